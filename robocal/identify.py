@@ -1,0 +1,297 @@
+"""Registration, identifiability analysis and parameter identification.
+
+Residuals are always the x/y/z components ``p_meas - p_model`` in the tracker frame (never one distance
+per point), optionally whitened by each point's 3x3 measurement covariance. Two estimators:
+
+* ``lm``: Levenberg-Marquardt least squares;
+* ``robust_ridge``: seed 000 eq. 9-12, Gauss-Newton steps ``dx = (A^T P A + mu I)^-1 A^T P r`` on
+  column-scaled normal equations, re-weighted with IGG3 (or Huber) on standardized residuals until
+  ``max |dx| < eps``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .frames import fit_rigid
+from .kinematics import (Kinematics, ParamLayout, apply_update, identification_jacobian, parameter_difference,
+                         smr_base)
+
+
+class IdentificationError(ValueError):
+    """The data cannot support an identification (too few points, degenerate pose set, ...)."""
+
+
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """Options of ``calibrate``. ``fixed`` names parameters kept at their start values."""
+    method: str = "robust_ridge"      # robust_ridge | lm
+    weights: str = "igg3"             # igg3 | huber | none (robust_ridge only)
+    k0: float = 1.5
+    k1: float = 2.5
+    ridge_mu: float = 1e-6            # on the column-scaled normal equations
+    max_iter: int = 100
+    step_tol: float = 1e-7            # max |dx| (mm or rad) for convergence
+    rank_tol: float = 1e-3            # relative residual of a scaled column below which it is unidentifiable
+    sigma0: str = "mad"               # mad | posterior: unit-weight error used to standardize residuals
+    fixed: tuple[str, ...] = ()
+    register: bool = True
+
+
+@dataclass(frozen=True)
+class Unidentifiable:
+    """A parameter fixed because the pose set cannot determine it."""
+    name: str
+    redundant_with: tuple[str, ...]
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "redundant_with": list(self.redundant_with), "reason": self.reason}
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """Identified model with its uncertainties and diagnostics.
+
+    ``delta``/``std`` follow ``names`` (all candidates; std NaN where not identified), in mm or rad;
+    the base entries are relative to the registered start frame. ``point_weights`` (N,) are the final
+    robust weights (0 = rejected); ``residual_tracker_mm`` (N, 3) = measured - model.
+    """
+    kinematics: Kinematics
+    start: Kinematics
+    names: tuple[str, ...]
+    identified: tuple[str, ...]
+    delta: np.ndarray
+    std: np.ndarray
+    unidentifiable: tuple[Unidentifiable, ...]
+    condition_number: float
+    observability: dict
+    point_weights: np.ndarray
+    residual_tracker_mm: np.ndarray
+    sigma0: float
+    iterations: int
+    converged: bool
+    units: tuple[str, ...] = field(default=())
+
+    def parameters_table(self) -> list[dict]:
+        """One dict per candidate: name, unit, delta, std, identified."""
+        ident = set(self.identified)
+        return [{"name": n, "unit": u, "delta": float(d), "std": None if not np.isfinite(s) else float(s),
+                 "identified": n in ident}
+                for n, u, d, s in zip(self.names, self.units, self.delta, self.std)]
+
+
+# ---------------------------------------------------------------- registration
+def register(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weights=None) -> Kinematics:
+    """Closed-form first guess of T_tracker_base from nominal vs measured SMR points (any distance/rotation)."""
+    p_nom = smr_base(kin, q_rad)
+    if len(p_nom) < 3 or np.linalg.matrix_rank(p_nom - p_nom.mean(0), tol=1.0) < 2:
+        raise IdentificationError("registration needs at least 3 non-collinear points")
+    return kin.with_(T_tracker_base=fit_rigid(p_nom, p_tracker_mm, weights))
+
+
+# ---------------------------------------------------------------- weighting
+def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
+    """Matrices W (N, 3, 3) with W^T W = cov^-1, or None for unit weights."""
+    if cov_mm2 is None:
+        return None
+    L = np.linalg.cholesky(np.asarray(cov_mm2, float))
+    return np.linalg.inv(L)
+
+
+def _whiten(W, x):
+    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays."""
+    if W is None:
+        return x
+    return np.einsum("nij,nj...->ni...", W, x)
+
+
+def igg3_weight(v_std: np.ndarray, k0: float = 1.5, k1: float = 2.5) -> np.ndarray:
+    """IGG3 equivalent-weight factor of seed 000 eq. 12 for standardized residuals."""
+    a = np.abs(v_std)
+    mid = k0 / np.maximum(a, 1e-300) * ((k1 - a) / (k1 - k0)) ** 2
+    return np.where(a <= k0, 1.0, np.where(a <= k1, mid, 0.0))
+
+
+def huber_weight(v_std: np.ndarray, k0: float = 1.5) -> np.ndarray:
+    """Huber equivalent-weight factor."""
+    a = np.abs(v_std)
+    return np.where(a <= k0, 1.0, k0 / np.maximum(a, 1e-300))
+
+
+# ---------------------------------------------------------------- identifiability
+@dataclass(frozen=True)
+class Identifiability:
+    keep: np.ndarray               # (P,) bool
+    unidentifiable: tuple[Unidentifiable, ...]
+    condition_number: float
+    observability: dict
+
+
+def priority_order(layout: ParamLayout) -> list[int]:
+    """Order in which candidates are admitted: base, tool, then joints from the last to the first.
+
+    With this order the redundant member of each classical pair is the one dropped: theta1 (base rz),
+    d1 (base z), d2 (d3 on parallel axes), last-joint parameters (SMR offset)."""
+    nj = len(layout.joint_cols)
+    joint_cols = sorted(layout.joint_cols, key=lambda c: (-c[1], c[2]))
+    return list(range(nj, layout.size)) + [c[0] for c in joint_cols]
+
+
+def observability_indices(A: np.ndarray) -> dict:
+    """Indices O1..O5 (effects.md §3.2) of a column-scaled Jacobian A (m, L)."""
+    s = np.linalg.svd(A, compute_uv=False)
+    m, L = A.shape
+    if L == 0 or s[-1] <= 0:
+        return {"O1": 0.0, "O2": 0.0, "O3": 0.0, "O4": 0.0, "O5": 0.0, "condition_number": float("inf")}
+    return {"O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(m)), "O2": float(s[-1] / s[0]), "O3": float(s[-1]),
+            "O4": float(s[-1] ** 2 / s[0]), "O5": float(1.0 / np.sum(1.0 / s)), "condition_number": float(s[0] / s[-1])}
+
+
+def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[int], rank_tol: float,
+                            fixed: tuple[str, ...] = ()) -> Identifiability:
+    """Admit columns of A (m, P) in ``order`` when their part orthogonal to the admitted ones keeps more
+    than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with."""
+    norms = np.linalg.norm(A, axis=0)
+    keep = np.zeros(A.shape[1], bool)
+    Q = np.zeros((A.shape[0], 0))
+    dropped = []
+    for j in order:
+        if names[j] in fixed:
+            dropped.append(Unidentifiable(names[j], (), "fixed by the user"))
+            continue
+        if norms[j] < 1e-9 * norms.max():
+            dropped.append(Unidentifiable(names[j], (), "no effect on the measured points"))
+            continue
+        c = A[:, j] / norms[j]
+        r = c - Q @ (Q.T @ c)
+        rel = np.linalg.norm(r)
+        if rel > rank_tol:
+            keep[j] = True
+            Q = np.column_stack([Q, r / rel])
+            continue
+        acc = np.flatnonzero(keep)
+        beta = np.linalg.lstsq(A[:, acc] / norms[acc], c, rcond=None)[0]
+        top = acc[np.argsort(-np.abs(beta))][: 3]
+        top = [names[t] for t, b in zip(top, np.sort(-np.abs(beta))[:3]) if -b > 0.1 * np.max(np.abs(beta))]
+        dropped.append(Unidentifiable(names[j], tuple(top), f"linearly dependent (relative residual {rel:.1e})"))
+    idx = np.flatnonzero(keep)
+    obs = observability_indices(A[:, idx] / norms[idx])
+    return Identifiability(keep, tuple(dropped), obs["condition_number"], obs)
+
+
+# ---------------------------------------------------------------- estimation
+def _linearise(kin, q, p_meas, W, cols, D):
+    p, J = identification_jacobian(kin, q)
+    r = _whiten(W, p_meas - p).reshape(-1)
+    A = _whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
+    return r, A
+
+
+def _apply(kin, layout, cols, dx_scaled, D):
+    full = np.zeros(layout.size)
+    full[cols] = dx_scaled / D
+    return apply_update(kin, full), full[cols]
+
+
+def _levenberg_marquardt(kin, q, p_meas, W, cols, D, layout, opt):
+    lam = 1e-3
+    r, A = _linearise(kin, q, p_meas, W, cols, D)
+    cost = r @ r
+    converged = False
+    for it in range(1, opt.max_iter + 1):
+        H, g = A.T @ A, A.T @ r
+        while True:
+            dx = np.linalg.solve(H + lam * np.diag(np.diag(H)) + opt.ridge_mu * np.eye(len(cols)), g)
+            trial, step = _apply(kin, layout, cols, dx, D)
+            r_t, A_t = _linearise(trial, q, p_meas, W, cols, D)
+            if r_t @ r_t <= cost or lam > 1e12:
+                break
+            lam *= 10.0
+        kin, r, A, old, cost = trial, r_t, A_t, cost, r_t @ r_t
+        lam = max(lam / 10.0, 1e-9)
+        if np.max(np.abs(step)) < opt.step_tol or old - cost < 1e-14 * max(old, 1e-300):
+            converged = True
+            break
+    return kin, np.ones(len(q)), it, converged
+
+
+def _standardized(A, v, w_rows, Ninv, p, sigma0_mode):
+    """Standardized residuals v / (sigma0 sqrt(q_v)), q_v = 1/P - a N^-1 a^T on the original unit weights
+    (1/P + a N^-1 a^T for rejected rows). sigma0 is the a-posteriori unit-weight error of the weighted fit
+    (``posterior``, seed 000) or its robust MAD estimate (``mad``), which does not shrink as IGG3 trims the
+    tails and so cannot cascade into rejecting good points."""
+    h = np.einsum("ij,jk,ik->i", A, Ninv, A)
+    qv = np.where(w_rows > 0, np.maximum(1.0 - w_rows * h, 1e-6), 1.0 + h)
+    u = v / np.sqrt(qv)
+    if sigma0_mode == "mad":
+        sigma0 = 1.4826 * np.median(np.abs(u))
+    else:
+        sigma0 = np.sqrt(np.sum(w_rows * v**2) / max(np.count_nonzero(w_rows) - p, 1))
+    return u / max(sigma0, 1e-300), sigma0
+
+
+def _robust_ridge(kin, q, p_meas, W, cols, D, layout, opt):
+    n, p = len(q), len(cols)
+    w = np.ones(n)
+    converged = False
+    for it in range(1, opt.max_iter + 1):
+        r, A = _linearise(kin, q, p_meas, W, cols, D)
+        w_rows = np.repeat(w, 3)
+        N = A.T @ (w_rows[:, None] * A) + opt.ridge_mu * np.eye(p)
+        dx = np.linalg.solve(N, A.T @ (w_rows * r))
+        kin, step = _apply(kin, layout, cols, dx, D)
+        if opt.weights == "none":
+            w_new = w
+        else:
+            v = A @ dx - r                          # seed 000 eq. 10
+            v_std, _ = _standardized(A, v, w_rows, np.linalg.inv(N), p, opt.sigma0)
+            v_pt = np.sqrt(np.mean(v_std.reshape(n, 3) ** 2, axis=1))   # one statistic per point (x, y, z)
+            w_new = igg3_weight(v_pt, opt.k0, opt.k1) if opt.weights == "igg3" else huber_weight(v_pt, opt.k0)
+        small = np.max(np.abs(step)) < opt.step_tol
+        if small and np.max(np.abs(w_new - w)) < 1e-3:
+            converged = True
+            break
+        w = w_new
+        if np.count_nonzero(w) * 3 <= p:
+            raise IdentificationError("robust weighting rejected too many points to identify the model")
+    return kin, w, it, converged
+
+
+def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov_mm2: np.ndarray | None = None,
+              options: CalibrationOptions = CalibrationOptions()) -> CalibrationResult:
+    """Identify base, tool and joint parameters from joint angles (N, n) rad and measured SMR points
+    (N, 3) mm in the tracker frame; ``cov_mm2`` (N, 3, 3) optional measurement covariances."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    p_meas = np.asarray(p_tracker_mm, float)
+    if len(q) != len(p_meas):
+        raise IdentificationError(f"{len(q)} joint vectors but {len(p_meas)} measured points")
+    kin = register(kin0, q, p_meas) if options.register else kin0
+    start = kin
+    layout = ParamLayout.of(kin)
+    W = whitening(cov_mm2, len(q))
+    _, J = identification_jacobian(kin, q)
+    A_full = _whiten(W, J).reshape(-1, layout.size)
+    ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol, options.fixed)
+    cols = np.flatnonzero(ident.keep)
+    if 3 * len(q) <= len(cols):
+        raise IdentificationError(f"{len(q)} points cannot determine {len(cols)} parameters")
+    D = np.linalg.norm(A_full[:, cols], axis=0)
+    solver = _levenberg_marquardt if options.method == "lm" else _robust_ridge
+    kin, w, iters, converged = solver(kin, q, p_meas, W, cols, D, layout, options)
+    r, A = _linearise(kin, q, p_meas, W, cols, D)
+    w_rows = np.repeat(w, 3)
+    N = A.T @ (w_rows[:, None] * A)
+    n_eff = np.count_nonzero(w_rows)
+    sigma0 = float(np.sqrt(np.sum(w_rows * r**2) / max(n_eff - len(cols), 1)))
+    cov_scaled = sigma0**2 * np.linalg.pinv(N)
+    std = np.full(layout.size, np.nan)
+    std[cols] = np.sqrt(np.diag(cov_scaled)) / D
+    p_model = identification_jacobian(kin, q)[0]
+    return CalibrationResult(
+        kinematics=kin, start=start, names=layout.names, identified=tuple(layout.names[c] for c in cols),
+        delta=parameter_difference(kin, start), std=std, unidentifiable=ident.unidentifiable,
+        condition_number=ident.condition_number, observability=ident.observability, point_weights=w,
+        residual_tracker_mm=p_meas - p_model, sigma0=sigma0, iterations=iters, converged=converged,
+        units=tuple(layout.unit(n) for n in layout.names))

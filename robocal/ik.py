@@ -1,0 +1,134 @@
+"""Batched iterative inverse kinematics (Levenberg-Marquardt with Sugihara's damping).
+
+Damping ``lambda = E + w_bar`` with ``E = 1/2 e^T W e`` (Sugihara 2011); the convergence test is on the
+pose error itself (mm and rad, never on a squared error) and every solution is checked by a final FK.
+Orientation errors are weighted by ``length_mm`` so that 1 rad counts like that many mm.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frames import matrix_to_rotvec, transform_points
+from .kinematics import Kinematics, chain, joint_jacobian, within_limits
+
+
+@dataclass(frozen=True, eq=False)
+class IKResult:
+    """q_rad (N, n); converged (N,) bool; pos_err_mm, rot_err_rad (N,) from the final FK; iterations."""
+    q_rad: np.ndarray
+    converged: np.ndarray
+    pos_err_mm: np.ndarray
+    rot_err_rad: np.ndarray
+    iterations: int
+
+
+def pose_error(kin: Kinematics, q_rad, p_target_base_mm, R_target_base, point_mm) -> tuple[np.ndarray, np.ndarray]:
+    """(e_pos (N, 3) mm, e_rot (N, 3) rad) from current to target; point_mm is fixed in the flange frame."""
+    T = chain(kin, q_rad).T_base_flange
+    e_p = p_target_base_mm - transform_points(T, point_mm)
+    if R_target_base is None:
+        return e_p, np.zeros_like(e_p)
+    return e_p, matrix_to_rotvec(R_target_base @ np.swapaxes(T[:, :3, :3], 1, 2))
+
+
+def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.ndarray | None, q_seed_rad: np.ndarray,
+             *, point_mm=None, tol_mm: float = 1e-6, tol_rad: float = 1e-9, max_iter: int = 200,
+             length_mm: float = 1000.0, w_bar: float = 1e-6) -> IKResult:
+    """Joint angles placing a flange-fixed point (default the SMR) at p_target (N, 3) mm in the base frame
+    with flange orientation R_target (N, 3, 3) (None = position only). q_seed (n,) or (N, n) rad."""
+    p_t = np.atleast_2d(np.asarray(p_target_base_mm, float))
+    N = len(p_t)
+    point = kin.p_flange_smr_mm if point_mm is None else np.asarray(point_mm, float)
+    q = np.broadcast_to(np.asarray(q_seed_rad, float), (N, kin.n)).copy()
+    R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (N, 3, 3))
+    rows = slice(0, 6) if R_t is not None else slice(0, 3)
+    w = np.array([1.0, 1.0, 1.0, length_mm, length_mm, length_mm])[rows]
+
+    def err(qq, idx):
+        e_p, e_r = pose_error(kin, qq, p_t[idx], None if R_t is None else R_t[idx], point)
+        return np.concatenate([e_p, e_r], axis=1)[:, rows] * w
+
+    active = np.arange(N)
+    e = err(q, active)
+    mu = np.ones(N)                     # per-target damping multiplier, raised after a failed step
+    it = 0
+    for it in range(1, max_iter + 1):
+        done = _converged(e, w, tol_mm, tol_rad)
+        active, e = active[~done], e[~done]
+        if len(active) == 0:
+            break
+        _, J = joint_jacobian(kin, q[active], point)
+        J = J[:, rows] * w[None, :, None]
+        E = 0.5 * np.einsum("ni,ni->n", e, e)
+        lam = (mu[active] * (E / length_mm**2 + w_bar))[:, None, None] * np.eye(kin.n)
+        H = np.einsum("nij,nik->njk", J, J) + lam
+        dq = np.linalg.solve(H, np.einsum("nij,ni->nj", J, e)[..., None])[..., 0]
+        q_new = q[active] + dq
+        e_new = err(q_new, active)
+        better = np.einsum("ni,ni->n", e_new, e_new) < 2.0 * E
+        q[active[better]] = q_new[better]
+        mu[active] = np.where(better, np.maximum(mu[active] / 10.0, 1.0), mu[active] * 10.0)
+        e = np.where(better[:, None], e_new, e)
+    e_p, e_r = pose_error(kin, q, p_t, R_t, point)
+    pos, rot = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_r, axis=1)
+    ok = (pos < tol_mm * 10) & (rot < max(tol_rad * 10, 1e-8))
+    return IKResult(q, ok, pos, rot, it)
+
+
+def _converged(e, w, tol_mm, tol_rad):
+    pos = np.linalg.norm(e[:, :3], axis=1)
+    if e.shape[1] == 3:
+        return pos < tol_mm
+    return (pos < tol_mm) & (np.linalg.norm(e[:, 3:] / w[3], axis=1) < tol_rad)
+
+
+def branch_signature(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
+    """(N, 3) signs (shoulder, elbow, wrist) of a 6R arm's IK branch, computed geometrically:
+    wrist centre in front of/behind J2, forearm turning +/- about J2, and the sign of J5 bending."""
+    c = chain(kin, q_rad)
+    o2, o3, w = c.origin[:, 1], c.origin[:, 2], c.origin[:, 4]
+    forward = c.dirs[2][:, 0]                       # x axis after joint 1 (the arm's plane direction)
+    shoulder = np.sign(np.einsum("ni,ni->n", w - o2, forward))
+    elbow = np.sign(np.einsum("ni,ni->n", np.cross(o3 - o2, w - o3), c.axis[:, 1]))
+    wrist = np.sign(np.einsum("ni,ni->n", np.cross(c.axis[:, 3], c.axis[:, 5]), c.axis[:, 4]))
+    return np.stack([shoulder, elbow, wrist], axis=1)
+
+
+def same_branch(kin: Kinematics, q_rad: np.ndarray, q_ref_rad: np.ndarray) -> np.ndarray:
+    """(N,) bool: same branch signature as q_ref and joints within +/-180 deg of q_ref (same turn)."""
+    sig = branch_signature(kin, q_rad)
+    ref = branch_signature(kin, np.atleast_2d(q_ref_rad))
+    turns = np.all(np.abs(np.atleast_2d(q_rad) - q_ref_rad) < np.pi, axis=1)
+    return np.all(sig == ref, axis=1) & turns
+
+
+def reachable(kin: Kinematics, result: IKResult, q_ref_rad: np.ndarray) -> np.ndarray:
+    """(N,) bool: IK converged, inside the joint limits and on q_ref's branch."""
+    return result.converged & within_limits(kin, result.q_rad) & same_branch(kin, result.q_rad, q_ref_rad)
+
+
+def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.ndarray | None,
+                    q_ref_rad: np.ndarray, rounds: int = 4, **kw) -> tuple[np.ndarray, np.ndarray]:
+    """IK for many targets on q_ref's branch: solve from q_ref, then re-seed each failed target from the
+    solution of its nearest solved neighbour (Cartesian distance), a few rounds.
+
+    Returns (q_rad (N, n), ok (N,) bool: converged, inside the limits, on q_ref's branch)."""
+    p_t = np.atleast_2d(np.asarray(p_target_base_mm, float))
+    R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (len(p_t), 3, 3))
+    res = solve_ik(kin, p_t, R_t, q_ref_rad, **kw)
+    q, ok = res.q_rad.copy(), reachable(kin, res, q_ref_rad)
+    for _ in range(rounds):
+        bad = np.flatnonzero(~ok)
+        if len(bad) == 0 or not ok.any():
+            break
+        good = np.flatnonzero(ok)
+        d = np.linalg.norm(p_t[bad, None, :] - p_t[None, good, :], axis=2)
+        seeds = q[good[np.argmin(d, axis=1)]]
+        retry = solve_ik(kin, p_t[bad], None if R_t is None else R_t[bad], seeds, **kw)
+        fixed = reachable(kin, retry, q_ref_rad)
+        if not fixed.any():
+            break
+        q[bad[fixed]], ok[bad[fixed]] = retry.q_rad[fixed], True
+    return q, ok

@@ -1,0 +1,292 @@
+"""Serial-robot kinematic models: standard DH, modified DH (Craig) and Hayati's beta.
+
+Per joint i (``theta_DH = q_i + theta_i``), the link transform is
+
+* ``dh``  (seed 000 eq. 1): ``Rz(theta) Tz(d) Tx(a) Rx(alpha) Ry(beta)``
+* ``mdh`` (Craig):          ``Rx(alpha) Ry(beta) Tx(a) Rz(theta) Tz(d)``
+
+``beta`` is Hayati's rotation about y for nearly parallel consecutive axes; it is zero nominally and
+identified only on joints flagged ``hayati``. The chain gives ``T_base_flange``; the SMR sits at
+``p_flange_smr_mm`` and the base is registered in the tracker frame by ``T_tracker_base``.
+All functions are batched over poses: joint angles ``(N, n)`` rad, no Python loop over poses.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
+
+import numpy as np
+
+from .frames import exp_se3_left, rot_y, rot_z_trans, transform_points, trans_x_rot_x, rot_x, make_T
+
+JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
+BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
+TOOL_PARAMS = ("tool_x", "tool_y", "tool_z")
+UNITS = {"theta": "rad", "d": "mm", "a": "mm", "alpha": "rad", "beta": "rad",
+         "base_t": "mm", "base_r": "rad", "tool": "mm"}
+
+
+def _arr(x, n=None) -> np.ndarray:
+    a = np.array(x, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Kinematics:
+    """Geometry of one robot + its SMR + its registration in the tracker frame.
+
+    Arrays of shape ``(n,)``: ``alpha_rad, a_mm, d_mm, theta_rad, beta_rad, q_min_rad, q_max_rad``.
+    ``T_tracker_base`` (4, 4) mm; ``p_flange_smr_mm`` (3,) mm.
+    """
+    convention: str
+    alpha_rad: np.ndarray
+    a_mm: np.ndarray
+    d_mm: np.ndarray
+    theta_rad: np.ndarray
+    beta_rad: np.ndarray
+    q_min_rad: np.ndarray
+    q_max_rad: np.ndarray
+    hayati: tuple[bool, ...]
+    T_tracker_base: np.ndarray = field(default_factory=lambda: np.eye(4))
+    p_flange_smr_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        if self.convention not in ("dh", "mdh"):
+            raise ValueError(f"unknown convention {self.convention!r}")
+        for name in ("alpha_rad", "a_mm", "d_mm", "theta_rad", "beta_rad", "q_min_rad", "q_max_rad",
+                     "T_tracker_base", "p_flange_smr_mm"):
+            object.__setattr__(self, name, _arr(getattr(self, name)))
+        n = len(self.a_mm)
+        if any(len(getattr(self, k)) != n for k in ("alpha_rad", "d_mm", "theta_rad", "beta_rad")):
+            raise ValueError("DH arrays must all have the number of joints")
+        if len(self.hayati) != n:
+            raise ValueError("hayati flags must have one entry per joint")
+
+    @property
+    def n(self) -> int:
+        return len(self.a_mm)
+
+    def with_(self, **changes) -> "Kinematics":
+        """Copy with fields replaced."""
+        return replace(self, **changes)
+
+    @classmethod
+    def from_table(cls, convention: str, alpha_deg, a_mm, d_mm, theta_deg, q_min_deg, q_max_deg,
+                   hayati_joints=(), T_tracker_base=None, p_flange_smr_mm=(0, 0, 0)) -> "Kinematics":
+        """Build from a DH table in degrees/mm (the form of configs and papers). hayati_joints are 1-based."""
+        n = len(a_mm)
+        return cls(convention, np.radians(alpha_deg), a_mm, d_mm, np.radians(theta_deg), np.zeros(n),
+                   np.radians(q_min_deg), np.radians(q_max_deg),
+                   tuple((i + 1) in set(hayati_joints) for i in range(n)),
+                   np.eye(4) if T_tracker_base is None else T_tracker_base, p_flange_smr_mm)
+
+    def to_dict(self) -> dict:
+        """Plain dict with units in the keys (angles in degrees for readability)."""
+        return {
+            "convention": self.convention,
+            "alpha_deg": np.degrees(self.alpha_rad).tolist(), "a_mm": self.a_mm.tolist(),
+            "d_mm": self.d_mm.tolist(), "theta_deg": np.degrees(self.theta_rad).tolist(),
+            "beta_deg": np.degrees(self.beta_rad).tolist(),
+            "q_min_deg": np.degrees(self.q_min_rad).tolist(), "q_max_deg": np.degrees(self.q_max_rad).tolist(),
+            "hayati": list(self.hayati), "T_tracker_base": self.T_tracker_base.tolist(),
+            "p_flange_smr_mm": self.p_flange_smr_mm.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Kinematics":
+        return cls(d["convention"], np.radians(d["alpha_deg"]), d["a_mm"], d["d_mm"], np.radians(d["theta_deg"]),
+                   np.radians(d["beta_deg"]), np.radians(d["q_min_deg"]), np.radians(d["q_max_deg"]),
+                   tuple(bool(h) for h in d["hayati"]), np.array(d["T_tracker_base"]), d["p_flange_smr_mm"])
+
+
+class Chain(NamedTuple):
+    """Intermediate frames of a batch of poses, all in the base frame.
+
+    ``T_base_flange`` (N, 4, 4). Per joint i, ``axis[:, i]``/``origin[:, i]`` give the joint's rotation axis
+    and a point on it, and ``dirs[k][:, i]``/``pts[k][:, i]`` the direction and pivot of each parameter's
+    elementary motion (k indexes JOINT_PARAMS); pivots are unused for the prismatic ones (d, a).
+    """
+    T_base_flange: np.ndarray
+    axis: np.ndarray
+    origin: np.ndarray
+    dirs: np.ndarray
+    pts: np.ndarray
+
+
+def _per_pose(x: np.ndarray, i: int) -> np.ndarray:
+    """Parameter i of an array that is (n,) or per pose (N, n)."""
+    return x[..., i]
+
+
+def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, theta=None, beta=None) -> Chain:
+    """Forward kinematics with all intermediate frames. q_rad (N, n). Optional per-pose (N, n) overrides
+    of the DH arrays (used by effect models such as thermal growth)."""
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+    N, n = q.shape
+    if n != kin.n:
+        raise ValueError(f"expected {kin.n} joint values per pose, got {n}")
+    alpha = kin.alpha_rad if alpha is None else alpha
+    a = kin.a_mm if a is None else a
+    d = kin.d_mm if d is None else d
+    theta = kin.theta_rad if theta is None else theta
+    beta = kin.beta_rad if beta is None else beta
+    F = np.broadcast_to(np.eye(4), (N, 4, 4)).copy()
+    axis = np.empty((N, n, 3)); origin = np.empty((N, n, 3))
+    dirs = np.empty((5, N, n, 3)); pts = np.zeros((5, N, n, 3))
+    for i in range(n):
+        th = q[:, i] + _per_pose(theta, i)
+        if kin.convention == "dh":
+            oF, zF = F[:, :3, 3], F[:, :3, 2]
+            F1 = F @ rot_z_trans(th, np.broadcast_to(_per_pose(d, i), th.shape))
+            x1 = F1[:, :3, 0]
+            F2 = F1 @ trans_x_rot_x(np.broadcast_to(_per_pose(a, i), th.shape), np.broadcast_to(_per_pose(alpha, i), th.shape))
+            o2, y2 = F2[:, :3, 3], F2[:, :3, 1]
+            F = F2 @ rot_y(np.broadcast_to(_per_pose(beta, i), th.shape))
+            axis[:, i], origin[:, i] = zF, oF
+            dirs[:, :, i] = (zF, zF, x1, x1, y2)
+            pts[0, :, i], pts[3, :, i], pts[4, :, i] = oF, o2, o2
+        else:
+            oF, xF = F[:, :3, 3], F[:, :3, 0]
+            F1 = F @ rot_x(np.broadcast_to(_per_pose(alpha, i), th.shape))
+            y1 = F1[:, :3, 1]
+            F2 = F1 @ rot_y(np.broadcast_to(_per_pose(beta, i), th.shape))
+            x2 = F2[:, :3, 0]
+            F2 = F2.copy(); F2[:, :3, 3] = oF + x2 * np.reshape(_per_pose(a, i), (-1, 1))
+            o2, z2 = F2[:, :3, 3], F2[:, :3, 2]
+            F = F2 @ rot_z_trans(th, np.broadcast_to(_per_pose(d, i), th.shape))
+            axis[:, i], origin[:, i] = z2, o2
+            dirs[:, :, i] = (z2, z2, x2, xF, y1)
+            pts[0, :, i], pts[3, :, i], pts[4, :, i] = o2, oF, oF
+    return Chain(F, axis, origin, dirs, pts)
+
+
+def fk(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
+    """T_base_flange (N, 4, 4) for joint angles (N, n) rad."""
+    return chain(kin, q_rad).T_base_flange
+
+
+def smr_base(kin: Kinematics, q_rad: np.ndarray, T_base_flange: np.ndarray | None = None) -> np.ndarray:
+    """SMR centre in the robot base frame, (N, 3) mm."""
+    T = fk(kin, q_rad) if T_base_flange is None else T_base_flange
+    return transform_points(T, kin.p_flange_smr_mm)
+
+
+def smr_tracker(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
+    """SMR centre in the tracker frame, (N, 3) mm."""
+    return transform_points(kin.T_tracker_base, smr_base(kin, q_rad))
+
+
+def joint_jacobian(kin: Kinematics, q_rad: np.ndarray, p_flange_point_mm=None) -> tuple[np.ndarray, np.ndarray]:
+    """Geometric Jacobian in the base frame of a point fixed to the flange (default: the SMR).
+
+    Returns (T_base_flange (N, 4, 4), J (N, 6, n)) with rows (v_x, v_y, v_z in mm/rad, w_x, w_y, w_z).
+    """
+    c = chain(kin, q_rad)
+    pf = kin.p_flange_smr_mm if p_flange_point_mm is None else np.asarray(p_flange_point_mm, float)
+    p = transform_points(c.T_base_flange, pf)
+    v = np.cross(c.axis, p[:, None, :] - c.origin)
+    return c.T_base_flange, np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(c.axis, 1, 2)], axis=1)
+
+
+# ---------------------------------------------------------------- parameters
+@dataclass(frozen=True)
+class ParamLayout:
+    """Names of the full candidate parameter vector of a model, in Jacobian column order.
+
+    Per joint: theta, d, a, alpha (+ beta on Hayati joints); then base (6, left perturbation in the
+    tracker frame: translation mm, rotation rad) and tool (3, mm in the flange frame).
+    """
+    names: tuple[str, ...]
+    joint_cols: tuple[tuple[int, int, int], ...]  # (column, joint index, JOINT_PARAMS index)
+
+    @classmethod
+    def of(cls, kin: Kinematics) -> "ParamLayout":
+        names, cols = [], []
+        for i in range(kin.n):
+            for k, kind in enumerate(JOINT_PARAMS):
+                if kind == "beta" and not kin.hayati[i]:
+                    continue
+                cols.append((len(names), i, k))
+                names.append(f"{kind}{i + 1}")
+        return cls(tuple(names + list(BASE_PARAMS) + list(TOOL_PARAMS)), tuple(cols))
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def unit(self, name: str) -> str:
+        if name.startswith("base_"):
+            return UNITS["base_t"] if name[5] == "t" else UNITS["base_r"]
+        if name.startswith("tool_"):
+            return UNITS["tool"]
+        return UNITS[name.rstrip("0123456789")]
+
+
+def identification_jacobian(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic d p_tracker / d params for all candidate parameters (ParamLayout order).
+
+    Returns (p_tracker_mm (N, 3), J (N, 3, P)). Units per column: mm/rad or mm/mm.
+    """
+    layout = ParamLayout.of(kin)
+    c = chain(kin, q_rad)
+    N = c.T_base_flange.shape[0]
+    p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
+    R_tb = kin.T_tracker_base[:3, :3]
+    p_tracker = p_base @ R_tb.T + kin.T_tracker_base[:3, 3]
+    J_base = np.empty((N, 3, layout.size))
+    prismatic = (1, 2)  # d, a
+    for col, i, k in layout.joint_cols:
+        u = c.dirs[k][:, i]
+        J_base[:, :, col] = u if k in prismatic else np.cross(u, p_base - c.pts[k][:, i])
+    J = np.einsum("ij,njk->nik", R_tb, J_base)
+    nj = len(layout.joint_cols)
+    J[:, :, nj:nj + 3] = np.eye(3)
+    J[:, :, nj + 3:nj + 6] = -_skew_batch(p_tracker)
+    J[:, :, nj + 6:nj + 9] = R_tb @ c.T_base_flange[:, :3, :3]
+    return p_tracker, J
+
+
+def _skew_batch(p: np.ndarray) -> np.ndarray:
+    from .frames import skew
+    return skew(p)
+
+
+def apply_update(kin: Kinematics, delta: np.ndarray) -> Kinematics:
+    """Apply a step over the full candidate vector (ParamLayout order): additive on DH and tool,
+    left-multiplicative on the base (T_tracker_base <- Exp(delta_base) @ T_tracker_base)."""
+    layout = ParamLayout.of(kin)
+    delta = np.asarray(delta, dtype=float)
+    arrays = [kin.theta_rad.copy(), kin.d_mm.copy(), kin.a_mm.copy(), kin.alpha_rad.copy(), kin.beta_rad.copy()]
+    for col, i, k in layout.joint_cols:
+        arrays[k][i] += delta[col]
+    nj = len(layout.joint_cols)
+    return kin.with_(theta_rad=arrays[0], d_mm=arrays[1], a_mm=arrays[2], alpha_rad=arrays[3], beta_rad=arrays[4],
+                     T_tracker_base=exp_se3_left(delta[nj:nj + 6], kin.T_tracker_base),
+                     p_flange_smr_mm=kin.p_flange_smr_mm + delta[nj + 6:nj + 9])
+
+
+def parameter_difference(kin: Kinematics, ref: Kinematics) -> np.ndarray:
+    """kin - ref over the full candidate vector (base as a rotation vector of T_kin @ T_ref^-1)."""
+    from .frames import inv_T, matrix_to_rotvec
+    layout = ParamLayout.of(kin)
+    out = np.zeros(layout.size)
+    pairs = [(kin.theta_rad, ref.theta_rad), (kin.d_mm, ref.d_mm), (kin.a_mm, ref.a_mm),
+             (kin.alpha_rad, ref.alpha_rad), (kin.beta_rad, ref.beta_rad)]
+    for col, i, k in layout.joint_cols:
+        out[col] = pairs[k][0][i] - pairs[k][1][i]
+    nj = len(layout.joint_cols)
+    D = kin.T_tracker_base @ inv_T(ref.T_tracker_base)
+    out[nj:nj + 3] = D[:3, 3]
+    out[nj + 3:nj + 6] = matrix_to_rotvec(D[:3, :3])
+    out[nj + 6:] = kin.p_flange_smr_mm - ref.p_flange_smr_mm
+    return out
+
+
+def within_limits(kin: Kinematics, q_rad: np.ndarray, margin_rad: float = 0.0) -> np.ndarray:
+    """(N,) bool: every joint inside [q_min + margin, q_max - margin]."""
+    q = np.atleast_2d(q_rad)
+    return np.all((q >= kin.q_min_rad + margin_rad) & (q <= kin.q_max_rad - margin_rad), axis=1)

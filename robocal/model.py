@@ -1,0 +1,85 @@
+"""The calibrated model: the actual-pose predictor AP(theta) of seed 001.
+
+``CalibratedModel`` = kinematic layer (identified geometry, registration, SMR) + optional residual layer
+(IDW or any object with ``predict(q_rad, p_base_mm) -> (N, 3)`` and ``to_dict``). It predicts where the
+SMR really is for given joint angles, and is what target correction and evaluation use. ``to_dict`` /
+``from_dict`` give a plain, unit-labelled structure for JSON or YAML (the file I/O lives in campaign/).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .frames import transform_points
+from .kinematics import Kinematics, fk
+from .residual import IDWResidual
+
+FORMAT = "robocal-model/1"
+RESIDUAL_KINDS = {"idw": IDWResidual}
+
+
+@dataclass(frozen=True, eq=False)
+class CalibratedModel:
+    kinematics: Kinematics
+    residual: Any = None
+    meta: dict | None = None
+
+    def flange_pose(self, q_rad: np.ndarray) -> np.ndarray:
+        """T_base_flange (N, 4, 4) of the kinematic layer (the residual layer corrects position only)."""
+        return fk(self.kinematics, np.atleast_2d(q_rad))
+
+    def kinematic_smr_base(self, q_rad: np.ndarray) -> np.ndarray:
+        """SMR position (N, 3) mm, base frame, kinematic layer only."""
+        return transform_points(self.flange_pose(q_rad), self.kinematics.p_flange_smr_mm)
+
+    def residual_base(self, q_rad: np.ndarray, p_kin_base_mm: np.ndarray | None = None) -> np.ndarray:
+        """Predicted residual error (N, 3) mm in the base frame (zeros without a residual layer)."""
+        q = np.atleast_2d(q_rad)
+        if self.residual is None:
+            return np.zeros((len(q), 3))
+        p = self.kinematic_smr_base(q) if p_kin_base_mm is None else p_kin_base_mm
+        return self.residual.predict(q, p)
+
+    def smr_base(self, q_rad: np.ndarray) -> np.ndarray:
+        """AP(theta): predicted actual SMR position (N, 3) mm in the base frame."""
+        p = self.kinematic_smr_base(q_rad)
+        return p + self.residual_base(q_rad, p)
+
+    def smr_tracker(self, q_rad: np.ndarray) -> np.ndarray:
+        """Predicted actual SMR position (N, 3) mm in the tracker frame."""
+        return transform_points(self.kinematics.T_tracker_base, self.smr_base(q_rad))
+
+    def without_residual(self) -> "CalibratedModel":
+        return CalibratedModel(self.kinematics, None, self.meta)
+
+    def to_dict(self) -> dict:
+        return {"format": FORMAT,
+                "units": {"length": "mm", "angle": "deg (in keys *_deg)", "frames": "T_tracker_base: base in tracker"},
+                "kinematics": self.kinematics.to_dict(),
+                "residual": None if self.residual is None else self.residual.to_dict(),
+                "meta": self.meta or {}}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CalibratedModel":
+        if d.get("format") != FORMAT:
+            raise ValueError(f"not a calibrated model file (format {d.get('format')!r}, expected {FORMAT!r})")
+        res = d.get("residual")
+        layer = None
+        if res is not None:
+            if res.get("kind") not in RESIDUAL_KINDS:
+                raise ValueError(f"unknown residual layer kind {res.get('kind')!r}")
+            layer = RESIDUAL_KINDS[res["kind"]].from_dict(res)
+        return cls(Kinematics.from_dict(d["kinematics"]), layer, d.get("meta") or {})
+
+
+def fit_idw_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, power: float = 2.0,
+                  k_nearest: int = 8, weights: np.ndarray | None = None) -> IDWResidual:
+    """IDW layer from calibration points: nodes at the model's SMR positions (base frame), values the
+    residuals measured - model rotated into the base frame. Points with zero robust weight are left out."""
+    keep = np.ones(len(q_rad), bool) if weights is None else np.asarray(weights) > 0
+    p_kin = transform_points(fk(kin, q_rad[keep]), kin.p_flange_smr_mm)
+    R = kin.T_tracker_base[:3, :3]
+    p_meas_base = (p_tracker_mm[keep] - kin.T_tracker_base[:3, 3]) @ R
+    return IDWResidual.fit(p_meas_base, p_meas_base - p_kin, power, k_nearest)
