@@ -1,0 +1,88 @@
+import numpy as np
+import pytest
+
+from robocal.effects import apply_effects, effect_regressor, gravity_torques, library
+from robocal.ik import branch_signature, solve_ik, solve_on_branch
+from robocal.kinematics import fk, smr_base
+from robocal.noise import (TrackerUncertainty, cartesian_to_spherical, noise_floor_mm, repeatability_sigma_mm,
+                           spherical_to_cartesian)
+from robocal.stats import error_stats
+from tests.cells import T_SEED000, irb2600, tool_frame
+
+
+def test_spherical_covariance_matches_jacobian_form_and_monte_carlo():
+    unc = TrackerUncertainty()
+    p = spherical_to_cartesian(3000.0, np.radians(30), np.radians(70))
+    cov = unc.covariance(p[None])[0]
+    r, az, zen = cartesian_to_spherical(p)
+    u_r, u_t = unc.sigmas_mm(r)
+    J = np.array([[np.sin(zen) * np.cos(az), -r * np.sin(zen) * np.sin(az), r * np.cos(zen) * np.cos(az)],
+                  [np.sin(zen) * np.sin(az), r * np.sin(zen) * np.cos(az), r * np.cos(zen) * np.sin(az)],
+                  [np.cos(zen), 0, -r * np.sin(zen)]])
+    np.testing.assert_allclose(cov, J @ np.diag([u_r**2, (u_t / (r * np.sin(zen)))**2, (u_t / r)**2]) @ J.T,
+                               rtol=1e-9, atol=1e-15)
+    rng = np.random.default_rng(0)
+    n = 200_000
+    samples = spherical_to_cartesian(r + rng.normal(0, u_r, n), az + rng.normal(0, u_t / (r * np.sin(zen)), n),
+                                     zen + rng.normal(0, u_t / r, n))
+    np.testing.assert_allclose(np.cov(samples.T).diagonal(), cov.diagonal(), rtol=0.02)
+
+
+def test_noise_floor_is_the_rms_of_simulated_noise():
+    unc = TrackerUncertainty()
+    rng = np.random.default_rng(1)
+    p = rng.uniform([3000, -500, -500], [5000, 500, 500], (2000, 3))
+    L = np.linalg.cholesky(unc.covariance(p))
+    s = repeatability_sigma_mm(0.04)
+    noise = np.einsum("nij,nj->ni", L, rng.standard_normal(p.shape)) + rng.normal(0, s, p.shape)
+    assert error_stats(noise).rms_mm == pytest.approx(noise_floor_mm(p, unc, 0.04), rel=0.03)
+
+
+def test_repeatability_conversion_against_monte_carlo():
+    rng = np.random.default_rng(2)
+    x = rng.normal(0, 1.0, (200_000, 3))
+    l = np.linalg.norm(x, axis=1)
+    assert repeatability_sigma_mm(l.mean() + 3 * l.std()) == pytest.approx(1.0, rel=0.01)
+
+
+@pytest.mark.parametrize("effect", library(6), ids=lambda e: e.name + "".join(map(str, e.joints)))
+def test_effect_regressor_is_the_linearisation_of_the_simulation(effect):
+    kin = irb2600().with_(T_tracker_base=T_SEED000, p_flange_smr_mm=[40.0, 30.0, 60.0])
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1, 1, (20, 6))
+    meta = {"t_s": np.linspace(0, 7200, 20), "payload_kg": rng.choice([0.0, 12.0], 20),
+            "approach": rng.choice([-1.0, 1.0], (20, 6)), "temp_c": None}
+    params = np.array(effect.typical)
+    base = apply_effects(kin, q, meta, [])
+    exact = apply_effects(kin, q, meta, [(effect, params)]) - base
+    linear = effect_regressor(kin, q, meta, effect) @ params
+    assert np.max(np.abs(exact)) > 1e-3, "typical magnitude should be visible"
+    np.testing.assert_allclose(linear, exact, atol=2e-3 * np.max(np.abs(exact)) + 1e-6)
+
+
+def test_gravity_torques_signs():
+    kin = irb2600()
+    q = np.radians([[0, 0, 0, 0, 0, 0], [0, 30, 0, 0, 0, 0]])
+    tau = gravity_torques(kin, q, [0, 35, 40, 12, 4, 1], np.array([0.0, 0.0]))
+    assert abs(tau[0, 0]) < 1e-9                           # J1 axis is vertical
+    assert abs(tau[1, 1]) > abs(tau[0, 1])                 # leaning forward loads J2 more
+
+
+def test_ik_reaches_targets_to_sub_micrometre():
+    kin = irb2600()
+    rng = np.random.default_rng(4)
+    q_true = rng.uniform(np.radians([-60, -20, -40, -90, 20, -90]), np.radians([60, 60, 30, 90, 90, 90]), (200, 6))
+    T = fk(kin, q_true)
+    res = solve_ik(kin, smr_base(kin, q_true), T[:, :3, :3], q_true + rng.normal(0, 0.05, q_true.shape))
+    assert res.converged.all()
+    assert res.pos_err_mm.max() < 1e-5 and res.rot_err_rad.max() < 1e-8
+
+
+def test_solve_on_branch_keeps_one_configuration():
+    kin = irb2600()
+    q_ref = np.radians([0, 0, 0, 0, 45, 0])
+    targets = np.random.default_rng(5).uniform([600, -700, 500], [1200, 700, 1500], (200, 3))
+    q, ok = solve_on_branch(kin, targets, tool_frame([1, 0, -0.7]), q_ref)
+    assert ok.mean() > 0.8
+    assert np.all(branch_signature(kin, q[ok]) == branch_signature(kin, q_ref[None]))
+    np.testing.assert_allclose(smr_base(kin, q[ok]), targets[ok], atol=1e-5)
