@@ -1,0 +1,94 @@
+"""Exceptions of the campaign controller.
+
+Every error meant for the operator renders as exactly one line (no traceback):
+the CLI prints ``str(error)`` and exits with a code chosen by the error class.
+"""
+
+from __future__ import annotations
+
+
+def _one_line(text: str) -> str:
+    """Collapse whitespace runs (including newlines) to single spaces."""
+    return " ".join(str(text).split())
+
+
+class CampaignError(Exception):
+    """Base class of every expected, operator-facing failure."""
+
+
+class ConfigError(CampaignError, ValueError):
+    """Invalid campaign configuration.
+
+    ``str()`` is ``"{file}: {key_path}: {message}"``, e.g.
+    ``configs/irb2600.yaml: plan.grid.step_mm: expected a positive number, got -200``.
+    ``key_path`` is a dotted path with 0-based list indices
+    (``robot.joints[2].a_mm``); it is ``""`` for errors about the whole file,
+    in which case the middle part is left out.
+    """
+
+    def __init__(self, file: str, key_path: str, message: str) -> None:
+        self.file = str(file)
+        self.key_path = _one_line(key_path)
+        self.message = _one_line(message)
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        if self.key_path:
+            return f"{self.file}: {self.key_path}: {self.message}"
+        return f"{self.file}: {self.message}"
+
+    def __reduce__(self):  # picklable despite the custom __init__
+        return (type(self), (self.file, self.key_path, self.message))
+
+    @classmethod
+    def malformed_yaml(cls, file: str, line: int, column: int, problem: str) -> "ConfigError":
+        """YAML syntax error at a 1-based ``line`` and ``column``."""
+        return cls(file, f"line {line}, column {column}", f"malformed YAML: {problem}")
+
+
+class DataError(CampaignError, ValueError):
+    """Bad measurement/log input (CSV, JSONL, ...).
+
+    ``str()`` is ``"{file}: line {line}, column {column}: {message}"``; the
+    line and column parts are left out when unknown (``None``). ``column`` may
+    be a 1-based number or a column name.
+    """
+
+    def __init__(
+        self,
+        file: str,
+        message: str,
+        line: int | None = None,
+        column: int | str | None = None,
+    ) -> None:
+        self.file = str(file)
+        self.message = _one_line(message)
+        self.line = line
+        self.column = column
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        location = ", ".join(
+            f"{label} {value}"
+            for label, value in (("line", self.line), ("column", self.column))
+            if value is not None
+        )
+        parts = [self.file, location, self.message] if location else [self.file, self.message]
+        return ": ".join(parts)
+
+    def __reduce__(self):
+        return (type(self), (self.file, self.message, self.line, self.column))
+
+
+class RunAborted(CampaignError):
+    """A campaign run stopped before completion (operator, safety, hardware)."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = _one_line(reason)
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return f"run aborted: {self.reason}"
+
+    def __reduce__(self):
+        return (type(self), (self.reason,))

@@ -1,0 +1,593 @@
+"""The interchange CSV: measured data in and out of the campaign controller.
+
+Format (one row per measurement, rows in measurement order)::
+
+    point_id,set,q1,q2,q3,q4,q5,q6,x,y,z[,x2,y2,z2[,x3,y3,z3]][,t_s][,temp_c][,payload_kg]
+
+* ``point_id``: non-empty text, unique; only ``check`` rows may repeat an id
+  (the same check pose measured again), and never an id of a calib/test row.
+* ``set``: ``calib`` | ``test`` | ``check`` (case-insensitive).
+* ``q1..qn``: joint values in degrees as the controller reports them; any
+  number n >= 1 of joints, contiguous from ``q1``.
+* ``x,y,z``: SMR centre in mm in the tracker frame; ``x2..z2`` / ``x3..z3``
+  optional second and third SMR (all three columns of a group, and the
+  third only with the second).
+* optional ``t_s`` (s), ``temp_c`` (deg C), ``payload_kg`` (kg); when a
+  column is present every row needs a value (leave the column out if unknown).
+* There is no approach column: approach directions come from row order
+  (:meth:`Dataset.approach_sign`).
+
+Header names are matched case-insensitively and may come in any order;
+unknown or repeated columns are errors.  Blank lines and lines starting with
+``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
+when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
+Fields may be double-quoted but not span lines.  Numbers are plain decimal
+(``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
+
+Every input problem raises :class:`campaign.errors.DataError` with a single
+line naming the file and the line/column, e.g.
+``data.csv: line 7, column 'q3': expected a number, got 'abc'``.
+
+:func:`write_csv` writes floats with ``repr`` (shortest text that round-trips
+exactly), so ``read_csv(write_csv(d))`` gives bit-identical numbers.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from campaign.errors import DataError
+
+__all__ = ["SETS", "Dataset", "read_csv", "write_csv", "dataset_from_log"]
+
+SETS = ("calib", "test", "check")
+_SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
+_SMR = {2: ("x2", "y2", "z2"), 3: ("x3", "y3", "z3")}
+_Q_RE = re.compile(r"q([1-9][0-9]*)")
+_NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+_NUM_RE = re.compile(_NUM)
+_COLUMN_RE = re.compile(rf"(?>{_NUM}\n)*+")  # a whole column joined with "\n"
+_BAD_ID_CHARS = frozenset(',;"\r\n')
+
+
+# --------------------------------------------------------------------------
+# Dataset
+
+
+def _float_array(value: Any, name: str, shape: tuple) -> np.ndarray:
+    """Read-only float64 copy of ``value`` checked against ``shape`` (-1 = any)."""
+    arr = np.array(value, dtype=np.float64)
+    ok = arr.ndim == len(shape) and all(s in (-1, a) for s, a in zip(shape, arr.shape))
+    if not ok:
+        raise ValueError(f"Dataset.{name}: expected shape {shape}, got {arr.shape}")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """Measured points, in measurement order (N rows, n joints).
+
+    ``q_deg`` (N, n) joint values in degrees; ``p_tracker_mm`` (N, 3) SMR
+    centre in mm, tracker frame; ``p2_tracker_mm``/``p3_tracker_mm`` (N, 3) or
+    None; ``t_s`` (N,) seconds, ``temp_c`` (N,) deg C, ``payload_kg`` (N,) kg,
+    ``sigma_mm`` (N,) mm (1-sigma, from logs only), each or None.  ``source``
+    names where the data came from.  Arrays are read-only float64 copies.
+    """
+
+    point_id: tuple[str, ...]
+    set: tuple[str, ...]
+    q_deg: np.ndarray
+    p_tracker_mm: np.ndarray
+    t_s: np.ndarray | None = None
+    temp_c: np.ndarray | None = None
+    payload_kg: np.ndarray | None = None
+    p2_tracker_mm: np.ndarray | None = None
+    p3_tracker_mm: np.ndarray | None = None
+    sigma_mm: np.ndarray | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        put("point_id", tuple(str(p) for p in self.point_id))
+        put("set", tuple(str(s) for s in self.set))
+        n_rows = len(self.point_id)
+        if len(self.set) != n_rows:
+            raise ValueError(f"Dataset.set: expected {n_rows} entries, got {len(self.set)}")
+        bad = sorted(set(self.set) - set(SETS))  # builtin set: the field is not in scope here
+        if bad:
+            raise ValueError(f"Dataset.set: unknown set name(s) {bad}, expected {SETS}")
+        put("q_deg", _float_array(self.q_deg, "q_deg", (n_rows, -1)))
+        if self.q_deg.shape[1] < 1:
+            raise ValueError("Dataset.q_deg: needs at least one joint column")
+        put("p_tracker_mm", _float_array(self.p_tracker_mm, "p_tracker_mm", (n_rows, 3)))
+        for name in ("p2_tracker_mm", "p3_tracker_mm"):
+            if getattr(self, name) is not None:
+                put(name, _float_array(getattr(self, name), name, (n_rows, 3)))
+        for name in (*_SCALARS, "sigma_mm"):
+            if getattr(self, name) is not None:
+                put(name, _float_array(getattr(self, name), name, (n_rows,)))
+
+    def __len__(self) -> int:
+        return len(self.point_id)
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joint columns n."""
+        return int(self.q_deg.shape[1])
+
+    def mask(self, set_name: str) -> np.ndarray:
+        """Boolean (N,) array: rows whose ``set`` is ``set_name``."""
+        if set_name not in SETS:
+            raise ValueError(f"set_name must be one of {SETS}, got {set_name!r}")
+        return np.fromiter((s == set_name for s in self.set), dtype=bool, count=len(self))
+
+    def subset(self, mask: Sequence[bool] | np.ndarray) -> "Dataset":
+        """Rows selected by a boolean (N,) mask or an integer index array.
+
+        Row order is kept.  Note that :meth:`approach_sign` of a subset only
+        sees the subset's rows: compute it on the full dataset and index it.
+        """
+        sel = np.asarray(mask)
+        if sel.dtype == bool:
+            if sel.shape != (len(self),):
+                raise ValueError(f"mask: expected shape ({len(self)},), got {sel.shape}")
+            sel = np.flatnonzero(sel)
+        sel = sel.astype(np.intp, copy=False).reshape(-1)
+        kwargs: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in ("point_id", "set"):
+                kwargs[f.name] = tuple(value[i] for i in sel)
+            elif isinstance(value, np.ndarray):
+                kwargs[f.name] = value[sel]
+            else:
+                kwargs[f.name] = value
+        return Dataset(**kwargs)
+
+    def approach_sign(self, tol_deg: float = 0.0) -> np.ndarray:
+        """(N, n) float array of -1/0/+1: direction each joint last moved in.
+
+        Row i holds ``sign(q[i] - q[i-1])`` per joint, from row order; a joint
+        that did not move (``|dq| <= tol_deg``) keeps the previous row's sign;
+        row 0, and a joint that has not moved yet, is 0.
+        """
+        n_rows, n_joints = self.q_deg.shape
+        step = np.zeros((n_rows, n_joints))
+        if n_rows > 1:
+            dq = np.diff(self.q_deg, axis=0)
+            step[1:] = np.where(np.abs(dq) > tol_deg, np.sign(dq), 0.0)
+        rows = np.where(step != 0.0, np.arange(n_rows)[:, None], 0)
+        last_move = np.maximum.accumulate(rows, axis=0)
+        return step[last_move, np.arange(n_joints)[None, :]]
+
+
+# --------------------------------------------------------------------------
+# reading
+
+
+def _show(text: str, limit: int = 40) -> str:
+    """``'text'`` quoted for a message, shortened if long."""
+    return "'" + (text if len(text) <= limit else text[: limit - 3] + "...") + "'"
+
+
+@dataclass
+class _Layout:
+    """What the header says: separator, column names and their positions."""
+
+    sep: str
+    names: list[str]  # lower-cased, stripped
+    shown: list[str]  # as written (stripped), for messages
+    n_joints: int
+    smr: tuple[int, ...]  # extra SMR indices present: (), (2,), (2, 3)
+    scalars: tuple[str, ...]  # optional scalar columns present
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+
+def _read_lines(path: str | os.PathLike) -> list[str]:
+    """The file's lines (BOM and ``\\r`` removed); DataError on bad UTF-8."""
+    blob = Path(path).read_bytes()
+    try:
+        text = blob.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        offset = exc.start + (3 if blob.startswith(b"\xef\xbb\xbf") else 0)
+        line = blob.count(b"\n", 0, offset) + 1
+        raise DataError(str(path), "not valid UTF-8 text", line=line) from None
+    lines = text.split("\n")
+    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+
+
+def _is_skipped(line: str) -> bool:
+    """Blank lines and ``#`` comment lines are ignored."""
+    stripped = line.strip()
+    return not stripped or stripped.startswith("#")
+
+
+def _split(line: str, sep: str) -> list[str]:
+    """Fields of one line, stripped; csv-module parsing only if quoted."""
+    if '"' in line:
+        parts = next(csv.reader([line], delimiter=sep, skipinitialspace=True))
+    else:
+        parts = line.split(sep)
+    return [p.strip() for p in parts]
+
+
+def _parse_header(line: str, src: str) -> _Layout:
+    """Validate the header line and return the column layout."""
+    sep = ";" if line.count(";") > line.count(",") else ","
+    shown = _split(line, sep)
+    names = [s.lower() for s in shown]
+    seen: set[str] = set()
+    for pos, name in enumerate(names, start=1):
+        if not name:
+            raise DataError(src, f"header: empty column name at position {pos}")
+        if name in seen:
+            raise DataError(src, f"header: duplicate column {_show(shown[pos - 1])}")
+        seen.add(name)
+    n_joints = _check_known_columns(names, shown, src)
+    smr = _check_smr_groups(seen, src)
+    scalars = tuple(s for s in _SCALARS if s in seen)
+    return _Layout(sep, names, shown, n_joints, smr, scalars)
+
+
+def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
+    """Reject unknown columns, require the mandatory ones; return n joints."""
+    known = {"point_id", "set", "x", "y", "z", *_SCALARS, *_SMR[2], *_SMR[3]}
+    joints = set()
+    for name, as_written in zip(names, shown):
+        match = _Q_RE.fullmatch(name)
+        if match:
+            joints.add(int(match.group(1)))
+        elif name not in known:
+            raise DataError(src, f"header: unknown column {_show(as_written)}")
+    n_joints = max(joints, default=1)
+    for name in ("point_id", "set", *(f"q{k}" for k in range(1, n_joints + 1)), "x", "y", "z"):
+        if name not in names:
+            raise DataError(src, f"header: missing column '{name}'")
+    return n_joints
+
+
+def _check_smr_groups(present: set[str], src: str) -> tuple[int, ...]:
+    """Second/third SMR columns come as complete groups, the third only with the second."""
+    groups = []
+    for k, cols in _SMR.items():
+        have = [c for c in cols if c in present]
+        if have and len(have) < 3:
+            missing = next(c for c in cols if c not in present)
+            raise DataError(src, f"header: missing column '{missing}' (needed with '{have[0]}')")
+        if have:
+            groups.append(k)
+    if groups == [3]:
+        raise DataError(src, "header: missing column 'x2' (x3,y3,z3 need x2,y2,z2)")
+    return tuple(groups)
+
+
+class _Table:
+    """Data cells of a CSV as one flat row-major list (``width`` cells per row)."""
+
+    def __init__(self, flat: list[str], width: int, line_nos: list[int]) -> None:
+        self.flat, self.width, self.line_nos = flat, width, line_nos
+
+    def column(self, pos: int) -> list[str]:
+        """Cells of column ``pos`` (0-based), one per row."""
+        return self.flat[pos :: self.width]
+
+
+def _data_table(lines: list[str], start: int, layout: _Layout, src: str) -> _Table:
+    """Split the data lines after the header into cells (bulk, then checked)."""
+    line_nos = [i + 1 for i in range(start, len(lines)) if not _is_skipped(lines[i])]
+    if not line_nos:
+        raise DataError(src, "no data rows")
+    data = [lines[n - 1] for n in line_nos]
+    width, sep = len(layout.names), layout.sep
+    block = sep.join(data)
+    if '"' in block:  # quoted fields: let the csv module split each line
+        _check_field_counts(data, line_nos, width, sep, src)
+        return _Table([cell for line in data for cell in _split(line, sep)], width, line_nos)
+    _check_field_counts(data, line_nos, width, sep, src)
+    flat = block.split(sep)
+    if " " in block or "\t" in block:
+        flat = [cell.strip() for cell in flat]
+    return _Table(flat, width, line_nos)
+
+
+def _check_field_counts(data: list[str], line_nos: list[int], width: int, sep: str, src: str) -> None:
+    """DataError at the first line whose number of fields is not ``width``."""
+    for line, line_no in zip(data, line_nos):
+        n_fields = len(_split(line, sep)) if '"' in line else line.count(sep) + 1
+        if n_fields != width:
+            raise DataError(src, f"expected {width} fields, got {n_fields}", line=line_no)
+
+
+def _number_error(raw: str, name: str, line: int, src: str) -> DataError:
+    """The DataError for a cell that is not a finite plain number."""
+    try:
+        value = float(raw.replace(",", "."))
+    except ValueError:
+        value = None
+    if value is not None and not math.isfinite(value):
+        what = f"expected a finite number, got {_show(raw)}"
+    else:
+        what = f"expected a number, got {_show(raw)}"
+    return DataError(src, what, line=line, column=f"'{name}'")
+
+
+def _first_bad_cell(table: _Table, positions: Sequence[int], decimal_comma: bool) -> tuple[int, int]:
+    """(row, column position) of the first malformed number, in reading order."""
+    for row in range(len(table.line_nos)):
+        for pos in positions:
+            cell = table.flat[row * table.width + pos]
+            if not _NUM_RE.fullmatch(cell.replace(",", ".") if decimal_comma else cell):
+                return row, pos
+    raise AssertionError("no malformed cell found")  # pragma: no cover
+
+
+def _numbers(table: _Table, layout: _Layout, names: Sequence[str], src: str) -> np.ndarray:
+    """(N, len(names)) float64 from the named columns; strict, vectorised."""
+    positions = [layout.index(n) for n in names]
+    cells = [cell for pos in positions for cell in table.column(pos)]  # column-major
+    joined = "\n".join(cells) + "\n"
+    decimal_comma = layout.sep == ";"
+    if decimal_comma and "," in joined:
+        joined = joined.replace(",", ".")
+        cells = joined[:-1].split("\n")
+    if not _COLUMN_RE.fullmatch(joined):
+        row, pos = _first_bad_cell(table, positions, decimal_comma)
+        raise _number_error(table.column(pos)[row], layout.shown[pos], table.line_nos[row], src)
+    values = np.array(cells, dtype=np.float64).reshape(len(positions), -1).T
+    bad = np.argwhere(~np.isfinite(values))
+    if bad.size:
+        row, k = (int(v) for v in bad[0])
+        pos = positions[k]
+        raise DataError(
+            src,
+            f"number out of range: {_show(table.column(pos)[row])}",
+            line=table.line_nos[row],
+            column=f"'{layout.shown[pos]}'",
+        )
+    return values
+
+
+def _check_ids(
+    ids: Sequence[str], sets: Sequence[str], fail: Callable[[int, str], DataError], ref: Callable[[int], str]
+) -> None:
+    """Unique non-empty point ids; ``check`` rows may repeat among themselves.
+
+    ``fail(i, what)`` builds the error for row i; ``ref(k)`` names row k.
+    """
+    first: dict[str, int] = {}
+    for i, (pid, set_name) in enumerate(zip(ids, sets)):
+        if not pid:
+            raise fail(i, "point_id is empty")
+        k = first.setdefault(pid, i)
+        if k != i and not (set_name == "check" and sets[k] == "check"):
+            raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
+
+
+def read_csv(path: str | os.PathLike) -> Dataset:
+    """Read and strictly validate an interchange CSV file (see module doc).
+
+    Returns a :class:`Dataset` (``sigma_mm`` None; ``source`` = ``str(path)``).
+    Raises :class:`DataError` (one line naming file and line/column) on any
+    problem.  Handles 10^5 rows in about a second or less.
+    """
+    src = str(path)
+    lines = _read_lines(path)
+    header_idx = next((i for i, ln in enumerate(lines) if not _is_skipped(ln)), None)
+    if header_idx is None:
+        raise DataError(src, "no data rows (empty file, no header)")
+    layout = _parse_header(lines[header_idx], src)
+    table = _data_table(lines, header_idx + 1, layout, src)
+    line_nos = table.line_nos
+    ids = table.column(layout.index("point_id"))
+    sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
+    _check_ids(
+        ids,
+        sets,
+        lambda i, what: DataError(src, what, line=line_nos[i]),
+        lambda k: f"on line {line_nos[k]}",
+    )
+    names = [f"q{k}" for k in range(1, layout.n_joints + 1)] + ["x", "y", "z"]
+    for k in layout.smr:
+        names += _SMR[k]
+    names += layout.scalars
+    values = _numbers(table, layout, names, src)
+    n = layout.n_joints
+    extra: dict[str, np.ndarray] = {}
+    for j, k in enumerate(layout.smr):
+        extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
+    for j, name in enumerate(layout.scalars):
+        extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
+    return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, **extra)
+
+
+def _parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
+    """Lower-cased set names; DataError for anything but calib/test/check."""
+    sets = [s.lower() for s in raw]
+    for i, s in enumerate(sets):
+        if s not in SETS:
+            raise DataError(
+                src, f"expected calib, test or check, got {_show(raw[i])}", line=line_nos[i], column="'set'"
+            )
+    return sets
+
+
+# --------------------------------------------------------------------------
+# writing
+
+
+def _header(ds: Dataset) -> list[str]:
+    """Column names present in ``ds``, in the canonical write order."""
+    names = ["point_id", "set", *(f"q{k}" for k in range(1, ds.n_joints + 1)), "x", "y", "z"]
+    for k in (2, 3):
+        if getattr(ds, f"p{k}_tracker_mm") is not None:
+            names += _SMR[k]
+    return names + [s for s in _SCALARS if getattr(ds, s) is not None]
+
+
+def _numeric_block(ds: Dataset) -> np.ndarray:
+    """(N, m) float matrix of every numeric column, in header order."""
+    parts = [ds.q_deg, ds.p_tracker_mm]
+    parts += [a for a in (ds.p2_tracker_mm, ds.p3_tracker_mm) if a is not None]
+    parts += [getattr(ds, s)[:, None] for s in _SCALARS if getattr(ds, s) is not None]
+    return np.hstack(parts)
+
+
+def _check_writable(ds: Dataset, src: str, numbers: np.ndarray) -> None:
+    """Refuse data that :func:`read_csv` would not read back identically."""
+    if len(ds) == 0:
+        raise DataError(src, "no data rows to write")
+    if ds.p3_tracker_mm is not None and ds.p2_tracker_mm is None:
+        raise DataError(src, "p3_tracker_mm needs p2_tracker_mm")
+    for i, pid in enumerate(ds.point_id):
+        if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid):
+            raise DataError(src, f"row {i + 1}: point_id {pid!r} cannot be written to CSV")
+    bad = np.argwhere(~np.isfinite(numbers))
+    if bad.size:
+        raise DataError(src, f"row {int(bad[0, 0]) + 1}: non-finite value")
+
+
+def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
+    """Write ``dataset`` as an interchange CSV (comma separated, ``\\n`` ends).
+
+    Only the columns present are written; ``sigma_mm`` is not part of the
+    format and is dropped.  Floats use ``repr`` (shortest exact round trip),
+    so reading the file back gives identical float64 values.  The file is
+    written to a temporary name and renamed into place.
+    """
+    src = str(path)
+    numbers = _numeric_block(dataset)
+    _check_writable(dataset, src, numbers)
+    lines = [",".join(_header(dataset))]
+    for pid, set_name, row in zip(dataset.point_id, dataset.set, numbers.tolist()):
+        lines.append(",".join([pid, set_name, *map(repr, row)]))
+    tmp = Path(f"{src}.tmp{os.getpid()}")
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write("\n".join(lines) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+# --------------------------------------------------------------------------
+# from a run log
+
+
+def _sigma_from(rec: dict) -> float | None:
+    """1-sigma in mm: ``sigma_mm``, else sqrt(trace(cov_mm2)/3) (RMS per axis)."""
+    if rec.get("sigma_mm") is not None:
+        return float(rec["sigma_mm"])
+    cov = rec.get("cov_mm2")
+    if cov is None:
+        return None
+    cov = np.asarray(cov, dtype=np.float64)
+    variances = np.diag(cov) if cov.ndim == 2 else cov.reshape(-1)
+    return float(np.sqrt(np.mean(variances)))
+
+
+def _temp_from(rec: dict) -> Any:
+    """``temperatures["temp_c"]`` if present, else a top-level ``temp_c``."""
+    temps = rec.get("temperatures")
+    if isinstance(temps, dict) and temps.get("temp_c") is not None:
+        return temps["temp_c"]
+    return rec.get("temp_c")
+
+
+_LOG_FIELDS: dict[str, Callable[[dict], Any]] = {
+    "t_s": lambda r: r.get("t_end_s"),
+    "temp_c": _temp_from,
+    "payload_kg": lambda r: r.get("payload_kg"),
+    "p2_tracker_mm": lambda r: r.get("p2_tracker_mm"),
+    "p3_tracker_mm": lambda r: r.get("p3_tracker_mm"),
+    "sigma_mm": _sigma_from,
+}
+
+
+def _optional(values: list, name: str, where: Callable[[int], str], src: str) -> list | None:
+    """All present -> the list; none present -> None; a mix -> DataError."""
+    missing = [i for i, v in enumerate(values) if v is None]
+    if len(missing) == len(values):
+        return None
+    if missing:
+        raise DataError(src, f"{where(missing[0])}: has no '{name}' while other points do")
+    return values
+
+
+def _log_set(rec: dict, where: str, src: str) -> str:
+    """``check`` for check-pose records, else the record's ``set``."""
+    set_name = "check" if rec.get("kind") == "check" else rec.get("set")
+    if set_name not in SETS:
+        raise DataError(src, f"{where}: set must be calib, test or check, got {set_name!r}")
+    return set_name
+
+
+def _log_q(rec: dict, where: str, src: str) -> list:
+    """``q_read_deg`` when recorded, else ``q_cmd_deg``."""
+    q = rec.get("q_read_deg")
+    if q is None:
+        q = rec.get("q_cmd_deg")
+    if q is None:
+        raise DataError(src, f"{where}: has neither 'q_read_deg' nor 'q_cmd_deg'")
+    return q
+
+
+def dataset_from_log(contents: Any) -> Dataset:
+    """Convert the ``point`` records of a run log into a :class:`Dataset`.
+
+    ``contents`` is a :class:`campaign.runlog.LogContents`.  Rows are in log
+    order, check-pose records (``kind == "check"``) get set ``check``.
+    q: ``q_read_deg`` if present else ``q_cmd_deg`` (deg); ``p_tracker_mm``
+    (mm); ``t_s`` = ``t_end_s`` minus the first point's ``t_end_s`` (s);
+    ``temp_c`` from ``temperatures["temp_c"]`` (or a top-level ``temp_c``);
+    ``payload_kg``; ``sigma_mm`` from ``sigma_mm`` or sqrt(trace(cov_mm2)/3);
+    ``p2_tracker_mm``/``p3_tracker_mm`` if recorded.  An optional field must
+    be in all point records or in none.  Raises :class:`DataError`.
+    """
+    src = getattr(contents, "path", "") or "<run log>"
+    recs = list(contents.points)
+    if not recs:
+        raise DataError(src, "no data rows (no point records)")
+
+    def where(i: int) -> str:
+        return f"point record {i + 1} (point_id {recs[i].get('point_id')!r})"
+
+    ids = [str(r.get("point_id", "")) for r in recs]
+    sets = [_log_set(r, where(i), src) for i, r in enumerate(recs)]
+    _check_ids(
+        ids,
+        sets,
+        lambda i, what: DataError(src, f"point record {i + 1}: {what}"),
+        lambda k: f"in point record {k + 1}",
+    )
+    q = [_log_q(r, where(i), src) for i, r in enumerate(recs)]
+    widths = {len(v) for v in q}
+    if len(widths) != 1:
+        raise DataError(src, f"point records have different joint counts {sorted(widths)}")
+    p = [r.get("p_tracker_mm") for r in recs]
+    if any(v is None for v in p):
+        raise DataError(src, f"{where(p.index(None))}: has no 'p_tracker_mm'")
+    try:
+        extra = {
+            name: _optional([get(r) for r in recs], name, where, src) for name, get in _LOG_FIELDS.items()
+        }
+        if extra["t_s"] is not None:
+            t = np.asarray(extra["t_s"], dtype=np.float64)
+            extra["t_s"] = t - t[0]
+        return Dataset(tuple(ids), tuple(sets), q, p, source=src, **extra)
+    except DataError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise DataError(src, f"point records: {exc}") from None
