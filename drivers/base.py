@@ -1,0 +1,116 @@
+"""The small device protocols the campaign runner talks to, and the driver error tree.
+
+Drivers know protocols, not calibration. Joint values cross this boundary in degrees (what controllers
+report), positions in mm in the tracker frame. Every driver method either returns or raises a
+``DriverError`` subclass within its configured timeout; none blocks forever.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Mapping, Protocol, Sequence, runtime_checkable
+
+
+class DriverError(Exception):
+    """Base of all driver failures; ``str()`` is one line naming the device."""
+
+
+class ConnectionLost(DriverError):
+    """The link to the device dropped or timed out."""
+
+
+class RobotError(DriverError):
+    """The robot refused or failed a command."""
+
+
+class RobotNotReady(RobotError):
+    """Preflight failed: not in AUTO, motors off, mastership held elsewhere, program stopped, ..."""
+
+
+class MotionError(RobotError):
+    """A commanded motion did not complete (limit, collision, error raised by the controller program)."""
+
+
+class TrackerError(DriverError):
+    """A tracker measurement failed; ``kind`` tells the runner whether retrying can help."""
+    kind = "error"
+
+
+class BeamBroken(TrackerError):
+    kind = "beam_broken"
+
+
+class TargetNotFound(TrackerError):
+    kind = "not_found"
+
+
+class Unstable(TrackerError):
+    kind = "unstable"
+
+
+class TrackerTimeout(TrackerError):
+    kind = "timeout"
+
+
+class GarbageReply(TrackerError):
+    kind = "garbage"
+
+
+@dataclass(frozen=True)
+class TrackerReading:
+    """One tracker sample: SMR centre xyz (mm, tracker frame) at time t_s (s, the driver's clock)."""
+    xyz_mm: tuple[float, float, float]
+    t_s: float
+    extra: Mapping[str, float] = field(default_factory=dict)
+
+
+@runtime_checkable
+class Clock(Protocol):
+    def now(self) -> float: ...
+    def sleep(self, seconds: float) -> None: ...
+
+
+class SystemClock:
+    """Wall-clock time for real cells."""
+    def now(self) -> float:
+        return time.time()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """A robot the runner can move point to point."""
+    n_joints: int
+
+    def connect(self) -> None:
+        """Open the session and run the preflight checks (raise RobotNotReady with the reason)."""
+
+    def move_joints(self, q_deg: Sequence[float]) -> None:
+        """Move to joint target (deg) with a fine stop; return when in position, or raise."""
+
+    def read_joints(self) -> tuple[float, ...]:
+        """Actual joint values (deg)."""
+
+    def stop(self) -> None:
+        """Stop any motion now (best effort, never raises)."""
+
+    def close(self) -> None:
+        """Release the session (logout, mastership); idempotent."""
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """A laser tracker that measures the SMR on request."""
+
+    def connect(self) -> None: ...
+
+    def measure(self) -> TrackerReading:
+        """One reading of the SMR, or a TrackerError."""
+
+    def environment(self) -> Mapping[str, float]:
+        """Latest environment readings (e.g. temp_c, pressure_hpa, humidity_pct); empty if none."""
+
+    def close(self) -> None: ...

@@ -1,0 +1,141 @@
+"""Mock robot and mock laser tracker for CI and demos, driven by the robocal simulator.
+
+Both share a ``MockWorld``: the simulated cell (true geometry, effects), a virtual clock, the current
+joint state and the SMR's realised position. Moves draw the robot's repeatability scatter; each
+measurement draws the tracker's spherical-model error once per point (MPE-type errors do not average
+out) plus a small per-sample jitter, so averaging samples behaves like a real tracker.
+Fault injection (beam break, timeout, garbage) follows the configured probabilities.
+"""
+from __future__ import annotations
+
+import time
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from robocal.noise import repeatability_sigma_mm
+from robocal.simulate import SimulatedCell
+
+from .base import BeamBroken, GarbageReply, MotionError, TrackerReading, TrackerTimeout
+
+
+class VirtualClock:
+    """Simulated campaign time (s) advanced by moves and waits; never really sleeps."""
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        self.t += max(0.0, float(seconds))
+
+
+class MockWorld:
+    """State shared by MockRobot and MockTracker."""
+
+    def __init__(self, cell: SimulatedCell, seed: int = 0, *, motion_time_s: float = 0.0,
+                 joint_speed_deg_s: float = 60.0, payload_kg: float = 0.0, faults: Mapping[str, float] | None = None,
+                 jitter_mm: float = 0.002, q0_deg: Sequence[float] | None = None) -> None:
+        self.cell = cell
+        self.rng = np.random.default_rng(seed)
+        self.fault_rng = np.random.default_rng(seed + 7919)
+        self.clock = VirtualClock()
+        self.motion_time_s = motion_time_s
+        self.joint_speed_deg_s = joint_speed_deg_s
+        self.payload_kg = payload_kg
+        self.faults = dict(faults or {})
+        self.jitter_mm = jitter_mm
+        n = cell.truth.n
+        self.q_deg = np.zeros(n) if q0_deg is None else np.asarray(q0_deg, float)
+        self.approach = np.zeros(n)
+        self.p_smr_tracker_mm = self._realise()
+        self.point_error_mm = np.zeros(3)
+        self.moves = 0
+        self.stopped = False
+
+    def meta(self) -> dict:
+        return {"t_s": np.array([self.clock.now()]), "payload_kg": np.array([self.payload_kg]),
+                "approach": self.approach[None, :]}
+
+    def _realise(self) -> np.ndarray:
+        p = self.cell.true_smr_tracker(np.radians(self.q_deg)[None], self.meta())[0]
+        s = repeatability_sigma_mm(self.cell.repeatability_rp_mm)
+        return p + (self.rng.normal(0.0, s, 3) if s > 0 else 0.0)
+
+    def move(self, q_deg: np.ndarray) -> None:
+        delta = q_deg - self.q_deg
+        self.approach = np.where(np.abs(delta) > 1e-9, np.sign(delta), self.approach)
+        self.clock.sleep(float(np.max(np.abs(delta))) / self.joint_speed_deg_s)
+        if self.motion_time_s > 0:
+            time.sleep(self.motion_time_s)
+        self.q_deg = q_deg.copy()
+        self.p_smr_tracker_mm = self._realise()
+        cov = self.cell.tracker.covariance(self.p_smr_tracker_mm[None])[0]
+        self.point_error_mm = np.linalg.cholesky(cov) @ self.rng.standard_normal(3)
+        self.moves += 1
+
+    def fault(self, name: str) -> bool:
+        p = self.faults.get(name, 0.0)
+        return p > 0 and self.fault_rng.random() < p
+
+
+class MockRobot:
+    """A robot that moves instantly (or after ``motion_time_s``) inside its joint limits."""
+
+    def __init__(self, world: MockWorld, url: str = "mock://robot") -> None:
+        self.world, self.url = world, url
+        self.n_joints = world.cell.truth.n
+        kin = world.cell.truth
+        self.q_min_deg, self.q_max_deg = np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad)
+
+    def connect(self) -> None:
+        self.world.stopped = False
+
+    def move_joints(self, q_deg: Sequence[float]) -> None:
+        q = np.asarray(q_deg, float)
+        if q.shape != (self.n_joints,) or not np.all(np.isfinite(q)):
+            raise MotionError(f"{self.url}: expected {self.n_joints} finite joint values, got {list(q_deg)}")
+        bad = np.flatnonzero((q < self.q_min_deg) | (q > self.q_max_deg))
+        if len(bad):
+            j = bad[0]
+            raise MotionError(f"{self.url}: joint {j + 1} target {q[j]:.3f} deg outside "
+                              f"[{self.q_min_deg[j]:.1f}, {self.q_max_deg[j]:.1f}]")
+        self.world.move(q)
+
+    def read_joints(self) -> tuple[float, ...]:
+        return tuple(float(v) for v in self.world.q_deg)
+
+    def stop(self) -> None:
+        self.world.stopped = True
+
+    def close(self) -> None:
+        pass
+
+
+class MockTracker:
+    """A tracker measuring the world's SMR with the spherical noise model and injected faults."""
+
+    def __init__(self, world: MockWorld, url: str = "mock://tracker") -> None:
+        self.world, self.url = world, url
+
+    def connect(self) -> None:
+        pass
+
+    def measure(self) -> TrackerReading:
+        w = self.world
+        if w.fault("beam_break_probability"):
+            raise BeamBroken(f"{self.url}: beam broken")
+        if w.fault("timeout_probability"):
+            raise TrackerTimeout(f"{self.url}: no reply")
+        if w.fault("garbage_probability"):
+            raise GarbageReply(f"{self.url}: unparseable reply '#%!?'")
+        xyz = w.p_smr_tracker_mm + w.point_error_mm + w.rng.normal(0.0, w.jitter_mm, 3)
+        w.clock.sleep(0.05)
+        return TrackerReading(tuple(float(v) for v in xyz), w.clock.now())
+
+    def environment(self) -> Mapping[str, float]:
+        return {}
+
+    def close(self) -> None:
+        pass

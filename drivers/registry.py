@@ -1,0 +1,39 @@
+"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ...
+
+Real drivers are imported lazily so that a cell only needs the libraries of the drivers it uses.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any, Mapping
+from urllib.parse import urlsplit
+
+from .base import DriverError, Robot, Tracker
+
+# scheme -> "module:factory"; factories take (url, options, **context)
+ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_rws:open_robot",
+                 "ur-rtde": "drivers.ur:open_robot"}
+TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
+                   "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
+                   "tracker+loop": "drivers.tracker:open_tracker"}
+
+
+def _factory(table: Mapping[str, str], url: str, what: str):
+    scheme = urlsplit(url).scheme
+    if scheme not in table:
+        raise DriverError(f"{what} url {url!r}: unknown driver {scheme!r} (expected one of: {', '.join(sorted(table))})")
+    module, name = table[scheme].split(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise DriverError(f"{what} url {url!r}: driver {scheme!r} is not available ({exc})") from exc
+
+
+def open_robot(url: str, options: Mapping[str, Any] | None = None, **context) -> Robot:
+    """Robot driver for ``url`` (not yet connected)."""
+    return _factory(ROBOT_DRIVERS, url, "robot")(url, dict(options or {}), **context)
+
+
+def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) -> Tracker:
+    """Tracker driver for ``url`` (not yet connected)."""
+    return _factory(TRACKER_DRIVERS, url, "tracker")(url, dict(options or {}), **context)
