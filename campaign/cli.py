@@ -14,11 +14,13 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from rich.console import Console
 
 from campaign.config import load_config
 from campaign.errors import CampaignError, ConfigError, DataError
+from drivers.base import DriverError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -80,6 +82,74 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _run_arguments(parser: argparse.ArgumentParser) -> None:
+    _config_argument(parser)
+    parser.add_argument("--out", metavar="RUN_DIR", type=Path, help="run directory (default: output.dir/NAME-TIMESTAMP)")
+    parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
+
+
+@command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
+def cmd_run(args: argparse.Namespace) -> int:
+    from campaign.pipeline import run_campaign
+    from campaign.report import render_parameters, render_stages
+
+    cfg = load_config(args.config)
+    out = _stdout()
+    result = run_campaign(cfg, args.out, args.resume, out)
+    o = result.outcome
+    if o.exit_status != "success":
+        hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}" if o.exit_status != "abort" else ""
+        _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
+        return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
+    render_stages(out, result.processed.report)
+    render_parameters(out, result.processed.report)
+    out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
+              markup=False)
+    return EXIT_OK
+
+
+def _plan_arguments(parser: argparse.ArgumentParser) -> None:
+    _config_argument(parser)
+    parser.add_argument("--csv", metavar="FILE", type=Path, help="also write the plan as CSV")
+
+
+@command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
+def cmd_plan(args: argparse.Namespace) -> int:
+    from campaign.cell import nominal_kinematics
+    from campaign.plan import build_plan, write_plan_csv
+    from campaign.report import render_plan
+
+    cfg = load_config(args.config)
+    plan = build_plan(cfg, nominal_kinematics(cfg))
+    m = cfg.tracker.measurement
+    render_plan(_stdout(), plan, plan.estimated_duration_s(cfg.robot.max_joint_speed_deg_s, m.settle_s, m.samples))
+    if args.csv:
+        write_plan_csv(plan, args.csv)
+    return EXIT_OK
+
+
+def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("source", metavar="RUN_DIR_OR_CSV", type=Path, help="a run directory or an interchange CSV")
+    parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise, options)")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where report.json and model.json go")
+
+
+@command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
+def cmd_reprocess(args: argparse.Namespace) -> int:
+    from campaign.pipeline import reprocess
+    from campaign.report import render_parameters, render_stages
+
+    cfg = load_config(args.config)
+    if not args.source.exists():
+        raise DataError(str(args.source), "no such file or run directory")
+    processed = reprocess(args.source, cfg, args.out)
+    out = _stdout()
+    render_stages(out, processed.report)
+    render_parameters(out, processed.report)
+    out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- entry point
 
 
@@ -108,6 +178,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, DataError) as exc:
         return _fail(f"error: {exc}", EXIT_BAD_INPUT)
     except CampaignError as exc:
+        return _fail(f"error: {exc}", EXIT_FAILED)
+    except DriverError as exc:
         return _fail(f"error: {exc}", EXIT_FAILED)
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)

@@ -1,0 +1,76 @@
+"""From a campaign config to the robocal objects it describes (nominal model, noise, options, simulated truth)."""
+from __future__ import annotations
+
+import numpy as np
+
+from robocal.effects import by_name
+from robocal.identify import CalibrationOptions
+from robocal.kinematics import Kinematics
+from robocal.noise import TrackerUncertainty, repeatability_sigma_mm
+from robocal.simulate import SimulatedCell, random_geometric_errors
+
+from .config import CampaignConfig
+from .errors import ConfigError
+
+EFFECT_FACTORY_KEYS = {"joints", "form", "joint", "harmonics", "tau_s", "link_masses_kg"}
+
+
+def nominal_kinematics(cfg: CampaignConfig) -> Kinematics:
+    """The controller's nominal model of the robot with the nominal SMR offset (base frame unregistered)."""
+    j = cfg.robot.joints
+    return Kinematics.from_table(cfg.robot.convention, [x.alpha_deg for x in j], [x.a_mm for x in j],
+                                 [x.d_mm for x in j], [x.theta_deg for x in j], [x.q_min_deg for x in j],
+                                 [x.q_max_deg for x in j], cfg.robot.hayati_joints,
+                                 p_flange_smr_mm=cfg.tool.p_flange_smr_mm)
+
+
+def tracker_uncertainty(cfg: CampaignConfig) -> TrackerUncertainty:
+    u = cfg.tracker.uncertainty
+    return TrackerUncertainty(u.transverse_a_um, u.transverse_b_um_per_m, u.range_a_um, u.range_b_um_per_m,
+                              u.coverage_k)
+
+
+def measurement_covariance(cfg: CampaignConfig, p_tracker_mm: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) mm^2: tracker spherical model + robot repeatability (isotropic): the calibration weights."""
+    s = repeatability_sigma_mm(cfg.robot.repeatability_mm)
+    return tracker_uncertainty(cfg).covariance(p_tracker_mm) + s**2 * np.eye(3)
+
+
+def calibration_options(cfg: CampaignConfig) -> CalibrationOptions:
+    c = cfg.calibration
+    return CalibrationOptions(method=c.method, weights=c.weights, k0=c.k0, k1=c.k1, ridge_mu=c.ridge_mu)
+
+
+def simulated_effects(cfg: CampaignConfig, n_joints: int) -> tuple:
+    """[(Effect, params)] of the simulation section: typical values x scale unless ``params.values`` is given."""
+    out = []
+    for i, spec in enumerate(cfg.simulation.effects):
+        where = f"simulation.effects[{i}].params"
+        unknown = set(spec.params) - EFFECT_FACTORY_KEYS - {"values"}
+        if unknown:
+            raise ConfigError(cfg.source_path, where, f"unknown key {sorted(unknown)[0]!r} "
+                              f"(expected one of: {', '.join(sorted(EFFECT_FACTORY_KEYS | {'values'}))})")
+        kwargs = {k: (tuple(v) if isinstance(v, (list, tuple)) else v)
+                  for k, v in spec.params.items() if k in EFFECT_FACTORY_KEYS}
+        try:
+            eff = by_name(spec.name, n_joints, **kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(cfg.source_path, where, f"cannot build effect {spec.name!r}: {exc}") from None
+        values = spec.params.get("values")
+        params = np.asarray(eff.typical if values is None else values, float) * spec.scale
+        if params.shape != (eff.k,):
+            raise ConfigError(cfg.source_path, where + ".values",
+                              f"expected {eff.k} numbers ({', '.join(eff.param_names)}), got {params.size}")
+        out.append((eff, params))
+    return tuple(out)
+
+
+def simulated_cell(cfg: CampaignConfig) -> SimulatedCell:
+    """The 'real' robot behind mock:// drivers: nominal + seeded geometric errors + configured effects."""
+    sim = cfg.simulation
+    nominal = nominal_kinematics(cfg)
+    rng = np.random.default_rng(sim.seed)
+    truth = random_geometric_errors(nominal, rng, sim.geometric_error_scale).with_(
+        T_tracker_base=np.array(sim.T_tracker_base, float), p_flange_smr_mm=sim.p_flange_smr_mm)
+    return SimulatedCell(truth, simulated_effects(cfg, nominal.n), tracker_uncertainty(cfg),
+                         cfg.robot.repeatability_mm)

@@ -1,0 +1,187 @@
+"""The measurement plan: data, not a generator (bluesky-style), so it can be summarised, hashed and dry-run.
+
+Seed 000's grid (box centre/size/step in the robot base frame) + a seeded random test set in the same
+box, one fixed SMR orientation and ONE robot configuration for every point (the IK branch of
+``q_ref``), unreachable points reported and skipped, a serpentine motion order with each test point
+measured next to its nearest grid point, and repeated check poses through the run.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robocal.ik import solve_ik, solve_on_branch
+from robocal.kinematics import Kinematics
+
+from .config import CampaignConfig
+
+
+@dataclass(frozen=True)
+class PlanPoint:
+    """One measurement: id, set (calib | test | check), commanded joints (deg), target SMR position (mm, base)."""
+    point_id: str
+    set: str
+    q_deg: tuple[float, ...]
+    p_base_mm: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Skipped:
+    point_id: str
+    set: str
+    p_base_mm: tuple[float, float, float]
+    reason: str
+
+
+@dataclass(frozen=True)
+class Plan:
+    points: tuple[PlanPoint, ...]
+    skipped: tuple[Skipped, ...]
+    sha256: str
+
+    def count(self, set_name: str) -> int:
+        return sum(p.set == set_name for p in self.points)
+
+    def estimated_duration_s(self, joint_speed_deg_s: float, settle_s: float, samples: int,
+                             sample_s: float = 0.1) -> float:
+        """Rough campaign duration: moves at the joint speed + settle + sampling per point."""
+        if not self.points:
+            return 0.0
+        q = np.array([p.q_deg for p in self.points])
+        moves = np.max(np.abs(np.diff(q, axis=0)), axis=1).sum() / joint_speed_deg_s
+        return float(moves + len(self.points) * (settle_s + samples * sample_s))
+
+
+def tool_rotation(direction, down=(0.0, 0.0, -1.0)) -> np.ndarray:
+    """Fixed flange orientation R_base_flange (3, 3): z along ``direction``, x as close as possible to ``down``
+    (+x of the base if the direction is vertical)."""
+    z = np.asarray(direction, float) / np.linalg.norm(direction)
+    x = np.asarray(down, float) - z * (z @ np.asarray(down, float))
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([1.0, 0.0, 0.0]) - z * z[0]
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def grid_points(center, size, step) -> tuple[np.ndarray, np.ndarray]:
+    """Grid vertices (M, 3) mm and their integer indices (M, 3), in serpentine order (x fastest)."""
+    counts = [int(np.floor(s / step + 1e-9)) + 1 for s in size]
+    lo = np.asarray(center, float) - np.asarray(size, float) / 2
+    idx = []
+    for k in range(counts[2]):
+        ys = range(counts[1]) if k % 2 == 0 else reversed(range(counts[1]))
+        for n, j in enumerate(ys):
+            xs = range(counts[0]) if (n + k * counts[1]) % 2 == 0 else reversed(range(counts[0]))
+            idx += [(i, j, k) for i in xs]
+    idx = np.array(idx)
+    return lo + idx * step, idx
+
+
+def _skip_reasons(kin: Kinematics, p: np.ndarray, R, q_ref) -> list[str]:
+    """Why each of the targets p (M, 3) cannot be planned (one batched IK from q_ref)."""
+    if len(p) == 0:
+        return []
+    res = solve_ik(kin, p, R, q_ref)
+    reasons = []
+    for q, conv in zip(res.q_rad, res.converged):
+        bad = np.flatnonzero((q < kin.q_min_rad) | (q > kin.q_max_rad))
+        if not conv:
+            reasons.append("unreachable with the fixed SMR orientation")
+        elif len(bad):
+            j = bad[0]
+            reasons.append(f"joint {j + 1} would be at {np.degrees(q[j]):.1f} deg, outside "
+                           f"[{np.degrees(kin.q_min_rad[j]):.0f}, {np.degrees(kin.q_max_rad[j]):.0f}]")
+        else:
+            reasons.append("reachable only in another robot configuration")
+    return reasons
+
+
+def _check_poses(q: np.ndarray, p: np.ndarray, count: int) -> list[int]:
+    """Indices of ``count`` reachable grid points spread over the box (farthest-point sampling)."""
+    if count <= 0 or len(p) == 0:
+        return []
+    chosen = [int(np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1)))]
+    while len(chosen) < min(count, len(p)):
+        d = np.min(np.linalg.norm(p[:, None] - p[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(d)))
+    return chosen
+
+
+def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
+    """Plan of a campaign config for the nominal model ``kin``."""
+    g, pl = cfg.plan.grid, cfg.plan
+    R = tool_rotation(pl.tool_direction)
+    q_ref = np.radians(pl.q_ref_deg)
+    p_grid, idx = grid_points(g.center_mm, g.size_mm, g.step_mm)
+    grid_ids = [f"G{i:02d}-{j:02d}-{k:02d}" for i, j, k in idx]
+    rng = np.random.default_rng(pl.test.seed)
+    c, s = np.asarray(g.center_mm), np.asarray(g.size_mm)
+    p_test = rng.uniform(c - s / 2, c + s / 2, (pl.test.count, 3))
+    test_ids = [f"T{i + 1:03d}" for i in range(pl.test.count)]
+    p_all = np.vstack([p_grid, p_test])
+    q_all, ok = solve_on_branch(kin, p_all, R, q_ref)
+    sets = ["calib"] * len(p_grid) + ["test"] * len(p_test)
+    ids = grid_ids + test_ids
+    bad = np.flatnonzero(~ok)
+    skipped = tuple(Skipped(ids[i], sets[i], tuple(p_all[i]), why)
+                    for i, why in zip(bad, _skip_reasons(kin, p_all[bad], R, q_ref)))
+    grid_ok = np.flatnonzero(ok[: len(p_grid)])
+    test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
+    order = _interleave(p_all, grid_ok, test_ok)
+    points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
+    points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
+    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] for p in points]).encode()).hexdigest()
+    return Plan(tuple(points), skipped, digest)
+
+
+def _interleave(p, grid_ok, test_ok) -> list[int]:
+    """Grid points in serpentine order, each test point right after its nearest grid point."""
+    if len(grid_ok) == 0:
+        return list(test_ok)
+    nearest = np.argmin(np.linalg.norm(p[test_ok][:, None] - p[grid_ok][None], axis=2), axis=1) if len(test_ok) else []
+    after = {}
+    for t, n in zip(test_ok, nearest):
+        after.setdefault(int(n), []).append(int(t))
+    order = []
+    for n, gi in enumerate(grid_ok):
+        order.append(int(gi))
+        order += after.get(n, [])
+    return order
+
+
+def _with_check_poses(points, q_grid, p_grid, grid_ids, cfg_check) -> list[PlanPoint]:
+    """Insert repeats of the check poses at the start, every ``every_n_points`` and at the end."""
+    chosen = _check_poses(q_grid, p_grid, cfg_check.count)
+    if not chosen:
+        return points
+    every = max(1, cfg_check.every_n_points)
+    out, rep = [], 0
+
+    def repeat():
+        nonlocal rep
+        rep += 1
+        for k, c in enumerate(chosen):
+            out.append(PlanPoint(f"K{k + 1}.{rep:03d}", "check", tuple(np.degrees(q_grid[c]).round(6)),
+                                 tuple(p_grid[c])))
+    repeat()
+    for n, pt in enumerate(points):
+        out.append(pt)
+        if (n + 1) % every == 0 and n + 1 < len(points):
+            repeat()
+    repeat()
+    return out
+
+
+def write_plan_csv(plan: Plan, path: str | Path) -> None:
+    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order."""
+    n = len(plan.points[0].q_deg) if plan.points else 0
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
+        for p in plan.points:
+            w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])

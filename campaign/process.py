@@ -1,0 +1,155 @@
+"""Calibrate and evaluate a dataset (live run or interchange CSV): seed 000's two stages, judged on the test set.
+
+Stages (seed 000 Table 3): ``nominal`` (nominal model, closed-form registration on the calibration points),
+``kinematic`` (registration + identification) and ``compensated`` (kinematic + IDW residual layer).
+Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated poses) give the noise floor.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
+from robocal.kinematics import smr_tracker
+from robocal.model import CalibratedModel, fit_idw_layer
+from robocal.noise import noise_floor_mm
+from robocal.stats import error_stats
+
+from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .config import CampaignConfig
+from .errors import DataError
+from .interchange import Dataset
+
+REPORT_FORMAT = "campaign-report/1"
+
+
+@dataclass(frozen=True, eq=False)
+class Processed:
+    report: dict
+    model: CalibratedModel
+    calibration: CalibrationResult
+
+
+def repeat_groups(q_deg: np.ndarray, decimals: int = 3) -> list[np.ndarray]:
+    """Row indices of repeated poses (same commanded joints to 10^-decimals deg), groups of >= 2."""
+    keys = np.round(q_deg, decimals)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    return [np.flatnonzero(inverse.ravel() == g) for g in np.flatnonzero(counts >= 2)]
+
+
+def noise_floor_from_repeats(q_deg: np.ndarray, p_mm: np.ndarray) -> float | None:
+    """sqrt of the pooled within-pose variance of the 3-D position (mm), or None without enough repeats."""
+    groups = repeat_groups(q_deg)
+    dof = sum(len(g) - 1 for g in groups)
+    if len(groups) < 2 or dof < 6:
+        return None
+    ss = sum(np.sum((p_mm[g] - p_mm[g].mean(axis=0)) ** 2) for g in groups)
+    return float(np.sqrt(ss / dof))
+
+
+def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
+    n = len(cfg.robot.joints)
+    if ds.q_deg.shape[1] != n:
+        raise DataError(ds.source, f"has {ds.q_deg.shape[1]} joint columns but the config's robot has {n} joints")
+    if ds.mask("calib").sum() < 10:
+        raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
+
+
+def _stage(kin_or_model, q, p) -> dict:
+    if len(q) == 0:
+        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
+    pred = kin_or_model.smr_tracker(q) if isinstance(kin_or_model, CalibratedModel) else smr_tracker(kin_or_model, q)
+    return error_stats(p - pred).to_dict()
+
+
+def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
+    """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
+    _check_dataset(ds, cfg)
+    kin0 = nominal_kinematics(cfg)
+    q = np.radians(ds.q_deg)
+    p = ds.p_tracker_mm
+    cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
+    cov = measurement_covariance(cfg, p)
+    try:
+        result = calibrate(kin0, q[cal], p[cal], cov[cal], calibration_options(cfg))
+    except IdentificationError as exc:
+        raise DataError(ds.source, f"calibration failed: {exc}") from None
+    nominal = register(kin0, q[cal], p[cal])
+    model = CalibratedModel(result.kinematics)
+    if cfg.calibration.residual == "idw":
+        layer = fit_idw_layer(result.kinematics, q[cal], p[cal], cfg.calibration.idw_power,
+                              cfg.calibration.idw_k_nearest, result.point_weights)
+        model = CalibratedModel(result.kinematics, layer)
+    stages = {name: {"test": _stage(m, q[test], p[test]), "calib": _stage(m, q[cal], p[cal])}
+              for name, m in (("nominal", nominal), ("kinematic", result.kinematics), ("compensated", model))}
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    eval_rows = test if test.any() else cal
+    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    calib_ids = np.array(ds.point_id)[cal]
+    report = {
+        "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
+        "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
+              "rejected": int(np.sum(result.point_weights == 0))},
+        "stages": stages,
+        "noise_floor_mm": repeats if repeats is not None else specs,
+        "noise_floor_source": "repeats" if repeats is not None else "specs",
+        "noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
+        "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
+        "condition_number": result.condition_number, "observability": result.observability,
+        "sigma0": result.sigma0, "iterations": result.iterations, "converged": result.converged,
+        "rejected_points": calib_ids[result.point_weights == 0].tolist(),
+        "T_tracker_base": result.kinematics.T_tracker_base.tolist(),
+        "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
+                   "residual": cfg.calibration.residual},
+    }
+    model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
+    return Processed(report, model, result)
+
+
+def _parameters(result: CalibrationResult) -> list[dict]:
+    """Parameter table with angles converted to degrees for people."""
+    rows = []
+    for row in result.parameters_table():
+        if row["unit"] == "rad":
+            row = dict(row, unit="deg", delta=float(np.degrees(row["delta"])),
+                       std=None if row["std"] is None else float(np.degrees(row["std"])))
+        rows.append(row)
+    return rows
+
+
+def _write_json(path: Path, data: dict) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=1, allow_nan=False, default=_plain)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _plain(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
+    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_json(out / "report.json", processed.report)
+    _write_json(out / "model.json", processed.model.to_dict())
+    return out / "report.json"
+
+
+def load_model(path: str | Path) -> CalibratedModel:
+    """Read a model.json written by write_outputs."""
+    try:
+        return CalibratedModel.from_dict(json.loads(Path(path).read_text()))
+    except (OSError, ValueError, KeyError) as exc:
+        raise DataError(str(path), f"not a readable calibrated model: {exc}") from None

@@ -1,0 +1,57 @@
+"""Terminal rendering of plans and reports with rich (nothing here computes a figure)."""
+from __future__ import annotations
+
+from rich.console import Console
+from rich.table import Table
+
+from .plan import Plan
+
+STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
+                ("compensated", "kinematic + residual compensation"))
+
+
+def _mm(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def render_stages(console: Console, report: dict) -> None:
+    """Seed 000 Table 3 rows on the held-out test set, with the noise floor."""
+    t = Table(title=f"Position error on the test set (n = {report['n']['test']}), mm")
+    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+        t.add_column(col, justify="left" if col == "stage" else "right")
+    floor = report["noise_floor_mm"]
+    for key, label in STAGE_LABELS:
+        s = report["stages"][key]["test"]
+        ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
+        t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
+    console.print(t)
+    console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
+                  f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
+                  f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
+
+
+def render_parameters(console: Console, report: dict) -> None:
+    t = Table(title="Identified parameters (delta from nominal; base relative to the registered frame)")
+    for col in ("parameter", "delta", "std", "unit"):
+        t.add_column(col, justify="left" if col == "parameter" else "right")
+    for row in report["parameters"]:
+        if row["identified"]:
+            t.add_row(row["name"], f"{row['delta']:+.4f}", f"{row['std']:.4f}", row["unit"])
+    console.print(t)
+    if report["unidentifiable"]:
+        notes = ", ".join(f"{u['name']} (~{'/'.join(u['redundant_with']) or u['reason']})"
+                          for u in report["unidentifiable"])
+        console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
+
+
+def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
+    console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
+                  f"{plan.count('check')} check-pose measurements, {len(plan.skipped)} skipped; "
+                  f"estimated duration {duration_s / 60:.1f} min")
+    if plan.skipped:
+        t = Table(title="Skipped points")
+        for col in ("point", "set", "x", "y", "z (mm, base)", "reason"):
+            t.add_column(col)
+        for s in plan.skipped:
+            t.add_row(s.point_id, s.set, *(f"{v:.0f}" for v in s.p_base_mm), s.reason)
+        console.print(t)

@@ -1,0 +1,147 @@
+"""The runner: executes a Plan on a Robot and a Tracker and appends every measurement to the RunLog.
+
+Per point: move (fine) -> settle -> read back joints -> N tracker samples -> stability test -> append +
+fsync -> only then the next move. Tracker faults are retried within limits; when retries are exhausted
+the run *pauses* (log closed with exit_status "paused" and the reason) instead of losing or faking the
+point, and ``campaign run CONFIG --resume RUN_DIR`` continues it. Ctrl-C stops the robot and closes the
+log cleanly ("abort"). The robot is always commanded to stop and released in ``finally``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+from drivers.base import Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
+
+from .config import MeasurementConfig
+from .plan import PlanPoint
+from .runlog import RunLog
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """How a run ended: exit_status success | paused | abort | fail, a one-line reason, points measured now."""
+    exit_status: str
+    reason: str
+    n_measured: int
+
+
+class PointFailed(Exception):
+    """A point could not be measured within the retry limits (the run pauses)."""
+
+
+def average_samples(readings: list[TrackerReading], stability_mm: float) -> tuple[np.ndarray, float]:
+    """Mean xyz (3,) mm and spread (max distance from the mean, mm); Unstable if spread > stability_mm."""
+    xyz = np.array([r.xyz_mm for r in readings], float)
+    mean = xyz.mean(axis=0)
+    spread = float(np.max(np.linalg.norm(xyz - mean, axis=1)))
+    if spread > stability_mm:
+        raise Unstable(f"readings spread {spread:.4f} mm > stability limit {stability_mm:.4f} mm")
+    return mean, spread
+
+
+class Runner:
+    """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty."""
+
+    def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
+                 covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
+                 on_point: Callable[[PlanPoint, dict], None] | None = None) -> None:
+        self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
+        self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
+        self.q_prev: np.ndarray | None = None
+        self.approach: np.ndarray | None = None
+
+    def execute(self, points: Iterable[PlanPoint], log: RunLog) -> RunOutcome:
+        """Measure ``points`` in order; return how the run ended. The log is closed on every path."""
+        n = 0
+        try:
+            for point in points:
+                record = self.measure_point(point, log)
+                log.append_point(record)                      # flushed + fsynced before the next move
+                n += 1
+                if self.on_point:
+                    self.on_point(point, record)
+        except PointFailed as exc:
+            self._safe_stop()
+            log.append_event({"type": "pause", "reason": str(exc), "t_s": self.clock.now()})
+            log.close("paused", str(exc))
+            return RunOutcome("paused", str(exc), n)
+        except KeyboardInterrupt:
+            self._safe_stop()
+            log.close("abort", "interrupted by the operator (Ctrl-C)")
+            return RunOutcome("abort", "interrupted by the operator (Ctrl-C)", n)
+        except DriverError as exc:
+            self._safe_stop()
+            reason = " ".join(str(exc).split())
+            log.append_event({"type": "fault", "device": "robot", "reason": reason, "t_s": self.clock.now()})
+            log.close("fail", reason)
+            return RunOutcome("fail", reason, n)
+        log.close("success", "all planned points measured")
+        return RunOutcome("success", "all planned points measured", n)
+
+    def _safe_stop(self) -> None:
+        try:
+            self.robot.stop()
+        except Exception:  # stop is best effort on an already failing device
+            pass
+
+    def measure_point(self, point: PlanPoint, log: RunLog) -> dict:
+        """Move, settle and measure one point; returns the log record."""
+        q_cmd = np.asarray(point.q_deg, float)
+        t_start = self.clock.now()
+        self.robot.move_joints(point.q_deg)
+        self.clock.sleep(self.m.settle_s)
+        q_read = np.asarray(self.robot.read_joints(), float)
+        approach = self._approach(q_cmd)
+        mean, spread, readings, retries = self._measure_with_retries(point, log)
+        env = dict(self.tracker.environment() or {})
+        record = {
+            "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
+            "p_tracker_mm": mean.tolist(), "cov_mm2": self.covariance(mean).tolist(), "spread_mm": spread,
+            "n_samples": len(readings), "t_start_s": t_start, "t_end_s": self.clock.now(),
+            "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
+            "p_target_base_mm": list(point.p_base_mm),
+        }
+        if env:
+            record["temperatures"] = env
+        return record
+
+    def _approach(self, q_cmd: np.ndarray) -> np.ndarray:
+        """Sign of the last motion of each joint before this stop (a joint that did not move keeps its sign)."""
+        if self.q_prev is None:
+            self.approach = np.zeros_like(q_cmd)
+        else:
+            d = q_cmd - self.q_prev
+            self.approach = np.where(np.abs(d) > 1e-9, np.sign(d), self.approach)
+        self.q_prev = q_cmd
+        return self.approach
+
+    def _measure_with_retries(self, point: PlanPoint, log: RunLog):
+        last = None
+        for attempt in range(self.m.retries + 1):
+            try:
+                readings = [self.tracker.measure() for _ in range(self.m.samples)]
+                mean, spread = average_samples(readings, self.m.stability_mm)
+                return mean, spread, readings, attempt
+            except TrackerError as exc:
+                last = exc
+                log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
+                                  "attempt": attempt + 1, "reason": " ".join(str(exc).split()),
+                                  "t_s": self.clock.now()})
+                self.clock.sleep(min(2.0, 0.2 * 2**attempt))
+        raise PointFailed(f"point {point.point_id}: tracker {last.kind} after {self.m.retries + 1} attempts "
+                          f"({' '.join(str(last).split())})")
+
+
+def pending(points: Iterable[PlanPoint], done_ids: set[str]) -> list[PlanPoint]:
+    """Plan points not yet in the log."""
+    return [p for p in points if p.point_id not in done_ids]
+
+
+def start_record(config: Mapping, config_sha256: str, plan_sha256: str, software_version: str,
+                 created_utc: str) -> dict:
+    return {"config_sha256": config_sha256, "plan_sha256": plan_sha256, "config": dict(config),
+            "created_utc": created_utc, "software_version": software_version,
+            "units": {"q": "deg (controller)", "p_tracker": "mm, tracker frame", "cov": "mm^2", "t": "s"}}
