@@ -119,20 +119,26 @@ class Runner:
         return self.approach
 
     def _measure_with_retries(self, point: PlanPoint, log: RunLog):
-        last = None
-        for attempt in range(self.m.retries + 1):
+        """Collect ``samples`` good readings; every failed reading (or an unstable set, which is discarded)
+        uses one of the point's ``retries`` and is followed by a short back-off. Returns (mean, spread,
+        readings, faults)."""
+        faults, readings = 0, []
+        while True:
             try:
-                readings = [self.tracker.measure() for _ in range(self.m.samples)]
+                while len(readings) < self.m.samples:
+                    readings.append(self.tracker.measure())
                 mean, spread = average_samples(readings, self.m.stability_mm)
-                return mean, spread, readings, attempt
+                return mean, spread, readings, faults
             except TrackerError as exc:
-                last = exc
+                faults += 1
+                if isinstance(exc, Unstable):
+                    readings = []
                 log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
-                                  "attempt": attempt + 1, "reason": " ".join(str(exc).split()),
-                                  "t_s": self.clock.now()})
-                self.clock.sleep(min(2.0, 0.2 * 2**attempt))
-        raise PointFailed(f"point {point.point_id}: tracker {last.kind} after {self.m.retries + 1} attempts "
-                          f"({' '.join(str(last).split())})")
+                                  "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+                if faults > self.m.retries:
+                    raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
+                                      f"{faults} failed readings, retry limit {self.m.retries}") from None
+                self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
 
 
 def pending(points: Iterable[PlanPoint], done_ids: set[str]) -> list[PlanPoint]:

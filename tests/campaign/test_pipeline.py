@@ -111,3 +111,34 @@ def test_reprocess_rejects_wrong_joint_count(tmp_path, capsys):
     csv.write_text("\n".join(rows) + "\n")
     assert main(["reprocess", str(csv), "--config", str(ROOT / "configs/irb2600.yaml"), "--out", str(tmp_path)]) == 2
     assert "7 joint columns" in capsys.readouterr().err
+
+
+def test_mock_faults_are_retried_and_logged(tmp_path):
+    cfg = small_config(tmp_path, **{"simulation.faults": {"beam_break_probability": 0.01, "timeout_probability": 0.01,
+                                                          "garbage_probability": 0.01}})
+    run = tmp_path / "r"
+    assert main(["run", str(cfg), "--out", str(run)]) == 0
+    contents = read_log(run)
+    kinds = {e["kind"] for e in contents.events if e["type"] == "tracker_fault"}
+    assert {"beam_broken", "timeout", "garbage"} <= kinds
+    assert sum(p["retries"] for p in contents.points) > 0
+    assert len({p["point_id"] for p in contents.points}) == len(contents.points)
+
+
+def test_sigint_stops_cleanly_with_exit_130(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+    cfg = small_config(tmp_path, **{"simulation.motion_time_s": 0.02})
+    run = tmp_path / "r"
+    proc = subprocess.Popen([sys.executable, "-m", "campaign", "run", str(cfg), "--out", str(run)], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not ((run / "log.jsonl").exists() and len(read_log(run).points) >= 5):
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=20) == 130
+    contents = read_log(run)
+    assert contents.stops[-1]["exit_status"] == "abort" and not contents.torn_tail
+    assert "interrupted" in proc.stderr.read().decode()
