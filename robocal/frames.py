@@ -124,9 +124,8 @@ def rot_y(a: np.ndarray) -> np.ndarray:
 
 def rot_z_trans(theta: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Rz(theta) @ Tz(d): (...,) rad, (...,) mm -> (..., 4, 4)."""
-    theta, d = np.broadcast_arrays(np.asarray(theta, float), np.asarray(d, float))
     c, s = np.cos(theta), np.sin(theta)
-    T = np.zeros(theta.shape + (4, 4))
+    T = np.zeros(np.broadcast_shapes(np.shape(theta), np.shape(d)) + (4, 4))
     T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
     T[..., 2, 2], T[..., 2, 3], T[..., 3, 3] = 1.0, d, 1.0
     return T
@@ -134,7 +133,6 @@ def rot_z_trans(theta: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 def trans_x_rot_x(a: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Tx(a) @ Rx(alpha): (...,) mm, (...,) rad -> (..., 4, 4)."""
-    a, alpha = np.broadcast_arrays(np.asarray(a, float), np.asarray(alpha, float))
-    T = rot_x(alpha)
+    T = rot_x(np.broadcast_to(alpha, np.broadcast_shapes(np.shape(a), np.shape(alpha))))
     T[..., 0, 3] = a
     return T

@@ -26,11 +26,24 @@ class IKResult:
 
 def pose_error(kin: Kinematics, q_rad, p_target_base_mm, R_target_base, point_mm) -> tuple[np.ndarray, np.ndarray]:
     """(e_pos (N, 3) mm, e_rot (N, 3) rad) from current to target; point_mm is fixed in the flange frame."""
-    T = chain(kin, q_rad).T_base_flange
+    T = chain(kin, q_rad, full=False).T_base_flange
     e_p = p_target_base_mm - transform_points(T, point_mm)
     if R_target_base is None:
         return e_p, np.zeros_like(e_p)
     return e_p, matrix_to_rotvec(R_target_base @ np.swapaxes(T[:, :3, :3], 1, 2))
+
+
+def _evaluate(kin, q, p_t, R_t, point, rows, w):
+    """Weighted pose error e (N, m) and Jacobian J (N, m, n) at q from ONE chain evaluation."""
+    c = chain(kin, q, full=False)
+    T = c.T_base_flange
+    p = transform_points(T, point)
+    e_p = p_t - p
+    e_r = np.zeros_like(e_p) if R_t is None else matrix_to_rotvec(R_t @ np.swapaxes(T[:, :3, :3], 1, 2))
+    e = np.concatenate([e_p, e_r], axis=1)[:, rows] * w
+    v = np.cross(c.axis, p[:, None, :] - c.origin)
+    J = np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(c.axis, 1, 2)], axis=1)[:, rows] * w[None, :, None]
+    return e, J
 
 
 def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.ndarray | None, q_seed_rad: np.ndarray,
@@ -45,32 +58,28 @@ def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.nd
     R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (N, 3, 3))
     rows = slice(0, 6) if R_t is not None else slice(0, 3)
     w = np.array([1.0, 1.0, 1.0, length_mm, length_mm, length_mm])[rows]
-
-    def err(qq, idx):
-        e_p, e_r = pose_error(kin, qq, p_t[idx], None if R_t is None else R_t[idx], point)
-        return np.concatenate([e_p, e_r], axis=1)[:, rows] * w
+    sub = lambda idx: (p_t[idx], None if R_t is None else R_t[idx])
 
     active = np.arange(N)
-    e = err(q, active)
+    e, J = _evaluate(kin, q, p_t, R_t, point, rows, w)
     mu = np.ones(N)                     # per-target damping multiplier, raised after a failed step
     it = 0
     for it in range(1, max_iter + 1):
         done = _converged(e, w, tol_mm, tol_rad)
-        active, e = active[~done], e[~done]
+        active, e, J = active[~done], e[~done], J[~done]
         if len(active) == 0:
             break
-        _, J = joint_jacobian(kin, q[active], point)
-        J = J[:, rows] * w[None, :, None]
         E = 0.5 * np.einsum("ni,ni->n", e, e)
         lam = (mu[active] * (E / length_mm**2 + w_bar))[:, None, None] * np.eye(kin.n)
         H = np.einsum("nij,nik->njk", J, J) + lam
         dq = np.linalg.solve(H, np.einsum("nij,ni->nj", J, e)[..., None])[..., 0]
         q_new = q[active] + dq
-        e_new = err(q_new, active)
+        e_new, J_new = _evaluate(kin, q_new, *sub(active), point, rows, w)
         better = np.einsum("ni,ni->n", e_new, e_new) < 2.0 * E
         q[active[better]] = q_new[better]
-        mu[active] = np.where(better, np.maximum(mu[active] / 10.0, 1.0), mu[active] * 10.0)
         e = np.where(better[:, None], e_new, e)
+        J = np.where(better[:, None, None], J_new, J)
+        mu[active] = np.where(better, np.maximum(mu[active] / 10.0, 1.0), mu[active] * 10.0)
     e_p, e_r = pose_error(kin, q, p_t, R_t, point)
     pos, rot = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_r, axis=1)
     ok = (pos < tol_mm * 10) & (rot < max(tol_rad * 10, 1e-8))

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .frames import exp_se3_left, rot_y, rot_z_trans, transform_points, trans_x_rot_x, rot_x, make_T
+from .frames import exp_se3_left, transform_points
 
 JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
@@ -119,9 +119,19 @@ def _per_pose(x: np.ndarray, i: int) -> np.ndarray:
     return x[..., i]
 
 
-def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, theta=None, beta=None) -> Chain:
+def _col(x):
+    """Per-pose scalar as a column (N, 1) (or (1, 1) when shared) for broadcasting against (N, 3)."""
+    return np.reshape(x, (-1, 1))
+
+
+def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, theta=None, beta=None,
+          full: bool = True) -> Chain:
     """Forward kinematics with all intermediate frames. q_rad (N, n). Optional per-pose (N, n) overrides
-    of the DH arrays (used by effect models such as thermal growth)."""
+    of the DH arrays (used by effect models such as thermal growth). ``full=False`` skips the per-parameter
+    directions (``dirs``/``pts`` are then None), which IK does not need.
+
+    Frames are propagated as their axis columns x, y, z and origin o (N, 3): every elementary rotation
+    is two vector combinations, far cheaper than batched 4x4 products."""
     q = np.atleast_2d(np.asarray(q_rad, dtype=float))
     N, n = q.shape
     if n != kin.n:
@@ -131,39 +141,46 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
     d = kin.d_mm if d is None else d
     theta = kin.theta_rad if theta is None else theta
     beta = kin.beta_rad if beta is None else beta
-    F = np.broadcast_to(np.eye(4), (N, 4, 4)).copy()
+    o = np.zeros((N, 3))
+    x, y, z = list(np.broadcast_to(np.eye(3), (N, 3, 3)).transpose(1, 0, 2))
     axis = np.empty((N, n, 3)); origin = np.empty((N, n, 3))
-    dirs = np.empty((5, N, n, 3)); pts = np.zeros((5, N, n, 3))
+    dirs = np.empty((5, N, n, 3)) if full else None
+    pts = np.zeros((5, N, n, 3)) if full else None
     for i in range(n):
         th = q[:, i] + _per_pose(theta, i)
-        if kin.convention == "dh":
-            oF, zF = F[:, :3, 3], F[:, :3, 2]
-            F1 = F @ rot_z_trans(th, np.broadcast_to(_per_pose(d, i), th.shape))
-            x1 = F1[:, :3, 0]
-            F2 = F1 @ trans_x_rot_x(np.broadcast_to(_per_pose(a, i), th.shape), np.broadcast_to(_per_pose(alpha, i), th.shape))
-            o2, y2 = F2[:, :3, 3], F2[:, :3, 1]
-            F = F2 @ rot_y(np.broadcast_to(_per_pose(beta, i), th.shape))
+        ct, st = np.cos(th)[:, None], np.sin(th)[:, None]
+        ca, sa = np.cos(_col(_per_pose(alpha, i))), np.sin(_col(_per_pose(alpha, i)))
+        cb, sb = np.cos(_col(_per_pose(beta, i))), np.sin(_col(_per_pose(beta, i)))
+        a_i, d_i = _col(_per_pose(a, i)), _col(_per_pose(d, i))
+        if kin.convention == "dh":                         # Rz(th) Tz(d) Tx(a) Rx(alpha) Ry(beta)
+            oF, zF = o, z
+            x1, y1 = ct * x + st * y, ct * y - st * x
+            o1 = o + d_i * z
+            o2 = o1 + a_i * x1
+            y2, z2 = ca * y1 + sa * z, ca * z - sa * y1
+            x, y, z, o = cb * x1 - sb * z2, y2, sb * x1 + cb * z2, o2
             axis[:, i], origin[:, i] = zF, oF
-            dirs[:, :, i] = (zF, zF, x1, x1, y2)
-            pts[0, :, i], pts[3, :, i], pts[4, :, i] = oF, o2, o2
-        else:
-            oF, xF = F[:, :3, 3], F[:, :3, 0]
-            F1 = F @ rot_x(np.broadcast_to(_per_pose(alpha, i), th.shape))
-            y1 = F1[:, :3, 1]
-            F2 = F1 @ rot_y(np.broadcast_to(_per_pose(beta, i), th.shape))
-            x2 = F2[:, :3, 0]
-            F2 = F2.copy(); F2[:, :3, 3] = oF + x2 * np.reshape(_per_pose(a, i), (-1, 1))
-            o2, z2 = F2[:, :3, 3], F2[:, :3, 2]
-            F = F2 @ rot_z_trans(th, np.broadcast_to(_per_pose(d, i), th.shape))
+            if full:
+                dirs[:, :, i] = (zF, zF, x1, x1, y2)
+                pts[0, :, i], pts[3, :, i], pts[4, :, i] = oF, o2, o2
+        else:                                              # Rx(alpha) Ry(beta) Tx(a) Rz(th) Tz(d)
+            oF, xF = o, x
+            y1, z1 = ca * y + sa * z, ca * z - sa * y
+            x2, z2 = cb * x - sb * z1, sb * x + cb * z1
+            o2 = o + a_i * x2
+            x, y, z, o = ct * x2 + st * y1, ct * y1 - st * x2, z2, o2 + d_i * z2
             axis[:, i], origin[:, i] = z2, o2
-            dirs[:, :, i] = (z2, z2, x2, xF, y1)
-            pts[0, :, i], pts[3, :, i], pts[4, :, i] = o2, oF, oF
-    return Chain(F, axis, origin, dirs, pts)
+            if full:
+                dirs[:, :, i] = (z2, z2, x2, xF, y1)
+                pts[0, :, i], pts[3, :, i], pts[4, :, i] = o2, oF, oF
+    T = np.zeros((N, 4, 4))
+    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2], T[:, :3, 3], T[:, 3, 3] = x, y, z, o, 1.0
+    return Chain(T, axis, origin, dirs, pts)
 
 
 def fk(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """T_base_flange (N, 4, 4) for joint angles (N, n) rad."""
-    return chain(kin, q_rad).T_base_flange
+    return chain(kin, q_rad, full=False).T_base_flange
 
 
 def smr_base(kin: Kinematics, q_rad: np.ndarray, T_base_flange: np.ndarray | None = None) -> np.ndarray:
@@ -182,7 +199,7 @@ def joint_jacobian(kin: Kinematics, q_rad: np.ndarray, p_flange_point_mm=None) -
 
     Returns (T_base_flange (N, 4, 4), J (N, 6, n)) with rows (v_x, v_y, v_z in mm/rad, w_x, w_y, w_z).
     """
-    c = chain(kin, q_rad)
+    c = chain(kin, q_rad, full=False)
     pf = kin.p_flange_smr_mm if p_flange_point_mm is None else np.asarray(p_flange_point_mm, float)
     p = transform_points(c.T_base_flange, pf)
     v = np.cross(c.axis, p[:, None, :] - c.origin)
