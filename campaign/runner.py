@@ -96,7 +96,12 @@ class Runner:
         q_read = np.asarray(self.robot.read_joints(), float)
         approach = self._approach(q_cmd)
         mean, spread, readings, retries = self._measure_with_retries(point, log)
-        env = dict(self.tracker.environment() or {})
+        try:
+            env = dict(self.tracker.environment() or {})
+        except DriverError as exc:                          # a failed weather read never costs the point
+            env = {}
+            log.append_event({"type": "environment_fault", "point_id": point.point_id,
+                              "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
         record = {
             "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
             "p_tracker_mm": mean.tolist(), "cov_mm2": self.covariance(mean).tolist(), "spread_mm": spread,

@@ -1,0 +1,330 @@
+"""TCP laser-tracker emulator speaking the sample line protocol of ``drivers.tracker`` (its default profile).
+
+Sample protocol (ASCII, one request per line, ``\\r\\n`` terminated both ways; ``<seq>`` is echoed, and omitted from
+the reply if the request has none):
+
+====================  ==========================================================================================
+request               reply
+====================  ==========================================================================================
+``INIT``              ``READY``
+``MEAS <seq>``        ``OK <seq> <x> <y> <z> <sx> <sy> <sz>`` (mm, tracker frame; device std in mm), or in
+                      ``spherical`` mode ``OK <seq> <r_mm> <az_deg> <zen_deg>`` (az ccw from +x, zen from +z)
+                      errors: ``ERR <seq> BEAM_BROKEN``, ``ERR <seq> NO_TARGET``, ``ERR <seq> UNSTABLE``
+``ENV``               ``ENV <temp_c> <pressure_hpa> <humidity_pct>``
+``STOP``              ``STOPPED``
+anything else         ``ERR - UNKNOWN_COMMAND``
+====================  ==========================================================================================
+
+Faults (per ``MEAS``; probabilities drawn from a seeded RNG, or queued one-shot with ``inject``): ``beam_break``,
+``no_target``, ``unstable`` (error replies), ``garbage`` (a line of junk), ``drop`` (no reply), ``delay`` (the reply
+is sent ``delay_s`` later, after the client's timeout: a stale late reply), ``disconnect`` (the server closes the
+connection). One client is served at a time, on 127.0.0.1 only.
+
+Run standalone: ``python -m drivers.emulators.tracker_server --port 0 --print-port`` prints the bound port as the
+first stdout line and serves until killed, interrupted, or its stdin is closed (``--ignore-stdin`` to disable that).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import random
+import select
+import signal
+import socket
+import sys
+import threading
+from collections import deque
+from dataclasses import dataclass, fields, replace
+from typing import Callable, Mapping, Sequence
+
+HOST = "127.0.0.1"
+POLL_S = 0.05
+DEFAULT_POINT_MM = (1500.0, -250.0, 1200.0)
+GARBAGE = b"\xa7#%!?@@ \x01garbage\r\n"
+ERROR_WORDS = {"beam_break": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE"}
+FAULT_ORDER = ("disconnect", "drop", "delay", "garbage", "beam_break", "no_target", "unstable")
+
+PositionSource = Callable[[], Sequence[float]]
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Per-``MEAS`` fault probabilities in [0, 1] (checked in ``FAULT_ORDER``); ``delay_s`` (s) for ``delay``."""
+    beam_break: float = 0.0
+    no_target: float = 0.0
+    unstable: float = 0.0
+    garbage: float = 0.0
+    drop: float = 0.0
+    delay: float = 0.0
+    disconnect: float = 0.0
+    delay_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name != "delay_s" and not 0.0 <= value <= 1.0:
+                raise ValueError(f"fault {f.name!r}: probability {value!r} not in [0, 1]")
+        if not self.delay_s >= 0.0:
+            raise ValueError(f"fault 'delay_s': expected >= 0 s, got {self.delay_s!r}")
+
+
+def _faults(value: Faults | Mapping[str, float] | None) -> Faults:
+    if isinstance(value, Faults):
+        return value
+    unknown = set(value or {}) - {f.name for f in fields(Faults)}
+    if unknown:
+        raise ValueError(f"unknown faults {sorted(unknown)} (expected {', '.join(f.name for f in fields(Faults))})")
+    return Faults(**dict(value or {}))
+
+
+@dataclass(frozen=True)
+class Response:
+    """What to do with one request: send ``data`` after ``delay_s`` s (nothing if empty), or drop the connection."""
+    data: bytes = b""
+    delay_s: float = 0.0
+    disconnect: bool = False
+
+
+class SampleDevice:
+    """The sample protocol without I/O: ``respond(line) -> Response``. Thread-safe fault settings."""
+
+    def __init__(self, position_source: PositionSource | None = None,
+                 faults: Faults | Mapping[str, float] | None = None, *, mode: str = "cartesian", seed: int = 0,
+                 noise_mm: float = 0.002, std_mm: float = 0.005,
+                 environment: tuple[float, float, float] = (20.0, 1013.25, 45.0)) -> None:
+        if mode not in ("cartesian", "spherical"):
+            raise ValueError(f"mode: expected cartesian or spherical, got {mode!r}")
+        self.mode, self.noise_mm, self.std_mm, self.environment = mode, noise_mm, std_mm, environment
+        self._noise_rng, self._fault_rng = random.Random(seed), random.Random(seed + 7919)
+        self._position = position_source or self._default_position
+        self._lock = threading.Lock()
+        self._faults = _faults(faults)
+        self._queued: deque[str] = deque()
+        self.requests: deque[str] = deque(maxlen=1000)
+
+    @property
+    def faults(self) -> Faults:
+        return self._faults
+
+    def set_faults(self, **changes: float) -> None:
+        """Change fault probabilities (or ``delay_s``) at runtime."""
+        with self._lock:
+            self._faults = replace(self._faults, **changes)
+
+    def inject(self, *names: str) -> None:
+        """Queue one-shot faults, consumed by the next ``MEAS`` requests in order (before any random draw)."""
+        bad = [n for n in names if n not in FAULT_ORDER]
+        if bad:
+            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULT_ORDER)})")
+        with self._lock:
+            self._queued.extend(names)
+
+    def respond(self, line: str) -> Response:
+        """The response to one request line (terminator already stripped)."""
+        self.requests.append(line)
+        tokens = line.split()
+        command, args = (tokens[0].upper(), tokens[1:]) if tokens else ("", [])
+        if command == "MEAS" and len(args) <= 1:
+            return self._measure(args[0] if args else None)
+        simple = {"INIT": "READY", "STOP": "STOPPED", "ENV": self._environment_line()}
+        if command in simple and not args:
+            return Response(_line(simple[command]))
+        return Response(_line("ERR - UNKNOWN_COMMAND"))
+
+    def _measure(self, seq: str | None) -> Response:
+        fault = self._draw_fault()
+        if fault == "disconnect":
+            return Response(disconnect=True)
+        if fault == "drop":
+            return Response()
+        if fault == "garbage":
+            return Response(GARBAGE)
+        if fault in ERROR_WORDS:
+            return Response(_line(_join("ERR", seq, ERROR_WORDS[fault])))
+        data = _line(_join("OK", seq, *self._fields()))
+        return Response(data, delay_s=self._faults.delay_s if fault == "delay" else 0.0)
+
+    def _draw_fault(self) -> str | None:
+        with self._lock:
+            if self._queued:
+                return self._queued.popleft()
+            draws = [(name, self._fault_rng.random()) for name in FAULT_ORDER]
+            faults = self._faults
+        return next((name for name, u in draws if u < getattr(faults, name)), None)
+
+    def _fields(self) -> list[str]:
+        x, y, z = (float(v) for v in self._position())
+        if self.mode == "spherical":
+            r = math.sqrt(x * x + y * y + z * z)
+            zen = math.degrees(math.acos(z / r)) if r > 0 else 0.0
+            return [f"{r:.5f}", f"{math.degrees(math.atan2(y, x)):.9f}", f"{zen:.9f}"]
+        return [f"{v:.5f}" for v in (x, y, z)] + [f"{self.std_mm:.5f}"] * 3
+
+    def _default_position(self) -> tuple[float, float, float]:
+        """A fixed point (mm) plus Gaussian noise of ``noise_mm`` per axis."""
+        return tuple(c + self._noise_rng.gauss(0.0, self.noise_mm) for c in DEFAULT_POINT_MM)
+
+    def _environment_line(self) -> str:
+        t, p, h = self.environment
+        return f"ENV {t:.2f} {p:.2f} {h:.1f}"
+
+
+def _join(word: str, seq: str | None, *rest: str) -> str:
+    return " ".join([word] + ([seq] if seq is not None else []) + list(rest))
+
+
+def _line(text: str) -> bytes:
+    return text.encode("ascii") + b"\r\n"
+
+
+class TrackerEmulator:
+    """The sample device served over TCP on 127.0.0.1 by one background thread; use as a context manager.
+
+    ``port=0`` picks a free port (read it from ``.port``; ``.url`` is the driver URL). ``stop()`` joins the thread.
+    ``connections`` and ``replies_sent`` count accepted clients and reply lines sent (for tests).
+    Keyword arguments after ``port`` go to ``SampleDevice`` (``mode``, ``seed``, ``noise_mm``, ``std_mm``, ...).
+    """
+
+    def __init__(self, position_source: PositionSource | None = None,
+                 faults: Faults | Mapping[str, float] | None = None, port: int = 0, **device_options) -> None:
+        self.device = SampleDevice(position_source, faults, **device_options)
+        self._requested_port = port
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._listener: socket.socket | None = None
+        self.port = 0
+        self.connections = 0
+        self.replies_sent = 0
+
+    @property
+    def url(self) -> str:
+        return f"tracker+socket://{HOST}:{self.port}"
+
+    def set_faults(self, **changes: float) -> None:
+        self.device.set_faults(**changes)
+
+    def inject(self, *names: str) -> None:
+        self.device.inject(*names)
+
+    def start(self) -> "TrackerEmulator":
+        """Bind, listen and start serving (idempotent)."""
+        if self._thread is not None:
+            return self
+        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((HOST, self._requested_port))
+        listener.listen(1)
+        self._listener, self.port = listener, listener.getsockname()[1]
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name=f"tracker-emulator-{self.port}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Stop serving, close all sockets and join the thread (within about ``POLL_S``)."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout_s)
+            if thread.is_alive():
+                raise RuntimeError(f"tracker emulator thread did not stop within {timeout_s} s")
+
+    def __enter__(self) -> "TrackerEmulator":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _serve(self) -> None:
+        listener = self._listener
+        try:
+            while not self._stop.is_set():
+                if select.select([listener], [], [], POLL_S)[0]:
+                    conn, _ = listener.accept()
+                    self.connections += 1
+                    with conn:
+                        self._serve_client(conn)
+        finally:
+            listener.close()
+
+    def _serve_client(self, conn: socket.socket) -> None:
+        conn.settimeout(1.0)
+        buf = b""
+        while not self._stop.is_set():
+            if not select.select([conn], [], [], POLL_S)[0]:
+                continue
+            try:
+                data = conn.recv(4096)
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                if not self._answer(conn, line):
+                    return
+
+    def _answer(self, conn: socket.socket, raw: bytes) -> bool:
+        """Handle one request; ``False`` when the connection must end."""
+        response = self.device.respond(raw.decode("ascii", errors="replace").strip())
+        if response.disconnect:
+            return False
+        if response.delay_s and self._stop.wait(response.delay_s):
+            return False
+        try:
+            if response.data:
+                conn.sendall(response.data)
+                self.replies_sent += 1
+        except OSError:
+            return False
+        return True
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m drivers.emulators.tracker_server",
+                                description="Laser-tracker emulator (sample line protocol) on 127.0.0.1.")
+    p.add_argument("--port", type=int, default=0, help="TCP port (0: any free port)")
+    p.add_argument("--print-port", action="store_true", help="print the bound port as the first stdout line")
+    p.add_argument("--mode", choices=("cartesian", "spherical"), default="cartesian")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--ignore-stdin", action="store_true", help="keep serving when stdin is closed")
+    for name in FAULT_ORDER:
+        p.add_argument(f"--{name.replace('_', '-')}", type=float, default=0.0, metavar="P",
+                       help=f"probability of a {name} fault per MEAS")
+    p.add_argument("--delay-s", type=float, default=0.5, help="delay of a delayed reply (s)")
+    return p
+
+
+def _watch_stdin(done: threading.Event) -> None:
+    """Set ``done`` at end of file on stdin (raw reads: no buffered-reader lock held at interpreter exit)."""
+    try:
+        while os.read(sys.stdin.fileno(), 4096):
+            pass
+    except (OSError, ValueError):
+        pass
+    done.set()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    faults = {name: getattr(args, name) for name in FAULT_ORDER} | {"delay_s": args.delay_s}
+    done = threading.Event()
+    with TrackerEmulator(faults=faults, port=args.port, mode=args.mode, seed=args.seed) as emulator:
+        if args.print_port:
+            print(emulator.port, flush=True)
+        print(f"tracker emulator ({args.mode}) on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
+        if not args.ignore_stdin:
+            threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
+        signal.signal(signal.SIGTERM, lambda *_: done.set())
+        try:
+            while not done.wait(0.2):
+                pass
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
