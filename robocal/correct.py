@@ -147,7 +147,7 @@ def correct(T_target: np.ndarray, q_start_rad: np.ndarray, actual_pose: PoseFn, 
     N = len(Td)
     err_fn = error_function(error, length_mm)
     q = np.broadcast_to(np.asarray(q_start_rad, float), (N, ik_kin.n)).copy()
-    Tp = Td.copy()
+    Tp = fk(ik_kin, q) @ T_flange_tool          # the pseudo-target q_start reaches (= T_d when q_start = IK(T_d))
     E_best = np.full(N, np.inf)
     q_best = q.copy()
     iters = np.zeros(N, int)
