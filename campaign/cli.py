@@ -150,6 +150,60 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _correct_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", required=True, help="campaign YAML of the cell")
+    parser.add_argument("--model", required=True, type=Path, help="model.json written by run or reprocess")
+    parser.add_argument("--targets", required=True, type=Path,
+                        help="CSV target_id,x,y,z[,qw,qx,qy,qz] in mm in the robot base frame (a path: one row per point)")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where the corrected targets go")
+
+
+@command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
+def cmd_correct(args: argparse.Namespace) -> int:
+    from campaign.correction import correct_targets, read_targets_csv, write_corrected
+    from campaign.plan import tool_rotation
+    from campaign.process import load_model
+
+    cfg = load_config(args.config)
+    model = load_model(args.model)
+    targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
+    accepted, rejected = correct_targets(cfg, model, targets)
+    paths = write_corrected(cfg, accepted, rejected, args.out)
+    out = _stdout()
+    res = [t.predicted_residual_mm for t in accepted]
+    out.print(f"{len(accepted)} targets corrected (predicted residual max {max(res, default=0):.2e} mm), "
+              f"{len(rejected)} rejected; wrote {', '.join(p.name for p in paths)} in {args.out}", markup=False)
+    for r in rejected[:20]:
+        out.print(f"  rejected {r.target_id}: {r.reason}", markup=False)
+    return EXIT_OK
+
+
+def _verify_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="a finished run (with model.json)")
+
+
+@command("verify", "measure the run's test points after correction (closed loop) and report before/after",
+         _verify_arguments)
+def cmd_verify(args: argparse.Namespace) -> int:
+    from campaign.pipeline import verify
+    from rich.table import Table
+
+    result = verify(args.run_dir, _stdout())
+    rep = result.report
+    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {rep['noise_floor_mm']:.3f} mm)")
+    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+        t.add_column(col, justify="left" if col == "stage" else "right")
+    for name, s in rep["stages"].items():
+        t.add_row(name, f"{s['max_mm']:.3f}", f"{s['mean_mm']:.3f}", f"{s['rms_mm']:.3f}",
+                  f"{s['rms_mm'] / rep['noise_floor_mm']:.2f}")
+    _stdout().print(t)
+    _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
+    if result.exit_status != "success":
+        _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- entry point
 
 

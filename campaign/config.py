@@ -67,6 +67,8 @@ CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
 RESIDUAL_MODELS = ("idw", "none")
+CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
+ERROR_FUNCTIONS = ("position", "pose")
 EFFECT_NAMES = (
     "joint_compliance",
     "gear_cyclic",
@@ -289,6 +291,29 @@ class CalibrationConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class CorrectionConfig:
+    """Target correction (seed 001) and its safety bounds.
+
+    ``generator`` pseudo-target generator or ``ensemble`` (multiply + quaternion, default);
+    ``error`` position | pose; ``threshold_mm`` (default 1e-4) and ``max_iterations`` (20) stop the
+    iteration; a corrected target is rejected (never written, never moved to) when a joint changes by more
+    than ``max_joint_correction_deg`` (default 0.5) or the command moves more than
+    ``max_position_correction_mm`` (default 5.0) from the target. ``closed_loop_iterations`` (default 2)
+    measured iterations in ``campaign verify``; a measured error is only corrected when it exceeds
+    ``significance`` (default 3.0) times the point's standard uncertainty (do not chase noise).
+    """
+
+    generator: str
+    error: str
+    threshold_mm: float
+    max_iterations: int
+    max_joint_correction_deg: float
+    max_position_correction_mm: float
+    closed_loop_iterations: int
+    significance: float
+
+
+@dataclass(frozen=True, slots=True)
 class FaultsConfig:
     """Per-reading fault probabilities of the mock tracker, each in [0, 1] (default 0)."""
 
@@ -355,6 +380,7 @@ class CampaignConfig:
     tracker: TrackerConfig
     plan: PlanConfig
     calibration: CalibrationConfig
+    correction: CorrectionConfig
     simulation: SimulationConfig
     output: OutputConfig
     source_path: str
@@ -739,6 +765,7 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
         tracker=tracker,
         plan=plan,
         calibration=_calibration(r.section("calibration", CalibrationConfig, required=False)),
+        correction=_correction(r.section("correction", CorrectionConfig, required=False)),
         simulation=_simulation(r.section("simulation", SimulationConfig, required=False), tool, tracker),
         output=_output(r.section("output", OutputConfig, required=False)),
         source_path=r.file,
@@ -896,6 +923,19 @@ def _calibration(r: _Reader) -> CalibrationConfig:
         residual=r.choice("residual", RESIDUAL_MODELS, "idw"),
         idw_power=r.number("idw_power", 2.0, positive=True),
         idw_k_nearest=r.integer("idw_k_nearest", 8, lo=1),
+    )
+
+
+def _correction(r: _Reader) -> CorrectionConfig:
+    return CorrectionConfig(
+        generator=r.choice("generator", CORRECTION_GENERATORS, "ensemble"),
+        error=r.choice("error", ERROR_FUNCTIONS, "position"),
+        threshold_mm=r.number("threshold_mm", 1e-4, positive=True),
+        max_iterations=r.integer("max_iterations", 20, lo=1),
+        max_joint_correction_deg=r.number("max_joint_correction_deg", 0.5, positive=True),
+        max_position_correction_mm=r.number("max_position_correction_mm", 5.0, positive=True),
+        closed_loop_iterations=r.integer("closed_loop_iterations", 2, lo=0),
+        significance=r.number("significance", 3.0, lo=0.0),
     )
 
 

@@ -8,6 +8,8 @@ from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+import numpy as np
+
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -75,6 +77,44 @@ def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     processed = process(dataset, cfg)
     write_outputs(processed, out_dir)
     return processed
+
+
+def verify(run_dir: Path, console: Console | None = None):
+    """Closed-loop verification of a finished run: corrected test points measured on the cell (logged durably
+    in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
+    from .correction import verify_run
+    from .config import load_config
+    from .process import load_model
+
+    cfg = load_config(run_dir / "config.yaml")
+    model = load_model(run_dir / "model.json")
+    tests = [p for p in read_log(run_dir).points if p["set"] == "test"]
+    if not tests:
+        raise CampaignError(f"{run_dir}: the run has no test points to verify")
+    out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
+    world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
+    with ExitStack() as stack:
+        robot = open_robot(cfg.robot.url, cfg.robot.options, world=world)
+        stack.callback(robot.close)
+        tracker = open_tracker(cfg.tracker.url, cfg.tracker.options, world=world)
+        stack.callback(tracker.close)
+        robot.connect()
+        tracker.connect()
+        log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
+                                      "software_version": software_version()})
+        runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
+                        lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)
+
+        def measure(points):
+            got = []
+            runner.on_point = lambda point, record: got.append(record["p_tracker_mm"])
+            outcome = runner.execute(points, log, close=False)
+            return np.array(got), outcome.exit_status, outcome.reason
+
+        result = verify_run(run_dir, measure, cfg, model, tests, out_dir)
+        if not log.closed:
+            log.close(result.exit_status if result.exit_status != "success" else "success", result.reason)
+    return result
 
 
 def mock_world(cfg: CampaignConfig) -> MockWorld:

@@ -15,10 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.ik import solve_ik, solve_on_branch
+from robocal.ik import solve_ik, solve_on_branch, wrist_angle_rad
 from robocal.kinematics import Kinematics
 
 from .config import CampaignConfig
+
+WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
 
 
 @dataclass(frozen=True)
@@ -128,8 +130,14 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     sets = ["calib"] * len(p_grid) + ["test"] * len(p_test)
     ids = grid_ids + test_ids
     bad = np.flatnonzero(~ok)
-    skipped = tuple(Skipped(ids[i], sets[i], tuple(p_all[i]), why)
-                    for i, why in zip(bad, _skip_reasons(kin, p_all[bad], R, q_ref)))
+    skipped = [Skipped(ids[i], sets[i], tuple(p_all[i]), why)
+               for i, why in zip(bad, _skip_reasons(kin, p_all[bad], R, q_ref))]
+    wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p_all), 90.0)
+    near = ok & (wrist < WRIST_MARGIN_DEG)
+    skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
+                        f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
+    ok &= ~near
+    skipped = tuple(skipped)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
     order = _interleave(p_all, grid_ok, test_ok)

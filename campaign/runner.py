@@ -53,8 +53,9 @@ class Runner:
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
 
-    def execute(self, points: Iterable[PlanPoint], log: RunLog) -> RunOutcome:
-        """Measure ``points`` in order; return how the run ended. The log is closed on every path."""
+    def execute(self, points: Iterable[PlanPoint], log: RunLog, close: bool = True) -> RunOutcome:
+        """Measure ``points`` in order; return how the run ended. The log is closed on every failure path,
+        and on success unless ``close`` is False (a caller measuring in several passes)."""
         n = 0
         try:
             for point in points:
@@ -78,7 +79,8 @@ class Runner:
             log.append_event({"type": "fault", "device": "robot", "reason": reason, "t_s": self.clock.now()})
             log.close("fail", reason)
             return RunOutcome("fail", reason, n)
-        log.close("success", "all planned points measured")
+        if close:
+            log.close("success", "all planned points measured")
         return RunOutcome("success", "all planned points measured", n)
 
     def _safe_stop(self) -> None:

@@ -141,3 +141,10 @@ def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base
             break
         q[bad[fixed]], ok[bad[fixed]] = retry.q_rad[fixed], True
     return q, ok
+
+
+def wrist_angle_rad(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
+    """(N,) angle between the J4 and J6 axes (rad): 0 at the wrist singularity of a 6R arm (J4 || J6)."""
+    c = chain(kin, q_rad, full=False)
+    s = np.linalg.norm(np.cross(c.axis[:, 3], c.axis[:, 5]), axis=1)
+    return np.arcsin(np.clip(s, 0.0, 1.0))

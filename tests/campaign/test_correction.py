@@ -1,0 +1,55 @@
+"""Target correction end to end on the mock cell: correct CLI, write-back bounds, closed-loop verify."""
+import json
+
+import numpy as np
+import pytest
+
+from campaign.cli import main
+from campaign.writeback import check_rapid_syntax, parse_rapid_module
+from tests.campaign.helpers import ROOT
+
+CONFIG = str(ROOT / "configs/irb2600.yaml")
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("corr") / "run"
+    assert main(["run", CONFIG, "--out", str(out)]) == 0
+    return out
+
+
+def test_correct_cli_writes_checked_files_and_rejects_unsafe_targets(run_dir, tmp_path, capsys):
+    targets = tmp_path / "targets.csv"
+    targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1100,300,800\nC,700,-500,1200\nFAR,3000,0,1000\n")
+    out = tmp_path / "out"
+    assert main(["correct", "--config", CONFIG, "--model", str(run_dir / "model.json"), "--targets", str(targets),
+                 "--out", str(out)]) == 0
+    text = (out / "CalTargets.mod").read_text()
+    assert check_rapid_syntax(text) == []
+    values = parse_rapid_module(text)
+    assert [v for v in values["id_cal"]] == ["A", "B", "C"]
+    rejected = (out / "rejected.csv").read_text()
+    assert "FAR" in rejected and "FAR" not in text and "FAR" not in (out / "targets_ur.script").read_text()
+    ur = json.loads((out / "targets_ur.json").read_text())
+    assert len(ur["targets"]) == 3
+
+
+def test_correct_cli_bad_targets_file(run_dir, tmp_path, capsys):
+    bad = tmp_path / "t.csv"
+    bad.write_text("target_id,x,y,z\nA,900,zero,1000\n")
+    assert main(["correct", "--config", CONFIG, "--model", str(run_dir / "model.json"), "--targets", str(bad),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "t.csv" in err and "line 2" in err and "'y'" in err
+
+
+def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
+    assert main(["verify", str(run_dir)]) == 0
+    report = json.loads(next(run_dir.glob("verify-*/verify.json")).read_text())
+    floor, stages = report["noise_floor_mm"], report["stages"]
+    ratios = {k: v["rms_mm"] / floor for k, v in stages.items()}
+    print("verify RMS / floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
+    assert ratios["nominal (no correction)"] > 10
+    assert ratios["model-corrected"] <= 1.2
+    assert ratios["after correction (all passes pooled)"] <= 1.2
+    assert all(r <= 1.3 for k, r in ratios.items() if k.startswith("closed loop"))
