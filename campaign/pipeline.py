@@ -49,12 +49,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:
-        robot = open_robot(cfg.robot.url, cfg.robot.options, world=world)
-        stack.callback(robot.close)
-        tracker = open_tracker(cfg.tracker.url, cfg.tracker.options, world=world)
-        stack.callback(tracker.close)
-        robot.connect()
-        tracker.connect()
+        robot, tracker = _open_devices(cfg, world, stack)
         log, run_dir = open_log(cfg, plan, run_dir, resume)
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
@@ -94,12 +89,7 @@ def verify(run_dir: Path, console: Console | None = None):
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     with ExitStack() as stack:
-        robot = open_robot(cfg.robot.url, cfg.robot.options, world=world)
-        stack.callback(robot.close)
-        tracker = open_tracker(cfg.tracker.url, cfg.tracker.options, world=world)
-        stack.callback(tracker.close)
-        robot.connect()
-        tracker.connect()
+        robot, tracker = _open_devices(cfg, world, stack)
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
@@ -115,6 +105,17 @@ def verify(run_dir: Path, console: Console | None = None):
         if not log.closed:
             log.close(result.exit_status if result.exit_status != "success" else "success", result.reason)
     return result
+
+
+def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):
+    """Open and connect robot and tracker; both are closed by ``stack`` whatever happens next."""
+    robot = open_robot(cfg.robot.url, cfg.robot.options, world=world, n_joints=len(cfg.robot.joints))
+    stack.callback(robot.close)
+    tracker = open_tracker(cfg.tracker.url, cfg.tracker.options, world=world, robot=robot, clock=world.clock if world else None)
+    stack.callback(tracker.close)
+    robot.connect()
+    tracker.connect()
+    return robot, tracker
 
 
 def mock_world(cfg: CampaignConfig) -> MockWorld:

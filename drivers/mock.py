@@ -114,16 +114,27 @@ class MockRobot:
 
 
 class MockTracker:
-    """A tracker measuring the world's SMR with the spherical noise model and injected faults."""
+    """A tracker measuring the world's SMR with the spherical noise model and injected faults.
 
-    def __init__(self, world: MockWorld, url: str = "mock://tracker") -> None:
+    With a non-mock ``robot`` (a real or emulated controller) it follows that robot: before measuring it reads
+    the robot's joints and places the simulated SMR there, so a real robot can be dry-run without a tracker."""
+
+    def __init__(self, world: MockWorld, url: str = "mock://tracker", robot=None) -> None:
         self.world, self.url = world, url
+        self.robot = None if isinstance(robot, MockRobot) else robot
+
+    def _follow(self) -> None:
+        q = np.asarray(self.robot.read_joints(), float)
+        if q.shape != self.world.q_deg.shape or np.max(np.abs(q - self.world.q_deg)) > 1e-9:
+            self.world.move(q)
 
     def connect(self) -> None:
         pass
 
     def measure(self) -> TrackerReading:
         w = self.world
+        if self.robot is not None:
+            self._follow()
         if w.fault("beam_break_probability"):
             raise BeamBroken(f"{self.url}: beam broken")
         if w.fault("timeout_probability"):

@@ -17,4 +17,4 @@ def robot(url, options, **context) -> MockRobot:
 
 
 def tracker(url, options, **context) -> MockTracker:
-    return MockTracker(_world(url, context), url)
+    return MockTracker(_world(url, context), url, context.get("robot"))
