@@ -125,12 +125,11 @@ def throughput(nominal, T_tool, ap, q, Td, n_loop=200):
 def _loop_one(robot, ap, Td, q0, max_iter=20, threshold=1e-4):
     """The same pseudo-target iteration ('multiply'), one target, IIK = roboticstoolbox ik_LM."""
     q, Tp = q0.copy(), Td.copy()
-    best, q_best = np.inf, q0
+    best = np.inf
     for _ in range(max_iter + 1):
         Ta = ap(q[None])[0]
         e = np.linalg.norm(Ta[:3, 3] - Td[:3, 3])
-        if e < best:
-            best, q_best = e, q
+        best = min(best, e)
         if best < threshold:
             break
         Tp = Tp.copy()

@@ -25,7 +25,7 @@ from robocal.stats import error_stats
 from .cell import measurement_covariance, nominal_kinematics
 from .config import CampaignConfig
 from .errors import DataError
-from .plan import PlanPoint, tool_rotation
+from .plan import PlanPoint
 from .writeback import (CorrectedTarget, Rejected, check_targets, write_rapid_module, write_rejected_csv,
                         write_targets_csv, write_ur_json, write_urscript)
 

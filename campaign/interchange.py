@@ -44,6 +44,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from .fsutil import atomic_write
+
 from campaign.errors import DataError
 
 __all__ = ["SETS", "Dataset", "read_csv", "write_csv", "dataset_from_log"]
@@ -471,15 +473,7 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     lines = [",".join(_header(dataset))]
     for pid, set_name, row in zip(dataset.point_id, dataset.set, numbers.tolist()):
         lines.append(",".join([pid, set_name, *map(repr, row)]))
-    tmp = Path(f"{src}.tmp{os.getpid()}")
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write("\n".join(lines) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    atomic_write(path, ("\n".join(lines) + "\n").encode("utf-8"))
 
 
 # --------------------------------------------------------------------------

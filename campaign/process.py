@@ -7,7 +7,6 @@ Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated pos
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from robocal.stats import error_stats
 from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .config import CampaignConfig
 from .errors import DataError
+from .fsutil import atomic_write
 from .interchange import Dataset
 
 REPORT_FORMAT = "campaign-report/1"
@@ -122,12 +122,7 @@ def _parameters(result: CalibrationResult) -> list[dict]:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=1, allow_nan=False, default=_plain)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(data, indent=1, allow_nan=False, default=_plain).encode())
 
 
 def _plain(x):

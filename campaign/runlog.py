@@ -42,6 +42,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .fsutil import fsync_dir
+
 from campaign.errors import DataError
 
 try:  # POSIX advisory locking; absent on Windows.
@@ -243,17 +245,6 @@ def completed_point_ids(contents: LogContents) -> set[str]:
 # low-level file helpers
 
 
-def _fsync_dir(directory: Path) -> None:
-    """fsync a directory so a new entry in it survives a power cut."""
-    fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover - some filesystems refuse dir fsync
-        pass
-    finally:
-        os.close(fd)
-
-
 def _write_all(fd: int, payload: bytes) -> None:
     """``os.write`` the whole payload (one call unless the kernel writes short)."""
     view = memoryview(payload)
@@ -368,11 +359,11 @@ class RunLog:
         run_dir = Path(run_dir)
         if not run_dir.is_dir():
             run_dir.mkdir(parents=True, exist_ok=True)
-            _fsync_dir(run_dir.resolve().parent)
+            fsync_dir(run_dir.resolve().parent)
         path = run_dir / LOG_NAME
         line = encode_record("start", 0, start)
         _create_with_start(path, line)
-        _fsync_dir(run_dir)
+        fsync_dir(run_dir)
         fd = os.open(path, os.O_WRONLY | os.O_APPEND)
         try:
             _lock(fd, path)

@@ -40,6 +40,8 @@ from numbers import Integral
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
+from .fsutil import atomic_write
+
 __all__ = [
     "CorrectedTarget", "Rejected", "RapidExpr", "check_targets",
     "render_rapid_module", "write_rapid_module", "check_rapid_syntax", "parse_rapid_module",
@@ -307,40 +309,6 @@ def _require_writable(targets: Iterable[CorrectedTarget], q_min_deg: Sequence[fl
 # files
 
 
-def _atomic_write(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically: temp file, fsync, os.replace, directory fsync."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
-    try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view):]
-        os.fsync(fd)
-    except BaseException:
-        os.close(fd)
-        tmp.unlink(missing_ok=True)
-        raise
-    os.close(fd)
-    os.replace(tmp, path)
-    _fsync_dir(path.parent)
-    return path
-
-
-def _fsync_dir(directory: Path) -> None:
-    """fsync a directory so the new entry survives a power cut (best effort)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:  # pragma: no cover - platforms without directory fds
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover - some filesystems refuse dir fsync
-        pass
-    finally:
-        os.close(fd)
-
-
 def _fixed(x: float, decimals: int) -> str:
     """``x`` with ``decimals`` decimals, trailing zeros dropped, never ``-0`` (RAPID/URScript literal)."""
     s = f"{float(x):.{decimals}f}"
@@ -557,7 +525,7 @@ def write_rapid_module(path: str | os.PathLike, targets: Iterable[CorrectedTarge
     """
     text = render_rapid_module(targets, module_name=module_name, persistent=persistent,
                                q_min_deg=q_min_deg, q_max_deg=q_max_deg, external_axes=external_axes)
-    return _atomic_write(path, text.encode("ascii"))
+    return atomic_write(path, text.encode("ascii"))
 
 
 # --------------------------------------------------------------------------
@@ -1324,7 +1292,7 @@ def write_ur_json(path: str | os.PathLike, targets: Iterable[CorrectedTarget], *
     rad (``q_deg`` in deg), full float precision.  ValueError, writing
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
     """
-    return _atomic_write(path, render_ur_json(targets, q_min_deg=q_min_deg, q_max_deg=q_max_deg).encode("ascii"))
+    return atomic_write(path, render_ur_json(targets, q_min_deg=q_min_deg, q_max_deg=q_max_deg).encode("ascii"))
 
 
 _UR_KEYWORDS = frozenset({"def", "end", "if", "elif", "else", "while", "for", "thread", "return", "break",
@@ -1378,7 +1346,7 @@ def write_urscript(path: str | os.PathLike, targets: Iterable[CorrectedTarget], 
     """
     text = render_urscript(targets, q_min_deg=q_min_deg, q_max_deg=q_max_deg, a_rad_s2=a_rad_s2,
                            v_rad_s=v_rad_s, name=name)
-    return _atomic_write(path, text.encode("utf-8"))
+    return atomic_write(path, text.encode("utf-8"))
 
 
 def _strip_ur_comment(line: str) -> str:
@@ -1497,7 +1465,7 @@ def write_targets_csv(path: str | os.PathLike, targets: Iterable[CorrectedTarget
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
     """
     text = render_targets_csv(targets, q_min_deg=q_min_deg, q_max_deg=q_max_deg)
-    return _atomic_write(path, text.encode("utf-8"))
+    return atomic_write(path, text.encode("utf-8"))
 
 
 def read_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]:
@@ -1532,4 +1500,4 @@ def write_rejected_csv(path: str | os.PathLike, rejected: Iterable[Rejected]) ->
     writer.writerow(["target_id", "reason"])
     for r in rejected:
         writer.writerow([r.target_id, " ".join(str(r.reason).split())])
-    return _atomic_write(path, buf.getvalue().encode("utf-8"))
+    return atomic_write(path, buf.getvalue().encode("utf-8"))

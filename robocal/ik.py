@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frames import matrix_to_rotvec, transform_points
-from .kinematics import Kinematics, chain, joint_jacobian, within_limits
+from .kinematics import Kinematics, chain, within_limits
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,7 +10,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .effects import Effect, apply_effects
+from .effects import apply_effects
 from .kinematics import Kinematics
 from .noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
 

@@ -1,7 +1,6 @@
 """Target correction end to end on the mock cell: correct CLI, write-back bounds, closed-loop verify."""
 import json
 
-import numpy as np
 import pytest
 
 from campaign.cli import main
