@@ -77,3 +77,31 @@ def test_campaign_with_tracker_over_socket(tmp_path):
         assert main(["run", str(cfg), "--out", str(run)]) == 0
         contents, report = _finished(run)
     assert report["stages"]["kinematic"]["test"]["rms_mm"] < 3 * report["noise_floor_mm"]
+
+
+def test_motors_off_mid_run_stops_cleanly_and_resume_completes(tmp_path, capsys):
+    """A fault during the campaign: one-line reason, robot commanded to stop, nothing lost, resume finishes."""
+    with RwsEmulator(1, joint_speed_deg_s=5000.0) as emu:
+        cfg = small_config(tmp_path, **SMALL, **{"robot.url": emu.url, "robot.options": RWS_OPTIONS})
+        run = tmp_path / "run"
+        moves = []
+
+        def hook(q_deg):
+            moves.append(q_deg)
+            if len(moves) == 8:
+                emu.fail_next_move("motors_off")
+            return None
+        emu.move_hook = hook
+        assert main(["run", str(cfg), "--out", str(run)]) == 1
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "run fail" in err and "--resume" in err
+        before = read_log(run)
+        assert before.stops[-1]["exit_status"] == "fail" and 5 <= len(before.points) <= 9
+        prefix = (run / "log.jsonl").read_bytes()
+        emu.move_hook = None
+        emu.set_ctrlstate("motoron")
+        emu.set_execution(True)
+        assert main(["run", str(cfg), "--resume", str(run)]) == 0
+        contents, _ = _finished(run)
+        ids = [p["point_id"] for p in contents.points]
+        assert len(ids) == len(set(ids)) and (run / "log.jsonl").read_bytes().startswith(prefix)
