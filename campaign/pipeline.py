@@ -111,7 +111,8 @@ def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack
     """Open and connect robot and tracker; both are closed by ``stack`` whatever happens next."""
     robot = open_robot(cfg.robot.url, cfg.robot.options, world=world, n_joints=len(cfg.robot.joints))
     stack.callback(robot.close)
-    tracker = open_tracker(cfg.tracker.url, cfg.tracker.options, world=world, robot=robot, clock=world.clock if world else None)
+    options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set
+    tracker = open_tracker(cfg.tracker.url, options, world=world, robot=robot, clock=world.clock if world else None)
     stack.callback(tracker.close)
     robot.connect()
     tracker.connect()
