@@ -127,6 +127,7 @@ class Identifiability:
     unidentifiable: tuple[Unidentifiable, ...]
     condition_number: float
     observability: dict
+    rel: np.ndarray                # (P,) relative residual of each column against the ones admitted before it
 
 
 def priority_order(layout: ParamLayout) -> list[int]:
@@ -155,6 +156,7 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
     than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with."""
     norms = np.linalg.norm(A, axis=0)
     keep = np.zeros(A.shape[1], bool)
+    rels = np.zeros(A.shape[1])
     Q = np.zeros((A.shape[0], 0))
     dropped = []
     for j in order:
@@ -166,7 +168,7 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
             continue
         c = A[:, j] / norms[j]
         r = c - Q @ (Q.T @ c)
-        rel = np.linalg.norm(r)
+        rel = rels[j] = np.linalg.norm(r)
         if rel > rank_tol:
             keep[j] = True
             Q = np.column_stack([Q, r / rel])
@@ -178,7 +180,7 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
         dropped.append(Unidentifiable(names[j], tuple(top), f"linearly dependent (relative residual {rel:.1e})"))
     idx = np.flatnonzero(keep)
     obs = observability_indices(A[:, idx] / norms[idx])
-    return Identifiability(keep, tuple(dropped), obs["condition_number"], obs)
+    return Identifiability(keep, tuple(dropped), obs["condition_number"], obs, rels)
 
 
 # ---------------------------------------------------------------- estimation
@@ -232,6 +234,9 @@ def _standardized(A, v, w_rows, Ninv, p, sigma0_mode):
     return u / max(sigma0, 1e-300), sigma0
 
 
+FREEZE_WEIGHTS_AFTER = 30
+
+
 def _robust_ridge(kin, q, p_meas, W, cols, D, layout, opt):
     n, p = len(q), len(cols)
     w = np.ones(n)
@@ -253,7 +258,8 @@ def _robust_ridge(kin, q, p_meas, W, cols, D, layout, opt):
         if small and np.max(np.abs(w_new - w)) < 1e-3:
             converged = True
             break
-        w = w_new
+        if it < FREEZE_WEIGHTS_AFTER:          # then the weights are frozen: borderline points cannot oscillate
+            w = w_new
         if np.count_nonzero(w) * 3 <= p:
             raise IdentificationError("robust weighting rejected too many points to identify the model")
     return kin, w, it, converged
@@ -271,15 +277,35 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
     start = kin
     layout = ParamLayout.of(kin)
     W = whitening(cov_mm2, len(q))
-    _, J = identification_jacobian(kin, q)
-    A_full = _whiten(W, J).reshape(-1, layout.size)
-    ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol, options.fixed)
-    cols = np.flatnonzero(ident.keep)
-    if 3 * len(q) <= len(cols):
-        raise IdentificationError(f"{len(q)} points cannot determine {len(cols)} parameters")
-    D = np.linalg.norm(A_full[:, cols], axis=0)
     solver = _levenberg_marquardt if options.method == "lm" else _robust_ridge
-    kin, w, iters, converged = solver(kin, q, p_meas, W, cols, D, layout, options)
+    cols, iters = None, 0
+    for _ in range(3):
+        # identifiability depends on where the model is (theta6, a5, alpha5 are degenerate while the SMR estimate
+        # sits on the J6 axis): re-analyse at the solution and re-solve when a parameter became clearly
+        # identifiable (10x the rank tolerance, so a borderline column never enters on the way)
+        _, J = identification_jacobian(kin, q)
+        A_full = _whiten(W, J).reshape(-1, layout.size)
+        ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol,
+                                        options.fixed)
+        if cols is None:
+            cols = np.flatnonzero(ident.keep)
+        else:
+            strong = {c for c in np.flatnonzero(ident.keep) if c not in set(cols) and ident.rel[c] > 10 * options.rank_tol}
+            if not strong:
+                break
+            cols = np.array([c for c in np.flatnonzero(ident.keep) if c in set(cols) | strong])
+        if 3 * len(q) <= len(cols):
+            raise IdentificationError(f"{len(q)} points cannot determine {len(cols)} parameters")
+        D = np.linalg.norm(A_full[:, cols], axis=0)
+        kin, w, it, converged = solver(kin, q, p_meas, W, cols, D, layout, options)
+        iters += it
+    identified = set(cols)
+    ident = Identifiability(np.isin(np.arange(layout.size), cols),
+                            tuple(u for u in ident.unidentifiable if layout.index(u.name) not in identified)
+                            + tuple(Unidentifiable(layout.names[c], (), "identifiable only marginally at the solution; "
+                                                   "kept at its start value") for c in np.flatnonzero(ident.keep)
+                                    if c not in identified),
+                            ident.condition_number, ident.observability, ident.rel)
     r, A = _linearise(kin, q, p_meas, W, cols, D)
     w_rows = np.repeat(w, 3)
     N = A.T @ (w_rows[:, None] * A)
