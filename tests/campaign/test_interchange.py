@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -155,17 +154,14 @@ def test_write_refuses_unreadable_data(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing left behind
 
 
-def test_large_file_is_fast(tmp_path):
+def test_large_file_round_trips(tmp_path):
+    """100k rows (timing: bench/bench_io.py)."""
     rng = np.random.default_rng(7)
     n = 100_000
     ds = random_dataset(rng, n, 6, t_s=np.arange(n) * 2.0, temp_c=20 + rng.normal(size=n))
     path = tmp_path / "big.csv"
     write_csv(path, ds)
-    t0 = time.perf_counter()
-    back = read_csv(path)
-    elapsed = time.perf_counter() - t0
-    assert_same(ds, back)
-    assert elapsed < 3.0, f"read_csv took {elapsed:.2f} s for {n} rows"
+    assert_same(ds, read_csv(path))
 
 
 # ---------------------------------------------------------------- approach

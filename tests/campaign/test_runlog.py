@@ -263,19 +263,6 @@ def test_resume_after_stop_continues_seq(tmp_path):
     assert [s["n_points"] for s in c.stops] == [3, 4]
 
 
-def test_append_speed(tmp_path):
-    """Appending is write + fsync only: no re-reading of a growing file."""
-    log = RunLog.create(tmp_path, START)
-    for i in range(50):
-        log.append_point(point(i))
-    t0 = time.perf_counter()
-    for i in range(50, 100):
-        log.append_point(point(i))
-    per_point = (time.perf_counter() - t0) / 50
-    log.close()
-    assert per_point < 0.05  # generous: fsync latency dominates
-
-
 # ---------------------------------------------------------------- SIGKILL
 
 

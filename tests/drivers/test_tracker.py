@@ -29,7 +29,7 @@ from drivers.tracker import (LineProfile, LineSensor, LineTracker, NoReply, Repl
 
 REPO = Path(__file__).resolve().parents[2]
 T = 0.2  # request timeout used throughout (s)
-SLACK = 0.5  # scheduling tolerance on elapsed-time bounds (s)
+SLACK = 3.0  # scheduling tolerance on elapsed-time upper bounds (s): they prove 'never hangs', not speed
 LOOP = {"init": [], "environment": None, "timeout_s": T}
 
 
