@@ -66,7 +66,7 @@ TRACKER_SCHEMES = frozenset(
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "none")
+RESIDUAL_MODELS = ("idw", "gpr", "none")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
 EFFECT_NAMES = (
@@ -164,11 +164,23 @@ class ToolConfig:
     """The SMR on the flange: nominal centre in the flange frame (mm).
 
     Defaults: ``smr_diameter_mm`` 38.1 (1.5 in ball), ``payload_kg`` 0.
+    A multi-SMR tool (seed 003) adds ``p_flange_smr2_mm`` and
+    ``p_flange_smr3_mm`` (default ``None``; the third only with the second;
+    centres at least ``smr_diameter_mm`` apart): every point then also logs
+    the second and third SMR.
     """
 
     p_flange_smr_mm: Vec3
     smr_diameter_mm: float
     payload_kg: float
+    p_flange_smr2_mm: Vec3 | None = None
+    p_flange_smr3_mm: Vec3 | None = None
+
+    @property
+    def smrs_mm(self) -> tuple[Vec3, ...]:
+        """Centres of every configured SMR in the flange frame (mm), the main one first."""
+        extra = (self.p_flange_smr2_mm, self.p_flange_smr3_mm)
+        return (self.p_flange_smr_mm,) + tuple(p for p in extra if p is not None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -278,6 +290,14 @@ class CalibrationConfig:
     Defaults: ``method`` robust_ridge, ``weights`` igg3, ``k0`` 1.5 < ``k1`` 2.5
     (IGG-III thresholds, in units of sigma), ``ridge_mu`` 1e-6 (>= 0),
     ``residual`` idw, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1).
+
+    ``residual`` (one of ``RESIDUAL_MODELS``) is the layer fitted on top of
+    the kinematic model: ``idw`` inverse distance weighting over positions
+    (seed 000), ``gpr`` Gaussian-process regression over joint angles, one
+    model per base-frame axis (seed 003; the payload becomes an extra input
+    when it varies across the calibration points; the report gives the
+    predictive standard deviation of every test point), ``none`` no layer.
+    ``idw_*`` apply to ``idw`` only.
     """
 
     method: str
@@ -808,11 +828,29 @@ def _joint(r: _Reader) -> JointConfig:
 
 
 def _tool(r: _Reader) -> ToolConfig:
-    return ToolConfig(
+    tool = ToolConfig(
         p_flange_smr_mm=r.vector("p_flange_smr_mm", 3),
         smr_diameter_mm=r.number("smr_diameter_mm", 38.1, positive=True),
         payload_kg=r.number("payload_kg", 0.0, lo=0.0),
+        p_flange_smr2_mm=r.vector("p_flange_smr2_mm", 3, None),
+        p_flange_smr3_mm=r.vector("p_flange_smr3_mm", 3, None),
     )
+    _check_smrs(tool, r)
+    return tool
+
+
+def _check_smrs(tool: ToolConfig, r: _Reader) -> None:
+    """The third SMR needs the second; no two SMR centres closer than one ball diameter (mm)."""
+    if tool.p_flange_smr3_mm is not None and tool.p_flange_smr2_mm is None:
+        raise r.error("p_flange_smr3_mm", "a third SMR needs p_flange_smr2_mm (the second SMR)")
+    keys = ("p_flange_smr_mm", "p_flange_smr2_mm", "p_flange_smr3_mm")
+    smrs = tool.smrs_mm
+    for j in range(1, len(smrs)):
+        for i in range(j):
+            gap = math.dist(smrs[i], smrs[j])
+            if gap < tool.smr_diameter_mm:
+                raise r.error(keys[j], f"SMR centre {gap:.1f} mm from {keys[i]}: closer than one ball "
+                                       f"(smr_diameter_mm = {_fmt(tool.smr_diameter_mm)})")
 
 
 def _tracker(r: _Reader) -> TrackerConfig:

@@ -53,7 +53,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         log, run_dir = open_log(cfg, plan, run_dir, resume)
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
-                        cfg.tool.payload_kg)
+                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
         with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
             runner.on_point = lambda point, record: advance()
             outcome = runner.execute(todo, log)
@@ -93,7 +93,7 @@ def verify(run_dir: Path, console: Console | None = None):
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
-                        lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)
+                        lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
 
         def measure(points):
             got = []
@@ -124,9 +124,11 @@ def mock_world(cfg: CampaignConfig) -> MockWorld:
     faults = {"beam_break_probability": s.faults.beam_break_probability,
               "timeout_probability": s.faults.timeout_probability,
               "garbage_probability": s.faults.garbage_probability}
+    offset = np.asarray(s.p_flange_smr_mm) - np.asarray(cfg.tool.p_flange_smr_mm)    # true vs nominal SMR 1
+    extra = [tuple(np.asarray(p) + offset) for p in cfg.tool.smrs_mm[1:]]
     return MockWorld(simulated_cell(cfg), s.seed, motion_time_s=s.motion_time_s,
                      joint_speed_deg_s=cfg.robot.max_joint_speed_deg_s, payload_kg=cfg.tool.payload_kg,
-                     faults=faults, q0_deg=cfg.plan.q_ref_deg)
+                     faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra)
 
 
 def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None) -> tuple[RunLog, Path]:

@@ -1,7 +1,9 @@
 """Calibrate and evaluate a dataset (live run or interchange CSV): seed 000's two stages, judged on the test set.
 
 Stages (seed 000 Table 3): ``nominal`` (nominal model, closed-form registration on the calibration points),
-``kinematic`` (registration + identification) and ``compensated`` (kinematic + IDW residual layer).
+``kinematic`` (registration + identification) and ``compensated`` (kinematic + the residual layer of
+``calibration.residual``: IDW, or GPR of seed 003, whose predictive standard deviation per test point is
+reported as ``stages.compensated.test_pred_std_mm``).
 Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated poses) give the noise floor.
 """
 from __future__ import annotations
@@ -12,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.frames import transform_points
+from robocal.gp import GPRResidual, fit_gpr_layer
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
 from robocal.kinematics import smr_tracker
 from robocal.model import CalibratedModel, fit_idw_layer
@@ -59,11 +63,34 @@ def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
 
 
-def _stage(kin_or_model, q, p) -> dict:
+def _stage(kin_or_model, q, p, payload=None) -> dict:
     if len(q) == 0:
         return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
-    pred = kin_or_model.smr_tracker(q) if isinstance(kin_or_model, CalibratedModel) else smr_tracker(kin_or_model, q)
+    if isinstance(kin_or_model, CalibratedModel) and getattr(kin_or_model.residual, "uses_payload", False):
+        p_kin = kin_or_model.kinematic_smr_base(q)                  # per-row payloads as GPR inputs
+        pred = transform_points(kin_or_model.kinematics.T_tracker_base,
+                                p_kin + kin_or_model.residual.predict(q, p_kin, payload))
+    elif isinstance(kin_or_model, CalibratedModel):
+        pred = kin_or_model.smr_tracker(q)
+    else:
+        pred = smr_tracker(kin_or_model, q)
     return error_stats(p - pred).to_dict()
+
+
+def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
+    """Per-row payloads (kg) when they vary over the calib rows (then a GPR input), else None."""
+    if ds.payload_kg is None or np.ptp(ds.payload_kg[cal]) == 0:
+        return None
+    return np.asarray(ds.payload_kg, float)
+
+
+def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
+    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point."""
+    if len(q) == 0:
+        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}
+    s = np.linalg.norm(layer.predict_std(q, None, payload), axis=1)
+    return {"max_mm": float(s.max()), "mean_mm": float(s.mean()), "rms_mm": float(np.sqrt(np.mean(s**2))),
+            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}
 
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
@@ -80,12 +107,23 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         raise DataError(ds.source, f"calibration failed: {exc}") from None
     nominal = register(kin0, q[cal], p[cal])
     model = CalibratedModel(result.kinematics)
+    payload = None
     if cfg.calibration.residual == "idw":
         layer = fit_idw_layer(result.kinematics, q[cal], p[cal], cfg.calibration.idw_power,
                               cfg.calibration.idw_k_nearest, result.point_weights)
         model = CalibratedModel(result.kinematics, layer)
-    stages = {name: {"test": _stage(m, q[test], p[test]), "calib": _stage(m, q[cal], p[cal])}
+    elif cfg.calibration.residual == "gpr":
+        payload = _varying_payload(ds, cal)
+        layer = fit_gpr_layer(result.kinematics, q[cal], p[cal], result.point_weights,
+                              None if payload is None else payload[cal])
+        layer = layer.with_payload(cfg.tool.payload_kg) if layer.uses_payload else layer
+        model = CalibratedModel(result.kinematics, layer)
+    rows = lambda m: None if payload is None else payload[m]  # noqa: E731
+    stages = {name: {"test": _stage(m, q[test], p[test], rows(test)), "calib": _stage(m, q[cal], p[cal], rows(cal))}
               for name, m in (("nominal", nominal), ("kinematic", result.kinematics), ("compensated", model))}
+    if isinstance(model.residual, GPRResidual):
+        stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
+                                                              np.array(ds.point_id)[test].tolist())
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     eval_rows = test if test.any() else cal
     specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)

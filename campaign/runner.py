@@ -5,6 +5,9 @@ fsync -> only then the next move. Tracker faults are retried within limits; when
 the run *pauses* (log closed with exit_status "paused" and the reason) instead of losing or faking the
 point, and ``campaign run CONFIG --resume RUN_DIR`` continues it. Ctrl-C stops the robot and closes the
 log cleanly ("abort"). The robot is always commanded to stop and released in ``finally``.
+With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each further SMR in turn
+(``tracker.select_smr(k)``) at the same stop, and the record gains ``p2_tracker_mm`` / ``p3_tracker_mm``
+(+ ``cov2_mm2`` / ``cov3_mm2``); the tracker is aimed back at SMR 1 before the next move.
 """
 from __future__ import annotations
 
@@ -47,9 +50,13 @@ class Runner:
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
-                 on_point: Callable[[PlanPoint, dict], None] | None = None) -> None:
+                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
+        if n_smrs > 1 and not callable(getattr(tracker, "select_smr", None)):
+            raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
+                              "driver cannot aim at another SMR (no select_smr)")
+        self.n_smrs = n_smrs
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
 
@@ -113,7 +120,19 @@ class Runner:
         }
         if env:
             record["temperatures"] = env
+        for k in range(2, self.n_smrs + 1):
+            record.update(self._measure_smr(k, point, log))
         return record
+
+    def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
+        """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
+        self.tracker.select_smr(k)
+        try:
+            mean, spread, _, retries = self._measure_with_retries(point, log)
+        finally:
+            self.tracker.select_smr(1)
+        return {f"p{k}_tracker_mm": mean.tolist(), f"cov{k}_mm2": self.covariance(mean).tolist(),
+                f"spread{k}_mm": spread, f"retries{k}": retries}
 
     def _approach(self, q_cmd: np.ndarray) -> np.ndarray:
         """Sign of the last motion of each joint before this stop (a joint that did not move keeps its sign)."""

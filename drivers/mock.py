@@ -5,10 +5,14 @@ joint state and the SMR's realised position. Moves draw the robot's repeatabilit
 measurement draws the tracker's spherical-model error once per point (MPE-type errors do not average
 out) plus a small per-sample jitter, so averaging samples behaves like a real tracker.
 Fault injection (beam break, timeout, garbage) follows the configured probabilities.
+A multi-SMR tool (seed 003): ``extra_smrs_flange_mm`` gives the true flange-frame centres of SMRs 2, 3, ...;
+they move rigidly with SMR 1 (same repeatability scatter, own tracker error) and ``MockTracker.select_smr(k)``
+chooses which SMR the following ``measure()`` calls read.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -16,7 +20,7 @@ import numpy as np
 from robocal.noise import repeatability_sigma_mm
 from robocal.simulate import SimulatedCell
 
-from .base import BeamBroken, GarbageReply, MotionError, TrackerReading, TrackerTimeout
+from .base import BeamBroken, GarbageReply, MotionError, TargetNotFound, TrackerReading, TrackerTimeout
 
 
 class VirtualClock:
@@ -36,7 +40,8 @@ class MockWorld:
 
     def __init__(self, cell: SimulatedCell, seed: int = 0, *, motion_time_s: float = 0.0,
                  joint_speed_deg_s: float = 60.0, payload_kg: float = 0.0, faults: Mapping[str, float] | None = None,
-                 jitter_mm: float = 0.002, q0_deg: Sequence[float] | None = None) -> None:
+                 jitter_mm: float = 0.002, q0_deg: Sequence[float] | None = None,
+                 extra_smrs_flange_mm: Sequence[Sequence[float]] = ()) -> None:
         self.cell = cell
         self.rng = np.random.default_rng(seed)
         self.fault_rng = np.random.default_rng(seed + 7919)
@@ -49,8 +54,12 @@ class MockWorld:
         n = cell.truth.n
         self.q_deg = np.zeros(n) if q0_deg is None else np.asarray(q0_deg, float)
         self.approach = np.zeros(n)
+        self.extra_cells = tuple(replace(cell, truth=cell.truth.with_(p_flange_smr_mm=np.asarray(p, float)))
+                                 for p in extra_smrs_flange_mm)
         self.p_smr_tracker_mm = self._realise()
         self.point_error_mm = np.zeros(3)
+        self.p_extra_tracker_mm = np.zeros((len(self.extra_cells), 3))     # SMRs 2, 3, ... (tracker frame)
+        self.extra_error_mm = np.zeros((len(self.extra_cells), 3))
         self.moves = 0
         self.stopped = False
 
@@ -61,7 +70,18 @@ class MockWorld:
     def _realise(self) -> np.ndarray:
         p = self.cell.true_smr_tracker(np.radians(self.q_deg)[None], self.meta())[0]
         s = repeatability_sigma_mm(self.cell.repeatability_rp_mm)
-        return p + (self.rng.normal(0.0, s, 3) if s > 0 else 0.0)
+        self.scatter_mm = self.rng.normal(0.0, s, 3) if s > 0 else np.zeros(3)
+        return p + self.scatter_mm
+
+    def _realise_extra(self) -> None:
+        """Extra SMRs: true positions + the same repeatability scatter as SMR 1, each with its tracker error."""
+        if not self.extra_cells:
+            return
+        q = np.radians(self.q_deg)[None]
+        p = np.array([c.true_smr_tracker(q, self.meta())[0] for c in self.extra_cells]) + self.scatter_mm
+        cov = self.cell.tracker.covariance(p)
+        self.p_extra_tracker_mm = p
+        self.extra_error_mm = np.einsum("kij,kj->ki", np.linalg.cholesky(cov), self.rng.standard_normal(p.shape))
 
     def move(self, q_deg: np.ndarray) -> None:
         delta = q_deg - self.q_deg
@@ -73,6 +93,7 @@ class MockWorld:
         self.p_smr_tracker_mm = self._realise()
         cov = self.cell.tracker.covariance(self.p_smr_tracker_mm[None])[0]
         self.point_error_mm = np.linalg.cholesky(cov) @ self.rng.standard_normal(3)
+        self._realise_extra()
         self.moves += 1
 
     def fault(self, name: str) -> bool:
@@ -122,6 +143,7 @@ class MockTracker:
     def __init__(self, world: MockWorld, url: str = "mock://tracker", robot=None) -> None:
         self.world, self.url = world, url
         self.robot = None if isinstance(robot, MockRobot) else robot
+        self.smr = 1
 
     def _follow(self) -> None:
         q = np.asarray(self.robot.read_joints(), float)
@@ -130,6 +152,12 @@ class MockTracker:
 
     def connect(self) -> None:
         pass
+
+    def select_smr(self, k: int) -> None:
+        """Aim at SMR k (1 = the main SMR, 2.. = the world's extra SMRs) for the following measurements."""
+        if not 1 <= k <= 1 + len(self.world.extra_cells):
+            raise TargetNotFound(f"{self.url}: no SMR {k} on the tool (it has {1 + len(self.world.extra_cells)})")
+        self.smr = k
 
     def measure(self) -> TrackerReading:
         w = self.world
@@ -141,7 +169,11 @@ class MockTracker:
             raise TrackerTimeout(f"{self.url}: no reply")
         if w.fault("garbage_probability"):
             raise GarbageReply(f"{self.url}: unparseable reply '#%!?'")
-        xyz = w.p_smr_tracker_mm + w.point_error_mm + w.rng.normal(0.0, w.jitter_mm, 3)
+        if self.smr == 1:
+            xyz = w.p_smr_tracker_mm + w.point_error_mm + w.rng.normal(0.0, w.jitter_mm, 3)
+        else:
+            k = self.smr - 2
+            xyz = w.p_extra_tracker_mm[k] + w.extra_error_mm[k] + w.rng.normal(0.0, w.jitter_mm, 3)
         w.clock.sleep(0.05)
         return TrackerReading(tuple(float(v) for v in xyz), w.clock.now())
 

@@ -1,7 +1,7 @@
 """The calibrated model: the actual-pose predictor AP(theta) of seed 001.
 
 ``CalibratedModel`` = kinematic layer (identified geometry, registration, SMR) + optional residual layer
-(IDW or any object with ``predict(q_rad, p_base_mm) -> (N, 3)`` and ``to_dict``). It predicts where the
+(IDW, GPR or any object with ``predict(q_rad, p_base_mm) -> (N, 3)`` and ``to_dict``). It predicts where the
 SMR really is for given joint angles, and is what target correction and evaluation use. ``to_dict`` /
 ``from_dict`` give a plain, unit-labelled structure for JSON or YAML (the file I/O lives in campaign/).
 """
@@ -14,10 +14,11 @@ import numpy as np
 
 from .frames import transform_points
 from .kinematics import Kinematics, fk
+from .gp import GPRResidual
 from .residual import IDWResidual
 
 FORMAT = "robocal-model/1"
-RESIDUAL_KINDS = {"idw": IDWResidual}
+RESIDUAL_KINDS = {"idw": IDWResidual, "gpr": GPRResidual}
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,331 @@
+"""Gaussian-process regression of robot errors (seed 003 §1.2, eq. 4-9) and an RBF-network baseline.
+
+One output per model: ``e = Omega(x) + eps`` with a squared-exponential ARD kernel
+
+    k(x_a, x_b) = sigma_f^2 exp(-1/2 (x_a - x_b)^T diag(lambda)^-2 (x_a - x_b))
+
+(one length scale ``lambda_i`` per input), white noise ``eps ~ N(0, sigma_n^2)`` and a constant mean (the
+training mean; the seed uses zero mean, which is the same after centring). Hyperparameters
+``theta = (sigma_f, sigma_n, lambda_1..lambda_d)`` minimise the negative log marginal likelihood (eq. 9) with
+its analytic gradient, by L-BFGS-B on log-parameters from a heuristic start plus a few seeded restarts.
+Predictive mean and variance are eq. 7 and eq. 8 (eq. 8 includes sigma_n^2: the spread of a new
+*measurement*; ``include_noise=False`` gives the latent function's). Everything is Cholesky based.
+
+Inputs are joint angles in rad (N, n), with the payload in kg appended as one more column when a model is
+trained across payloads (seed 003 §5 suggestion). Outputs in mm. ``GPRResidual`` is the residual layer of
+``CalibratedModel`` (kind ``"gpr"``): one GP per base-frame axis on the kinematic model's residuals.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.optimize import minimize
+
+from .frames import transform_points
+from .kinematics import Kinematics, fk
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+JITTER = 1e-10            # added to the diagonal, relative to var(y), for a safe Cholesky
+
+
+# ---------------------------------------------------------------- kernel and likelihood
+def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -> np.ndarray:
+    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d)."""
+    A, B = Xa / length, Xb / length
+    d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :] - 2.0 * A @ B.T
+    return sigma_f**2 * np.exp(-0.5 * np.maximum(d2, 0.0))
+
+
+def unpack(log_theta: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """log-parameter vector (log sigma_f, log sigma_n, log lambda_1..d) -> (sigma_f, sigma_n, lambda)."""
+    t = np.asarray(log_theta, float)
+    return float(np.exp(t[0])), float(np.exp(t[1])), np.exp(t[2:])
+
+
+def neg_log_marginal_likelihood(log_theta: np.ndarray, X: np.ndarray, y: np.ndarray, jitter: float = 0.0,
+                                grad: bool = True):
+    """L(theta) = -log p(y | X, theta) (eq. 9) and its analytic gradient w.r.t. the log-parameters.
+
+    With H = K + sigma_n^2 I, alpha = H^-1 y and W = alpha alpha^T - H^-1:
+    dL/dlog(sigma_f) = -sum(W o K), dL/dlog(sigma_n) = -sigma_n^2 tr(W),
+    dL/dlog(lambda_i) = -1/2 sum_ab W_ab K_ab (x_ai - x_bi)^2 / lambda_i^2 (expanded, no (m, m, d) array).
+    X (m, d) should be centred (the kernel is translation invariant; centring avoids cancellation).
+    Returns L or (L, gradient (d + 2,)).
+    """
+    sf, sn, lam = unpack(log_theta)
+    m = len(y)
+    K = se_ard(X, X, lam, sf)
+    H = K + (sn**2 + jitter) * np.eye(m)
+    try:
+        c = cho_factor(H, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        return (np.inf, np.zeros_like(log_theta)) if grad else np.inf
+    alpha = cho_solve(c, y, check_finite=False)
+    L = 0.5 * y @ alpha + np.sum(np.log(np.diag(c[0]))) + 0.5 * m * LOG_2PI
+    if not grad:
+        return float(L)
+    W = np.outer(alpha, alpha) - cho_solve(c, np.eye(m), check_finite=False)
+    M = W * K
+    r = M.sum(axis=1)
+    quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)       # = 1/2 sum_ab M_ab (x_ai - x_bi)^2
+    g = np.empty(len(log_theta))
+    g[0] = -np.sum(M)
+    g[1] = -sn**2 * np.trace(W)
+    g[2:] = -quad / lam**2
+    return float(L), g
+
+
+# ---------------------------------------------------------------- one-output GP
+@dataclass(frozen=True, eq=False)
+class GaussianProcess:
+    """A trained one-output GP: training inputs X (m, d) and outputs y (m,), hyperparameters
+    sigma_f, sigma_n (output units), length (d,) (input units) and the constant mean y_mean.
+    The Cholesky factor and alpha are derived (recomputed by ``from_dict``)."""
+    X: np.ndarray
+    y: np.ndarray
+    sigma_f: float
+    sigma_n: float
+    length: np.ndarray
+    y_mean: float = 0.0
+    x_centre: np.ndarray | None = None
+    _chol: np.ndarray = field(init=False, repr=False)
+    _alpha: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        put = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        put("X", np.atleast_2d(np.asarray(self.X, float)))
+        put("y", np.asarray(self.y, float).ravel())
+        put("length", np.asarray(self.length, float).ravel())
+        put("x_centre", self.X.mean(axis=0) if self.x_centre is None else np.asarray(self.x_centre, float))
+        Xc = self.X - self.x_centre
+        H = se_ard(Xc, Xc, self.length, self.sigma_f) + (self.sigma_n**2 + self._jitter()) * np.eye(len(self.y))
+        L = np.linalg.cholesky(H)
+        put("_chol", L)
+        put("_alpha", cho_solve((L, True), self.y - self.y_mean, check_finite=False))
+
+    def _jitter(self) -> float:
+        return JITTER * max(float(np.var(self.y)), 1e-30)
+
+    @property
+    def log_theta(self) -> np.ndarray:
+        return np.log(np.concatenate([[self.sigma_f, self.sigma_n], self.length]))
+
+    @property
+    def nlml(self) -> float:
+        """Negative log marginal likelihood at the stored hyperparameters."""
+        return neg_log_marginal_likelihood(self.log_theta, self.X - self.x_centre, self.y - self.y_mean,
+                                           self._jitter(), grad=False)
+
+    @classmethod
+    def fit(cls, X: np.ndarray, y: np.ndarray, *, n_restarts: int = 3, seed: int = 0,
+            log_theta0: np.ndarray | None = None, max_iter: int = 200) -> "GaussianProcess":
+        """Maximise the marginal likelihood (L-BFGS-B, analytic gradient) from a heuristic start and
+        ``n_restarts`` seeded random starts around it; keep the best."""
+        X = np.atleast_2d(np.asarray(X, float))
+        y = np.asarray(y, float).ravel()
+        y_mean = float(y.mean())
+        x_centre = X.mean(axis=0)
+        Xc, yc = X - x_centre, y - y_mean
+        s_y = max(float(yc.std()), 1e-12)
+        s_x = np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
+        start = np.log(np.concatenate([[s_y, 0.1 * s_y], s_x])) if log_theta0 is None else np.asarray(log_theta0)
+        bounds = [(np.log(1e-3 * s_y), np.log(1e2 * s_y)), (np.log(1e-6 * s_y), np.log(10 * s_y))]
+        bounds += [(np.log(1e-2 * s), np.log(1e3 * s)) for s in s_x]
+        lo, hi = np.array(bounds).T
+        rng = np.random.default_rng(seed)
+        starts = [np.clip(start, lo, hi)] + [np.clip(start + rng.normal(0.0, 1.0, start.shape), lo, hi)
+                                             for _ in range(n_restarts)]
+        jitter = JITTER * max(float(np.var(y)), 1e-30)
+        best = None
+        for t0 in starts:
+            res = minimize(neg_log_marginal_likelihood, t0, args=(Xc, yc, jitter), jac=True, method="L-BFGS-B",
+                           bounds=bounds, options={"maxiter": max_iter})
+            if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+                best = res
+        sf, sn, lam = unpack(best.x if best is not None else starts[0])
+        return cls(X, y, sf, sn, lam, y_mean, x_centre)
+
+    def predict(self, Xs: np.ndarray, return_var: bool = False, include_noise: bool = True):
+        """Predictive mean (N,) (eq. 7) and optionally variance (N,) (eq. 8; without sigma_n^2 if
+        ``include_noise`` is False)."""
+        Xs = np.atleast_2d(np.asarray(Xs, float)) - self.x_centre
+        Ks = se_ard(Xs, self.X - self.x_centre, self.length, self.sigma_f)
+        mean = Ks @ self._alpha + self.y_mean
+        if not return_var:
+            return mean
+        v = solve_triangular(self._chol, Ks.T, lower=True, check_finite=False)
+        var = self.sigma_f**2 - np.sum(v**2, axis=0) + (self.sigma_n**2 if include_noise else 0.0)
+        return mean, np.maximum(var, 0.0)
+
+    def to_dict(self) -> dict:
+        return {"X": self.X.tolist(), "y": self.y.tolist(), "sigma_f": self.sigma_f, "sigma_n": self.sigma_n,
+                "length": self.length.tolist(), "y_mean": self.y_mean, "x_centre": self.x_centre.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "GaussianProcess":
+        return cls(np.array(d["X"], float), np.array(d["y"], float), float(d["sigma_f"]), float(d["sigma_n"]),
+                   np.array(d["length"], float), float(d["y_mean"]), np.array(d["x_centre"], float))
+
+
+@dataclass(frozen=True, eq=False)
+class MultiOutputGP:
+    """Independent GPs on the same inputs, one per output column (seed 003: one model per axis)."""
+    models: tuple[GaussianProcess, ...]
+
+    @classmethod
+    def fit(cls, X: np.ndarray, Y: np.ndarray, *, n_restarts: int = 3, seed: int = 0) -> "MultiOutputGP":
+        """X (m, d), Y (m, k): k GPs, each with its own hyperparameters (seeds seed, seed+1, ...)."""
+        Y = np.asarray(Y, float).reshape(len(X), -1)
+        return cls(tuple(GaussianProcess.fit(X, Y[:, j], n_restarts=n_restarts, seed=seed + j)
+                         for j in range(Y.shape[1])))
+
+    def predict(self, Xs: np.ndarray) -> np.ndarray:
+        """Predictive means (N, k)."""
+        return np.stack([g.predict(Xs) for g in self.models], axis=1)
+
+    def predict_std(self, Xs: np.ndarray, include_noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(mean (N, k), predictive standard deviation (N, k))."""
+        out = [g.predict(Xs, return_var=True, include_noise=include_noise) for g in self.models]
+        return np.stack([m for m, _ in out], 1), np.sqrt(np.stack([v for _, v in out], 1))
+
+    def to_dict(self) -> dict:
+        return {"models": [g.to_dict() for g in self.models]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "MultiOutputGP":
+        return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]))
+
+
+def gp_inputs(q_rad: np.ndarray, payload_kg=None) -> np.ndarray:
+    """GP input matrix: joint angles (N, n) rad, plus the payload (kg, scalar or (N,)) as a last column."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    if payload_kg is None:
+        return q
+    return np.column_stack([q, np.broadcast_to(np.asarray(payload_kg, float), (len(q),))])
+
+
+# ---------------------------------------------------------------- residual layer
+@dataclass(frozen=True, eq=False)
+class GPRResidual:
+    """GPR residual layer: one GP per base-frame axis on the residual ``p_measured - p_model`` (mm) as a
+    function of the joint angles (+ payload when ``uses_payload``). ``payload_kg`` is the payload assumed when
+    ``predict`` is given none (the tool the robot carries now; see ``with_payload``)."""
+    gp: MultiOutputGP
+    uses_payload: bool = False
+    payload_kg: float | None = None
+
+    kind = "gpr"
+
+    def _x(self, q_rad, payload_kg):
+        if not self.uses_payload:
+            return gp_inputs(q_rad)
+        pay = self.payload_kg if payload_kg is None else payload_kg
+        if pay is None:
+            raise ValueError("this GPR layer takes the payload as an input: give payload_kg (or use with_payload)")
+        return gp_inputs(q_rad, pay)
+
+    def predict(self, q_rad: np.ndarray, p_base_mm: np.ndarray | None = None, payload_kg=None) -> np.ndarray:
+        """Predicted residual (N, 3) mm in the base frame at joint angles q_rad (N, n); p_base_mm is unused
+        (a joint-keyed layer; the argument keeps the residual-layer interface)."""
+        return self.gp.predict(self._x(q_rad, payload_kg))
+
+    def predict_std(self, q_rad: np.ndarray, p_base_mm: np.ndarray | None = None, payload_kg=None,
+                    include_noise: bool = True) -> np.ndarray:
+        """Predictive standard deviation (N, 3) mm per base-frame axis (eq. 8)."""
+        return self.gp.predict_std(self._x(q_rad, payload_kg), include_noise)[1]
+
+    def with_payload(self, payload_kg: float | None) -> "GPRResidual":
+        return GPRResidual(self.gp, self.uses_payload, payload_kg)
+
+    def to_dict(self) -> dict:
+        return {"kind": "gpr", "frame": "base", "units": {"inputs": "rad (joints), kg (payload)", "outputs": "mm"},
+                "uses_payload": self.uses_payload, "payload_kg": self.payload_kg, "gp": self.gp.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "GPRResidual":
+        pay = d.get("payload_kg")
+        return cls(MultiOutputGP.from_dict(d["gp"]), bool(d.get("uses_payload", False)),
+                   None if pay is None else float(pay))
+
+
+def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weights: np.ndarray | None = None,
+                  payload_kg=None, n_restarts: int = 3, seed: int = 0) -> GPRResidual:
+    """GPR layer from calibration points (mirror of ``fit_idw_layer``): residuals measured - model rotated
+    into the base frame. Points with zero robust weight are left out. ``payload_kg`` (N,) makes the payload
+    an input (pass it only when it varies across the points)."""
+    keep = np.ones(len(q_rad), bool) if weights is None else np.asarray(weights) > 0
+    q = np.asarray(q_rad, float)[keep]
+    p_kin = transform_points(fk(kin, q), kin.p_flange_smr_mm)
+    R = kin.T_tracker_base[:3, :3]
+    p_meas_base = (np.asarray(p_tracker_mm, float)[keep] - kin.T_tracker_base[:3, 3]) @ R
+    pay = None if payload_kg is None else np.broadcast_to(np.asarray(payload_kg, float), (len(q_rad),))[keep]
+    gp = MultiOutputGP.fit(gp_inputs(q, pay), p_meas_base - p_kin, n_restarts=n_restarts, seed=seed)
+    return GPRResidual(gp, pay is not None, None)
+
+
+# ---------------------------------------------------------------- RBF-network baseline (seed 003 Fig. 8)
+RBF_WIDTHS = (0.25, 0.5, 1.0, 2.0, 4.0)       # x the median distance between centres
+RBF_RIDGES = (1e-8, 1e-5, 1e-2)
+
+
+@dataclass(frozen=True, eq=False)
+class RBFNetwork:
+    """Gaussian radial-basis-function network: inputs standardised, centres by seeded k-means (``n_centres``,
+    default half the training points), one common width, linear output layer with bias by ridge least
+    squares. Width (a multiple of the median distance between centres) and ridge are chosen by seeded
+    5-fold cross-validation on the training set unless given: a fair baseline, not a strawman."""
+    centres: np.ndarray
+    width: float
+    weights: np.ndarray
+    x_mean: np.ndarray
+    x_std: np.ndarray
+
+    @classmethod
+    def fit(cls, X: np.ndarray, Y: np.ndarray, n_centres: int | None = None, width: float | None = None,
+            ridge: float | None = None, seed: int = 0) -> "RBFNetwork":
+        from scipy.cluster.vq import kmeans2
+        X = np.atleast_2d(np.asarray(X, float))
+        Y = np.asarray(Y, float).reshape(len(X), -1)
+        mu, sd = X.mean(0), np.where(X.std(0) > 1e-12, X.std(0), 1.0)
+        Z = (X - mu) / sd
+        k = min(len(X), n_centres or max(2, len(X) // 2))
+        C = Z.copy() if k == len(X) else kmeans2(Z, k, minit="++", seed=np.random.default_rng(seed))[0]
+        dc = np.sqrt(np.sum((C[:, None] - C[None]) ** 2, -1))
+        scale = float(np.median(dc[np.triu_indices(len(C), 1)])) if len(C) > 1 else 1.0
+        widths = [scale * f for f in RBF_WIDTHS] if width is None else [width]
+        ridges = list(RBF_RIDGES) if ridge is None else [ridge]
+        if len(widths) * len(ridges) > 1:
+            width, ridge = cls._cross_validate(Z, Y, C, widths, ridges, seed)
+        else:
+            width, ridge = widths[0], ridges[0]
+        return cls(C, width, cls._solve(cls._design(Z, C, width), Y, ridge), mu, sd)
+
+    @classmethod
+    def _cross_validate(cls, Z, Y, C, widths, ridges, seed, folds=5):
+        fold = np.random.default_rng(seed).permutation(len(Z)) % folds
+        best, arg = np.inf, (widths[0], ridges[0])
+        for w in widths:
+            Phi = cls._design(Z, C, w)
+            for r in ridges:
+                sse = sum(np.sum((Y[fold == f] - Phi[fold == f] @ cls._solve(Phi[fold != f], Y[fold != f], r)) ** 2)
+                          for f in range(folds))
+                if sse < best:
+                    best, arg = sse, (w, r)
+        return arg
+
+    @staticmethod
+    def _solve(Phi, Y, ridge):
+        A = Phi.T @ Phi + ridge * len(Phi) * np.eye(Phi.shape[1])
+        return np.linalg.solve(A, Phi.T @ Y)
+
+    @staticmethod
+    def _design(Z, C, width):
+        d2 = np.sum((Z[:, None, :] - C[None]) ** 2, -1)
+        return np.column_stack([np.exp(-0.5 * d2 / width**2), np.ones(len(Z))])
+
+    def predict(self, Xs: np.ndarray) -> np.ndarray:
+        """Predicted outputs (N, k)."""
+        Z = (np.atleast_2d(np.asarray(Xs, float)) - self.x_mean) / self.x_std
+        return self._design(Z, self.centres, self.width) @ self.weights
