@@ -139,18 +139,27 @@ def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Target
         c = run_correction(cfg, model_pose_fn(model, T_tool), T_d, q_nom[idx], T_tool)
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
+        std = predictive_std_mm(model, c.q_rad)
         for j, i in enumerate(idx):
             accepted.append(CorrectedTarget(
                 target_id=targets.ids[i], q_nominal_deg=tuple(np.degrees(q_nom[i])),
                 q_corrected_deg=tuple(np.degrees(c.q_rad[j])), p_command_base_mm=tuple(cmd[j, :3, 3]),
                 quat_command_wxyz=tuple(matrix_to_quat(cmd[j:j + 1, :3, :3])[0]), confdata=tuple(int(v) for v in conf[j]),
                 predicted_residual_mm=float(c.pos_err_mm[j]),
-                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j]))))
+                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j])), predicted_std_mm=float(std[j])))
     lim = _limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
     return ok_targets, rejected + bad
+
+
+def predictive_std_mm(model: CalibratedModel, q_rad: np.ndarray) -> np.ndarray:
+    """3-D predictive standard deviation (N,) mm of the residual layer at q (GPR), nan without one."""
+    fn = getattr(model.residual, "predict_std", None)
+    if fn is None:
+        return np.full(len(q_rad), np.nan)
+    return np.linalg.norm(fn(q_rad, None, include_noise=False), axis=1)
 
 
 def _limits_deg(cfg: CampaignConfig):

@@ -84,7 +84,8 @@ class CorrectedTarget:
     (w, x, y, z) as ABB writes it; ``confdata``: ABB (cf1, cf4, cf6, cfx).
     ``predicted_residual_mm``: predicted position error left after correction
     (mm); ``predicted_rot_err_deg``: predicted orientation error (deg), nan when
-    not applicable.
+    not applicable; ``predicted_std_mm``: 3-D predictive standard deviation of the
+    residual layer at the corrected joints (GPR), nan when the model has none.
     """
 
     target_id: str
@@ -95,6 +96,7 @@ class CorrectedTarget:
     confdata: tuple[int, int, int, int]
     predicted_residual_mm: float
     predicted_rot_err_deg: float = math.nan
+    predicted_std_mm: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -191,6 +193,9 @@ def _shape_problems(t: CorrectedTarget, n: int) -> list[str]:
     rot = _as_float(t.predicted_rot_err_deg)
     if rot is None or math.isinf(rot) or rot < 0:
         out.append(f"predicted_rot_err_deg must be nan or finite >= 0, got {t.predicted_rot_err_deg!r}")
+    std = _as_float(t.predicted_std_mm)
+    if std is None or math.isinf(std) or std < 0:
+        out.append(f"predicted_std_mm must be nan or finite >= 0, got {t.predicted_std_mm!r}")
     conf = tuple(t.confdata) if isinstance(t.confdata, (tuple, list)) else ()
     if len(conf) != 4 or not all(isinstance(c, Integral) and not isinstance(c, bool) for c in conf):
         out.append(f"confdata must be 4 integers (cf1, cf4, cf6, cfx), got {t.confdata!r}")
@@ -1278,6 +1283,7 @@ def render_ur_json(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[fl
             "q_deg": [float(q) for q in t.q_corrected_deg],
             "q_nominal_rad": [math.radians(float(q)) for q in t.q_nominal_deg],
             "predicted_residual_mm": float(t.predicted_residual_mm),
+            "predicted_std_mm": None if math.isnan(float(t.predicted_std_mm)) else float(t.predicted_std_mm),
         } for t in items],
     }
     return json.dumps(doc, indent=2, allow_nan=False) + "\n"
@@ -1435,7 +1441,7 @@ def _csv_float(x: float) -> str:
 def _csv_header(n: int) -> list[str]:
     return (["target_id"] + [f"q{j}" for j in range(1, n + 1)] + [f"q{j}_nominal" for j in range(1, n + 1)]
             + ["x_cmd", "y_cmd", "z_cmd", "qw", "qx", "qy", "qz", "cf1", "cf4", "cf6", "cfx",
-               "predicted_residual_mm", "predicted_rot_err_deg"])
+               "predicted_residual_mm", "predicted_rot_err_deg", "predicted_std_mm"])
 
 
 def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
@@ -1449,7 +1455,7 @@ def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequenc
         writer.writerow([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
                          *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
                          *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_residual_mm),
-                         _csv_float(t.predicted_rot_err_deg)])
+                         _csv_float(t.predicted_rot_err_deg), _csv_float(t.predicted_std_mm)])
     return buf.getvalue()
 
 
@@ -1459,8 +1465,8 @@ def write_targets_csv(path: str | os.PathLike, targets: Iterable[CorrectedTarget
 
     Columns ``target_id, q1..qn`` (corrected, deg), ``q1_nominal..qn_nominal``
     (deg), ``x_cmd, y_cmd, z_cmd`` (mm, base), ``qw, qx, qy, qz``, ``cf1, cf4,
-    cf6, cfx``, ``predicted_residual_mm``, ``predicted_rot_err_deg`` (``nan``
-    when not applicable).  Floats are written exactly (``repr``), so
+    cf6, cfx``, ``predicted_residual_mm``, ``predicted_rot_err_deg``,
+    ``predicted_std_mm`` (``nan`` when not applicable).  Floats are written exactly (``repr``), so
     :func:`read_targets_csv` gives back identical values.  ValueError, writing
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
     """
@@ -1485,11 +1491,11 @@ def read_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]:
         try:
             nums = [float(v) for v in row[1:2 * n + 8]]
             conf = tuple(int(v) for v in row[2 * n + 8:2 * n + 12])
-            res, rot = float(row[-2]), float(row[-1])
+            res, rot, std = float(row[-3]), float(row[-2]), float(row[-1])
         except ValueError as e:
             raise ValueError(f"{path}: line {k}: {e}") from None
         out.append(CorrectedTarget(row[0], tuple(nums[n:2 * n]), tuple(nums[:n]), tuple(nums[2 * n:2 * n + 3]),
-                                   tuple(nums[2 * n + 3:2 * n + 7]), conf, res, rot))
+                                   tuple(nums[2 * n + 3:2 * n + 7]), conf, res, rot, std))
     return out
 
 

@@ -52,3 +52,21 @@ def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
     assert ratios["model-corrected"] <= 1.2
     assert ratios["after correction (all passes pooled)"] <= 1.2
     assert all(r <= 1.3 for k, r in ratios.items() if k.startswith("closed loop"))
+
+
+def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path):
+    from tests.campaign.helpers import small_config
+    cfg = small_config(tmp_path, **{"calibration.residual": "gpr"})
+    run = tmp_path / "run"
+    assert main(["run", str(cfg), "--out", str(run)]) == 0
+    targets = tmp_path / "targets.csv"
+    targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1000,200,900\n")
+    out = tmp_path / "out"
+    assert main(["correct", "--config", str(cfg), "--model", str(run / "model.json"), "--targets", str(targets),
+                 "--out", str(out)]) == 0
+    rows = (out / "targets.csv").read_text().splitlines()
+    assert rows[0].endswith("predicted_std_mm") and len(rows) == 3
+    stds = [float(r.split(",")[-1]) for r in rows[1:]]
+    assert all(0 < s < 1 for s in stds)
+    ur = json.loads((out / "targets_ur.json").read_text())
+    assert all(t["predicted_std_mm"] > 0 for t in ur["targets"])

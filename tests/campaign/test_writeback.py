@@ -452,7 +452,7 @@ def test_ur_json_round_trip(tmp_path):
     assert doc["units"] == {"q": "rad", "predicted_residual": "mm"}
     assert [d["id"] for d in doc["targets"]] == [t.target_id for t in targets]
     for t, d in zip(targets, doc["targets"]):
-        assert set(d) == {"id", "q_rad", "q_deg", "q_nominal_rad", "predicted_residual_mm"}
+        assert set(d) == {"id", "q_rad", "q_deg", "q_nominal_rad", "predicted_residual_mm", "predicted_std_mm"}
         assert d["q_deg"] == list(t.q_corrected_deg)
         assert np.allclose(np.degrees(d["q_rad"]), t.q_corrected_deg, rtol=0, atol=1e-12)
         assert np.allclose(np.degrees(d["q_nominal_rad"]), t.q_nominal_deg, rtol=0, atol=1e-12)
@@ -513,7 +513,7 @@ def test_targets_csv_round_trip(tmp_path):
     header = path.read_text(encoding="utf-8").split("\n")[0]
     assert header == ("target_id,q1,q2,q3,q4,q5,q6,q1_nominal,q2_nominal,q3_nominal,q4_nominal,q5_nominal,"
                       "q6_nominal,x_cmd,y_cmd,z_cmd,qw,qx,qy,qz,cf1,cf4,cf6,cfx,predicted_residual_mm,"
-                      "predicted_rot_err_deg")
+                      "predicted_rot_err_deg,predicted_std_mm")
     back = wb.read_targets_csv(path)
     assert len(back) == len(targets)
     for a, b in zip(targets, back):
