@@ -34,7 +34,7 @@ def make_targets(n: int = 12, seed: int = 1, ids=None) -> list[CorrectedTarget]:
         tid = ids[k] if ids else f"P{k + 1:03d}"
         out.append(CorrectedTarget(tid, tuple(map(float, q_nom)), tuple(map(float, q_cor)),
                                    tuple(map(float, rng.uniform(-2500, 2500, 3))), tuple(map(float, quat)),
-                                   conf, float(rng.uniform(0, 0.3)), rot))
+                                   conf, float(rng.uniform(0, 0.3)), rot, float(rng.uniform(0.001, 0.05))))
     return out
 
 
