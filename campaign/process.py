@@ -63,18 +63,21 @@ def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
 
 
+def _predict(kin_or_model, q, payload=None) -> np.ndarray:
+    """Predicted SMR positions (N, 3) mm in the tracker frame of a kinematic model or a calibrated model."""
+    if isinstance(kin_or_model, CalibratedModel) and getattr(kin_or_model.residual, "uses_payload", False):
+        p_kin = kin_or_model.kinematic_smr_base(q)                  # per-row payloads as GPR inputs
+        return transform_points(kin_or_model.kinematics.T_tracker_base,
+                                p_kin + kin_or_model.residual.predict(q, p_kin, payload))
+    if isinstance(kin_or_model, CalibratedModel):
+        return kin_or_model.smr_tracker(q)
+    return smr_tracker(kin_or_model, q)
+
+
 def _stage(kin_or_model, q, p, payload=None) -> dict:
     if len(q) == 0:
         return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
-    if isinstance(kin_or_model, CalibratedModel) and getattr(kin_or_model.residual, "uses_payload", False):
-        p_kin = kin_or_model.kinematic_smr_base(q)                  # per-row payloads as GPR inputs
-        pred = transform_points(kin_or_model.kinematics.T_tracker_base,
-                                p_kin + kin_or_model.residual.predict(q, p_kin, payload))
-    elif isinstance(kin_or_model, CalibratedModel):
-        pred = kin_or_model.smr_tracker(q)
-    else:
-        pred = smr_tracker(kin_or_model, q)
-    return error_stats(p - pred).to_dict()
+    return error_stats(p - _predict(kin_or_model, q, payload)).to_dict()
 
 
 def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
@@ -106,18 +109,10 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     except IdentificationError as exc:
         raise DataError(ds.source, f"calibration failed: {exc}") from None
     nominal = register(kin0, q[cal], p[cal])
-    model = CalibratedModel(result.kinematics)
-    payload = None
-    if cfg.calibration.residual == "idw":
-        layer = fit_idw_layer(result.kinematics, q[cal], p[cal], cfg.calibration.idw_power,
-                              cfg.calibration.idw_k_nearest, result.point_weights)
-        model = CalibratedModel(result.kinematics, layer)
-    elif cfg.calibration.residual == "gpr":
-        payload = _varying_payload(ds, cal)
-        layer = fit_gpr_layer(result.kinematics, q[cal], p[cal], result.point_weights,
-                              None if payload is None else payload[cal])
-        layer = layer.with_payload(cfg.tool.payload_kg) if layer.uses_payload else layer
-        model = CalibratedModel(result.kinematics, layer)
+    payload = _varying_payload(ds, cal) if cfg.calibration.residual == "gpr" else None
+    pay_cal = None if payload is None else payload[cal]
+    layer = fit_residual_layer(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal)
+    model = CalibratedModel(result.kinematics, layer)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
     stages = {name: {"test": _stage(m, q[test], p[test], rows(test)), "calib": _stage(m, q[cal], p[cal], rows(cal))}
               for name, m in (("nominal", nominal), ("kinematic", result.kinematics), ("compensated", model))}
@@ -143,9 +138,44 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "T_tracker_base": result.kinematics.T_tracker_base.tolist(),
         "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
                    "residual": cfg.calibration.residual},
+        "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
     }
     model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
     return Processed(report, model, result)
+
+
+def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
+    """The configured residual layer (IDW or GPR) fitted on calibration points, or None."""
+    c = cfg.calibration
+    if c.residual == "idw":
+        return fit_idw_layer(kin, q, p, c.idw_power, c.idw_k_nearest, weights)
+    if c.residual == "gpr":
+        layer = fit_gpr_layer(kin, q, p, weights, payload)
+        return layer.with_payload(cfg.tool.payload_kg) if layer.uses_payload else layer
+    return None
+
+
+def residual_cv(cfg: CampaignConfig, kin, q, p, weights, payload=None, folds: int = 5, seed: int = 0) -> dict | None:
+    """Does the residual layer predict anything? k-fold cross-validation over the calibration points (kinematics
+    fixed): RMS of the held-out residual without and with the layer. A negative gain means the layer only
+    interpolates noise (e.g. purely geometric errors, or a pose set too sparse for the structure)."""
+    if cfg.calibration.residual == "none":
+        return None
+    idx = np.flatnonzero(np.asarray(weights) > 0)
+    if len(idx) < 4 * folds:
+        return None
+    fold = np.random.default_rng(seed).permutation(len(idx)) % folds
+    r0 = p - smr_tracker(kin, q)
+    without, with_ = [], []
+    for k in range(folds):
+        tr, te = idx[fold != k], idx[fold == k]
+        pay = (lambda rows: None) if payload is None else (lambda rows: payload[rows])  # noqa: E731
+        layer = fit_residual_layer(cfg, kin, q[tr], p[tr], None, pay(tr))
+        without.append(r0[te])
+        with_.append(p[te] - _predict(CalibratedModel(kin, layer), q[te], pay(te)))
+    a = error_stats(np.concatenate(without)).rms_mm
+    b = error_stats(np.concatenate(with_)).rms_mm
+    return {"folds": folds, "rms_without_mm": a, "rms_with_mm": b, "gain": 1.0 - b / a}
 
 
 def _parameters(result: CalibrationResult) -> list[dict]:

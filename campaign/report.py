@@ -25,6 +25,13 @@ def render_stages(console: Console, report: dict) -> None:
         ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
         t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
     console.print(t)
+    cv = report.get("residual_cv")
+    if cv:
+        verdict = ("it predicts structure" if cv["gain"] > 0.02 else
+                   "no structured residual above the noise: the layer mostly interpolates noise")
+        console.print(f"residual layer ({report['method']['residual']}): {cv['folds']}-fold CV on the calibration "
+                      f"points, RMS {cv['rms_without_mm']:.4f} -> {cv['rms_with_mm']:.4f} mm "
+                      f"({100 * cv['gain']:+.0f} %): {verdict}")
     console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
                   f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
