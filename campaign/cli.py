@@ -243,3 +243,4 @@ def _fail(message: str, code: int) -> int:
     """Print one red line on stderr; return ``code``."""
     _stderr().print(" ".join(message.split()), style="red", markup=False)
     return code
+import campaign.cli_diagnose  # noqa: E402,F401  (registers "diagnose")

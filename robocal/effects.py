@@ -268,3 +268,104 @@ def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:
     if name not in factories:
         raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(EFFECT_NAMES)})")
     return factories[name](**kwargs)
+
+
+# ---------------------------------------------------------------- alternative functional forms
+# Used as *truths* by the self-check (robocal/selfcheck.py), so that the diagnosis is not only tested on the
+# forms its own candidates use: lumped masses with off-line centres of mass and an offset payload, other warm-up
+# curves with per-link growth, drifting registration with a settling curve.
+def warmup_curve(t_s: np.ndarray, curve: str = "exp", tau_s: float = 2700.0, tau2_s: float | None = None,
+                 mix: float = 0.5) -> np.ndarray:
+    """Thermal state u(t) in [0, 1]: ``exp`` 1 - e^(-t/tau); ``two_exp`` mix of two such curves (tau, tau2);
+    ``hyperbolic`` t / (t + tau); ``ramp`` min(t / tau, 1) (linear warm-up, then steady)."""
+    t = np.maximum(np.asarray(t_s, float), 0.0)
+    if curve == "exp":
+        return 1.0 - np.exp(-t / tau_s)
+    if curve == "two_exp":
+        return mix * (1.0 - np.exp(-t / tau_s)) + (1.0 - mix) * (1.0 - np.exp(-t / (tau2_s or 4.0 * tau_s)))
+    if curve == "hyperbolic":
+        return t / (t + tau_s)
+    if curve == "ramp":
+        return np.minimum(t / tau_s, 1.0)
+    raise ValueError(f"unknown warm-up curve {curve!r} (expected exp, two_exp, hyperbolic or ramp)")
+
+
+def lumped_gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, com_fraction=0.5,
+                           com_lateral_mm=0.0, payload_kg=0.0, payload_com_flange_mm=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Gravity torque about each joint axis (N, n) N·m from one lumped mass per link and a payload.
+
+    Link i runs from joint i's axis point to joint i+1's (the last to the flange); its centre of mass sits at
+    ``com_fraction`` of the way along it and ``com_lateral_mm`` off it, perpendicular to the link in the plane
+    normal to joint i's axis (so it is not on the link line). The payload's centre of mass is
+    ``payload_com_flange_mm`` in the flange frame. Gravity is -z of the base frame."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    c = chain(kin, q, full=False)
+    N, n = q.shape
+    flange = c.T_base_flange[:, :3, 3]
+    o = np.concatenate([c.origin, flange[:, None, :]], axis=1)
+    link = o[:, 1:] - o[:, :-1]
+    lat = np.cross(c.axis, link)
+    norm = np.linalg.norm(lat, axis=2, keepdims=True)
+    lat = np.where(norm > 1e-6, lat / np.maximum(norm, 1e-12), 0.0)
+    f = np.broadcast_to(np.asarray(com_fraction, float), (n,))
+    lateral = np.broadcast_to(np.asarray(com_lateral_mm, float), (n,))
+    com = o[:, :-1] + f[None, :, None] * link + lateral[None, :, None] * lat
+    p_pay = flange + np.einsum("nij,j->ni", c.T_base_flange[:, :3, :3], np.asarray(payload_com_flange_mm, float))
+    masses = _link_masses(n, link_masses_kg)
+    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
+    force = np.array([0.0, 0.0, -G_MM_S2])
+    tau = np.zeros((N, n))
+    for j in range(n):
+        arm = com[:, j:] - c.origin[:, j:j + 1]
+        t_links = np.einsum("nmk,nk->nm", np.cross(arm, force), c.axis[:, j]) @ masses[j:]
+        t_pay = np.einsum("nk,nk->n", np.cross(p_pay - c.origin[:, j], force), c.axis[:, j]) * pay
+        tau[:, j] = (t_links + t_pay) / 1000.0
+    return tau
+
+
+def lumped_compliance(joints=(2, 3), link_masses_kg=DEFAULT_LINK_MASSES_KG, com_fraction=0.5, com_lateral_mm=0.0,
+                      payload_com_flange_mm=(0.0, 0.0, 0.0), name: str = "joint_compliance") -> Effect:
+    """Joint compliance from lumped-mass gravity torques (``lumped_gravity_torques``): dq_j = c_j * tau_j,
+    c_j in rad/(N·m). With all link masses zero it is the payload-only deflection (``name`` payload_deflection)."""
+    def basis(kin, q, meta):
+        tau = lumped_gravity_torques(kin, q, link_masses_kg, com_fraction, com_lateral_mm,
+                                     _meta(meta, "payload_kg", len(q)), payload_com_flange_mm)
+        dq = _zeros_dq(q, len(joints))
+        for k, j in enumerate(joints):
+            dq[:, j - 1, k] = tau[:, j - 1]
+        return Basis(dq=dq)
+    return Effect(name, tuple(joints), tuple(f"c{j}" for j in joints), "rad/(N*m)", basis,
+                  typical=tuple({2: 3.3e-7, 3: 6.7e-7}.get(j, 3e-6) for j in joints),
+                  needs=("payload_kg",) if name == "payload_deflection" else ())
+
+
+def thermal_warmup(length_growth, zero_drift_rad, curve: str = "exp", tau_s: float = 2700.0,
+                   tau2_s: float | None = None, mix: float = 0.5) -> Effect:
+    """Warm-up with per-link growth: a_i, d_i grow by ``length_growth[i] * u(t)`` (relative) and joint zeros drift
+    by ``zero_drift_rad[i] * u(t)``, u = ``warmup_curve``. Exact (not linearised): one parameter, the scale of
+    the whole displacement (1 = as given); its basis is the exact SMR displacement in the tracker frame."""
+    from .kinematics import smr_tracker
+    g = np.asarray(length_growth, float)
+    z = np.asarray(zero_drift_rad, float)
+
+    def basis(kin, q, meta):
+        u = warmup_curve(_meta(meta, "t_s", len(q)), curve, tau_s, tau2_s, mix)[:, None]
+        c = chain(kin, q, a=kin.a_mm * (1 + u * g), d=kin.d_mm * (1 + u * g), theta=kin.theta_rad + u * z, full=False)
+        p = transform_points(kin.T_tracker_base, transform_points(c.T_base_flange, kin.p_flange_smr_mm))
+        return Basis(dp=(p - smr_tracker(kin, q))[:, :, None])
+    return Effect("thermal_drift", tuple(int(i) + 1 for i in np.flatnonzero(z)), ("scale",), "1", basis,
+                  typical=(1.0,), needs=("t_s",))
+
+
+def registration_drift_curve(v_mm, w_rad, curve: str = "linear", tau_s: float = 2700.0) -> Effect:
+    """Tracker-to-base drift dp = u(t) * (v + w x p): ``linear`` u = t in hours (v mm/h, w rad/h), otherwise
+    u = ``warmup_curve`` (a settling tripod: v, w are the final offsets). One parameter (scale, 1 = as given)."""
+    from .kinematics import smr_tracker
+    v, w = np.asarray(v_mm, float), np.asarray(w_rad, float)
+
+    def basis(kin, q, meta):
+        t = _meta(meta, "t_s", len(q))
+        u = t / 3600.0 if curve == "linear" else warmup_curve(t, curve, tau_s)
+        p = smr_tracker(kin, q)
+        return Basis(dp=(u[:, None] * (v + np.cross(w, p)))[:, :, None])
+    return Effect("registration_drift", (), ("scale",), "1", basis, typical=(1.0,), needs=("t_s",))

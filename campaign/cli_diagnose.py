@@ -1,0 +1,86 @@
+"""``campaign diagnose``: the sim-to-real gap of a dataset, or the withheld-effect self-check.
+
+    campaign diagnose RUN_DIR_OR_CSV --config CONFIG [--json OUT.json] [--plots DIR]
+    campaign diagnose --self-check [--seeds N] [--json OUT.json]
+
+Imported at the end of :mod:`campaign.cli` (after ``command`` and the consoles exist), which registers it.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from campaign.cli import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
+from campaign.errors import DataError
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("source", nargs="?", metavar="RUN_DIR_OR_CSV", type=Path,
+                        help="a run directory or an interchange CSV (not with --self-check)")
+    parser.add_argument("--config", help="campaign YAML of the cell (nominal model, noise specs)")
+    parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the report (or self-check) as JSON")
+    parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG maps (needs matplotlib)")
+    parser.add_argument("--self-check", action="store_true",
+                        help="simulate campaigns with withheld effects and check the diagnosis finds them")
+    parser.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
+                        help="self-check: seeds per effect (default 5; 2N controls and 2N two-effect cases)")
+
+
+@command("diagnose", "diagnose the sim-to-real gap: where it lies, which effect causes it, how far it shrinks",
+         _arguments)
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    if args.self_check:
+        if args.source is not None or args.config or args.plots:
+            raise DataError("diagnose", "--self-check takes no data, --config or --plots (only --seeds, --json)")
+        return _self_check(args)
+    if args.source is None or not args.config:
+        raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
+    from campaign.config import load_config
+    from campaign.diagnose import diagnose_source, render, write_json, write_plots
+
+    cfg = load_config(args.config)
+    result = diagnose_source(args.source, cfg)
+    out = _stdout()
+    render(out, result.report)
+    if args.json:
+        write_json(args.json, result.report)
+        out.print(f"wrote {args.json}", markup=False)
+    if args.plots:
+        files = write_plots(result.report, args.plots)
+        out.print(files if isinstance(files, str) else f"wrote {', '.join(str(f) for f in files)}", markup=False)
+    return EXIT_OK
+
+
+def _self_check(args: argparse.Namespace) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from campaign.diagnose import render_self_check, write_json
+    from robocal.selfcheck import run_self_check, trial_plan
+
+    out = _stdout()
+    total = len(trial_plan(args.seeds))
+    out.print(f"self-check: {total} simulated campaigns ({args.seeds} seeds per effect, controls, two-effect cases)",
+              markup=False)
+    with Progress(TextColumn("diagnosing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=out, disable=not out.is_terminal) as bar:
+        task = bar.add_task("trials", total=total)
+        result = run_self_check(args.seeds, progress=lambda i, n, trial: bar.update(task, completed=i))
+    render_self_check(out, result)
+    if args.json:
+        write_json(args.json, result.to_dict())
+        out.print(f"wrote {args.json}", markup=False)
+    if not result.passed():
+        _stderr().print("self-check below target: < 90 % correct attribution or > 10 % false alarms on controls",
+                        style="red", markup=False)
+        return EXIT_FAILED
+    return EXIT_OK

@@ -1,0 +1,320 @@
+"""Sim-to-real gap diagnosis of a dataset (run directory or interchange CSV) against a cell config.
+
+``diagnose_source`` loads the data, takes the noise floor from repeated check poses (``check`` rows) when there
+are enough, else from the tracker and robot specifications of the config, and runs
+:func:`robocal.diagnose.diagnose` on the calibration and test rows. The report is a plain dict whose leading
+keys are the JSON contract of issue 7::
+
+    {"noise_floor_mm", "noise_floor_source": "repeats" | "specs", "baseline_test_rms_mm", "final_test_rms_mm",
+     "unexplained", "findings": [{"effect", "joints" (1-based), "accepted", "test_rms_before_mm",
+     "test_rms_after_mm", "evidence": {...}}], "where": [{"description", "rms_mm", ...}], ...}
+
+followed by detail keys (``format``, ``source``, ``undiagnosable``, ``structure``, ``stages``, ``maps``, ...).
+``render`` prints it with rich; ``write_plots`` draws the maps when matplotlib (the ``plots`` extra) is
+importable. The self-check (``robocal.selfcheck``) is rendered by ``render_self_check``.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, diagnose
+from robocal.identify import IdentificationError
+from robocal.noise import noise_floor_mm
+from robocal.selfcheck import LABELS, SelfCheckResult
+
+from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .config import CampaignConfig
+from .errors import DataError
+from .interchange import Dataset, dataset_from_log, read_csv
+from .process import noise_floor_from_repeats, repeat_groups
+
+REPORT_FORMAT = "campaign-diagnosis/1"
+MIN_CALIB_ROWS = 40
+PLOTS_MISSING = "matplotlib is not installed: no plots (pip install 'robot-accuracy-campaign[plots]')"
+
+
+@dataclass(frozen=True, eq=False)
+class DiagnosisReport:
+    report: dict
+    diagnosis: Diagnosis
+
+
+def load_dataset(source: str | os.PathLike) -> Dataset:
+    """A run directory (its log.jsonl) or an interchange CSV; DataError when it is neither."""
+    from .runlog import read_log
+
+    path = Path(source)
+    if not path.exists():
+        raise DataError(str(path), "no such file or run directory")
+    return dataset_from_log(read_log(path)) if path.is_dir() else read_csv(path)
+
+
+def _check(ds: Dataset, cfg: CampaignConfig) -> None:
+    n = len(cfg.robot.joints)
+    if ds.n_joints != n:
+        raise DataError(ds.source, f"has {ds.n_joints} joint columns but the config's robot has {n} joints")
+    n_cal = int(ds.mask("calib").sum())
+    if n_cal < MIN_CALIB_ROWS:
+        raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
+
+
+def diagnosis_input(ds: Dataset, cfg: CampaignConfig) -> tuple[DiagnosisInput, dict]:
+    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata."""
+    _check(ds, cfg)
+    check = ds.mask("check")
+    use = ~check
+    p = ds.p_tracker_mm
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    specs = noise_floor_mm(p[use], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    floor, source = (repeats, "repeats") if repeats is not None else (specs, "specs")
+    approach = ds.approach_sign()[use]
+    meta = {name: (None if getattr(ds, name) is None else getattr(ds, name)[use])
+            for name in ("t_s", "temp_c", "payload_kg")}
+    dof = sum(len(g) - 1 for g in repeat_groups(ds.q_deg[check])) if repeats is not None else None
+    inp = DiagnosisInput(nominal_kinematics(cfg), np.radians(ds.q_deg[use]), p[use], measurement_covariance(cfg, p)[use],
+                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach, **meta)
+    payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
+    info = {"noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
+            "n": {"calib": int(ds.mask("calib").sum()), "test": int(ds.mask("test").sum()), "check": int(check.sum())},
+            "metadata": {"timestamps": ds.t_s is not None, "temperatures": ds.temp_c is not None,
+                         "payloads_kg": payloads, "approach": "from row order"}}
+    return inp, info
+
+
+def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions = DiagnosisOptions()
+                     ) -> DiagnosisReport:
+    """Diagnose one dataset; the report dict leads with the JSON contract."""
+    inp, info = diagnosis_input(ds, cfg)
+    try:
+        d = diagnose(inp, options)
+    except (IdentificationError, np.linalg.LinAlgError) as exc:
+        raise DataError(ds.source, f"diagnosis failed: {exc}") from None
+    body = d.to_dict()
+    contract = {k: body.pop(k) for k in ("noise_floor_mm", "noise_floor_source", "baseline_test_rms_mm",
+                                         "final_test_rms_mm", "unexplained", "findings", "where")}
+    report = {**contract, "format": REPORT_FORMAT, "source": ds.source, "config": cfg.name, **info, **body}
+    return DiagnosisReport(report, d)
+
+
+def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
+                    options: DiagnosisOptions = DiagnosisOptions()) -> DiagnosisReport:
+    return diagnose_dataset(load_dataset(source), cfg, options)
+
+
+def write_json(path: str | os.PathLike, data: dict) -> Path:
+    """Atomic JSON write (no NaN: missing figures are null)."""
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        raise DataError(str(path), "the directory does not exist")
+    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return path
+
+
+# ============================================================================ terminal
+def _mm(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def _short_evidence(f: dict) -> str:
+    ev = f["evidence"]
+    if not ev.get("diagnosable", True):
+        return f"cannot tell: {ev.get('reason', '')}"
+    if not f["accepted"]:
+        return ev.get("reason", "")
+    parts = [f"ΔBIC {ev['delta_bic']:.0f}", f"CV t {ev['cv_gain_t']:.1f} ({ev.get('cv_blocking')} blocks)"]
+    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers"):
+        parts.append(ev["profile"])
+    if ev.get("groups"):
+        parts.append(", ".join(ev["groups"]))
+    if ev.get("confusable_with"):
+        parts.append("confusable with " + ", ".join(c["effect"] for c in ev["confusable_with"]))
+    return "; ".join(parts)
+
+
+def render(console: Console, report: dict) -> None:
+    """Rich tables: summary, findings (which effect, how far it shrinks), where it lies, what cannot be told."""
+    floor = report["noise_floor_mm"]
+    n = report["n"]
+    ev = "test set" if report.get("evaluation") == "test" else "cross-validation (no test rows)"
+    console.print(f"[bold]Sim-to-real gap[/bold] of {report['source']} ({n['calib']} calib, {n['test']} test, "
+                  f"{n['check']} check rows; config {report['config']})", highlight=False)
+    console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
+                  f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
+                  f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
+    t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
+    for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),
+                      ("after", "right"), ("after / floor", "right"), ("evidence", "left")):
+        t.add_column(col, justify=just, overflow="fold")
+    for f in report["findings"]:
+        after = f["test_rms_after_mm"]
+        style = "green" if f["accepted"] else ("dim" if f["evidence"].get("diagnosable", True) else "yellow")
+        t.add_row(f["effect"], ",".join(f"J{j}" for j in f["joints"]) or "-", "yes" if f["accepted"] else "no",
+                  _mm(f["test_rms_before_mm"]), _mm(after), f"{after / floor:.2f}" if after and floor else "-",
+                  _short_evidence(f), style=style)
+    console.print(t)
+    if report["where"]:
+        w = Table(title="Where it lies (regions significantly above the noise floor)")
+        for col, just in (("stage", "left"), ("region", "left"), ("RMS", "right"), ("floor", "right"),
+                          ("ratio", "right"), ("n", "right")):
+            w.add_column(col, justify=just, overflow="fold")
+        for r in report["where"]:
+            w.add_row(r["stage"], r.get("region", r["description"]), _mm(r["rms_mm"]), _mm(r["floor_mm"]),
+                      "-" if r.get("ratio") is None else f"{r['ratio']:.1f}", str(r["n"]))
+        console.print(w)
+    else:
+        console.print("where: no region of the geometric model's residual is significantly above the noise floor")
+    for u in report.get("undiagnosable", []):
+        console.print(f"[yellow]cannot be diagnosed from these data:[/yellow] {u['effect']}: {u['reason']} "
+                      f"(to reveal it: {u['remedy']})", highlight=False)
+    s = report.get("structure", {})
+    if not report["unexplained"]:
+        console.print(f"nothing unexplained: what is left cannot be told from the noise floor (chi2/dof "
+                      f"{s.get('chi2_per_dof', float('nan')):.2f})", highlight=False)
+    for note in report.get("notes", []):
+        if note.startswith("unexplained"):
+            console.print(f"[red]{note}[/red]", highlight=False)
+        else:
+            console.print(f"note: {note}", highlight=False)
+
+
+def render_self_check(console: Console, result: SelfCheckResult) -> None:
+    short = {"none": "none", "joint_compliance": "comp", "payload_deflection": "pay", "gear_cyclic": "cyc",
+             "backlash": "back", "thermal_drift": "therm", "axis_coupling": "coup", "registration_drift": "tdrift"}
+    m = result.confusion()
+    t = Table(title="Self-check: true effect (rows) vs diagnosed effect (first accepted)")
+    t.add_column("truth \\ diagnosed")
+    for b in LABELS:
+        t.add_column(short[b], justify="right")
+    for a in LABELS:
+        if sum(m[a].values()):
+            t.add_row(short[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
+                                  for b in LABELS])
+    console.print(t)
+    s = result.summary()
+    e = s["shrinkage_error_mm"]
+    console.print(
+        f"single effects: {s['primary_correct']}/{s['single_trials']} correctly attributed "
+        f"(exact set {s['exact_set']}, joints right {s['joints_ok']}); effect-free controls: "
+        f"{s['controls_clean']}/{s['controls']} with no effect accepted ({s['controls_unexplained']} flagged "
+        f"unexplained); two-effect combinations: {s['combo_exact']}/{s['combo_trials']} exact, recall "
+        f"{_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}", highlight=False)
+    if e["n"]:
+        console.print(f"predicted (calibration CV) minus achieved (test) shrinkage over {e['n']} accepted true effects: "
+                      f"mean {e['mean']:+.4f} mm, mean |error| {e['mean_abs']:.4f} mm, max |error| {e['max_abs']:.4f} mm "
+                      f"(mean achieved shrinkage {e['mean_achieved']:.4f} mm)", highlight=False)
+    console.print(f"{len(result.trials)} simulated campaigns in {s['seconds']:.0f} s "
+                  f"({s['seconds_per_trial']:.2f} s per diagnosis)", highlight=False)
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.0f} %"
+
+
+# ============================================================================ plots (optional extra)
+def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
+    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect. Returns the
+    files written, or a one-line note when matplotlib is not importable."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return PLOTS_MISSING
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    maps, floor = report["maps"], report["noise_floor_mm"]
+    files = [_plot_workspace(plt, maps, floor, out / "where_workspace.png"),
+             _plot_joints(plt, maps, floor, out / "where_joints.png"),
+             _plot_shrinkage(plt, report, out / "shrinkage.png")]
+    if "time" in maps.get("geometric", {}):
+        files.append(_plot_time(plt, maps, floor, out / "where_time.png"))
+    return files
+
+
+def _plot_workspace(plt, maps, floor, path):
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    vmax = max((v for st in ("geometric", "final") for row in maps[st]["workspace"]["rms_mm"] for v in row
+                if v is not None), default=floor)
+    for ax, st in zip(axes, ("geometric", "final")):
+        w = maps[st]["workspace"]
+        grid = np.array([[np.nan if v is None else v for v in row] for row in w["rms_mm"]]).T
+        im = ax.pcolormesh(w["radius_edges_mm"], w["z_edges_mm"], grid, vmin=0, vmax=vmax, cmap="viridis")
+        ax.set_title(f"{st} model: residual RMS (floor {floor:.3f} mm)")
+        ax.set_xlabel("radius from the J1 axis (mm)")
+        ax.set_ylabel("height z (mm)")
+    fig.colorbar(im, ax=axes, label="RMS (mm)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_line(ax, m, label, style):
+    e = np.asarray(m["edges"])
+    c = 0.5 * (e[1:] + e[:-1])
+    y = np.array([np.nan if v is None else v for v in m["rms_mm"]])
+    ax.plot(c, y, style, label=label)
+
+
+def _plot_joints(plt, maps, floor, path):
+    n = len(maps["geometric"]["joints"])
+    fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(12, 6), constrained_layout=True, squeeze=False)
+    for j, ax in enumerate(axes.ravel()):
+        if j >= n:
+            ax.axis("off")
+            continue
+        _plot_line(ax, maps["geometric"]["joints"][j], "geometric", "o-")
+        _plot_line(ax, maps["final"]["joints"][j], "final", "s-")
+        ax.axhline(floor, color="k", ls="--", lw=1, label="floor")
+        ax.set_xlabel(maps["geometric"]["joints"][j]["label"])
+        ax.set_ylabel("RMS (mm)")
+        ax.set_ylim(bottom=0)
+    axes.ravel()[0].legend()
+    fig.suptitle("Residual RMS over each joint's range")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_time(plt, maps, floor, path):
+    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    _plot_line(ax, maps["geometric"]["time"], "geometric", "o-")
+    if "time" in maps["final"]:
+        _plot_line(ax, maps["final"]["time"], "final", "s-")
+    ax.axhline(floor, color="k", ls="--", lw=1, label="floor")
+    ax.set_xlabel("t (min)")
+    ax.set_ylabel("RMS (mm)")
+    ax.set_ylim(bottom=0)
+    ax.legend()
+    ax.set_title("Residual RMS over time")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_shrinkage(plt, report, path):
+    key = "test_rms_mm" if report.get("evaluation") == "test" else "cv_rms_mm"
+    stages = report["stages"]
+    labels = [s["added"] if i == 0 else "+ " + s["added"] for i, s in enumerate(stages)]
+    values = [s[key] for s in stages]
+    fig, ax = plt.subplots(figsize=(max(5, 1.7 * len(labels)), 4), constrained_layout=True)
+    ax.bar(range(len(values)), [0 if v is None else v for v in values], color="tab:blue")
+    ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
+    ax.set_xticks(range(len(values)), labels, rotation=20, ha="right")
+    ax.set_ylabel(("test" if key == "test_rms_mm" else "cross-validated") + " RMS (mm)")
+    ax.set_title("How far the error shrinks, step by step")
+    ax.legend()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
