@@ -562,20 +562,26 @@ class DashboardSession(Session):
 
     def serve(self) -> None:
         self.sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
-        buf = b""
-        while True:
-            data = self.sock.recv(4096)
-            if not data:
+        for line in _recv_lines(self.sock):
+            if self.emulator.frozen:
+                continue
+            answer = self.emulator.dashboard_reply(line)
+            self.sock.sendall(answer.encode() + b"\n")
+            if answer == "Disconnected":
                 return
-            buf += data
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                if self.emulator.frozen:
-                    continue
-                answer = self.emulator.dashboard_reply(line.decode("utf-8", "replace").strip())
-                self.sock.sendall(answer.encode() + b"\n")
-                if answer == "Disconnected":
-                    return
+
+
+def _recv_lines(sock: socket.socket):
+    """Yield the stripped text lines a client sends until it closes the connection."""
+    buf = b""
+    while True:
+        data = sock.recv(4096)
+        if not data:
+            return
+        buf += data
+        while b"\n" in buf:
+            line, buf = buf.split(b"\n", 1)
+            yield line.decode("utf-8", "replace").strip()
 
 
 class ScriptSession(Session):
@@ -608,15 +614,8 @@ class ControlSession(Session):
     service = "control"
 
     def serve(self) -> None:
-        buf = b""
-        while True:
-            data = self.sock.recv(4096)
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                self.sock.sendall(self.emulator.control_reply(line.decode().strip()).encode() + b"\n")
+        for line in _recv_lines(self.sock):
+            self.sock.sendall(self.emulator.control_reply(line).encode() + b"\n")
 
 
 # --------------------------------------------------------------------------------------------- emulator
