@@ -103,7 +103,7 @@ def verify(run_dir: Path, console: Console | None = None):
 
         result = verify_run(run_dir, measure, cfg, model, tests, out_dir)
         if not log.closed:
-            log.close(result.exit_status if result.exit_status != "success" else "success", result.reason)
+            log.close(result.exit_status, result.reason)
     return result
 
 

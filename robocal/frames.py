@@ -100,39 +100,3 @@ def fit_rigid(p_from_mm: np.ndarray, p_to_mm: np.ndarray, weights: np.ndarray | 
     d = np.sign(np.linalg.det(Vt.T @ U.T))
     R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
     return make_T(R, cb - R @ ca)
-
-
-def rot_x(a: np.ndarray) -> np.ndarray:
-    """Homogeneous rotation about x, angle (...,) rad -> (..., 4, 4)."""
-    c, s = np.cos(a), np.sin(a)
-    T = np.zeros(np.shape(a) + (4, 4))
-    T[..., 0, 0] = 1.0
-    T[..., 1, 1], T[..., 1, 2], T[..., 2, 1], T[..., 2, 2] = c, -s, s, c
-    T[..., 3, 3] = 1.0
-    return T
-
-
-def rot_y(a: np.ndarray) -> np.ndarray:
-    """Homogeneous rotation about y, angle (...,) rad -> (..., 4, 4)."""
-    c, s = np.cos(a), np.sin(a)
-    T = np.zeros(np.shape(a) + (4, 4))
-    T[..., 1, 1] = 1.0
-    T[..., 0, 0], T[..., 0, 2], T[..., 2, 0], T[..., 2, 2] = c, s, -s, c
-    T[..., 3, 3] = 1.0
-    return T
-
-
-def rot_z_trans(theta: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Rz(theta) @ Tz(d): (...,) rad, (...,) mm -> (..., 4, 4)."""
-    c, s = np.cos(theta), np.sin(theta)
-    T = np.zeros(np.broadcast_shapes(np.shape(theta), np.shape(d)) + (4, 4))
-    T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
-    T[..., 2, 2], T[..., 2, 3], T[..., 3, 3] = 1.0, d, 1.0
-    return T
-
-
-def trans_x_rot_x(a: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Tx(a) @ Rx(alpha): (...,) mm, (...,) rad -> (..., 4, 4)."""
-    T = rot_x(np.broadcast_to(alpha, np.broadcast_shapes(np.shape(a), np.shape(alpha))))
-    T[..., 0, 3] = a
-    return T

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .frames import exp_se3_left, transform_points
+from .frames import exp_se3_left, inv_T, matrix_to_rotvec, skew, transform_points
 
 JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
@@ -262,14 +262,9 @@ def identification_jacobian(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndar
     J = np.einsum("ij,njk->nik", R_tb, J_base)
     nj = len(layout.joint_cols)
     J[:, :, nj:nj + 3] = np.eye(3)
-    J[:, :, nj + 3:nj + 6] = -_skew_batch(p_tracker)
+    J[:, :, nj + 3:nj + 6] = -skew(p_tracker)
     J[:, :, nj + 6:nj + 9] = R_tb @ c.T_base_flange[:, :3, :3]
     return p_tracker, J
-
-
-def _skew_batch(p: np.ndarray) -> np.ndarray:
-    from .frames import skew
-    return skew(p)
 
 
 def apply_update(kin: Kinematics, delta: np.ndarray) -> Kinematics:
@@ -288,7 +283,6 @@ def apply_update(kin: Kinematics, delta: np.ndarray) -> Kinematics:
 
 def parameter_difference(kin: Kinematics, ref: Kinematics) -> np.ndarray:
     """kin - ref over the full candidate vector (base as a rotation vector of T_kin @ T_ref^-1)."""
-    from .frames import inv_T, matrix_to_rotvec
     layout = ParamLayout.of(kin)
     out = np.zeros(layout.size)
     pairs = [(kin.theta_rad, ref.theta_rad), (kin.d_mm, ref.d_mm), (kin.a_mm, ref.a_mm),
