@@ -64,6 +64,24 @@ class TrackerReading:
     extra: Mapping[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, slots=True)
+class MotionLimits:
+    """Speed caps a robot driver enforces before any command leaves the process.
+
+    ``max_tcp_speed_mm_s``: TCP speed cap (mm/s); ``max_joint_speed_pct``: cap on every joint's speed in percent
+    of the robot's rated speed (0 < pct <= 100).
+    """
+    max_tcp_speed_mm_s: float = 250.0
+    max_joint_speed_pct: float = 100.0
+
+
+@dataclass(frozen=True, slots=True)
+class Payload:
+    """Load on the flange: mass (kg) and centre of gravity in the flange frame (mm)."""
+    mass_kg: float
+    cog_flange_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
 @runtime_checkable
 class Clock(Protocol):
     def now(self) -> float: ...
@@ -100,6 +118,12 @@ class Robot(Protocol):
     def close(self) -> None:
         """Release the session (logout, mastership); idempotent."""
 
+    # Optional capabilities (the runner checks with ``hasattr``; real drivers implement them):
+    # def set_motion_limits(self, limits: MotionLimits) -> None: enforce the caps on every later command
+    # def set_payload(self, payload: Payload) -> None: send the load data to the controller
+    # def identity(self) -> Mapping[str, str]: vendor, model, controller_type, serial, software_version
+    # def speed_override_pct(self) -> float | None: the controller's speed override, if readable
+
 
 @runtime_checkable
 class Tracker(Protocol):
@@ -114,3 +138,10 @@ class Tracker(Protocol):
         """Latest environment readings (e.g. temp_c, pressure_hpa, humidity_pct); empty if none."""
 
     def close(self) -> None: ...
+
+    # Optional capabilities (the runner checks with ``hasattr``):
+    # def identity(self) -> Mapping[str, str]: vendor, model, serial, firmware
+    # def reacquire(self, p_tracker_mm_guess: Sequence[float]) -> None: aim at a predicted SMR position and
+    #     search (GoPosition + FindReflector or the protocol's equivalent) after a beam break; raises TrackerError
+    # TrackerReading.extra may carry the device's own statistics: "std_x_mm", "std_y_mm", "std_z_mm",
+    #     "cov_xy_mm2", "cov_xz_mm2", "cov_yz_mm2" and environment values "temp_c", "pressure_hpa", "humidity_pct"
