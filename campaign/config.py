@@ -267,6 +267,18 @@ class CheckPosesConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class Iso9283Config:
+    """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
+    P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
+
+    Defaults: ``cycles`` 30 (int >= 2), ``edge_mm`` 0 = the largest cube inside the grid box.
+    """
+
+    cycles: int = 30
+    edge_mm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class PlanConfig:
     """What to measure.
 
@@ -281,6 +293,8 @@ class PlanConfig:
     tool_direction: Vec3
     q_ref_deg: tuple[float, ...]
     check_poses: CheckPosesConfig
+    kind: str = "grid"                          # grid (calibration campaign) | iso9283 (acceptance test)
+    iso9283: Iso9283Config = Iso9283Config()
 
 
 @dataclass(frozen=True, slots=True)
@@ -898,7 +912,13 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         tool_direction=direction,
         q_ref_deg=q_ref,
         check_poses=_check_poses(r.section("check_poses", CheckPosesConfig, required=False)),
+        kind=r.choice("kind", ("grid", "iso9283"), "grid"),
+        iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
     )
+
+
+def _iso9283(r: _Reader) -> Iso9283Config:
+    return Iso9283Config(cycles=r.integer("cycles", 30, lo=2), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
 
 
 def _grid(r: _Reader) -> GridConfig:

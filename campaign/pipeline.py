@@ -22,6 +22,7 @@ from .config import CampaignConfig
 from .errors import CampaignError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
+from .html_report import write_report
 from .process import Processed, process, write_outputs
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
@@ -32,6 +33,7 @@ class RunResult:
     run_dir: Path
     outcome: RunOutcome
     processed: Processed | None
+    iso9283: dict | None = None             # the ISO 9283 report of a plan.kind: iso9283 run
 
 
 def software_version() -> str:
@@ -59,10 +61,16 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
+    if cfg.plan.kind == "iso9283":              # acceptance test: ISO 9283 characteristics, no calibration
+        from .iso_run import finish
+        iso = finish(cfg, run_dir)
+        write_report(run_dir)
+        return RunResult(run_dir, outcome, None, iso)
     dataset = dataset_from_log(read_log(run_dir))
     write_csv(run_dir / "data.csv", dataset)
     processed = process(dataset, cfg)
     write_outputs(processed, run_dir)
+    write_report(run_dir)                       # report.html from report.json
     return RunResult(run_dir, outcome, processed)
 
 
@@ -71,6 +79,7 @@ def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     dataset = dataset_from_log(read_log(source)) if source.is_dir() else read_csv(source)
     processed = process(dataset, cfg)
     write_outputs(processed, out_dir)
+    write_report(out_dir)                       # report.html from report.json
     return processed
 
 
@@ -104,6 +113,7 @@ def verify(run_dir: Path, console: Console | None = None):
         result = verify_run(run_dir, measure, cfg, model, tests, out_dir)
         if not log.closed:
             log.close(result.exit_status, result.reason)
+    write_report(run_dir)                       # report.html now includes the verify passes
     return result
 
 

@@ -27,6 +27,7 @@ from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
 from .interchange import Dataset
+from .report_points import cell_summary, point_table
 
 REPORT_FORMAT = "campaign-report/1"
 
@@ -140,6 +141,11 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
                    "residual": cfg.calibration.residual},
         "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
     }
+    report["cell"] = cell_summary(cfg)
+    report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, result.kinematics.T_tracker_base,  # HTML figures
+                                   {name: (lambda rows, m=m: _predict(m, q[rows], None if payload is None else payload[rows]))
+                                    for name, m in (("nominal", nominal), ("kinematic", result.kinematics),
+                                                    ("compensated", model))}, result.point_weights, cal, ds.t_s)
     model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
     return Processed(report, model, result)
 
