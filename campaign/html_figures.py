@@ -33,6 +33,13 @@ def _plt():
     return plt
 
 
+def _subplots(rows: int, cols: int, figsize, left=0.07, right=0.98, bottom=0.13, top=0.9, wspace=0.3, hspace=0.4):
+    """Figure and axes with fixed margins (a layout engine would double the drawing time of a 1000-point run)."""
+    fig, axes = _plt().subplots(rows, cols, figsize=figsize, squeeze=False)
+    fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, wspace=wspace, hspace=hspace)
+    return fig, axes
+
+
 def _png(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI)
@@ -62,14 +69,14 @@ def plan_figure(report: dict) -> Figure | None:
     if got is None:
         return None
     sets, p, _, _ = got
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), constrained_layout=True)
+    fig, axes = _subplots(1, 2, (11, 4.6), left=0.08, bottom=0.12, top=0.92, wspace=0.25)
+    axes = axes[0]
     for ax, (i, j, xl, yl) in zip(axes, ((0, 1, "x (mm)", "y (mm)"), (0, 2, "x (mm)", "z (mm)"))):
         for s, (marker, color, label) in SET_STYLE.items():
             m = sets == s
             if m.any():
-                ax.scatter(p[m, i], p[m, j], marker=marker, c=color, s=22 if s != "calib" else 14,
-                           label=f"{label} ({int(m.sum())})", alpha=0.8)
+                ax.plot(p[m, i], p[m, j], marker, color=color, ms=4 if s != "calib" else 3, ls="none",
+                        label=f"{label} ({int(m.sum())})", alpha=0.8)
         ax.set_xlabel(xl)
         ax.set_ylabel(yl)
         ax.set_aspect("equal", adjustable="datalim")
@@ -90,8 +97,8 @@ def histogram_figure(report: dict) -> Figure | None:
     if not test.any():
         return None
     floor = report["noise_floor_mm"]
-    plt = _plt()
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), constrained_layout=True)
+    fig, axes = _subplots(1, 3, (12, 3.6), left=0.06, bottom=0.16, top=0.9, wspace=0.28)
+    axes = axes[0]
     for ax, (key, label) in zip(axes, STAGES):
         e = err[key][test]
         ax.hist(e[np.isfinite(e)], bins=20, color=COLORS[key], alpha=0.8)
@@ -113,8 +120,8 @@ def cdf_figure(report: dict) -> Figure | None:
     test = sets == "test"
     if not test.any():
         return None
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 4.2), constrained_layout=True)
+    fig, axes = _subplots(1, 1, (7.5, 4.2), left=0.1, bottom=0.14, top=0.96)
+    ax = axes[0][0]
     for key, label in STAGES:
         e = np.sort(err[key][test][np.isfinite(err[key][test])])
         ax.step(e, np.arange(1, len(e) + 1) / len(e), where="post", color=COLORS[key], label=label)
@@ -122,7 +129,7 @@ def cdf_figure(report: dict) -> Figure | None:
     ax.set_xscale("log")
     ax.set_xlabel("|error| on test points (mm, log scale)")
     ax.set_ylabel("fraction of test points")
-    ax.grid(alpha=0.3, which="both")
+    ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     return Figure("cdf", "Cumulative distribution of the error per stage (test set)",
                   "Fraction of held-out points whose error is below a value.", _png(fig))
@@ -136,17 +143,17 @@ def reach_height_figure(report: dict) -> Figure | None:
     test = sets == "test"
     if not test.any():
         return None
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    fig, axes = _subplots(1, 2, (11, 3.8), left=0.08, bottom=0.15, top=0.95, wspace=0.22)
+    axes = axes[0]
     reach = np.hypot(p[test, 0], p[test, 1])
     for ax, x, xl in zip(axes, (reach, p[test, 2]), ("reach: radius from the J1 axis (mm)", "height z (mm)")):
         for key, label in STAGES:
-            ax.scatter(x, err[key][test], s=12, color=COLORS[key], label=label, alpha=0.8)
+            ax.plot(x, err[key][test], ".", ms=4, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
         ax.set_yscale("log")
         ax.set_xlabel(xl)
         ax.set_ylabel("|error| (mm, log)")
-        ax.grid(alpha=0.3, which="both")
+        ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     return Figure("reach_height", "Error vs. reach and height (test set)", "Log scale: all stages on one axis.",
                   _png(fig))
@@ -161,22 +168,23 @@ def joints_figure(report: dict) -> Figure | None:
     if not test.any():
         return None
     n = q.shape[1]
-    plt = _plt()
     cols = (n + 1) // 2
-    fig, axes = plt.subplots(2, cols, figsize=(4 * cols, 6), constrained_layout=True, squeeze=False)
+    fig, axes = _subplots(2, cols, (4 * cols, 6), left=0.07, bottom=0.09, top=0.97, wspace=0.32, hspace=0.32)
     for j, ax in enumerate(axes.ravel()):
         if j >= n:
             ax.axis("off")
             continue
-        for key, label in STAGES:
-            ax.scatter(q[test, j], err[key][test], s=10, color=COLORS[key], label=label, alpha=0.8)
+        for key, label in STAGES[1:]:
+            ax.plot(q[test, j], err[key][test], ".", ms=3, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
-        ax.set_yscale("log")
+        ax.set_ylim(bottom=0)
         ax.set_xlabel(f"J{j + 1} (deg)")
-        ax.set_ylabel("|error| (mm, log)")
-        ax.grid(alpha=0.3, which="both")
+        ax.set_ylabel("|error| (mm)")
+        ax.grid(alpha=0.3)
     axes.ravel()[0].legend(fontsize=7)
-    return Figure("joints", "Error vs. each joint (test set)", "Controller joint values; log scale.", _png(fig))
+    return Figure("joints", "Error vs. each joint after calibration (test set)",
+                  "Controller joint values; the calibrated stages only (the nominal error is in the figures above).",
+                  _png(fig))
 
 
 def workspace_map_figure(report: dict) -> Figure | None:
@@ -187,8 +195,8 @@ def workspace_map_figure(report: dict) -> Figure | None:
     test = sets == "test"
     if not test.any():
         return None
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11.5, 4.6), constrained_layout=True)
+    fig, axes = _subplots(1, 2, (11.5, 4.6), left=0.07, right=0.97, bottom=0.12, top=0.92, wspace=0.25)
+    axes = axes[0]
     reach = np.hypot(p[test, 0], p[test, 1])
     for ax, key, title in zip(axes, ("nominal", "compensated"), ("before: nominal model", "after: calibrated model")):
         sc = ax.scatter(reach, p[test, 2], c=err[key][test], s=40, cmap="viridis", vmin=0)
@@ -206,9 +214,9 @@ def parameters_figure(report: dict) -> Figure | None:
     rows = [r for r in report.get("parameters", []) if r["identified"] and r["std"]]
     if not rows:
         return None
-    plt = _plt()
     z = np.array([abs(r["delta"]) / r["std"] for r in rows])
-    fig, ax = plt.subplots(figsize=(max(7, 0.32 * len(rows)), 3.8), constrained_layout=True)
+    fig, axes = _subplots(1, 1, (max(7, 0.32 * len(rows)), 3.8), left=0.09, bottom=0.24, top=0.96)
+    ax = axes[0][0]
     ax.bar(range(len(rows)), z, color=["tab:blue" if v >= 3 else "tab:gray" for v in z])
     ax.axhline(3, color="k", ls="--", lw=1, label="3 sigma")
     ax.set_yscale("log")
