@@ -238,8 +238,8 @@ def verify_figure(verify: dict, index: int) -> Figure:
     plt = _plt()
     names = list(verify["stages"])
     rms = [verify["stages"][k]["rms_mm"] for k in names]
-    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(names)), 3.6), constrained_layout=True)
-    ax.bar(range(len(names)), rms, color="tab:blue")
+    fig, ax = plt.subplots(figsize=(max(7, 1.8 * len(names)), 4.2), constrained_layout=True)   # small: a layout
+    ax.bar(range(len(names)), rms, color="tab:blue")                                               # engine is cheap
     ax.axhline(verify["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
     ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
     ax.set_ylabel("RMS on the test points (mm)")

@@ -23,8 +23,10 @@ def check_numbers(page, run_dir: Path) -> int:
     """Every tagged number: data-value is the JSON value and the text is it formatted. Returns how many."""
     docs = {"calibration": "report.json", "iso9283": "report.json", "diagnosis": "diagnosis.json"}
     cache = {}
+    verify = sorted(run_dir.glob("verify-*/verify.json"))
     for n in page.numbers:
-        path = run_dir / docs[n["doc"]]
+        doc_name = n["doc"]
+        path = verify[int(doc_name[6:])] if doc_name.startswith("verify") else run_dir / docs[doc_name]
         doc = cache.setdefault(path, json.loads(path.read_text()))
         want = _lookup(doc, n["key"])
         if want is None:
@@ -56,6 +58,7 @@ def mock_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("report")
     cfg = small_config(tmp)
     assert main(["run", str(cfg), "--out", str(tmp / "run")]) == 0
+    assert main(["verify", str(tmp / "run")]) == 0                 # rewrites report.html with the verify passes
     return tmp / "run", cfg
 
 
@@ -78,7 +81,8 @@ def test_mock_run_report_in_headless_chromium(mock_run, tmp_path):
     keys = {n["key"] for n in page.numbers}
     assert {f"stages.{s}.test.rms_mm" for s in ("nominal", "kinematic", "compensated")} <= keys
     assert {"noise_floor_mm", "condition_number", "residual_cv.gain"} <= keys
-    assert page.figures >= 6 and "seed 000 Table 3" in page.text
+    assert any(n["doc"] == "verify0" and n["key"].endswith(".rms_mm") for n in page.numbers)
+    assert page.figures >= 6 and "seed 000 Table 3" in page.text and "Closed-loop verification" in page.text
 
 
 @pytest.mark.system

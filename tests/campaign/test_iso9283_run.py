@@ -35,7 +35,8 @@ def test_campaign_run_with_an_iso_plan_prints_ap_and_rp(tmp_path, capsys):
     assert "ISO 9283 (nominal targets, 10 cycles" in out and "AP" in out and "RP" in out and "AD" in out
     rep = json.loads((tmp_path / "iso" / "report.json").read_text())
     assert rep["format"] == "campaign-iso9283/1" and len(rep["runs"][0]["poses"]) == 5
-    assert (tmp_path / "iso" / "report.html").exists()
+    html = (tmp_path / "iso" / "report.html").read_text()
+    assert html.count('data-doc="iso9283"') > 5 * 6 and "ISO 9283 pose accuracy and repeatability" in html
 
 
 def test_rp_agrees_with_the_simulated_repeatability(tmp_path, capsys):
