@@ -4,8 +4,9 @@
 the robot base frame (kinematic layer with its physical effects). ``fit_layer`` fits an IDW (seed 000) or GPR
 (seed 003) layer on them. ``choose_layer`` compares none / IDW / GPR by k-fold CV on the calibration points (the
 kinematic layer fixed) and returns a layer only when its CV gain over none is significant (one-sided paired t of
-the per-point squared errors > 3 and CV RMS lower by > 2 %, ``robocal.stats.paired_gain``). GPR's CV uses the
-closed-form fold-out predictions with the hyperparameters fitted once on the calibration set.
+the per-point squared errors > 3 and CV RMS lower by > 2 %, ``robocal.stats.paired_gain``). GPR's CV re-fits the
+hyperparameters on every training fold (hyperparameters fitted on the held-out points too make a GP that
+interpolates noise look useful).
 """
 from __future__ import annotations
 
@@ -76,7 +77,7 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
         return np.sum(err**2, axis=1), IDWResidual.fit(p_meas, e, idw_power, idw_k_nearest)
     if kind == "gpr":
         gp = MultiOutputGP.fit_subset(gp_inputs(q_rad, payload_kg), e, seed=seed)
-        return np.sum(gp.kfold_errors(fold) ** 2, axis=1), GPRResidual(gp, payload_kg is not None, None)
+        return np.sum(gp.cv_errors(fold, seed=seed) ** 2, axis=1), GPRResidual(gp, payload_kg is not None, None)
     raise ValueError(f"unknown residual layer {kind!r}")
 
 

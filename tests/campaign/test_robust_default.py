@@ -1,0 +1,76 @@
+"""The default pipeline against plain LM on data it was not written for: random joint configurations (not the
+plan's grid), geometric-only truth, with and without isolated gross outliers."""
+import numpy as np
+import pytest
+
+from campaign.cell import measurement_covariance, nominal_kinematics, simulated_cell
+from campaign.config import load_config
+from campaign.interchange import Dataset
+from campaign.process import geometric_fit, process
+from robocal.identify import CalibrationOptions, calibrate
+from robocal.kinematics import smr_tracker
+from tests.campaign.helpers import ROOT
+
+CFG = load_config(ROOT / "configs/irb2600.yaml")
+N_CAL, N_TEST = 120, 60
+
+
+def simulated_dataset(seed: int, outlier_fraction: float = 0.0):
+    """Random configurations in a working range, measured by the simulated cell (new geometry per seed);
+    ``outlier_fraction`` of the calib rows get an isolated gross error of 1-3 mm in a random direction."""
+    rng = np.random.default_rng(seed)
+    lo = np.radians([-60, -40, -60, -120, -100, -180])
+    hi = np.radians([60, 70, 40, 120, 100, 180])
+    q = rng.uniform(lo, hi, (N_CAL + N_TEST, 6))
+    cell = simulated_cell(CFG)
+    from robocal.simulate import random_geometric_errors
+    cell = type(cell)(random_geometric_errors(nominal_kinematics(CFG), rng).with_(
+        T_tracker_base=cell.truth.T_tracker_base, p_flange_smr_mm=cell.truth.p_flange_smr_mm),
+        cell.effects, cell.tracker, cell.repeatability_rp_mm)
+    p, _ = cell.measure(q, rng)
+    bad = np.zeros(len(q), bool)
+    n_bad = int(round(outlier_fraction * N_CAL))
+    if n_bad:
+        idx = rng.choice(N_CAL, n_bad, replace=False)
+        d = rng.normal(size=(n_bad, 3))
+        p[idx] += d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(1.0, 3.0, (n_bad, 1))
+        bad[idx] = True
+    sets = ["calib"] * N_CAL + ["test"] * N_TEST
+    ds = Dataset(tuple(f"P{i:03d}" for i in range(len(q))), tuple(sets), np.degrees(q), p, source=f"sim{seed}")
+    return ds, q, p, bad
+
+
+def plain_lm_test_rms(q, p):
+    kin0 = nominal_kinematics(CFG)
+    cov = measurement_covariance(CFG, p[:N_CAL])
+    res = calibrate(kin0, q[:N_CAL], p[:N_CAL], cov, CalibrationOptions(method="lm"))
+    e = p[N_CAL:] - smr_tracker(res.kinematics, q[N_CAL:])
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+@pytest.mark.unit
+def test_default_is_never_worse_than_plain_lm_without_gross_outliers():
+    ratios, excluded, extra = [], 0, 0
+    for seed in range(20):
+        ds, q, p, _ = simulated_dataset(seed)
+        rep = process(ds, CFG).report
+        ratios.append(rep["stages"]["compensated"]["test"]["rms_mm"] / plain_lm_test_rms(q, p))
+        excluded += len(rep["excluded_points"])
+        extra += len(rep["effects"]["selection"]["taken"]) + (rep["residual_choice"]["chosen"] != "none")
+    print(f"default / plain LM held-out RMS over 20 seeds: max {max(ratios):.4f}, median {np.median(ratios):.4f}; "
+          f"{excluded} points excluded, {extra} effects/layers taken")
+    assert max(ratios) <= 1.03
+
+
+@pytest.mark.unit
+def test_isolated_gross_outliers_are_excluded_and_nothing_else():
+    for seed in (100, 101, 102):
+        ds, q, p, bad = simulated_dataset(seed, outlier_fraction=0.05)
+        res = geometric_fit(ds, CFG)
+        excluded = res.point_weights == 0
+        print(f"seed {seed}: {bad[:N_CAL].sum()} corrupted, {excluded.sum()} excluded, "
+              f"{np.sum(excluded & bad[:N_CAL])} of them corrupted")
+        assert np.array_equal(excluded, bad[:N_CAL])
+        reasons = process(ds, CFG).report["excluded_points"]
+        assert {r["point_id"] for r in reasons} == {ds.point_id[i] for i in np.flatnonzero(bad)}
+        assert all("isolated against its neighbours" in r["reason"] for r in reasons)
