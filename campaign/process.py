@@ -23,6 +23,7 @@ from robocal.identify import CalibrationResult, IdentificationError, calibrate, 
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer
 from robocal.model import CalibratedModel
+from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
 from robocal.screen import ScreenResult, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
@@ -272,7 +273,38 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "residual_choice": choice.to_dict(),
         "residual_cv": _residual_cv_summary(choice),
     }
+    if ds.p2_tracker_mm is not None:
+        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
     return Processed(report, model, result)
+
+
+def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
+    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
+    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
+    clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
+    offsets0 = cfg.tool.smrs_mm
+    if len(offsets0) < len(clouds):
+        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
+                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
+    P = np.stack(clouds)
+    q = np.radians(ds.q_deg)
+    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
+    try:
+        res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
+                                  calibration_options(cfg))
+    except (IdentificationError, np.linalg.LinAlgError) as exc:
+        raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
+    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
+           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
+           "test": {}}
+    if test.any():
+        pred = res.predict_tracker(q[test])
+        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
+        if len(clouds) == 3:
+            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
+            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
+                                               "max": float(a.max()), "n": int(len(a))}
+    return out
 
 
 def _effects_report(selection, elastic) -> dict:

@@ -67,6 +67,16 @@ def render_choices(console: Console, report: dict) -> None:
         console.print(f"excluded {e['point_id']}: {e['reason']}")
     if report.get("structure_note"):
         console.print(report["structure_note"])
+    multi = report.get("multi_smr")
+    if multi and "skipped" not in multi:
+        figs = ", ".join(f"{k} RMS {v['rms_mm']:.4f}" for k, v in multi["test"].items())
+        console.print(f"{multi['n_smr']}-SMR calibration (one offset per SMR), test set: {figs} mm")
+        o = multi.get("orientation_error_arcsec")
+        if o:
+            console.print(f"flange orientation error on the test set: mean {o['mean']:.1f}, RMS {o['rms']:.1f}, "
+                          f"max {o['max']:.1f} arcsec")
+    elif multi:
+        console.print(f"multi-SMR calibration skipped: {multi['skipped']}")
 
 
 def render_parameters(console: Console, report: dict) -> None:

@@ -74,3 +74,23 @@ def test_isolated_gross_outliers_are_excluded_and_nothing_else():
         reasons = process(ds, CFG).report["excluded_points"]
         assert {r["point_id"] for r in reasons} == {ds.point_id[i] for i in np.flatnonzero(bad)}
         assert all("isolated against its neighbours" in r["reason"] for r in reasons)
+
+
+@pytest.mark.unit
+def test_three_smr_dataset_reports_offsets_and_orientation():
+    from dataclasses import replace
+    from robocal.multicalib import predict_multi
+    offsets = np.array([[0.36, 0.28, 39.43], [90.0, 0.0, 50.0], [0.0, 90.0, 50.0]])
+    cfg = replace(CFG, tool=replace(CFG.tool, p_flange_smr2_mm=tuple(offsets[1] + 0.4),
+                                    p_flange_smr3_mm=tuple(offsets[2] - 0.4)))
+    rng = np.random.default_rng(7)
+    truth = simulated_cell(CFG).truth
+    q = rng.uniform(np.radians([-60, -40, -60, -120, -100, -180]), np.radians([60, 70, 40, 120, 100, 180]), (160, 6))
+    P = predict_multi(truth, offsets, q) + rng.normal(0, 0.01, (3, 160, 3))
+    ds = Dataset(tuple(f"P{i}" for i in range(160)), tuple(["calib"] * 120 + ["test"] * 40), np.degrees(q), P[0],
+                 p2_tracker_mm=P[1], p3_tracker_mm=P[2], source="sim3")
+    multi = process(ds, cfg).report["multi_smr"]
+    print(multi["test"], multi["orientation_error_arcsec"])
+    assert multi["n_smr"] == 3 and multi["converged"]
+    assert set(multi["orientation_error_arcsec"]) == {"mean", "rms", "max", "n"}
+    assert all(v["rms_mm"] < 0.03 for v in multi["test"].values())
