@@ -209,14 +209,34 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     choices, selection = _model_effects(ds, cfg, geo, qk, pk, covk, meta_k)
     model_geo = CalibratedModel(result.kinematics, None, None, (), payload_model)
     model_el, elastic = model_geo, None
+    final_screen = geo.screen
     if choices:
         cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified])
-        try:
-            elastic = calibrate_elastic(result.kinematics, cols, qk, pk, covk, meta_k, choices,
-                                        calibration_options(cfg))
-        except (np.linalg.LinAlgError, ValueError) as exc:
-            raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
+
+        def fit_el(rows):
+            try:
+                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], measurement_covariance(cfg, p[rows]),
+                                         sub(meta_all, rows), choices, calibration_options(cfg))
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
+        elastic = fit_el(kept_rows)
         model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
+        if cfg.calibration.outliers == "local":
+            # screen again against the model with its effects: structure the geometry alone could not fit is no
+            # reason to exclude a point (and a fault hidden by that structure shows now)
+            rc = geo.rows
+            final_screen = screen(q[rc], p[rc], p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)),
+                                  None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
+            robust_rejected = ~geo.keep
+            robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
+            new_keep = final_screen.keep & ~robust_rejected
+            if not np.array_equal(new_keep, geo.keep) and new_keep.sum() >= 10:
+                kept_rows = rc[new_keep]
+                qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
+                elastic = fit_el(kept_rows)
+                model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
+            else:
+                final_screen = geo.screen
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
@@ -248,13 +268,14 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     eval_rows = test if test.any() else cal
     specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
     calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = [] if geo.screen is None else [
-        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in geo.screen.excluded]
-    rejected_ids = calib_ids[result.point_weights == 0].tolist()
+    excluded = [] if final_screen is None else [
+        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
+    rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
+                          key=calib_ids.tolist().index)
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
-              "rejected": int(np.sum(result.point_weights == 0))},
+              "rejected": len(rejected_ids)},
         "stages": stages,
         "noise_floor_mm": repeats if repeats is not None else specs,
         "noise_floor_source": "repeats" if repeats is not None else "specs",
@@ -264,7 +285,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "sigma0": result.sigma0, "iterations": result.iterations, "converged": result.converged,
         "rejected_points": rejected_ids,
         "excluded_points": excluded,
-        "structure_note": None if geo.screen is None else geo.screen.structure_note(),
+        "structure_note": None if final_screen is None else final_screen.structure_note(),
         "T_tracker_base": model.kinematics.T_tracker_base.tolist(),
         "method": {"estimator": c.method, "weights": c.weights if c.method == "robust_ridge" else None,
                    "outliers": c.outliers, "effects": c.effects if isinstance(c.effects, str) else "list",
