@@ -296,6 +296,9 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     }
     if ds.p2_tracker_mm is not None:
         report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        if "p_flange_smr_mm" in report["multi_smr"]:
+            model = replace(model, meta={**(model.meta or {}),
+                                         "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
     return Processed(report, model, result)
 
 
@@ -334,6 +337,10 @@ def _effects_report(selection, elastic) -> dict:
         out["fitted"] = [fe.to_dict() for fe in elastic.effects]
         out["unidentifiable"] = [u.to_dict() for u in elastic.unidentifiable]
         out["sigma0"] = elastic.sigma0
+        out["notes"] = [f"{fe.choice.label}.{n}: negative compliance {v:.3g} rad/(N*m) ({-v / s:.1f} std below zero): "
+                        "not physical; check the link masses, payload and joint directions"
+                        for fe in elastic.effects if fe.unit == "rad/(N*m)"
+                        for n, v, s in zip(fe.param_names, fe.values, fe.std) if np.isfinite(s) and v < -3 * s]
         out["condition_number"] = elastic.condition_number
     return out
 

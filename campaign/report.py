@@ -57,6 +57,8 @@ def render_choices(console: Console, report: dict) -> None:
                                                                  if "stiffness_Nm_per_rad" in p else "")
                          for n, p in fe["params"].items())
         console.print(f"  {fe['name']}: {vals}")
+    for note in (report.get("effects") or {}).get("notes", []):
+        console.print(f"  note: {note}")
     ch = report.get("residual_choice")
     if ch and ch.get("candidates"):
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
