@@ -230,13 +230,13 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
             robust_rejected = ~geo.keep
             robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
             new_keep = final_screen.keep & ~robust_rejected
-            if not np.array_equal(new_keep, geo.keep) and new_keep.sum() >= 10:
+            if new_keep.sum() < 10:
+                final_screen = geo.screen
+            elif not np.array_equal(new_keep, geo.keep):
                 kept_rows = rc[new_keep]
                 qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
                 elastic = fit_el(kept_rows)
                 model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
-            else:
-                final_screen = geo.screen
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
@@ -272,6 +272,9 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
     rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
                           key=calib_ids.tolist().index)
+    listed = {e["point_id"] for e in excluded}
+    excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+                 for pid in rejected_ids if pid not in listed]
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
