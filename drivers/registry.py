@@ -1,4 +1,4 @@
-"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ...
+"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ``emscon://host``, ...
 
 Real drivers are imported lazily so that a cell only needs the libraries of the drivers it uses.
 """
@@ -15,7 +15,7 @@ ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_r
                  "ur-rtde": "drivers.ur:open_robot"}
 TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
                    "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
-                   "tracker+loop": "drivers.tracker:open_tracker"}
+                   "tracker+loop": "drivers.tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
 
 
 def _factory(table: Mapping[str, str], url: str, what: str):
