@@ -195,8 +195,8 @@ class Runner:
                               f"{faults} failed readings, retry limit {self.m.retries}") from None
 
     def _reacquire(self, point: PlanPoint, log: RunLog, faults: int) -> int:
-        """After a beam break: aim at the predicted SMR position and search (each step logged). A failed search
-        uses one of the point's retries. Returns the updated fault count."""
+        """After a beam break: aim at the predicted SMR position and search (each step logged); every failed
+        search uses one of the point's retries (then PointFailed names it). Returns the updated fault count."""
         reacquire = getattr(self.tracker, "reacquire", None)
         if not callable(reacquire) or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
             self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
@@ -204,12 +204,14 @@ class Runner:
         p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
         log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "predicted",
                           "p_tracker_mm": [round(float(v), 3) for v in p], "t_s": self.clock.now()})
-        try:
-            reacquire(p.tolist())
-        except TrackerError as exc:
-            faults += 1
-            self._fault(point, log, exc, faults)
-            return faults
+        while True:                                 # search again until found or the point's retries are spent
+            try:
+                reacquire(p.tolist())
+                break
+            except TrackerError as exc:
+                faults += 1
+                self._fault(point, log, exc, faults)
+                self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
         self._log_tracker_steps(point, log)
         log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "found", "t_s": self.clock.now()})
         return faults

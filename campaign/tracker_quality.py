@@ -6,7 +6,7 @@
 * ``check_device_stability(readings, stability_mm)``: a reading whose own total std dev exceeds the stability limit
   is unstable (``Unstable``), whatever the spread of the readings.
 * ``SmrPredictor``: predicted SMR centre in the tracker frame for read-back joints (deg): the nominal model with
-  the registration fitted to the points measured so far (>= 4, not collinear), else the rough tracker placement
+  the registration fitted to the points measured so far (>= 3, not collinear), else the rough tracker placement
   of the config (``tracker.position_in_base_mm``, axes assumed parallel).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from robocal.kinematics import Kinematics, smr_base
 
 STD_KEYS = ("std_x_mm", "std_y_mm", "std_z_mm")
 COV_KEYS = ((0, 1, "cov_xy_mm2"), (0, 2, "cov_xz_mm2"), (1, 2, "cov_yz_mm2"))
-MIN_REGISTRATION_POINTS = 4
+MIN_REGISTRATION_POINTS = 3
 
 
 def reading_covariance(reading: TrackerReading) -> np.ndarray | None:
