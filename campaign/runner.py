@@ -198,7 +198,8 @@ class Runner:
         """After a beam break: aim at the predicted SMR position and search (each step logged); every failed
         search uses one of the point's retries (then PointFailed names it). Returns the updated fault count."""
         reacquire = getattr(self.tracker, "reacquire", None)
-        if not callable(reacquire) or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
+        if not callable(reacquire) or not getattr(self.tracker, "can_reacquire", True) \
+                or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
             self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
             return faults
         p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
