@@ -2,8 +2,7 @@
 
 One transport for TCP (``tracker+socket://host:port``), native serial (``tracker+serial:///dev/ttyUSB0?baudrate=115200``),
 RFC 2217 serial-over-LAN (``tracker+rfc2217://host:port``) and the in-memory loopback (``tracker+loop://``), and one
-declarative line protocol configured by the cell YAML's ``tracker.options`` (see ``docs/drivers_tracker.md`` and
-``/work/shared/docs/trackers.md`` §8). The built-in default profile speaks the sample protocol of
+declarative line protocol configured by the cell YAML's ``tracker.options`` (see ``docs/drivers_tracker.md``). The built-in default profile speaks the sample protocol of
 ``drivers.emulators.tracker_server``, so ``options: {}`` works against the emulator.
 
 Layers: ``LineProfile`` (validated options), ``TrackerCodec`` (pure: command bytes, line -> ``Reply``; unit-tested on
