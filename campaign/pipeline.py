@@ -55,7 +55,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
-        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log)
+        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
             runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
@@ -98,6 +98,8 @@ def verify(run_dir: Path, console: Console | None = None):
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
         def measure(points):
             got = []
@@ -111,12 +113,11 @@ def verify(run_dir: Path, console: Console | None = None):
     return result
 
 
-def _smr_predictor(cfg: CampaignConfig, log: RunLog) -> SmrPredictor:
-    """Where to aim the tracker after a beam break: nominal model + registration from the points measured so far
-    (those of a resumed log included), else the config's rough tracker position."""
+def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
+    """Where to aim the tracker after a beam break: nominal model + registration from the point ``records`` measured
+    so far (a resumed or verified run's), else the config's rough tracker position."""
     predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
-    contents = getattr(log, "contents", None)
-    for record in contents.points if contents is not None else ():
+    for record in records:
         if record.get("q_read_deg") is not None and record.get("p_tracker_mm") is not None:
             predictor.observe(record["q_read_deg"], record["p_tracker_mm"])
     return predictor

@@ -65,12 +65,18 @@ class SmrPredictor:
         self._q_rad: list[np.ndarray] = []
         self._p_mm: list[np.ndarray] = []
         self._T: np.ndarray | None = None
+        self._dirty = False
         self.source = "rough tracker position" if tracker_position_in_base_mm is not None else "none"
 
     def observe(self, q_deg: Sequence[float], p_tracker_mm: Sequence[float]) -> None:
-        """Add one measured point; the registration is refitted from all points so far (closed form)."""
+        """Add one measured point (the registration is refitted when the next prediction is asked for)."""
         self._q_rad.append(np.radians(np.asarray(q_deg, float)))
         self._p_mm.append(np.asarray(p_tracker_mm, float))
+        self._dirty = True
+
+    def _refit(self) -> None:
+        """Closed-form registration of all points so far (nominal SMR in the base frame -> measured)."""
+        self._dirty = False
         if len(self._p_mm) < MIN_REGISTRATION_POINTS:
             return
         p_nom = smr_base(self.kin, np.array(self._q_rad))
@@ -79,11 +85,9 @@ class SmrPredictor:
         self._T = fit_rigid(p_nom, np.array(self._p_mm))
         self.source = f"registration of {len(self._p_mm)} measured points"
 
-    @property
-    def usable(self) -> bool:
-        return self._T is not None or self.source != "none"
-
     def __call__(self, q_deg: Sequence[float]) -> np.ndarray:
+        if self._dirty:
+            self._refit()
         T = self._T if self._T is not None else self.T_tracker_base_rough
         p_base = smr_base(self.kin, np.radians(np.asarray(q_deg, float))[None])[0]
         return T[:3, :3] @ p_base + T[:3, 3]

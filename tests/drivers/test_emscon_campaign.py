@@ -95,10 +95,16 @@ class FaultAt:
         return getattr(self.robot, name)
 
 
-def _run(tmp_path, faults, *, at=4, n_points=7, retries=3, predictor=True, late_s=1.0):
-    cfg = load_config(small_config(tmp_path, **SMALL))
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    """The small config and the first 7 points of its plan (built once: planning solves IK)."""
+    cfg = load_config(small_config(tmp_path_factory.mktemp("cell"), **SMALL))
+    return cfg, build_plan(cfg, nominal_kinematics(cfg)).points[:7]
+
+
+def _run(tmp_path, cell, faults, *, at=4, retries=3, predictor=True, late_s=1.0):
+    cfg, points = cell
     world = _world(cfg)
-    points = build_plan(cfg, nominal_kinematics(cfg)).points[:n_points]
     measurement = dataclasses.replace(cfg.tracker.measurement, retries=retries)
     with EmsconEmulator(_smr(world), seed=2, late_s=late_s) as emu:
         robot = FaultAt(MockRobot(world), emu, at, faults)
@@ -126,8 +132,8 @@ def _steps(contents, point_id):
 
 
 @pytest.mark.system
-def test_beam_break_mid_point_is_reacquired_and_measured(tmp_path):
-    outcome, contents, elapsed, points, _, _ = _run(tmp_path, ("beam_break",))
+def test_beam_break_mid_point_is_reacquired_and_measured(tmp_path, cell):
+    outcome, contents, elapsed, points, _, _ = _run(tmp_path, cell, ("beam_break",))
     assert outcome.exit_status == "success" and elapsed < 10.0
     assert [r["point_id"] for r in contents.points] == [p.point_id for p in points]
     pid = points[3].point_id
@@ -139,16 +145,16 @@ def test_beam_break_mid_point_is_reacquired_and_measured(tmp_path):
 
 
 @pytest.mark.system
-def test_beam_break_without_a_prediction_is_not_recovered(tmp_path):
+def test_beam_break_without_a_prediction_is_not_recovered(tmp_path, cell):
     """Control: the tracker stays pointed at the previous point (> search radius away), so only aiming recovers."""
-    outcome, contents, elapsed, points, _, _ = _run(tmp_path, ("beam_break",), predictor=False)
+    outcome, contents, elapsed, points, _, _ = _run(tmp_path, cell, ("beam_break",), predictor=False)
     assert outcome.exit_status == "paused" and "beam_broken" in outcome.reason and elapsed < 10.0
     assert len(contents.points) == 3
 
 
 @pytest.mark.system
-def test_reflector_lost_for_good_pauses_with_the_reason(tmp_path):
-    outcome, contents, elapsed, points, _, _ = _run(tmp_path, ("lost_reflector",), retries=2)
+def test_reflector_lost_for_good_pauses_with_the_reason(tmp_path, cell):
+    outcome, contents, elapsed, points, _, _ = _run(tmp_path, cell, ("lost_reflector",), retries=2)
     assert outcome.exit_status == "paused" and elapsed < 10.0
     assert f"point {points[3].point_id}" in outcome.reason and "not_found" in outcome.reason
     assert "reflector not found near the predicted position" in outcome.reason
@@ -160,8 +166,8 @@ def test_reflector_lost_for_good_pauses_with_the_reason(tmp_path):
 @pytest.mark.parametrize("faults, step", [(("garbage",), "reconnect"), (("disconnect",), "reconnect"),
                                           (("not_initialised",), "initialize"), (("late",), None),
                                           (("garbage", "disconnect", "not_initialised", "warm_up"), "reconnect")])
-def test_recoverable_faults_lose_no_point(tmp_path, faults, step):
-    outcome, contents, elapsed, points, stale, truth_ok = _run(tmp_path, faults, late_s=0.45)
+def test_recoverable_faults_lose_no_point(tmp_path, cell, faults, step):
+    outcome, contents, elapsed, points, stale, truth_ok = _run(tmp_path, cell, faults, late_s=0.45)
     assert outcome.exit_status == "success" and elapsed < 15.0 and truth_ok
     assert [r["point_id"] for r in contents.points] == [p.point_id for p in points]
     kinds = [k for t, k in _steps(contents, points[3].point_id)]
