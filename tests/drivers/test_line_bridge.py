@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from drivers.base import TargetNotFound, TrackerError
@@ -170,3 +171,46 @@ def test_command_line_replays_a_csv(tmp_path):
 
 def test_measurement_record():
     assert Measurement((1.0, 2.0, 3.0)).std_mm is None
+
+
+def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path):
+    """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
+    from campaign.cell import measurement_covariance, nominal_kinematics
+    from campaign.config import load_config
+    from campaign.pipeline import mock_world
+    from campaign.plan import build_plan
+    from campaign.runlog import RunLog, read_log
+    from campaign.runner import Runner
+    from campaign.tracker_quality import SmrPredictor
+    from drivers.mock import MockRobot
+    from tests.campaign.helpers import small_config
+
+    cfg = load_config(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
+    world = mock_world(cfg)
+    world.faults = {}
+
+    class CellBackend(ReplayBackend):
+        def measure(self):
+            return Measurement(tuple(world.p_smr_tracker_mm + world.point_error_mm))
+
+    points = build_plan(cfg, nominal_kinematics(cfg)).points[:5]
+    backend = CellBackend([{"x": "0", "y": "0", "z": "0"}])
+    with LineBridge(backend) as bridge:
+        tracker = open_tracker(bridge.url, {"timeout_s": 0.5, "environment": None,
+                                            "goto": "GOTO {seq} {x:.3f} {y:.3f} {z:.3f}", "find": "FIND {seq}"})
+        tracker.connect()
+        predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+        runner = Runner(MockRobot(world), tracker, cfg.tracker.measurement, world.clock,
+                        lambda p: measurement_covariance(cfg, p[None])[0], predict_p_tracker_mm=predict)
+        runner.on_point = lambda point, record: (predict.observe(record["q_read_deg"], record["p_tracker_mm"]),
+                                                 bridge.inject("beam_break") if point is points[2] else None)
+        outcome = runner.execute(points, RunLog.create(tmp_path / "run", {"config_sha256": "t", "plan_sha256": "t"}))
+        tracker.close()
+    assert outcome.exit_status == "success"
+    contents = read_log(tmp_path / "run")
+    steps = [(e["type"], e.get("step") or e.get("kind")) for e in contents.events if e.get("point_id") == points[3].point_id]
+    assert steps == [("tracker_fault", "beam_broken"), ("reacquire", "predicted"), ("reacquire", "found")]
+    predicted = next(e["p_tracker_mm"] for e in contents.events if e.get("step") == "predicted")
+    measured = next(r["p_tracker_mm"] for r in contents.points if r["point_id"] == points[3].point_id)
+    assert backend.aim_mm == pytest.approx(predicted, abs=1e-3)                   # GOTO carried the prediction
+    assert np.linalg.norm(np.subtract(predicted, measured)) < 10.0                # and it was close to the SMR
