@@ -101,7 +101,8 @@ class EmsconSettings:
                 out[key] = opts[key]
         if opts.get("reflector") is not None:
             if isinstance(opts["reflector"], bool) or not isinstance(opts["reflector"], (str, int)):
-                raise DriverError(f"emscon option 'reflector': expected a reflector id or name, got {opts['reflector']!r}")
+                raise DriverError("emscon option 'reflector': expected a reflector id or name, "
+                                  f"got {opts['reflector']!r}")
             out["reflector"] = opts["reflector"]
         env = opts.get("environment", "station")
         if env == "station":

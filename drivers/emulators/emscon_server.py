@@ -40,7 +40,6 @@ import signal
 import socket
 import sys
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence

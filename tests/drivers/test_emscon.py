@@ -1,4 +1,5 @@
-"""emScon protocol, driver and emulator (drivers/emscon_protocol.py, drivers/emscon.py, drivers/emulators/emscon_server.py).
+"""emScon protocol, driver and emulator (drivers/emscon_protocol.py, drivers/emscon.py,
+drivers/emulators/emscon_server.py).
 
 Struct sizes are checked against the public header's layouts (pack(4), 4-byte long/enum); driver tests run against
 the emulator on 127.0.0.1 with small timeouts; the third-party client ``cesapi`` (PyPI) checks the emulator.
@@ -143,7 +144,8 @@ def test_connect_initialises_configures_and_measures():
     assert r.xyz_mm == pytest.approx(device.last_truth["measured_mm"], abs=1e-9)
     assert r.xyz_mm == pytest.approx(truth, abs=0.05)
     cov = device.last_truth["cov_mm2"]
-    assert r.extra["std_y_mm"] == pytest.approx(math.sqrt(cov[1][1])) and r.extra["cov_xz_mm2"] == pytest.approx(cov[0][2])
+    assert r.extra["std_y_mm"] == pytest.approx(math.sqrt(cov[1][1]))
+    assert r.extra["cov_xz_mm2"] == pytest.approx(cov[0][2])
     assert env == {"temp_c": 20.5, "pressure_hpa": 1008.0, "humidity_pct": 42.0}
     assert tracker.identity()["serial"] == "754321" and "RRR05" in tracker.reflector_name
 

@@ -37,11 +37,13 @@ from tests.drivers.test_tracker import (no_leftover_threads,  # noqa: F401 (auto
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.system
-CONTRACT_TESTS = (test_connection_refused_is_connection_lost, test_emulator_disconnect_is_connection_lost_and_reconnect_works,
+CONTRACT_TESTS = (test_connection_refused_is_connection_lost,
+                  test_emulator_disconnect_is_connection_lost_and_reconnect_works,
                   test_emulator_dropped_reply_is_retried, test_emulator_dropped_reply_times_out_within_the_timeout,
                   test_emulator_faults_map_to_errors_and_recover, test_emulator_late_reply_already_arrived_is_flushed,
                   test_emulator_late_reply_in_flight_is_dropped_by_seq,
-                  test_emulator_late_reply_without_flush_is_dropped_by_seq, test_emulator_position_source_and_environment,
+                  test_emulator_late_reply_without_flush_is_dropped_by_seq,
+                  test_emulator_position_source_and_environment,
                   test_emulator_random_faults_are_seeded, test_emulator_readings_with_default_options)
 
 
@@ -101,7 +103,8 @@ def test_replayed_errors_and_goto_find_through_the_driver(tmp_path):
         w.writerow(["", "", "", "", "", "", "beam_broken"])
         w.writerow([1000.5, 0.0, 0.0, 0.004, 0.004, 0.004, ""])
     backend = ReplayBackend.from_csv(str(path))
-    options = {"timeout_s": 0.5, "environment": None, "goto": "GOTO {seq} {x:.4f} {y:.4f} {z:.4f}", "find": "FIND {seq}",
+    options = {"timeout_s": 0.5, "environment": None, "goto": "GOTO {seq} {x:.4f} {y:.4f} {z:.4f}",
+               "find": "FIND {seq}",
                "length_unit": "m", "measure_regex": r"^OK (?P<seq>\d+) (?P<x>{num}) (?P<y>{num}) (?P<z>{num})"
                                                     r"(?: (?P<sx>{num}) (?P<sy>{num}) (?P<sz>{num}))?$"}
     with LineBridge(backend) as bridge:
@@ -208,7 +211,8 @@ def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path
         tracker.close()
     assert outcome.exit_status == "success"
     contents = read_log(tmp_path / "run")
-    steps = [(e["type"], e.get("step") or e.get("kind")) for e in contents.events if e.get("point_id") == points[3].point_id]
+    pid = points[3].point_id
+    steps = [(e["type"], e.get("step") or e.get("kind")) for e in contents.events if e.get("point_id") == pid]
     assert steps == [("tracker_fault", "beam_broken"), ("reacquire", "predicted"), ("reacquire", "found")]
     predicted = next(e["p_tracker_mm"] for e in contents.events if e.get("step") == "predicted")
     measured = next(r["p_tracker_mm"] for r in contents.points if r["point_id"] == points[3].point_id)
