@@ -15,6 +15,10 @@ class DriverError(Exception):
     """Base of all driver failures; ``str()`` is one line naming the device."""
 
 
+class DriverConfigError(DriverError):
+    """Bad driver URL or options (input error: the CLI exits with 2)."""
+
+
 class ConnectionLost(DriverError):
     """The link to the device dropped or timed out."""
 

@@ -28,7 +28,7 @@ from typing import Any, Mapping, Sequence
 from urllib.parse import urlsplit
 
 from . import emscon_protocol as P
-from .base import (BeamBroken, ConnectionLost, DriverError, GarbageReply, TargetNotFound, TrackerError, TrackerReading,
+from .base import (BeamBroken, ConnectionLost, DriverConfigError, DriverError, GarbageReply, TargetNotFound, TrackerError, TrackerReading,
                    TrackerTimeout, Unstable)
 
 POLL_S = 0.02
@@ -83,7 +83,7 @@ class EmsconSettings:
         opts = dict(options or {})
         unknown = set(opts) - set(cls.__dataclass_fields__)
         if unknown:
-            raise DriverError(f"emscon option {sorted(unknown)[0]!r}: unknown "
+            raise DriverConfigError(f"emscon option {sorted(unknown)[0]!r}: unknown "
                               f"(expected one of {', '.join(cls.__dataclass_fields__)})")
         out = {}
         for key in ("timeout_s", "init_timeout_s", "connect_timeout_s", "search_timeout_s", "move_timeout_s"):
@@ -92,16 +92,16 @@ class EmsconSettings:
         if "meas_time_ms" in opts:
             value = opts["meas_time_ms"]
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100000:
-                raise DriverError(f"emscon option 'meas_time_ms': expected an integer in [1, 100000], got {value!r}")
+                raise DriverConfigError(f"emscon option 'meas_time_ms': expected an integer in [1, 100000], got {value!r}")
             out["meas_time_ms"] = value
         for key in ("use_adm", "reconnect"):
             if key in opts:
                 if not isinstance(opts[key], bool):
-                    raise DriverError(f"emscon option {key!r}: expected true or false, got {opts[key]!r}")
+                    raise DriverConfigError(f"emscon option {key!r}: expected true or false, got {opts[key]!r}")
                 out[key] = opts[key]
         if opts.get("reflector") is not None:
             if isinstance(opts["reflector"], bool) or not isinstance(opts["reflector"], (str, int)):
-                raise DriverError("emscon option 'reflector': expected a reflector id or name, "
+                raise DriverConfigError("emscon option 'reflector': expected a reflector id or name, "
                                   f"got {opts['reflector']!r}")
             out["reflector"] = opts["reflector"]
         env = opts.get("environment", "station")
@@ -112,24 +112,24 @@ class EmsconSettings:
             out["environment"] = tuple(_finite(f"environment.{k}", env[k]) for k in ("temp_c", "pressure_hpa",
                                                                                    "humidity_pct"))
         else:
-            raise DriverError("emscon option 'environment': expected 'station' or {temp_c, pressure_hpa, "
+            raise DriverConfigError("emscon option 'environment': expected 'station' or {temp_c, pressure_hpa, "
                               f"humidity_pct}}, got {env!r}")
         if opts.get("statistic", "extended") not in ("extended", "standard"):
-            raise DriverError(f"emscon option 'statistic': expected extended or standard, got {opts['statistic']!r}")
+            raise DriverConfigError(f"emscon option 'statistic': expected extended or standard, got {opts['statistic']!r}")
         out["statistic"] = opts.get("statistic", "extended")
         return cls(**out)
 
 
 def _finite(key: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise DriverError(f"emscon option {key!r}: expected a number, got {value!r}")
+        raise DriverConfigError(f"emscon option {key!r}: expected a number, got {value!r}")
     return float(value)
 
 
 def _positive(key: str, value: Any) -> float:
     v = _finite(key, value)
     if v <= 0:
-        raise DriverError(f"emscon option {key!r}: expected a number > 0, got {value!r}")
+        raise DriverConfigError(f"emscon option {key!r}: expected a number > 0, got {value!r}")
     return v
 
 
@@ -137,11 +137,11 @@ def parse_url(url: str) -> tuple[str, int]:
     """``emscon://HOST[:PORT]`` -> (host, port); port 700 by default."""
     parts = urlsplit(url)
     if parts.scheme != "emscon" or not parts.hostname:
-        raise DriverError(f"tracker url {url!r}: expected emscon://HOST[:PORT]")
+        raise DriverConfigError(f"tracker url {url!r}: expected emscon://HOST[:PORT]")
     try:
         return parts.hostname, parts.port or P.DEFAULT_PORT
     except ValueError:
-        raise DriverError(f"tracker url {url!r}: bad port") from None
+        raise DriverConfigError(f"tracker url {url!r}: bad port") from None
 
 
 class EmsconTracker:
@@ -284,7 +284,7 @@ class EmsconTracker:
             table.append((rid, P.TARGET_TYPES.get(ttype, str(ttype)), offset, name))
         match = [r for r in table if wanted in (r[0], r[1], r[3]) or str(wanted) in (str(r[0]), r[1], r[3])]
         if not match:
-            raise DriverError(f"{self.url}: reflector {wanted!r} not known to the tracker (it has: "
+            raise DriverConfigError(f"{self.url}: reflector {wanted!r} not known to the tracker (it has: "
                               f"{', '.join(f'{r[0]} {r[3]} ({r[1]})' for r in table)})")
         rid, ttype, offset, name = match[0]
         self._command(P.C_SET_REFLECTOR, rid, timeout_s=t)

@@ -322,3 +322,17 @@ def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
             proc.wait(5)
         proc.stdout.close()
         proc.stderr.close()
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("url, options, text", [
+    ("emscon://127.0.0.1:1", {"meas_time_ms": "long"}, "emscon option 'meas_time_ms'"),
+    ("tracker+socket://127.0.0.1:1", {"colour": 1}, "tracker option 'colour'")])
+def test_bad_tracker_options_are_input_errors_at_the_cli(tmp_path, capsys, url, options, text):
+    from campaign.cli import main
+    from tests.campaign.helpers import small_config
+
+    cfg = small_config(tmp_path, **{"tracker.url": url, "tracker.options": options})
+    assert main(["run", str(cfg), "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and text in err and not (tmp_path / "run").exists()
