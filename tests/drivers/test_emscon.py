@@ -282,16 +282,24 @@ def test_cesapi_client_initialises_configures_measures_and_decodes():
             sync.SetUnits(units)
             sync.SetMeasurementMode(cesapi_packet.ES_MM_Stationary)
             result = sync.StartMeasurement()
+            last = emu.device.last_truth
             assert sync.GetSystemStatus().trackerProcessorStatus == cesapi_packet.ES_TPS_Initialized
+            sync.SetStatisticMode(cesapi_packet.ES_SM_Standard, cesapi_packet.ES_SM_Extended)  # continuous, stationary
+            result2 = sync.StartMeasurement()                                  # SingleMeasResult2T, with covariances
+            last2 = emu.device.last_truth
         finally:
             conn.disconnect()
-        last = emu.device.last_truth
     measured = (result.dVal1, result.dVal2, result.dVal3)
     assert measured == pytest.approx(last["measured_mm"], abs=1e-9)           # decoded bit for bit
     assert measured == pytest.approx(truth, abs=0.05)                           # and it is the SMR
     cov = last["cov_mm2"]
     assert (result.dStd1, result.dStd2, result.dStd3) == pytest.approx([math.sqrt(cov[i][i]) for i in range(3)])
     assert (result.dTemperature, result.dPressure, result.dHumidity) == (19.75, 1002.5, 37.0)
+    assert (result2.dVal1, result2.dVal2, result2.dVal3) == pytest.approx(last2["measured_mm"], abs=1e-9)
+    cov2 = last2["cov_mm2"]
+    assert (result2.dCovar12, result2.dCovar13, result2.dCovar23) == pytest.approx(
+        (cov2[0][1], cov2[0][2], cov2[1][2]), rel=1e-12) and abs(cov2[0][1]) > 0
+    assert (result2.dTemperature, result2.dPressure, result2.dHumidity) == (19.75, 1002.5, 37.0)
 
 
 # ------------------------------------------------------------------------------------------------- command line
