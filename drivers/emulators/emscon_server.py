@@ -452,9 +452,10 @@ def _fault_probabilities(text: str) -> dict[str, float]:
     return out
 
 
-def cell_position_source(config_path: str, robot_url: str | None = None) -> PositionSource:
-    """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error); with
-    ``robot_url`` the simulated robot follows that robot's read-back joints, else it stays at the plan's q_ref."""
+def cell_position_source(config_path: str, robot_url: str | None = None) -> tuple[PositionSource, Callable[[], None]]:
+    """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
+    function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
+    released by the close function), else it stays at the plan's q_ref."""
     from campaign.config import load_config
     from campaign.pipeline import mock_world
     from drivers.mock import MockTracker
@@ -473,7 +474,7 @@ def cell_position_source(config_path: str, robot_url: str | None = None) -> Posi
         if follower.robot is not None:
             follower._follow()
         return tuple(float(v) for v in world.p_smr_tracker_mm + world.point_error_mm)
-    return position
+    return position, (robot.close if robot is not None else (lambda: None))
 
 
 def _watch_stdin(done: threading.Event) -> None:
@@ -487,7 +488,7 @@ def _watch_stdin(done: threading.Event) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    source = cell_position_source(args.cell, args.robot_url) if args.cell else None
+    source, release = cell_position_source(args.cell, args.robot_url) if args.cell else (None, lambda: None)
     done = threading.Event()
     with EmsconEmulator(source, port=args.port, seed=args.seed, initialised=args.initialised,
                         meas_time_scale=args.meas_time_scale, late_s=args.late_s,
@@ -503,6 +504,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 pass
         except KeyboardInterrupt:
             pass
+        finally:
+            release()
     return 0
 
 

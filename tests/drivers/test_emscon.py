@@ -344,3 +344,40 @@ def test_bad_tracker_options_are_input_errors_at_the_cli(tmp_path, capsys, url, 
     assert main(["run", str(cfg), "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and text in err and not (tmp_path / "run").exists()
+
+
+@pytest.mark.system
+def test_command_line_with_a_cell_follows_a_robot(tmp_path):
+    """--cell + --robot-url: the emulator reads the robot's joints (here the RWS emulator) and measures the simulated
+    SMR there."""
+    import numpy as np
+
+    from campaign.cell import simulated_cell
+    from campaign.config import load_config
+    from drivers.emulators.rws_server import RwsEmulator
+    from robocal.kinematics import smr_tracker
+    from tests.campaign.helpers import small_config
+
+    with RwsEmulator(1) as rws:
+        cfg_path = small_config(tmp_path, **{"robot.url": rws.url,
+                                             "robot.options": {"credentials": {"use_default": True}}})
+        truth = simulated_cell(load_config(cfg_path)).truth
+        proc = subprocess.Popen([sys.executable, "-m", "drivers.emulators.emscon_server", "--port", "0",
+                                 "--print-port", "--cell", str(cfg_path), "--robot-url", rws.url], cwd=REPO,
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            assert select.select([proc.stdout], [], [], 30)[0], "emulator did not print its port"
+            port = int(proc.stdout.readline())
+            with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=5.0)) as tracker:
+                for q in ([10.0, 20.0, 10.0, 0.0, 30.0, 0.0], [-30.0, 5.0, -20.0, 40.0, -45.0, 90.0]):
+                    rws.joints = list(q)
+                    expected = smr_tracker(truth, np.radians(q)[None])[0]
+                    assert np.linalg.norm(np.subtract(tracker.measure().xyz_mm, expected)) < 0.3
+            proc.stdin.close()
+            assert proc.wait(10) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(5)
+            proc.stdout.close()
+            proc.stderr.close()
