@@ -375,6 +375,7 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
                     assert np.linalg.norm(np.subtract(tracker.measure().xyz_mm, expected)) < 0.3
             proc.stdin.close()
             assert proc.wait(10) == 0
+            assert rws.counts["logouts"] >= 1                        # the robot session was released
         finally:
             if proc.poll() is None:
                 proc.kill()
