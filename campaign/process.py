@@ -29,6 +29,7 @@ from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
 from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
@@ -145,7 +146,7 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     kin0 = nominal_kinematics(cfg)
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
-    cov = measurement_covariance(cfg, p)
+    cov = weights_covariance(cfg, ds)[0][rows]
     options = calibration_options(cfg)
     result = _calibrate(kin0, q, p, cov, options, ds.source)
     keep = np.ones(len(rows), bool)
@@ -201,7 +202,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
     kept_rows = geo.rows[geo.keep]
     qk, pk = q[kept_rows], p[kept_rows]
-    covk = measurement_covariance(cfg, pk)
+    cov_all, cov_source = weights_covariance(cfg, ds)
+    covk = cov_all[kept_rows]
     meta_all = _effect_meta(ds, cfg, np.arange(len(ds)))
     sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
     meta_k = sub(meta_all, kept_rows)
@@ -215,7 +217,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
 
         def fit_el(rows):
             try:
-                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], measurement_covariance(cfg, p[rows]),
+                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows],
                                          sub(meta_all, rows), choices, calibration_options(cfg))
             except (np.linalg.LinAlgError, ValueError) as exc:
                 raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
@@ -292,7 +294,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "T_tracker_base": model.kinematics.T_tracker_base.tolist(),
         "method": {"estimator": c.method, "weights": c.weights if c.method == "robust_ridge" else None,
                    "outliers": c.outliers, "effects": c.effects if isinstance(c.effects, str) else "list",
-                   "residual": choice.kind, "residual_config": c.residual},
+                   "residual": choice.kind, "residual_config": c.residual, "measurement_covariance": cov_source},
         "effects": _effects_report(selection, elastic),
         "residual_choice": choice.to_dict(),
         "residual_cv": _residual_cv_summary(choice),
