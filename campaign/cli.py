@@ -12,6 +12,7 @@ errors are printed as one red line on stderr, never as a traceback:
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -98,7 +99,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     result = run_campaign(cfg, args.out, args.resume, out)
     o = result.outcome
     if o.exit_status != "success":
-        hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}" if o.exit_status != "abort" else ""
+        hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
         _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     render_stages(out, result.processed.report)
@@ -227,16 +228,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    try:
-        return args.func(args)
-    except (ConfigError, DataError) as exc:
-        return _fail(f"error: {exc}", EXIT_BAD_INPUT)
-    except CampaignError as exc:
-        return _fail(f"error: {exc}", EXIT_FAILED)
-    except DriverError as exc:
-        return _fail(f"error: {exc}", EXIT_FAILED)
-    except KeyboardInterrupt:
-        return _fail("interrupted", EXIT_INTERRUPTED)
+    from campaign.boundary import guarded
+
+    argv_text = list(argv) if argv is not None else sys.argv[1:]
+    return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
+
+
+def _run_dir_hint(args: argparse.Namespace) -> Path | None:
+    """The run directory a crash report should go to, if the command names one."""
+    for name in ("resume", "run_dir", "out"):
+        value = getattr(args, name, None)
+        if isinstance(value, Path) and value.is_dir():
+            return value
+    return None
 
 
 def _fail(message: str, code: int) -> int:
