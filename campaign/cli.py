@@ -20,6 +20,7 @@ from pathlib import Path
 from rich.console import Console
 
 from campaign.config import load_config
+from campaign.plausibility import forced
 from campaign.errors import CampaignError, ConfigError, DataError
 from drivers.base import DriverError
 
@@ -87,6 +88,7 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
     parser.add_argument("--out", metavar="RUN_DIR", type=Path, help="run directory (default: output.dir/NAME-TIMESTAMP)")
     parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
+    _force_argument(parser)
 
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
@@ -96,7 +98,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     out = _stdout()
-    result = run_campaign(cfg, args.out, args.resume, out)
+    with forced(args.force):
+        result = run_campaign(cfg, args.out, args.resume, out)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
@@ -104,6 +107,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
+    print_plausibility(out, result.processed.report.get("plausibility"))
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
     return EXIT_OK
@@ -133,6 +137,7 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", metavar="RUN_DIR_OR_CSV", type=Path, help="a run directory or an interchange CSV")
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise, options)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where report.json and model.json go")
+    _force_argument(parser)
 
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
@@ -143,10 +148,12 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
-    processed = reprocess(args.source, cfg, args.out)
+    with forced(args.force):
+        processed = reprocess(args.source, cfg, args.out)
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
+    print_plausibility(out, processed.report.get("plausibility"))
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
     return EXIT_OK
 
@@ -203,6 +210,20 @@ def cmd_verify(args: argparse.Namespace) -> int:
         _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _force_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force", action="store_true",
+                        help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
+                             "implausible deltas); the report says they were overridden")
+
+
+def print_plausibility(out: Console, plaus: dict | None) -> None:
+    """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
+    from campaign.plausibility import plausibility_lines
+
+    for line, style in plausibility_lines(plaus):
+        out.print(line, style=style, markup=False)
 
 
 # --------------------------------------------------------------------------- entry point

@@ -26,6 +26,7 @@ from .cell import calibration_options, measurement_covariance, nominal_kinematic
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
+from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 
 REPORT_FORMAT = "campaign-report/1"
@@ -99,6 +100,7 @@ def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
     kin0 = nominal_kinematics(cfg)
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
@@ -108,6 +110,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         result = calibrate(kin0, q[cal], p[cal], cov[cal], calibration_options(cfg))
     except IdentificationError as exc:
         raise DataError(ds.source, f"calibration failed: {exc}") from None
+    plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     nominal = register(kin0, q[cal], p[cal])
     payload = _varying_payload(ds, cal) if cfg.calibration.residual == "gpr" else None
     pay_cal = None if payload is None else payload[cal]
@@ -138,6 +141,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "T_tracker_base": result.kinematics.T_tracker_base.tolist(),
         "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
                    "residual": cfg.calibration.residual},
+        "plausibility": plaus.to_dict(),
         "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
     }
     model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
