@@ -164,26 +164,51 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--targets", required=True, type=Path,
                         help="CSV target_id,x,y,z[,qw,qx,qy,qz] in mm in the robot base frame (a path: one row per point)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where the corrected targets go")
+    parser.add_argument("--format", action="append", choices=("rapid", "ur", "csv"), metavar="FORMAT",
+                        help="write-back format: rapid, ur or csv (repeatable; default: the configured "
+                             "controller's format and csv)")
+    _force_argument(parser)
 
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_targets_csv, write_corrected
+    from campaign.correction import correct_targets, read_rejected, read_targets_csv, write_corrected
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
+    from campaign.correction import check_model_fits
+
     cfg = load_config(args.config)
     model = load_model(args.model)
+    with forced(args.force):
+        check_model_fits(cfg, model, str(args.model))
     targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
     accepted, rejected = correct_targets(cfg, model, targets)
-    paths = write_corrected(cfg, accepted, rejected, args.out)
     out = _stdout()
+    try:
+        paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))
+    finally:
+        _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]
-    out.print(f"{len(accepted)} targets corrected (predicted residual max {max(res, default=0):.2e} mm), "
-              f"{len(rejected)} rejected; wrote {', '.join(p.name for p in paths)} in {args.out}", markup=False)
-    for r in rejected[:20]:
-        out.print(f"  rejected {r.target_id}: {r.reason}", markup=False)
+    out.print(f"{len(targets.ids) - len(read_rejected(args.out))} of {len(targets.ids)} targets corrected "
+              f"(predicted residual max {max(res, default=0):.2e} mm); wrote {', '.join(p.name for p in paths)} "
+              f"in {args.out}", markup=False)
     return EXIT_OK
+
+
+def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
+    """Summary of the rejected targets (all of them are in rejected.csv with their reason)."""
+    from campaign.correction import read_rejected
+
+    rows = read_rejected(out_dir)
+    if not rows:
+        return
+    out.print(f"{len(rows)} of {n_targets} targets rejected (never written; reasons in {out_dir}/rejected.csv):",
+              markup=False)
+    for target_id, reason in rows[:10]:
+        out.print(f"  {target_id}: {reason}", markup=False)
+    if len(rows) > 10:
+        out.print(f"  ... and {len(rows) - 10} more", markup=False)
 
 
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:

@@ -166,20 +166,71 @@ def _limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 
-def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path) -> list[Path]:
-    """Every write-back form: RAPID module, UR JSON + URScript, CSV; rejected targets in their own CSV."""
+FORMATS = {"rapid": ("CalTargets.mod",), "ur": ("targets_ur.json", "targets_ur.script"), "csv": ("targets.csv",)}
+
+
+def controller_formats(cfg: CampaignConfig) -> tuple[str, ...]:
+    """Write-back formats that fit the configured controller: the robot url's driver, else the robot model's
+    vendor (a mock cell of an ABB or UR arm); the CSV always."""
+    import re
+
+    scheme = cfg.robot.url.split("://", 1)[0]
+    model = cfg.robot.model.lower()
+    if scheme == "abb-rws" or (scheme == "mock" and ("abb" in model or re.search(r"\birb", model))):
+        return ("rapid", "csv")
+    if scheme == "ur-rtde" or (scheme == "mock" and ("universal robots" in model or re.match(r"ur\d", model))):
+        return ("ur", "csv")
+    return ("csv",)
+
+
+def _format_rejections(accepted, formats) -> tuple[list, list[Rejected]]:
+    """Targets a chosen format cannot hold (RAPID: ids over 80 characters or not ISO 8859-1) -> rejected."""
+    if "rapid" not in formats:
+        return list(accepted), []
+    from .writeback import _rapid_string
+
+    ok, bad = [], []
+    for t in accepted:
+        try:
+            _rapid_string(t.target_id)
+            ok.append(t)
+        except ValueError as exc:
+            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {' '.join(str(exc).split())}"))
+    return ok, bad
+
+
+def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path,
+                    formats: tuple[str, ...] | None = None) -> list[Path]:
+    """The write-back files of ``formats`` (default: those of the configured controller, see
+    ``controller_formats``) and ``rejected.csv``. Every file is rendered in memory first, so a target no format
+    can hold writes nothing; ``CampaignError`` when no target is left to write (rejected.csv is still written)."""
+    from .errors import CampaignError
+    from .fsutil import atomic_write
+    from .writeback import render_rapid_module, render_targets_csv, render_ur_json, render_urscript
+
+    formats = controller_formats(cfg) if not formats else tuple(formats)
+    accepted, unfit = _format_rejections(accepted, formats)
+    rejected = list(rejected) + unfit
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lo, hi = _limits_deg(cfg)
-    paths = [out / "CalTargets.mod", out / "targets_ur.json", out / "targets_ur.script", out / "targets.csv",
-             out / "rejected.csv"]
     limits = dict(q_min_deg=lo, q_max_deg=hi)
-    write_rapid_module(paths[0], accepted, **limits)
-    write_ur_json(paths[1], accepted, **limits)
-    write_urscript(paths[2], accepted, **limits)
-    write_targets_csv(paths[3], accepted, **limits)
-    write_rejected_csv(paths[4], rejected)
-    return paths
+    rejected_path = write_rejected_csv(out / "rejected.csv", rejected)
+    if not accepted:
+        first = f"; first reason: {rejected[0].target_id}: {rejected[0].reason}" if rejected else ""
+        raise CampaignError(f"{out}: nothing to write: all {len(rejected)} targets rejected (reasons in "
+                            f"{rejected_path}){first}")
+    renderers = {"CalTargets.mod": render_rapid_module, "targets_ur.json": render_ur_json,
+                 "targets_ur.script": render_urscript, "targets.csv": render_targets_csv}
+    texts = {}
+    for fmt in formats:
+        for name in FORMATS[fmt]:
+            try:
+                texts[name] = renderers[name](accepted, **limits)
+            except ValueError as exc:
+                raise CampaignError(f"{out / name}: not written: {' '.join(str(exc).split())}") from None
+    paths = [atomic_write(out / name, text.encode("utf-8")) for name, text in texts.items()]
+    return paths + [rejected_path]
 
 
 # ---------------------------------------------------------------- closed-loop verification
@@ -244,3 +295,25 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "verify.json").write_text(json.dumps(report, indent=1))
     return VerifyResult(report, out_dir, status, reason)
+
+
+def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:
+    """(target_id, reason) rows of OUT_DIR/rejected.csv (empty when the file is absent)."""
+    try:
+        with open(Path(out_dir) / "rejected.csv", newline="", encoding="utf-8") as fh:
+            return [(row[0], row[1] if len(row) > 1 else "") for row in list(csv.reader(fh))[1:] if row]
+    except OSError:
+        return []
+
+
+def check_model_fits(cfg: CampaignConfig, model: CalibratedModel, source: str) -> None:
+    """The model must describe the config's robot: same joint count and convention (DataError otherwise)."""
+    kin, n = model.kinematics, len(cfg.robot.joints)
+    if kin.n != n:
+        raise DataError(source, f"the model has {kin.n} joints but the config's robot has {n}: not a model of this robot")
+    if kin.convention != cfg.robot.convention:
+        raise DataError(source, f"the model uses {kin.convention!r} parameters but the config {cfg.robot.convention!r}: "
+                                "not a model of this robot")
+    from .plausibility import Plausibility, check_deltas
+
+    check_deltas(nominal_kinematics(cfg), kin, source, Plausibility())   # a model of another robot: exit 2

@@ -22,7 +22,7 @@ def test_correct_cli_writes_checked_files_and_rejects_unsafe_targets(run_dir, tm
     targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1100,300,800\nC,700,-500,1200\nFAR,3000,0,1000\n")
     out = tmp_path / "out"
     assert main(["correct", "--config", CONFIG, "--model", str(run_dir / "model.json"), "--targets", str(targets),
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--format", "rapid", "--format", "ur", "--format", "csv"]) == 0
     text = (out / "CalTargets.mod").read_text()
     assert check_rapid_syntax(text) == []
     values = parse_rapid_module(text)
@@ -63,7 +63,7 @@ def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path
     targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1000,200,900\n")
     out = tmp_path / "out"
     assert main(["correct", "--config", str(cfg), "--model", str(run / "model.json"), "--targets", str(targets),
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--format", "ur", "--format", "csv"]) == 0
     rows = (out / "targets.csv").read_text().splitlines()
     assert rows[0].endswith("predicted_std_mm") and len(rows) == 3
     stds = [float(r.split(",")[-1]) for r in rows[1:]]
