@@ -234,6 +234,43 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
 
 
 # ---------------------------------------------------------------- closed-loop verification
+UNCORRECTED = "uncorrected (planned joints)"
+POOLED = "after correction (all passes pooled)"
+
+
+def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray, hi: np.ndarray,
+                 limit_deg: float) -> list[str | None]:
+    """Per point: None when the corrected joints q (N, n) rad may be commanded, else why it is held at q0."""
+    step = np.abs(q - q0)
+    out: list[str | None] = []
+    for i in range(len(q)):
+        over = np.flatnonzero(step[i] > limit_rad)
+        outside = np.flatnonzero((q[i] < lo) | (q[i] > hi))
+        if len(outside):
+            out.append(f"corrected joint {outside[0] + 1} outside its limits")
+        elif len(over):
+            out.append(f"correction of joint {over[0] + 1} > max_joint_correction_deg {limit_deg:g}")
+        else:
+            out.append(None)
+    return out
+
+
+def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str | None]) -> dict:
+    """One verify pass: counts of corrected and held points, held reasons, stats over all and corrected points."""
+    reasons: dict[str, int] = {}
+    for h in held:
+        if h is not None:
+            reasons[h] = reasons.get(h, 0) + 1
+    return {"stage": stage, "n_corrected": int(safe.sum()), "n_held": int((~safe).sum()), "held": reasons,
+            "all": error_stats(err).to_dict(), "corrected": error_stats(err[safe]).to_dict() if safe.any() else None}
+
+
+def atomic_write_json(path: Path, data: dict) -> Path:
+    from .fsutil import atomic_write
+
+    return atomic_write(path, json.dumps(data, indent=1, allow_nan=False).encode())
+
+
 @dataclass(frozen=True)
 class VerifyResult:
     report: dict
@@ -255,7 +292,9 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     target_tracker = transform_points(T_tb, p_d)
     before = np.array([p["p_tracker_mm"] for p in test_points]) - target_tracker
     floor = float(np.sqrt(np.mean(np.trace(measurement_covariance(cfg, target_tracker), axis1=1, axis2=2))))
-    rows = {"nominal (no correction)": error_stats(before).to_dict()}
+    rows = {UNCORRECTED: error_stats(before).to_dict()}
+    passes = [{"stage": UNCORRECTED, "n_corrected": 0, "n_held": len(ids), "held": {},
+               "all": rows[UNCORRECTED], "corrected": None}]
     R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
@@ -265,9 +304,11 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     lo, hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
     p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
     stage, status, reason = "model-corrected", "success", ""
-    corrected = []                                        # every measurement of the corrected points
+    corrected, corrected_only = [], []                    # every measurement; those of corrected points
+    safe = np.ones(len(ids), bool)
     for k in range(cfg.correction.closed_loop_iterations + 1):
-        safe = np.all((np.abs(q - q0) <= limit) & (q >= lo) & (q <= hi), axis=1)
+        held = held_reasons(q, q0, limit, lo, hi, cfg.correction.max_joint_correction_deg)
+        safe = np.array([h is None for h in held])
         q = np.where(safe[:, None], q, q0)                # an unsafe correction is never commanded
         points = [PlanPoint(f"{i}.v{k}", "verify", tuple(np.degrees(qq)), tuple(pd)) for i, qq, pd in zip(ids, q, p_d)]
         p_meas, status, reason = measure_fn(points)
@@ -275,25 +316,37 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
             break
         err = p_meas - target_tracker
         rows[stage] = error_stats(err).to_dict()
+        passes.append(pass_summary(stage, err, safe, held))
         corrected.append(err)
+        corrected_only.append(err[safe])
         if k == cfg.correction.closed_loop_iterations:
             break
         sigma = np.sqrt(np.trace(measurement_covariance(cfg, p_meas), axis1=1, axis2=2))
         significant = np.linalg.norm(err, axis=1) > cfg.correction.significance * sigma
         err_base = err @ T_tb[:3, :3]                     # rotate into the base frame
-        p_pseudo = np.where(significant[:, None], p_pseudo - err_base, p_pseudo)
+        p_cmd = (fk(kin, q) @ T_tool)[:, :3, 3]           # nominal position of what was commanded (held: q0)
+        p_pseudo = np.where(significant[:, None], p_cmd - err_base, p_pseudo)
         R_flange = np.broadcast_to(R_d[0] @ T_tool[:3, :3].T, (len(ids), 3, 3))
         q = np.where(significant[:, None],
                      solve_ik(kin, p_pseudo, R_flange, q, point_mm=T_tool[:3, 3]).q_rad, q)
         stage = f"closed loop {k + 1}"
     if corrected:
-        rows["after correction (all passes pooled)"] = error_stats(np.concatenate(corrected)).to_dict()
-    report = {"format": "campaign-verify/1", "run": str(run_dir), "n": len(ids), "noise_floor_mm": floor,
+        pooled = np.concatenate(corrected_only)
+        rows[POOLED] = error_stats(np.concatenate(corrected)).to_dict()
+        passes.append({"stage": POOLED, "n_corrected": int(len(pooled)),
+                       "n_held": int(sum(len(e) for e in corrected) - len(pooled)), "held": {},
+                       "all": rows[POOLED], "corrected": error_stats(pooled).to_dict() if len(pooled) else None})
+    report = {"format": "campaign-verify/2", "run": str(run_dir), "n": len(ids), "noise_floor_mm": floor,
               "n_uncorrected": int(np.sum(~safe)) if corrected else None,
-              "stages": rows, "exit_status": status, "reason": reason,
+              "stages": rows, "passes": passes, "exit_status": status, "reason": reason,
+              "definitions": {UNCORRECTED: "the test points commanded at their planned (nominal-IK) joints, "
+                                           "measured against the targets through the calibrated registration",
+                              "held": "points commanded at their planned joints in a corrected pass because the "
+                                      "correction would exceed a bound (reason per point count)",
+                              "corrected": "figures over the points whose correction was commanded"},
               "created_utc": datetime.now(timezone.utc).isoformat()}
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "verify.json").write_text(json.dumps(report, indent=1))
+    atomic_write_json(out_dir / "verify.json", report)
     return VerifyResult(report, out_dir, status, reason)
 
 

@@ -48,10 +48,14 @@ def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
     floor, stages = report["noise_floor_mm"], report["stages"]
     ratios = {k: v["rms_mm"] / floor for k, v in stages.items()}
     print("verify RMS / floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
-    assert ratios["nominal (no correction)"] > 10
+    assert ratios["uncorrected (planned joints)"] > 10
     assert ratios["model-corrected"] <= 1.2
     assert ratios["after correction (all passes pooled)"] <= 1.2
     assert all(r <= 1.3 for k, r in ratios.items() if k.startswith("closed loop"))
+    for p in report["passes"][1:]:                  # every pass says what it measured
+        assert p["n_corrected"] + p["n_held"] == (report["n"] if p["stage"] != "after correction (all passes pooled)"
+                                                  else p["n_corrected"] + p["n_held"])
+        assert p["n_held"] == sum(p["held"].values()) or p["stage"].startswith("after")
 
 
 def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path):
