@@ -23,6 +23,7 @@ MAX_SECONDS = 3_600.0           # any single wait (settle, timeout, simulated mo
 MAX_ITERATIONS = 10_000         # pseudo-target iterations
 MAX_CLOSED_LOOP = 20
 MAX_IDW_NEIGHBOURS = 10_000
+MAX_EFFECT_MM = 50.0            # a simulated non-geometric effect larger than this is a typo, not a robot
 PARALLEL_TOL_DEG = 1.0          # Hayati beta: axis i within this of axis i+1
 
 
@@ -122,6 +123,27 @@ def _check_effects(cfg) -> None:
     from .cell import simulated_effects
 
     effects = simulated_effects(cfg, cfg.robot.n_joints)
+    if not effects:
+        return
+    from robocal.effects import apply_effects
+    from robocal.kinematics import smr_tracker
+
+    from .cell import nominal_kinematics
+
+    kin = nominal_kinematics(cfg)
+    q = np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]
+    meta = {"t_s": np.array([3600.0]), "temp_c": np.array([25.0]), "payload_kg": np.array([cfg.tool.payload_kg])}
     for i, (eff, params) in enumerate(effects):
+        where = f"simulation.effects[{i}]"
         if not np.all(np.isfinite(params)):
-            raise ConfigError(cfg.source_path, f"simulation.effects[{i}].params", "non-finite effect parameters")
+            raise ConfigError(cfg.source_path, f"{where}.params", "non-finite effect parameters")
+        try:
+            with np.errstate(all="ignore"):
+                moved = apply_effects(kin, q, meta, ((eff, params),)) - smr_tracker(kin, q)
+        except (ValueError, IndexError, KeyError, TypeError, ZeroDivisionError) as exc:
+            raise ConfigError(cfg.source_path, f"{where}.params",
+                              f"effect {eff.name!r} cannot be evaluated: {exc}") from None
+        shift = float(np.max(np.linalg.norm(moved, axis=1)))
+        if not np.isfinite(shift) or shift > MAX_EFFECT_MM:
+            raise ConfigError(cfg.source_path, where, f"effect {eff.name!r} moves the SMR by {shift:.3g} mm at "
+                                                      f"q_ref_deg (max {MAX_EFFECT_MM:g} mm): not a robot error")

@@ -23,6 +23,7 @@ from .errors import CampaignError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
+from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
 
@@ -46,6 +47,8 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
     plan = build_plan(cfg, nominal_kinematics(cfg))
+    if resume is not None:
+        check_resume(resume, cfg, plan)                     # every record's content, before anything connects
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:

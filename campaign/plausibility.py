@@ -104,6 +104,9 @@ def check_dataset(ds, cfg):
     (the wrong-robot verdict first). Returns (dataset, Plausibility): the dataset without the rejected rows
     when forced, else unchanged."""
     state = Plausibility()
+    n = len(cfg.robot.joints)
+    if ds.q_deg.shape[1] != n:
+        raise DataError(ds.source, f"has {ds.q_deg.shape[1]} joint columns but the config's robot has {n} joints")
     ds = _check_magnitudes(ds)
     keep, state, limits_msg = _check_limits(ds, cfg, state)
     inside = ds.subset(keep) if limits_msg else ds
