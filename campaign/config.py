@@ -805,6 +805,9 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    from campaign.config_checks import check_joint_count  # before the plan's checks use the joints
+
+    check_joint_count(len(joints), r.file)
     return RobotConfig(
         model=model,
         url=url,

@@ -38,7 +38,11 @@ def check_config(cfg) -> None:
 
 
 def _check_joint_count(cfg, file: str) -> None:
-    n = cfg.robot.n_joints
+    check_joint_count(cfg.robot.n_joints, file)
+
+
+def check_joint_count(n: int, file: str) -> None:
+    """The campaign commands support 6-joint arms only (ConfigError at robot.joints otherwise)."""
     if n != SUPPORTED_JOINTS:
         raise ConfigError(file, "robot.joints", f"the campaign supports 6-joint arms (plan, IK branch and "
                                                 f"controller write-back are 6R), got {n} joints")
