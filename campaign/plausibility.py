@@ -204,7 +204,8 @@ def _check_unit(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibi
     if s_nom < 1e-6:
         return state, None
     scale = s_meas / s_nom
-    unit = next((name for name, f in _UNITS if abs(np.log(scale / f)) < np.log(1.25)), None)
+    unit = None if not scale > 0 else next(
+        (name for name, f in _UNITS if abs(np.log(scale / f)) < np.log(1.25)), None)
     state = replace(state, scale=scale, unit=unit or "unknown")
     if unit == "mm":
         return state, None
