@@ -46,9 +46,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                  console: Console | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
+    if resume is not None:
+        check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     plan = build_plan(cfg, nominal_kinematics(cfg))
     if resume is not None:
-        check_resume(resume, cfg, plan)                     # every record's content, before anything connects
+        check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:

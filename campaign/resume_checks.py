@@ -73,9 +73,27 @@ def record_problem(rec: dict, plan_points: dict, lo: list[float], hi: list[float
     return None
 
 
-def check_resume(run_dir: str | Path, cfg, plan) -> None:
-    """Every point record of RUN_DIR's log is checked against ``plan`` and ``cfg`` before anything moves;
-    then the whole log must convert to a dataset (as it will at the end of the run)."""
+def _plan_csv(run_dir: Path) -> list:
+    """The plan as the run wrote it (RUN_DIR/plan.csv), for checks before the plan is rebuilt."""
+    import csv
+
+    from .plan import PlanPoint
+
+    path = run_dir / "plan.csv"
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+        n = sum(1 for h in rows[0] if h[:1] == "q" and h[1:].isdigit())
+        return [PlanPoint(r[0], r[1], tuple(float(v) for v in r[2:2 + n]), tuple(float(v) for v in r[2 + n:5 + n]))
+                for r in rows[1:]]
+    except (OSError, UnicodeDecodeError, IndexError, ValueError, csv.Error):
+        raise RunLogError(str(path), "missing or unreadable plan.csv: not a resumable run directory") from None
+
+
+def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
+    """Every point record of RUN_DIR's log is checked against the plan (``plan``, or RUN_DIR/plan.csv when
+    None, so that a bad log is refused before the plan is even built) and ``cfg`` before anything moves; then
+    the whole log must convert to a dataset (as it will at the end of the run)."""
     from .interchange import dataset_from_log
 
     from .errors import CampaignError
@@ -86,10 +104,10 @@ def check_resume(run_dir: str | Path, cfg, plan) -> None:
     contents = read_log(run_dir)
     if contents.start.get("config_sha256") != cfg.sha256:
         raise CampaignError(f"{run_dir}: the config file changed since the run started; resume with the same config")
-    if contents.start.get("plan_sha256") != plan.sha256:
+    if plan is not None and contents.start.get("plan_sha256") != plan.sha256:
         raise CampaignError(f"{run_dir}: the plan differs from the one the run started with")
     lines = _point_lines(path)
-    plan_points = {p.point_id: p for p in plan.points}
+    plan_points = {p.point_id: p for p in (plan.points if plan is not None else _plan_csv(Path(run_dir)))}
     lo = [j.q_min_deg for j in cfg.robot.joints]
     hi = [j.q_max_deg for j in cfg.robot.joints]
     seen: set[str] = set()
