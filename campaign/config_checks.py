@@ -31,6 +31,7 @@ def check_config(cfg) -> None:
     """Raise ConfigError for the first cross-key problem of a parsed ``CampaignConfig``."""
     file = cfg.source_path
     _check_joint_count(cfg, file)
+    _check_magnitudes(cfg, file)
     _check_sizes(cfg, file)
     _check_hayati(cfg, file)
     _check_drivers(cfg, file)
@@ -84,6 +85,62 @@ def _check_sizes(cfg, file: str) -> None:
         raise ConfigError(file, "plan.check_poses.every_n_points",
                           f"the plan would hold up to {total} points with the check-pose repeats "
                           f"(max {MAX_PLAN_POINTS}): repeat less often")
+
+
+MAX_LENGTH_MM = 20_000.0        # any length, offset or position in the cell (a 20 m cell is already huge)
+MAX_ANGLE_DEG = 10_000.0        # joint limits and offsets (multi-turn axes stay far below)
+
+
+def _magnitudes(cfg) -> list[tuple[str, float, float]]:
+    """(key path, value, largest plausible |value|) of every physical number that feeds a computation."""
+    out: list[tuple[str, float, float]] = []
+    for i, j in enumerate(cfg.robot.joints):
+        for key in ("a_mm", "d_mm"):
+            out.append((f"robot.joints[{i}].{key}", getattr(j, key), MAX_LENGTH_MM))
+        for key in ("alpha_deg", "theta_deg", "q_min_deg", "q_max_deg"):
+            out.append((f"robot.joints[{i}].{key}", getattr(j, key), MAX_ANGLE_DEG))
+    vectors = [("tool.p_flange_smr_mm", cfg.tool.p_flange_smr_mm), ("tool.p_flange_smr2_mm", cfg.tool.p_flange_smr2_mm),
+               ("tool.p_flange_smr3_mm", cfg.tool.p_flange_smr3_mm),
+               ("tracker.position_in_base_mm", cfg.tracker.position_in_base_mm),
+               ("simulation.p_flange_smr_mm", cfg.simulation.p_flange_smr_mm),
+               ("plan.tool_direction", cfg.plan.tool_direction), ("plan.grid.center_mm", cfg.plan.grid.center_mm),
+               ("plan.grid.size_mm", cfg.plan.grid.size_mm)]
+    for key, vec in vectors:
+        for k, v in enumerate(vec or ()):
+            out.append((f"{key}[{k}]", v, MAX_LENGTH_MM))
+    for r in range(3):
+        out.append((f"simulation.T_tracker_base[{r}][3]", cfg.simulation.T_tracker_base[r][3], 10 * MAX_LENGTH_MM))
+    u = cfg.tracker.uncertainty
+    out += [("robot.repeatability_mm", cfg.robot.repeatability_mm, 10.0),
+            ("robot.max_joint_speed_deg_s", cfg.robot.max_joint_speed_deg_s, 10_000.0),
+            ("tool.smr_diameter_mm", cfg.tool.smr_diameter_mm, 1_000.0),
+            ("tool.payload_kg", cfg.tool.payload_kg, 10_000.0),
+            ("tracker.uncertainty.transverse_a_um", u.transverse_a_um, 100_000.0),
+            ("tracker.uncertainty.transverse_b_um_per_m", u.transverse_b_um_per_m, 100_000.0),
+            ("tracker.uncertainty.range_a_um", u.range_a_um, 100_000.0),
+            ("tracker.uncertainty.range_b_um_per_m", u.range_b_um_per_m, 100_000.0),
+            ("tracker.uncertainty.coverage_k", u.coverage_k, 100.0),
+            ("tracker.measurement.stability_mm", cfg.tracker.measurement.stability_mm, 1_000.0),
+            ("simulation.geometric_error_scale", cfg.simulation.geometric_error_scale, 100.0),
+            ("calibration.ridge_mu", cfg.calibration.ridge_mu, 1e6),
+            ("calibration.k1", cfg.calibration.k1, 1e3),
+            ("calibration.idw_power", cfg.calibration.idw_power, 100.0),
+            ("correction.threshold_mm", cfg.correction.threshold_mm, 1_000.0),
+            ("correction.max_joint_correction_deg", cfg.correction.max_joint_correction_deg, 360.0),
+            ("correction.max_position_correction_mm", cfg.correction.max_position_correction_mm, MAX_LENGTH_MM),
+            ("correction.significance", cfg.correction.significance, 1e3)]
+    smr_shift = max(abs(a - b) for a, b in zip(cfg.simulation.p_flange_smr_mm, cfg.tool.p_flange_smr_mm))
+    out.append(("simulation.p_flange_smr_mm", smr_shift, 100.0))
+    out.append(("plan.grid.step_mm", cfg.plan.grid.step_mm, MAX_LENGTH_MM))      # true vs nominal SMR: a few mm, not metres
+    return out
+
+
+def _check_magnitudes(cfg, file: str) -> None:
+    """Every physical number within a plausible magnitude (1e300 mm passes 'finite' and overflows later)."""
+    for key, value, limit in _magnitudes(cfg):
+        if abs(value) > limit:
+            what = "differs from tool.p_flange_smr_mm by" if key == "simulation.p_flange_smr_mm" else "is"
+            raise ConfigError(file, key, f"{what} {value:.6g}: expected at most {limit:g} in magnitude")
 
 
 def _check_hayati(cfg, file: str) -> None:
