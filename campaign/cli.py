@@ -4,9 +4,11 @@ Subcommands register themselves with :func:`command`; each handler receives
 the parsed ``argparse.Namespace`` and returns the exit code. Operator-facing
 errors are printed as one red line on stderr, never as a traceback:
 
-* ``ConfigError`` / ``DataError`` -> exit 2 (same as a command-line usage error)
-* any other ``CampaignError`` (e.g. ``RunAborted``) -> exit 1
-* Ctrl-C -> exit 130
+* ``ConfigError`` / ``DataError`` / ``PlausibilityError`` -> exit 2 (same as a command-line usage error)
+* any other ``CampaignError`` (e.g. ``RunAborted``) or ``DriverError`` -> exit 1
+* ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
+* Ctrl-C, SIGTERM, SIGHUP -> exit 130
+* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)
 """
 
 from __future__ import annotations
