@@ -92,6 +92,7 @@ def diagnosis_input(ds: Dataset, cfg: CampaignConfig) -> tuple[DiagnosisInput, d
 def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions = DiagnosisOptions()
                      ) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract."""
+    _check(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     inp, info = diagnosis_input(ds, cfg)
     info["plausibility"] = plaus.to_dict()
