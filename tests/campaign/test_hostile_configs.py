@@ -185,6 +185,7 @@ def _write(tmp_path: Path, case: Case) -> Path:
     return path
 
 
+@pytest.mark.unit
 def test_table_size():
     assert len(CASES) >= 40
 

@@ -188,6 +188,7 @@ def _write(tmp: Path, base: dict, case: Case) -> Path:
     return path
 
 
+@pytest.mark.unit
 def test_table_size():
     assert len(CASES) >= 30
 

@@ -122,6 +122,7 @@ LOG_CASES: dict[str, LogCase] = {
 }
 
 
+@pytest.mark.unit
 def test_log_table_size():
     assert len(LOG_CASES) >= 15
 
@@ -331,3 +332,47 @@ def test_real_entry_point_alias_bomb_and_file_size_limit(tmp_path):
     assert proc.returncode == 1, err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and "too large" in err.lower(), err
     read_log(tmp_path / "run")                     # the records written before the limit are intact
+
+
+# ----------------------------------------------------------------------------------------------- correct
+
+def _targets(tmp: Path, rows: list[str]) -> Path:
+    path = tmp / "targets.csv"
+    path.write_text("target_id,x,y,z\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.unit
+def test_correct_all_rejected_exits_1_with_the_reasons(base, tmp_path, capsys):
+    targets = _targets(tmp_path, ["FAR1,3000,0,1000", "FAR2,0,3500,0"])
+    out_dir = tmp_path / "out"
+    code, out, err = cli(capsys, "correct", "--config", base["config"], "--model", base["run"] / "model.json",
+                         "--targets", targets, "--out", out_dir)
+    assert_one_line(code, out, err, 1, "nothing to write", "all 2 targets rejected", "FAR1")
+    assert "2 of 2 targets rejected" in out and "FAR2: unreachable" in out
+    assert sorted(p.name for p in out_dir.iterdir()) == ["rejected.csv"]
+    assert (out_dir / "rejected.csv").read_text().count("unreachable") == 2
+
+
+@pytest.mark.unit
+def test_correct_model_of_another_robot_exits_2(base, tmp_path, capsys):
+    other = small_config(tmp_path, "irb4600")
+    targets = _targets(tmp_path, ["A,900,0,1000"])
+    code, out, err = cli(capsys, "correct", "--config", other, "--model", base["run"] / "model.json",
+                         "--targets", targets, "--out", tmp_path / "out")
+    assert_one_line(code, out, err, 2, "model.json", "beyond physical bounds")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.unit
+def test_correct_long_id_is_rejected_with_its_reason_and_only_the_controllers_formats(base, tmp_path, capsys):
+    long_id = "L" * 90
+    targets = _targets(tmp_path, ["A,900,0,1000", f"{long_id},1000,100,900"])
+    out_dir = tmp_path / "out"
+    code, out, err = cli(capsys, "correct", "--config", base["config"], "--model", base["run"] / "model.json",
+                         "--targets", targets, "--out", out_dir)
+    assert code == 0, err
+    assert "1 of 2 targets rejected" in out and "at most 80 characters" in out
+    assert sorted(p.name for p in out_dir.iterdir()) == ["CalTargets.mod", "rejected.csv", "targets.csv"]  # ABB
+    header = (out_dir / "targets.csv").read_text().splitlines()[0]
+    assert "predicted_std_mm" not in header            # IDW model: no all-nan column
