@@ -128,9 +128,15 @@ def signals_as_interrupt() -> Iterator[None]:
 def guarded(run: Callable[[], int], argv: Sequence[str], run_dir_hint: Callable[[], Path | None],
             fail: Callable[[str, int], int]) -> int:
     """Call ``run()`` inside the boundary; ``fail(message, code)`` prints one line and returns ``code``."""
+    import warnings
+
     try:
-        with signals_as_interrupt():
-            return run()
+        with signals_as_interrupt(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            code = run()
+        for text in (_unique_warnings(caught) if code == EXIT_OK else []):   # one line each, success only
+            fail(f"warning: {text}", code)
+        return code
     except BaseException as exc:  # noqa: BLE001 - this IS the boundary
         if isinstance(exc, SystemExit):
             raise
@@ -148,3 +154,13 @@ def guarded(run: Callable[[], int], argv: Sequence[str], run_dir_hint: Callable[
 def _short(exc: BaseException, limit: int = 160) -> str:
     text = " ".join(str(exc).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _unique_warnings(caught, limit: int = 3) -> list[str]:
+    """Python warnings raised during a command as short one-line texts (no file/line/source dump)."""
+    seen: list[str] = []
+    for w in caught:
+        text = f"{w.category.__name__}: {' '.join(str(w.message).split())}"
+        if text not in seen:
+            seen.append(text)
+    return seen[:limit]

@@ -13,14 +13,16 @@ from pathlib import Path
 from campaign.cli import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
+MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
+
 
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if not 1 <= value <= MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"expected an integer in [1, {MAX_SEEDS}], got {text!r}")
     return value
 
 
