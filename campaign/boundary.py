@@ -49,9 +49,9 @@ def os_error_line(exc: OSError) -> tuple[str, int]:
 
 def classify(exc: BaseException) -> tuple[str, int] | None:
     """(one-line message, exit code) for an expected error, None for a crash."""
-    from drivers.base import DriverError
+    from drivers.base import DriverConfigError, DriverError
 
-    if isinstance(exc, (ConfigError, DataError, PlausibilityError)):
+    if isinstance(exc, (ConfigError, DataError, PlausibilityError, DriverConfigError)):
         return f"error: {exc}", EXIT_BAD_INPUT
     if isinstance(exc, (CampaignError, DriverError)):
         return f"error: {exc}", EXIT_FAILED

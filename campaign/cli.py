@@ -24,7 +24,7 @@ from rich.console import Console
 from campaign.config import load_config
 from campaign.plausibility import forced
 from campaign.errors import CampaignError, ConfigError, DataError
-from drivers.base import DriverError
+from drivers.base import DriverConfigError, DriverError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
