@@ -102,6 +102,9 @@ CASES: dict[str, Case] = {
                                         needles=("tracker.url", "host:port")),
     "tracker_socket_bad_port": Case(_set("tracker.url", "tracker+socket://localhost:99999"),
                                     needles=("tracker.url",)),
+    "emscon_without_host": Case(_set("tracker.url", "emscon://"), needles=("tracker.url", "HOST")),
+    "emscon_option_typo": Case(lambda d: _set("tracker.options", {"meas_tme_ms": 100})(
+        _set("tracker.url", "emscon://10.0.0.2")(d)), needles=("tracker.options", "meas_tme_ms")),
     "tracker_serial_without_device": Case(_set("tracker.url", "tracker+serial://"), needles=("tracker.url",)),
     "tracker_option_typo": Case(lambda d: _set("tracker.options", {"tiemout_s": 2})(
         _set("tracker.url", "tracker+socket://127.0.0.1:7000")(d)), needles=("tracker.options", "tiemout_s")),
