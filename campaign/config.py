@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
+from campaign.yaml_limits import load_limited, read_limited
 
 __all__ = [
     "CALIBRATION_METHODS",
@@ -447,7 +448,7 @@ def load_config(path: str | Path) -> CampaignConfig:
     """
     file = str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_limited(path)
     except FileNotFoundError:
         raise ConfigError(file, "", "file not found") from None
     except IsADirectoryError:
@@ -468,8 +469,12 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
         raise ConfigError(file, "", "empty config file (expected a mapping of sections)")
     if not isinstance(doc, dict):
         raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
-    return _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
-                     sha256=hashlib.sha256(data).hexdigest())
+    cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
+                    sha256=hashlib.sha256(data).hexdigest())
+    from campaign.config_checks import check_config  # cross-key checks: drivers, sizes, Hayati, effects
+
+    check_config(cfg)
+    return cfg
 
 
 class _StrictSafeLoader(yaml.SafeLoader):
@@ -494,7 +499,7 @@ class _StrictSafeLoader(yaml.SafeLoader):
 def _parse_yaml(text: str, file: str) -> Any:
     """Safe-load YAML text; syntax errors become one-line ``ConfigError``s."""
     try:
-        return yaml.load(text, Loader=_StrictSafeLoader)  # noqa: S506 - a SafeLoader subclass
+        return load_limited(text, _StrictSafeLoader, file)  # size and alias-expansion limits
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "syntax error"
@@ -814,6 +819,9 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    from campaign.config_checks import check_joint_count  # before the plan's checks use the joints
+
+    check_joint_count(len(joints), r.file)
     return RobotConfig(
         model=model,
         url=url,

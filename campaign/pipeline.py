@@ -19,10 +19,11 @@ from drivers.registry import open_robot, open_tracker
 
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
-from .errors import CampaignError
+from .errors import CampaignError, ConfigError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
+from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
 from .tracker_quality import SmrPredictor
@@ -46,7 +47,14 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                  console: Console | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
+    if resume is not None:
+        check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     plan = build_plan(cfg, nominal_kinematics(cfg))
+    if not plan.points:
+        raise ConfigError(cfg.source_path, "plan", f"no reachable point to measure ({len(plan.skipped)} skipped"
+                          + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
+    if resume is not None:
+        check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:

@@ -19,6 +19,7 @@ import numpy as np
 from drivers.base import BeamBroken, Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
 
 from .config import MeasurementConfig
+from .errors import Terminated
 from .plan import PlanPoint
 from .runlog import RunLog
 from .tracker_quality import check_device_stability, device_covariance
@@ -84,10 +85,11 @@ class Runner:
             log.append_event({"type": "pause", "reason": str(exc), "t_s": self.clock.now()})
             log.close("paused", str(exc))
             return RunOutcome("paused", str(exc), n)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             self._safe_stop()
-            log.close("abort", "interrupted by the operator (Ctrl-C)")
-            return RunOutcome("abort", "interrupted by the operator (Ctrl-C)", n)
+            why = str(exc) if isinstance(exc, Terminated) else "interrupted by the operator (Ctrl-C)"
+            log.close("abort", why)
+            return RunOutcome("abort", why, n)
         except DriverError as exc:
             self._safe_stop()
             reason = " ".join(str(exc).split())
