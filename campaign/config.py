@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
+from campaign.yaml_limits import load_limited, read_limited
 
 __all__ = [
     "CALIBRATION_METHODS",
@@ -61,12 +62,15 @@ __all__ = [
 
 ROBOT_SCHEMES = frozenset({"mock", "abb-rws", "ur-rtde"})
 TRACKER_SCHEMES = frozenset(
-    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop"}
+    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop", "emscon"}
 )
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "gpr", "none")
+RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
+OUTLIER_SCREENS = ("local", "none")
+MODEL_EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
+                      "axis_coupling")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
 EFFECT_NAMES = (
@@ -301,9 +305,17 @@ class PlanConfig:
 class CalibrationConfig:
     """Identification settings (the whole section is optional).
 
-    Defaults: ``method`` robust_ridge, ``weights`` igg3, ``k0`` 1.5 < ``k1`` 2.5
+    Defaults: ``method`` lm, ``weights`` igg3 (robust_ridge only), ``k0`` 1.5 < ``k1`` 2.5
     (IGG-III thresholds, in units of sigma), ``ridge_mu`` 1e-6 (>= 0),
-    ``residual`` idw, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1).
+    ``residual`` auto, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1),
+    ``outliers`` local, ``effects`` auto, ``cv_folds`` 5 (int >= 2).
+
+    ``outliers``: ``local`` excludes a point only as a measurement fault (residual isolated against its
+    neighbours in joint space and in the workspace, tracker statistics, repeats); ``none`` keeps all.
+    ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
+    ``none``, or a list of effect specs (``name`` in ``MODEL_EFFECT_NAMES``, optional ``params`` with the
+    factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
+    ``residual`` ``auto`` chooses none / idw / gpr by k-fold CV and keeps a layer only on a significant gain.
 
     ``residual`` (one of ``RESIDUAL_MODELS``) is the layer fitted on top of
     the kinematic model: ``idw`` inverse distance weighting over positions
@@ -322,6 +334,9 @@ class CalibrationConfig:
     residual: str
     idw_power: float
     idw_k_nearest: int
+    outliers: str = "local"
+    effects: str | tuple["EffectSpec", ...] = "auto"
+    cv_folds: int = 5
 
 
 @dataclass(frozen=True, slots=True)
@@ -447,7 +462,7 @@ def load_config(path: str | Path) -> CampaignConfig:
     """
     file = str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_limited(path)
     except FileNotFoundError:
         raise ConfigError(file, "", "file not found") from None
     except IsADirectoryError:
@@ -468,8 +483,12 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
         raise ConfigError(file, "", "empty config file (expected a mapping of sections)")
     if not isinstance(doc, dict):
         raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
-    return _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
-                     sha256=hashlib.sha256(data).hexdigest())
+    cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
+                    sha256=hashlib.sha256(data).hexdigest())
+    from campaign.config_checks import check_config  # cross-key checks: drivers, sizes, Hayati, effects
+
+    check_config(cfg)
+    return cfg
 
 
 class _StrictSafeLoader(yaml.SafeLoader):
@@ -494,7 +513,7 @@ class _StrictSafeLoader(yaml.SafeLoader):
 def _parse_yaml(text: str, file: str) -> Any:
     """Safe-load YAML text; syntax errors become one-line ``ConfigError``s."""
     try:
-        return yaml.load(text, Loader=_StrictSafeLoader)  # noqa: S506 - a SafeLoader subclass
+        return load_limited(text, _StrictSafeLoader, file)  # size and alias-expansion limits
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "syntax error"
@@ -814,6 +833,9 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    from campaign.config_checks import check_joint_count  # before the plan's checks use the joints
+
+    check_joint_count(len(joints), r.file)
     return RobotConfig(
         model=model,
         url=url,
@@ -973,15 +995,34 @@ def _calibration(r: _Reader) -> CalibrationConfig:
     if k1 <= k0:
         raise r.error("k1", f"expected a number > k0 = {_fmt(k0)}, got {_fmt(k1)}")
     return CalibrationConfig(
-        method=r.choice("method", CALIBRATION_METHODS, "robust_ridge"),
+        method=r.choice("method", CALIBRATION_METHODS, "lm"),
         weights=r.choice("weights", WEIGHT_FUNCTIONS, "igg3"),
         k0=k0,
         k1=k1,
         ridge_mu=r.number("ridge_mu", 1e-6, lo=0.0),
-        residual=r.choice("residual", RESIDUAL_MODELS, "idw"),
+        residual=r.choice("residual", RESIDUAL_MODELS, "auto"),
         idw_power=r.number("idw_power", 2.0, positive=True),
         idw_k_nearest=r.integer("idw_k_nearest", 8, lo=1),
+        outliers=r.choice("outliers", OUTLIER_SCREENS, "local"),
+        effects=_model_effects(r),
+        cv_folds=r.integer("cv_folds", 5, lo=2, hi=20),
     )
+
+
+def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
+    """``calibration.effects``: ``auto`` | ``none`` | a list of effect specs of the robot model."""
+    value = r.data.get("effects", "auto")
+    if value is None or isinstance(value, str):
+        return r.choice("effects", ("auto", "none"), "auto")
+    specs = _effects(r)
+    where = r.child_list("effects")
+    for i, spec in enumerate(specs):
+        if spec.name not in MODEL_EFFECT_NAMES:
+            raise ConfigError(r.file, where.key_path(i) + ".name", f"effect {spec.name!r} is not a robot effect "
+                              f"(expected one of: {', '.join(MODEL_EFFECT_NAMES)})")
+        if spec.scale != 1.0:
+            raise ConfigError(r.file, where.key_path(i) + ".scale", "scale applies to simulated effects only")
+    return specs
 
 
 def _correction(r: _Reader) -> CorrectionConfig:

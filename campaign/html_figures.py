@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STAGES = (("nominal", "nominal"), ("kinematic", "kinematic"), ("compensated", "kinematic + residual"))
+STAGES = (("nominal", "nominal"), ("kinematic", "kinematic"), ("compensated", "final model"))
 COLORS = {"nominal": "tab:red", "kinematic": "tab:blue", "compensated": "tab:green"}
 SET_STYLE = {"calib": ("o", "tab:blue", "calibration"), "test": ("^", "tab:orange", "test (held out)"),
              "check": ("s", "tab:purple", "check (repeated)"), "nest": ("*", "tab:red", "reference nest")}

@@ -24,10 +24,9 @@ from markupsafe import Markup
 
 from .errors import DataError
 from .fsutil import atomic_write
+from .report import STAGE_LABELS
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
-STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
-                ("compensated", "kinematic + residual compensation"))
 
 
 @dataclass(frozen=True)

@@ -17,15 +17,17 @@ from drivers.base import SystemClock
 from drivers.mock import MockWorld
 from drivers.registry import open_robot, open_tracker
 
-from .cell import measurement_covariance, nominal_kinematics, simulated_cell
+from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
-from .errors import CampaignError
+from .errors import CampaignError, ConfigError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
 from .html_report import write_report
 from .process import Processed, process, write_outputs
+from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
+from .tracker_quality import SmrPredictor
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,14 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                  console: Console | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
+    if resume is not None:
+        check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     plan = build_plan(cfg, nominal_kinematics(cfg))
+    if not plan.points:
+        raise ConfigError(cfg.source_path, "plan", f"no reachable point to measure ({len(plan.skipped)} skipped"
+                          + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
+    if resume is not None:
+        check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:
@@ -56,8 +65,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
+        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
-            runner.on_point = lambda point, record: advance()
+            runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
+                                                     advance())
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
@@ -103,6 +115,8 @@ def verify(run_dir: Path, console: Console | None = None):
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
         def measure(points):
             got = []
@@ -115,6 +129,16 @@ def verify(run_dir: Path, console: Console | None = None):
             log.close(result.exit_status, result.reason)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
+
+
+def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
+    """Where to aim the tracker after a beam break: nominal model + registration from the point ``records`` measured
+    so far (a resumed or verified run's), else the config's rough tracker position."""
+    predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+    for record in records:
+        if record.get("q_read_deg") is not None and record.get("p_tracker_mm") is not None:
+            predictor.observe(record["q_read_deg"], record["p_tracker_mm"])
+    return predictor
 
 
 def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):

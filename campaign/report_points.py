@@ -13,12 +13,13 @@ import numpy as np
 
 
 def point_table(point_ids, sets, q_deg: np.ndarray, p_tracker_mm: np.ndarray, T_tracker_base: np.ndarray,
-                predictions_tracker_mm: Mapping[str, Callable[[np.ndarray], np.ndarray]], weights_calib: np.ndarray,
-                calib_mask: np.ndarray, t_s: np.ndarray | None = None) -> dict:
+                predictions_tracker_mm: Mapping[str, Callable[[np.ndarray], np.ndarray]], used: np.ndarray,
+                t_s: np.ndarray | None = None) -> dict:
     """The ``points`` dict of report.json.
 
     ``predictions_tracker_mm[stage](rows)`` -> predicted SMR positions (len(rows), 3) mm in the tracker frame for
-    row indices ``rows``; ``weights_calib`` are the robust weights of the calib rows (0 = rejected)."""
+    row indices ``rows``; ``used`` (N,): 1 = the row is in the fit, 0 = an excluded calib row, NaN = not a calib
+    row."""
     q = np.asarray(q_deg, float)
     has_q = np.all(np.isfinite(q), axis=1)
     rows = np.flatnonzero(has_q)
@@ -30,10 +31,8 @@ def point_table(point_ids, sets, q_deg: np.ndarray, p_tracker_mm: np.ndarray, T_
         e = np.full((len(q), 3), np.nan)
         e[rows] = (p_tracker_mm[rows] - predict(rows)) @ R
         err[stage] = _rounded(e, 4)
-    weight = np.full(len(q), np.nan)
-    weight[np.flatnonzero(calib_mask)] = weights_calib
     return {"point_id": list(point_ids), "set": list(sets), "q_deg": _rounded(q, 4),
-            "p_base_mm": _rounded(p_base, 4), "err_base_mm": err, "weight": _rounded(weight, 4),
+            "p_base_mm": _rounded(p_base, 4), "err_base_mm": err, "used": _rounded(used, 0),
             "t_s": None if t_s is None else _rounded(np.asarray(t_s, float), 3)}
 
 

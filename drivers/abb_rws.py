@@ -801,3 +801,19 @@ def open_robot(url: str, options: Mapping[str, Any], **context: Any) -> AbbRwsRo
         opts = replace(opts, n_joints=int(context["n_joints"]))
     credentials = load_credentials(opts.credentials, context.get("environ"))
     return AbbRwsRobot(url, opts, credentials, transport=context.get("transport"))
+
+
+def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> None:
+    """What ``open_robot`` checks, without credentials or a connection: the url's host and the options."""
+    parts = urlsplit(url)
+    try:
+        parts.port
+    except ValueError as exc:
+        raise DriverError(f"{url}: {exc}") from None
+    if parts.scheme != "abb-rws" or not parts.hostname:
+        raise DriverError(f"{url}: expected abb-rws://host[:port]")
+    opts = RwsOptions.from_mapping(options or {})
+    n = context.get("n_joints")
+    if n is not None and "n_joints" not in (options or {}) and not 1 <= int(n) <= 6:
+        raise DriverError(f"{url}: an ABB robot has 1 to 6 robot axes, the config has {n} joints")
+    del opts

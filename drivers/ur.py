@@ -581,3 +581,20 @@ def _six(values: Sequence[float], name: str) -> list[float]:
     if len(vals) != 6 or not all(math.isfinite(v) for v in vals):
         raise _Failure("lost", f"{name} is not 6 finite values ({vals}); no valid RTDE data")
     return vals
+
+
+def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> None:
+    """What ``open_robot`` checks, without starting the worker: the url (host only) and the options."""
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError as exc:
+        raise DriverError(f"{url}: {exc}") from None
+    if parts.scheme != "ur-rtde" or not parts.hostname:
+        raise DriverError(f"{url}: expected ur-rtde://<controller host>")
+    if port is not None or parts.path not in ("", "/"):
+        raise DriverError(f"{url}: ur_rtde uses the controller's fixed ports (29999, 30003, 30004); give only the host")
+    UROptions.from_mapping(url, options or {})
+    n = context.get("n_joints")
+    if n is not None and int(n) != 6:
+        raise DriverError(f"{url}: a UR arm has 6 joints, the config has {n}")
