@@ -322,7 +322,8 @@ def _plot_joints(plt, maps, report, path):
         ax.set_ylabel("RMS (mm)")
         ax.set_ylim(bottom=0)
     axes.ravel()[0].legend(fontsize=8)
-    fig.suptitle("Residual RMS over each joint's range")
+    gaps = any(v is None for m in maps["geometric"]["joints"] for v in m["rms_mm"])
+    fig.suptitle("Residual RMS over each joint's range" + ("; gaps: bins without points" if gaps else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -339,7 +340,8 @@ def _plot_time(plt, maps, report, path):
     ax.set_ylabel("RMS (mm)")
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=8)
-    ax.set_title("Residual RMS over time")
+    gaps = any(v is None for v in maps["geometric"]["time"]["rms_mm"])
+    ax.set_title("Residual RMS over time" + ("; gaps: intervals without points" if gaps else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
