@@ -51,6 +51,14 @@ def _arr(rows) -> np.ndarray:
     return np.array([[np.nan if v is None else v for v in r] for r in rows], float) if rows else np.zeros((0, 3))
 
 
+def _stages(err: dict) -> tuple:
+    """(key, label) of the stages to draw; the final model is drawn once when it equals the kinematic one (no
+    effects, no residual layer) instead of two curves on top of each other."""
+    if np.array_equal(err.get("compensated"), err.get("kinematic"), equal_nan=True):
+        return (("nominal", "nominal"), ("kinematic", "kinematic = final model"))
+    return STAGES
+
+
 def _points(report: dict):
     """(sets (N,), p_base (N, 3), q_deg (N, n), {stage: |err| (N,)}) of report.json's points section."""
     pts = report.get("points")
@@ -97,9 +105,11 @@ def histogram_figure(report: dict) -> Figure | None:
     if not test.any():
         return None
     floor = report["noise_floor_mm"]
-    fig, axes = _subplots(1, 3, (12, 3.6), left=0.06, bottom=0.16, top=0.9, wspace=0.28)
+    stages = _stages(err)
+    fig, axes = _subplots(1, len(stages), (4 * len(stages), 3.6), left=0.06 * 3 / len(stages), bottom=0.16, top=0.9,
+                          wspace=0.28)
     axes = axes[0]
-    for ax, (key, label) in zip(axes, STAGES):
+    for ax, (key, label) in zip(axes, stages):
         e = err[key][test]
         ax.hist(e[np.isfinite(e)], bins=20, color=COLORS[key], alpha=0.8)
         ax.axvline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor:.3f} mm")
@@ -122,7 +132,7 @@ def cdf_figure(report: dict) -> Figure | None:
         return None
     fig, axes = _subplots(1, 1, (7.5, 4.2), left=0.1, bottom=0.14, top=0.96)
     ax = axes[0][0]
-    for key, label in STAGES:
+    for key, label in _stages(err):
         e = np.sort(err[key][test][np.isfinite(err[key][test])])
         ax.step(e, np.arange(1, len(e) + 1) / len(e), where="post", color=COLORS[key], label=label)
     ax.axvline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
@@ -147,7 +157,7 @@ def reach_height_figure(report: dict) -> Figure | None:
     axes = axes[0]
     reach = np.hypot(p[test, 0], p[test, 1])
     for ax, x, xl in zip(axes, (reach, p[test, 2]), ("reach: radius from the J1 axis (mm)", "height z (mm)")):
-        for key, label in STAGES:
+        for key, label in _stages(err):
             ax.plot(x, err[key][test], ".", ms=4, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
         ax.set_yscale("log")
@@ -174,8 +184,8 @@ def joints_figure(report: dict) -> Figure | None:
         if j >= n:
             ax.axis("off")
             continue
-        for key, label in STAGES[1:]:
-            ax.plot(q[test, j], err[key][test], ".", ms=3, color=COLORS[key], label=label, alpha=0.8)
+        for key, label in _stages(err)[1:]:
+            ax.plot(q[test, j], err[key][test], ".", ms=5, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
         ax.set_ylim(bottom=0)
         ax.set_xlabel(f"J{j + 1} (deg)")
