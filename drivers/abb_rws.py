@@ -133,11 +133,11 @@ class RwsOptions:
     start_rapid: bool = False                 # start a stopped CalServer at connect (PP per ``entry`` + start)
     entry: str = "routine"                    # routine: PP to cal_run, restored to main at close; main: PP to main
     motors_on: bool = False                   # switch motors on at connect (AUTO only)
-    speed: tuple[float, float, float, float] = (200.0, 100.0, 5000.0, 1000.0)   # speeddata mm/s, deg/s, mm/s, deg/s
+    speed: tuple[float, float, float, float] = (200.0, 100.0, 200.0, 1000.0)    # speeddata mm/s, deg/s, mm/s, deg/s
     settle_s: float = 0.5
     poll_s: float = 0.25
     health_s: float = 1.0
-    max_poll_rate_hz: float = 4.0             # requests/s ceiling while waiting for CalServer
+    max_poll_rate_hz: float = 3.0             # requests/s ceiling of the polls while waiting for CalServer
     timeouts: Timeouts = field(default_factory=Timeouts)
     retry: RetryPolicy = field(default_factory=RetryPolicy)
     credentials: CredentialOptions = field(default_factory=CredentialOptions)

@@ -180,7 +180,7 @@ def test_moves_and_joints(emu, robot):
         assert robot.read_joints() == pytest.approx(q, abs=1e-4)
     assert [m[1] for m in emu.moves] == [tuple(map(float, q)) for q in targets]
     assert parse_literal(emu.symbol("cal_reached"))[0] == pytest.approx(targets[-1])
-    assert parse_literal(emu.symbol("cal_speed")) == [200.0, 100.0, 250.0, 1000.0]   # v_leax clamped to the cap
+    assert parse_literal(emu.symbol("cal_speed")) == [200.0, 100.0, 200.0, 1000.0]
     assert emu.session_count == 1 and emu.counts["sessions"] == 1
     robot.close()
     robot.close()
@@ -704,15 +704,31 @@ def test_abb_robot_client_drives_calserver_handshake(make_emu):
     client.logout()
 
 
-def test_abb_robot_client_rws2_if_available(make_emu):
-    """Only the Mesh-ch fork of abb_robot_client has an RWS 2.0 client; the released package has none."""
+@pytest.mark.parametrize("implicit", [True, False], ids=["implicit", "explicit"])
+def test_rw7_client_reads_state_and_writes_pers(make_emu, implicit):
+    """A public RW7 client: the RWS 2.0 class ``RWS2`` of the Mesh-ch fork of abb_robot_client (GitHub
+    Mesh-ch/abb_robot_client, 0.5.3; requests + Basic over HTTPS). Not on PyPI, so it is skipped unless installed
+    (``pip install git+https://github.com/Mesh-ch/abb_robot_client``); see docs/drivers_abb.md."""
     rws2 = pytest.importorskip("abb_robot_client.rws2")
-    emu = make_emu(2)
+    emu = make_emu(2, implicit_mastership=implicit)
     client = rws2.RWS2(emu.base_url, USER, PASSWORD)
-    assert client.get_controller_state() == "motoron"
+    assert emu.tls and client.get_controller_state() == "motoron" and client.get_operation_mode() == "AUTO"
     assert client.get_execution_state().ctrlexecstate == "running"
-    client.set_rapid_variable("CalServer/cal_settle_s", "0.75")
-    assert client.get_rapid_variable("CalServer/cal_settle_s") == "0.75"
+    assert client.get_jointtarget("T_ROB1").robax.tolist() == [0, 0, 0, 0, 30, 0]  # /rw/rapid/tasks/T_ROB1/motion/...
+    assert client.get_robtarget().rot.tolist() == [0, 0, 1, 0]
+    assert client.get_speedratio() == 100
+    client.set_rapid_variable("CalServer/cal_settle_s", "0.75")                      # a PERS write
+    assert client.get_rapid_variable("CalServer/cal_settle_s") == "0.75" == emu.symbol("cal_settle_s")
+    client.set_rapid_variable("CalServer/cal_target", fmt_jointtarget([15, 25, 35, 45, 55, 65]))
+    client.set_rapid_variable("CalServer/cal_settle_s", "0")
+    client.set_rapid_variable("CalServer/cal_kind", "1")
+    client.set_rapid_variable("CalServer/cal_req_seq", "1")                          # the CalServer handshake
+    for _ in range(300):
+        if client.get_rapid_variable("CalServer/cal_done_seq") == "1":
+            break
+        time.sleep(0.01)
+    assert client.get_jointtarget().robax.tolist() == [15, 25, 35, 45, 55, 65]
+    assert not emu.mastership                                                        # the client released it
 
 
 # --------------------------------------------------------------------------- issue 13: routine entry, mastership, caps
