@@ -12,8 +12,8 @@ boundary (``move_joints`` / ``read_joints``); TCP positions are reported in mm.
 
 Moves use ``moveJ(q, speed, acceleration, asynchronous=True)``; the worker then watches the robot
 itself until it has settled over a sliding window of ``settle_hold_s``: the window's mean ``|actual_q - target|``
-within ``in_position_tol_deg``, its mean ``|actual_qd|`` below ``settle_qd_rad_s`` and the spread (max - min) of
-each joint within ``settle_band_deg``, so encoder noise and a decaying servo oscillation neither block nor fake
+within ``in_position_tol_deg``, each joint's drift (least-squares slope of ``actual_q``) below ``settle_qd_rad_s``
+and its spread (max - min) within ``settle_band_deg``, so encoder noise and a decaying servo oscillation neither block nor fake
 the settle. While waiting it checks that RTDE data keep arriving (controller timestamp advancing), the safety
 and robot modes, the control script, and whether ``stop()`` asked for a ``stopJ``.
 
@@ -86,7 +86,7 @@ class UROptions:
     ``speed_rad_s`` / ``acceleration_rad_s2``: moveJ speed and acceleration of the leading joint.
     ``frequency_hz``: RTDE rate, -1 = library default (125 Hz CB3, 500 Hz e-Series).
     ``settle_qd_rad_s`` / ``settle_hold_s`` / ``settle_band_deg``: settled when, over a window of ``settle_hold_s``,
-    the mean |qd| of every joint is below the threshold and each joint's spread stays within the band.
+    every joint's drift (slope of actual_q) is below the threshold and its spread stays within the band.
     ``in_position_tol_deg``: max |mean q - target| accepted as "in position" (deg, like the Robot protocol).
     ``power_on``: power on and release the brakes through the Dashboard at connect.
     ``unlock_protective_stop``: unlock a protective stop through the Dashboard before the next move (the
@@ -661,7 +661,11 @@ class _Worker:
             while int(self.rtde_r.getSafetyMode()) == PROTECTIVE_STOP:
                 if time.monotonic() > deadline:
                     raise _Failure("motion", f"protective stop not unlocked within {self.o.protective_stop_wait_s:g} s")
-                self.dash.unlockProtectiveStop()
+                try:
+                    self.dash.unlockProtectiveStop()
+                except RuntimeError as exc:        # "Cannot unlock protective stop until 5s after occurrence"
+                    if "cannot unlock" not in str(exc).lower():
+                        raise
                 time.sleep(0.2)
             self.dash.closeSafetyPopup()
             status = self.op_status()
@@ -692,8 +696,12 @@ class _Worker:
             raise _Failure("lost", "RTDE control connection closed")
         return self.rtde_c
 
-    def _check_motion_state(self) -> None:
-        """Raise MotionError-kind failures for safety stops, robot mode or a dead control script."""
+    def _check_motion_state(self, *, fresh: bool = False) -> None:
+        """Raise MotionError-kind failures for safety stops, robot mode or a dead control script. The control
+        interface's stream can see the script end before the receive stream shows why: a dead script is
+        re-checked against one fresh receive sample."""
+        if fresh:
+            self._fresh_timestamp()
         status = self.op_status()
         self.pstop_seen = self.pstop_seen or status["safety_mode"] == PROTECTIVE_STOP
         if status["safety_mode"] not in (1, 2):
@@ -701,6 +709,8 @@ class _Worker:
         if status["robot_mode"] != ROBOT_MODE_RUNNING:
             raise _Failure("motion", f"robot mode {status['robot_mode']} ({status['robot_mode_name']})")
         if not self._controller().isProgramRunning():
+            if not fresh:
+                return self._check_motion_state(fresh=True)
             raise _Failure("motion", "the rtde_control script is not running")
 
     def _motion_failure(self, what: str) -> _Failure:
@@ -757,27 +767,29 @@ class _Settle:
                                    f"(controller timestamp stuck at {ts:.3f} s)")
 
     def _evaluate(self, q: Sequence[float], qd: Sequence[float], now: float) -> list[float] | None:
-        """Settled: over a full window, mean q within ``tol`` of the target, mean |qd| below the threshold and each
-        joint's spread within the band. Returns the window's mean q (rad)."""
+        """Settled: over a full window, mean q within ``tol`` of the target, each joint's drift (least-squares slope
+        of q over time, insensitive to the differentiation noise of actual_qd) below ``settle_qd_rad_s`` and its
+        spread within the band. Returns the window's mean q (rad)."""
         q, qd = _six(q, "actual_q"), _six(qd, "actual_qd")
         self.window.append((now, q, qd))
         while now - self.window[0][0] > self.o.settle_hold_s:
             self.window.popleft()
-        n = len(self.window)
-        cols = list(zip(*(w[1] for w in self.window)))
-        mean_q = [sum(c) / n for c in cols]
-        mean_qd = [abs(sum(c) / n) for c in zip(*(w[2] for w in self.window))]
-        spread = max(max(c) - min(c) for c in cols)
-        error = max(abs(a - b) for a, b in zip(mean_q, self.target))
-        full = now - self.window[0][0] >= 0.9 * self.o.settle_hold_s
-        still = full and max(mean_qd) < self.o.settle_qd_rad_s and spread <= self.band
+        t = np.array([w[0] for w in self.window])
+        qs = np.array([w[1] for w in self.window])                       # (n, 6) rad
+        mean_q = qs.mean(axis=0)
+        error = float(np.max(np.abs(mean_q - self.target)))
+        full = t[-1] - t[0] >= 0.9 * self.o.settle_hold_s
+        dt = t - t.mean()
+        slope = np.abs(dt @ (qs - mean_q)) / max(float(dt @ dt), 1e-12) if full else np.full(6, np.inf)
+        spread = float(np.max(qs.max(axis=0) - qs.min(axis=0)))
+        still = full and float(slope.max()) < self.o.settle_qd_rad_s and spread <= self.band
         self.still_since = (self.still_since or now) if still else None
         if error <= self.tol:
             self.arrived_at = self.arrived_at or now
             if still:
-                return mean_q
+                return mean_q.tolist()
             if now - self.arrived_at > self.o.settle_timeout_s:
-                raise _Failure("motion", f"in position but not settled (mean |qd| {max(mean_qd):.2g} rad/s, "
+                raise _Failure("motion", f"in position but not settled (drift {float(slope.max()):.2g} rad/s, "
                                          f"spread {math.degrees(spread):.3g} deg) within {self.o.settle_timeout_s:.1f} s")
         elif still and now - self.still_since > self.o.stall_s:
             raise _Failure("motion", f"robot stopped {math.degrees(error):.4f} deg from the target")
