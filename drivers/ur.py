@@ -161,6 +161,7 @@ def _option_value(url: str, key: str, value: Any) -> Any:
 class URRobot:
     """A UR arm behind ur_rtde; implements the ``Robot`` protocol (degrees at this boundary)."""
     n_joints = 6
+    DEFAULT_LIMITS = MotionLimits()      # 250 mm/s, 100 %: in force until ``set_motion_limits``
 
     def __init__(self, url: str, host: str, options: UROptions) -> None:
         self.url, self.host, self.options = url, host, options
@@ -173,7 +174,7 @@ class URRobot:
         self._own_log = False
         self.last_settled_deg: tuple[float, ...] | None = None
         self.last_speed_rad_s: float | None = None     # the moveJ speed actually sent for the last move
-        self._limits = MotionLimits()                  # safe default until the runner sets the campaign's caps
+        self._limits = self.DEFAULT_LIMITS             # safe default until the runner sets the campaign's caps
         self._identity: dict[str, str] | None = None
 
     def __repr__(self) -> str:
