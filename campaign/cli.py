@@ -160,14 +160,14 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_targets_csv, write_corrected
+    from campaign.correction import correct_targets, read_targets_csv, recorded_identity, write_corrected
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
     cfg = load_config(args.config)
     model = load_model(args.model)
     targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets)
+    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     paths = write_corrected(cfg, accepted, rejected, args.out)
     out = _stdout()
     res = [t.predicted_residual_mm for t in accepted]
