@@ -33,7 +33,7 @@ HAL_JSON_V2 = "application/hal+json;v=2.0"
 FORM_V2 = "application/x-www-form-urlencoded;v=2.0"
 FILE_V2 = "text/plain;v=2.0"
 
-# The RobotWare return codes the driver reacts to or reports (full table: shared/docs/rws_retcodes.tsv).
+# The RobotWare return codes the driver reacts to or reports (names as in ABB's RWS return-code list).
 RETCODE_NAMES = {
     294912: "S_OK", -1073445879: "E_INVALIDARG", -1073445867: "E_UAS_REJECT", -1073445866: "E_UNRESOLVED_URL",
     -1073445862: "E_RESOURCE_HELD", -1073445860: "E_MODE_REJECT", -1073445859: "E_MASTER_REJECT",

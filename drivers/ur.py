@@ -1,7 +1,7 @@
 """Universal Robots driver (``ur-rtde://host``) on the ur_rtde library, run in a supervised worker process.
 
 ur_rtde holds the Python interpreter while its constructors connect and can block for minutes in
-``moveJ`` after a lost connection (see ``/work/shared/docs/ur_rtde.md`` section 3). So every library call
+``moveJ`` after a lost connection (see ``docs/drivers_ur.md``). So every library call
 runs in a worker process (``multiprocessing`` spawn context) that owns the ``RTDEControlInterface`` and
 ``RTDEReceiveInterface``; the parent talks to it over a pipe with a small request/response protocol
 ``(id, op, args) -> (id, status, payload)`` and puts a hard wall-clock timeout on every call. When a call

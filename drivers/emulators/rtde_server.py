@@ -18,7 +18,17 @@ fixed ports (the library cannot be pointed elsewhere):
 
 The emulated arm is a nominal UR10 (DH, metres/radians inside): ``movej`` moves all joints on a
 synchronised trapezoidal profile whose leading axis respects the commanded speed and acceleration and
-ends exactly on the target; ``actual_TCP_pose`` is the DH forward kinematics with the active TCP.
+ends exactly on the target; ``actual_TCP_pose`` is the DH forward kinematics with the active TCP. The script
+emulation also runs ``setPayload`` (command 17; a [0, 0, 0] CoG keeps the current one, as the real script does)
+and records every movej speed and the highest TCP speed reached (``STATE``).
+
+Dashboard: ``power on`` (-> IDLE), ``brake release`` (-> RUNNING), ``unlock protective stop`` (refused with UR's
+message until ``--unlock-delay`` s, default 5, after the stop), ``close safety popup``, ``is in remote control``
+(``--no-remote-control``), serial number, model and PolyScope version. A protective stop halts the arm and ends
+the script program (ur_rtde's ``reuploadScript`` starts it again once unlocked).
+
+Standstill noise (``--q-noise-rad``, ``--qd-noise-rad-s``, ``--ring-rad``, ``--seed``): white noise on
+``actual_q`` / ``actual_qd`` and a decaying ~7 Hz oscillation after each move, to test settle detection.
 
 A line-oriented back door on an extra port (``--control-port``, default ephemeral) injects state and
 faults for tests: ``STATE``, ``SETQ``, ``MODE``, ``SAFETY``, ``DROP``, ``FREEZE``, ``HANG`` (the control

@@ -1,6 +1,7 @@
 """Localhost emulator of an ABB controller's Robot Web Services: RWS 1.0 (IRC5) or RWS 2.0 (OmniCore).
 
-It implements what ``drivers.abb_rws`` and ``abb_robot_client.rws.RWS`` use, following ``shared/docs/rws.md``:
+It implements what ``drivers.abb_rws`` and public RWS clients (``abb_robot_client.rws.RWS`` for RWS 1.0, the RWS 2.0
+client ``RWS2`` of the Mesh-ch fork of abb_robot_client) use:
 
 - authentication: real Digest (RFC 7616 / 2617, MD5, ``qop="auth"``, realm ``validusers@robapi.abb``, fresh nonce
   per challenge, stale nonces rejected) on 1.0; Basic on 2.0 (Digest rejected);
@@ -9,20 +10,31 @@ It implements what ``drivers.abb_rws`` and ``abb_robot_client.rws.RWS`` use, fol
   and the session's mastership;
 - representations: 1.0 ``?json=1`` (``_embedded._state``, ``Content-Type: application/json`` exactly) or XHTML;
   2.0 HAL (``state[]`` / ``_embedded.resources[]``) requiring ``Accept: …;v=2.0`` (else 406) and ``;v=2.0``
-  request bodies (else 415); error envelopes with the RobotWare return codes of ``rws_retcodes.tsv``;
-- controller model: operating mode, controller state, RAPID execution state and cycle, program pointer,
-  mastership per domain and session, a task ``T_ROB1`` whose modules are parsed from uploaded ``.mod`` text
-  (module-level ``PERS``/``VAR``/``CONST`` declarations become typed RAPID symbols), a file service (``$HOME``,
-  ``$TEMP``, ``$RAMDISK``), the ROB_1 joint and Cartesian state, speed ratio and an event log;
-- rules: motors on only in AUTO; start only in AUTO with motors on, stopped, PP set (2.0: caller holds no edit
-  mastership); resetpp/loadmod only when stopped and with edit mastership; foreign mastership -> 403
-  ``-1073445862``; missing mastership -> 403 ``-1073445859``; bad literal -> 400 ``-1073445879``; unknown symbol ->
-  1.0 400 ``-1073414146`` / 2.0 404 ``-1073442816``; missing load file -> 400 ``-1073438708``;
-- a thread that plays ``CalServer.mod`` while RAPID runs and the module is loaded: resync on PP-to-main, ack,
-  move the simulated robot at ``joint_speed_deg_s`` (interrupted if RAPID stops or motors go off), call the
-  ``move_hook`` (plug the campaign's mock world in here), dwell ``cal_settle_s``, set ``cal_reached`` and done;
+  request bodies (else 415); error envelopes with RobotWare return codes;
+- controller model: operating mode, controller state, RAPID execution state and cycle, the program pointer
+  (module, routine), mastership per domain and session (``internal`` for motion while RAPID runs), a task ``T_ROB1``
+  whose modules are parsed from uploaded ``.mod`` text (module-level ``PERS``/``VAR``/``CONST`` declarations
+  become typed RAPID symbols, procedures and what ``main`` calls are recorded), a production program
+  ``MainModule`` (its ``main`` calls ``cal_run`` or not: ``customer_program``), a file service (``$HOME``,
+  ``$TEMP``, ``$RAMDISK``), the ROB_1 joint and Cartesian state (also as the task's ``motion/jointtarget`` and
+  ``motion/robtarget`` read by RW7 clients), speed ratio, identity (``/ctrl/identity``, robot type, system
+  options with or without ``Absolute Accuracy``) and an event log;
+- rules: motors on only in AUTO; start only in AUTO with motors on, stopped, PP set, program linked (2.0: caller
+  holds no edit mastership); resetpp / PP to routine / loadmod only when stopped and with edit mastership;
+  a second ``main`` (or main calling an unknown procedure) loads but does not link, as on a controller: elog
+  "Link error" and start / PP moves answer 400 ``-1073442802``; PP to a routine with parameters -> 400
+  ``-1073442801``; foreign mastership -> 403 ``-1073445862``; missing mastership (and, with
+  ``implicit_mastership=False``, writes with ``mastership=implicit``) -> 403 ``-1073445859``; bad literal -> 400
+  ``-1073445879``; unknown symbol -> 1.0 400 ``-1073414146`` / 2.0 404 ``-1073442816``; missing load file -> 400
+  ``-1073438708``;
+- a thread that plays ``CalServer.mod`` while RAPID runs cal_run (PP at cal_run, or at a main calling it):
+  resync on a PP move, ack, ``cal_limit`` (clamp the speed to ``cal_vmax``, VelSet override; recorded with the
+  ``cal_tool`` load in ``executed``), move the simulated robot at ``joint_speed_deg_s`` x override (interrupted if
+  RAPID stops or motors go off), call the ``move_hook`` (plug the campaign's mock world in here), dwell
+  ``cal_settle_s``, set ``cal_reached`` and done; ``cal_state`` mirrors [ack, done, err];
 - fault injection: 503 storms, 401 (session expiry) on the next requests, motors off / RAPID stop / RAPID-side
-  error / hang on the next move, manual mode, foreign mastership, extra elog entries.
+  error / hang on the next move, manual mode, foreign mastership (optionally released after N refusals), extra
+  elog entries.
 
 Not implemented: subscriptions / WebSockets, IO signals, RMMP, configuration, XHTML on RWS 2.0 beyond the basics.
 
@@ -64,7 +76,7 @@ log = logging.getLogger(__name__)
 
 REALM = "validusers@robapi.abb"
 S_OK = 294912
-E = {  # return codes used here -> description (shared/docs/rws_retcodes.tsv)
+E = {  # RobotWare return codes used here -> description
     -1073445879: "An argument specified by the client is not valid for this type of operation.",
     -1073445866: "The URL used to initialize the helper does not resolve to a valid object.",
     -1073445862: "Requested resource is held by someone else.",
