@@ -603,7 +603,19 @@ class AbbRwsRobot:
         try:
             self._command(KIND_PING, {}, "ping", move_s=0.0)
         except MotionError as exc:
-            raise RobotNotReady(f"{self.url}: CalServer does not answer ({exc})") from exc
+            raise RobotNotReady(f"{self.url}: CalServer does not answer ({exc}){self._pp_hint()}") from exc
+
+    def _pp_hint(self) -> str:
+        """Where the program pointer is, for a CalServer that does not answer (best effort)."""
+        try:
+            item = self._first_item(self._routes.pcp(self.opts.task))
+        except DriverError:
+            return ""
+        module, routine = item.get("modulemame") or item.get("modulename"), item.get("routinename")
+        if not module or str(routine).lower() == ENTRY_ROUTINE:
+            return ""
+        return (f"; the program pointer is in {module}/{routine}: run {ENTRY_ROUTINE} (PP to routine, or call "
+                f"'{ENTRY_ROUTINE};' from main)")
 
     def _install_calserver(self) -> None:
         """Upload and verify CalServer, stop RAPID, load it with PP to main, and start RAPID."""

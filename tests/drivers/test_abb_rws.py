@@ -892,3 +892,11 @@ def test_polling_never_exceeds_the_request_rate(make_emu, make_robot, version):
     polls = len(emu.requests) - before - 8                         # minus the request writes
     assert polls >= 2 and polls <= 50.0 * sum(slept) + 1
     robot.close()
+
+
+def test_production_program_running_without_calserver_is_explained(make_emu, make_robot):
+    emu = make_emu(1, customer_program="plain")                  # RAPID runs the production main, not cal_run
+    assert emu.pp == ("MainModule", "main") and emu.execution == "stopped"
+    emu.set_execution(True)
+    with pytest.raises(RobotNotReady, match=r"program pointer is in MainModule/main: run cal_run"):
+        make_robot(emu).connect()
