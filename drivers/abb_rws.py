@@ -408,6 +408,8 @@ class AbbRwsRobot:
                              f"got {tcp} mm/s, {pct} %")
         self._limits = MotionLimits(tcp, pct)
         self._capped_warned = False
+        if self.session.client is not None and self.session.routes is not None:
+            self._write_values(self._motion_arguments())
 
     def set_payload(self, payload: Payload) -> None:
         """Load data of ``cal_tool`` (tool0's frame): mass (kg) and centre of gravity (mm, flange frame); written
@@ -534,6 +536,7 @@ class AbbRwsRobot:
         self._check_version()
         self._sync_seq()
         self._ping()
+        self._write_values(self._motion_arguments())     # cached from here on: a move writes 3 symbols
 
     def _check_opmode(self) -> None:
         mode = self._opmode()
@@ -658,13 +661,15 @@ class AbbRwsRobot:
         then the trigger. The speed is clamped to the motion limits here, before anything is sent."""
         values = dict(args, cal_kind=str(kind))
         if kind != KIND_PING:
-            values.update(cal_speed="[" + ",".join(fmt_num(v) for v in self._speeddata()) + "]",
-                          cal_settle_s=fmt_num(self.opts.settle_s),
-                          cal_vmax=fmt_num(self._limits.max_tcp_speed_mm_s),
-                          cal_override=fmt_num(min(100.0, self._limits.max_joint_speed_pct)),
-                          cal_tool=self._tool_literal())
+            values.update(self._motion_arguments())
         values["cal_req_seq"] = str(seq)
         self._write_values(values)
+
+    def _motion_arguments(self) -> dict[str, str]:
+        """The cached arguments of a motion request: capped speed, settle time, caps and tool (RAPID literals)."""
+        return {"cal_speed": "[" + ",".join(fmt_num(v) for v in self._speeddata()) + "]",
+                "cal_settle_s": fmt_num(self.opts.settle_s), "cal_vmax": fmt_num(self._limits.max_tcp_speed_mm_s),
+                "cal_override": fmt_num(min(100.0, self._limits.max_joint_speed_pct)), "cal_tool": self._tool_literal()}
 
     def _speeddata(self) -> tuple[float, float, float, float]:
         """``options.speed`` with v_tcp and v_leax clamped to the TCP speed cap (mm/s)."""
