@@ -176,6 +176,7 @@ class URRobot:
         self.last_speed_rad_s: float | None = None     # the moveJ speed actually sent for the last move
         self._limits = self.DEFAULT_LIMITS             # safe default until the runner sets the campaign's caps
         self._identity: dict[str, str] | None = None
+        self._payload: tuple[float, list[float]] | None = None   # sent at connect when set before it
 
     def __repr__(self) -> str:
         return f"URRobot({self.url!r}, worker={'alive' if self.worker_alive else 'none'})"
@@ -193,6 +194,8 @@ class URRobot:
             self._start_worker()
             status = self._call("connect", (), self.options.connect_timeout_s)
             self._identity = dict(status.get("identity", {}))
+            if self._payload is not None:
+                self._call("set_payload", self._payload, self.options.call_timeout_s)
         except BaseException:
             self.close()
             raise
@@ -265,7 +268,9 @@ class URRobot:
             raise RobotError(f"{self.url}: payload needs a mass >= 0 kg and a finite CoG (mm), got {payload}")
         if not any(cog_m):
             cog_m[2] = 1e-6
-        self._call("set_payload", (mass, cog_m), self.options.call_timeout_s)
+        self._payload = (mass, cog_m)
+        if self.worker_alive:
+            self._call("set_payload", self._payload, self.options.call_timeout_s)
 
     def identity(self) -> dict[str, str]:
         """vendor, model, controller_type (CB3 / e-Series), serial, software_version (PolyScope), remote_control;
@@ -525,15 +530,23 @@ class _Worker:
         version = str(self.dash.polyscopeVersion())
         major = int(version.split(".")[0]) if version.split(".")[0].isdigit() else 0
         modern = tuple(int(v) for v in version.split(".")[:2] if v.isdigit()) >= (5, 6)
-        model = str(self.dash.getRobotModel()).strip()
+        model = self._dashboard_text(self.dash.getRobotModel)
         family = re.match(r"UR\d+", model)
         if family and family.group(0) in RATED_JOINT_SPEED_RAD_S:
             self.rated_rad_s = RATED_JOINT_SPEED_RAD_S[family.group(0)]
             self.dh = UR_DH.get(family.group(0) + ("e" if major >= 5 else ""))
-        serial = str(self.dash.getSerialNumber()).strip() if modern else "unknown (PolyScope < 5.6)"
+        serial = self._dashboard_text(self.dash.getSerialNumber) if modern else "unknown (PolyScope < 5.6)"
         remote = ("true" if self.dash.isInRemoteControl() else "false") if modern else "n/a"
         return {"vendor": "Universal Robots", "model": model, "controller_type": "e-Series" if major >= 5 else "CB3",
                 "serial": serial, "software_version": f"PolyScope {version}", "remote_control": remote}
+
+    @staticmethod
+    def _dashboard_text(query: Any) -> str:
+        """A Dashboard answer as text, or ``unknown`` if this PolyScope does not support the query."""
+        try:
+            return str(query()).strip() or "unknown"
+        except RuntimeError:
+            return "unknown"
 
     def _power_on(self) -> None:
         """Dashboard power on (-> IDLE) and brake release (-> RUNNING), bounded by ``connect_timeout_s``."""

@@ -424,9 +424,9 @@ def test_speed_cap_and_payload_reach_the_controller():
     for emu in _emulator():
         rb = open_robot(f"ur-rtde://{emu.host}", FAST)
         try:
+            rb.set_payload(Payload(3.0, (0.0, 0.0, 50.0)))            # before connect: sent once connected
             rb.connect()
             rb.set_motion_limits(MotionLimits(max_tcp_speed_mm_s=150.0, max_joint_speed_pct=30.0))
-            rb.set_payload(Payload(3.0, (0.0, 0.0, 50.0)))
             rb.move_joints([4, -86, 86, -90, -90, 0])              # TCP-bound: base joint far from the TCP
             rb.move_joints([4, -86, 86, -90, -90, 40])             # joint-bound: the wrist barely moves the TCP
         finally:
