@@ -728,6 +728,7 @@ class RwsEmulator:
             ("GET", r"/rw/panel/opmode", self._get_opmode), ("GET", r"/rw/panel/speedratio", self._get_speedratio),
             ("POST", r"/rw/panel/speedratio", self._set_speedratio), ("GET", r"/rw/rapid/execution", self._get_exec),
             ("GET", r"/rw/rapid/tasks", self._get_tasks), ("GET", r"/rw/mastership/(\w+)", self._get_mastership),
+            ("GET", r"/rw/motionsystem/mechunits", self._get_mechunits),
             ("GET", r"/rw/motionsystem/mechunits/(\w+)/jointtarget", self._get_jointtarget),
             ("GET", r"/rw/motionsystem/mechunits/(\w+)/robtarget", self._get_robtarget),
             ("GET", r"/rw/elog/(\d+)", self._get_elog), ("GET", r"/ctrl/identity", self._get_identity),
@@ -884,7 +885,7 @@ class RwsEmulator:
     def _resetpp(self, req: Request, s: _Session) -> None:
         if self.execution == "running":
             raise _Reject(400, EXEC_STATE, "RAPID is running")
-        self._require_edit(s, explicit=self.version == 2)
+        self._require_edit(s, explicit=self.version == 2, implicit=self._implicit(req))
         self._require_linked()
         main = next((m.name for m in self.modules.values() if m.has_main), None)
         if main is None:
@@ -904,7 +905,7 @@ class RwsEmulator:
             raise _Reject(400 if self.version == 1 else 404, E_FAIL, "unknown task")
         if self.execution == "running":
             raise _Reject(400, EXEC_STATE, "RAPID is running")
-        self._require_edit(s, explicit=True)
+        self._require_edit(s, explicit=True, implicit=self._implicit(req))
         self._require_linked()
         form = req.form()
         module = self.modules.get(form.get("module", "").lower())
@@ -916,6 +917,13 @@ class RwsEmulator:
         self.pp, self._fresh_start = (module.name, routine), True
         self.add_elog(1, 10006, "Program pointer moved to routine", f"{module.name}/{routine}")
         return Response(204)
+
+    def _implicit(self, req: Request) -> bool:
+        """RWS 2.0 ``?mastership=implicit`` accepted (unless the controller is set to refuse implicit mastership)."""
+        return self.version == 2 and req.q("mastership") == "implicit" and self.implicit_mastership
+
+    def _get_mechunits(self, req: Request, s: _Session) -> Response:
+        return self._ok(req, [{"_type": "ms-mechunit-li", "_title": "ROB_1", "mode": "Activated"}], collection=True)
 
     def _get_pcp(self, req: Request, s: _Session, task: str) -> Response:
         module, routine = self.pp or ("", "")
@@ -1049,7 +1057,7 @@ class RwsEmulator:
             raise _Reject(400 if self.version == 1 else 404, E_FAIL, "unknown task")
         if self.execution == "running":
             raise _Reject(400 if self.version == 1 else 403, EXEC_STATE, "Operation not allowed for current PGM state")
-        self._require_edit(s, explicit=True, implicit=req.q("mastership") == "implicit")
+        self._require_edit(s, explicit=True, implicit=self._implicit(req))
         form = req.form()
         if verb == "unloadmod":
             return self._unload(form.get("module", ""))

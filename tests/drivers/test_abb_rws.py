@@ -728,6 +728,14 @@ def test_rw7_client_reads_state_and_writes_pers(make_emu, implicit):
             break
         time.sleep(0.01)
     assert client.get_jointtarget().robax.tolist() == [15, 25, 35, 45, 55, 65]
+    assert client.get_mechunits() == ["ROB_1"] and "T_ROB1" in client.get_tasks()
+    assert client.read_event_log()[0].seqnum == emu.elog[-1]["seqnum"]
+    client.stop()
+    if implicit:                                                                     # resetpp?mastership=implicit
+        client.resetpp()
+        assert emu.pp == ("MainModule", "main")
+    client.start()
+    assert client.get_execution_state().ctrlexecstate == "running"
     assert not emu.mastership                                                        # the client released it
 
 
