@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import random
 import re
 import stat
 import time
@@ -33,7 +34,7 @@ log = logging.getLogger(__name__)
 DEFAULT_USER, DEFAULT_PASSWORD = "Default User", "robotics"   # ABB's documented factory account
 CALSERVER_VERSION = 2                                          # cal_version expected in CalServer.mod
 ENTRY_ROUTINE = "cal_run"                                      # CalServer's entry procedure (no main of its own)
-_CACHED = ("cal_speed", "cal_settle_s", "cal_vmax", "cal_override", "cal_tool")
+_CACHED = ("cal_speed", "cal_settle_s", "cal_vmax", "cal_override", "cal_tool", "cal_epoch")
 UNUSED_AXIS = 9e9
 KIND_PING, KIND_MOVEABSJ, KIND_MOVEL = 0, 1, 2
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
@@ -331,6 +332,7 @@ class AbbRwsRobot:
         self._restore_pp = False                  # we moved the PP to cal_run: put it back to main at close
         self._identity: dict[str, str] | None = None
         self._capped_warned = False
+        self._epoch = random.SystemRandom().randint(1, 999_999)   # marks this session's cached arguments
 
     @property
     def _routes(self) -> Routes:
@@ -408,6 +410,7 @@ class AbbRwsRobot:
                              f"got {tcp} mm/s, {pct} %")
         self._limits = MotionLimits(tcp, pct)
         self._capped_warned = False
+        self._epoch = random.SystemRandom().randint(1, 999_999)   # marks this session's cached arguments
         if self.session.client is not None and self.session.routes is not None:
             self._write_values(self._motion_arguments())
 
@@ -661,15 +664,25 @@ class AbbRwsRobot:
         then the trigger. The speed is clamped to the motion limits here, before anything is sent."""
         values = dict(args, cal_kind=str(kind))
         if kind != KIND_PING:
+            self._check_epoch()
             values.update(self._motion_arguments())
         values["cal_req_seq"] = str(seq)
         self._write_values(values)
+
+    def _check_epoch(self) -> None:
+        """A reloaded CalServer has its PERS initial values again (speed, caps, tool): if ``cal_epoch`` is not this
+        session's mark, forget what was cached so every argument is written again before the trigger."""
+        if self._written and int(parse_num(self._read("cal_epoch"))) != self._epoch:
+            log.warning("%s: %s was reloaded since the last request; writing every argument again", self.url,
+                        self.opts.module)
+            self._written.clear()
 
     def _motion_arguments(self) -> dict[str, str]:
         """The cached arguments of a motion request: capped speed, settle time, caps and tool (RAPID literals)."""
         return {"cal_speed": "[" + ",".join(fmt_num(v) for v in self._speeddata()) + "]",
                 "cal_settle_s": fmt_num(self.opts.settle_s), "cal_vmax": fmt_num(self._limits.max_tcp_speed_mm_s),
-                "cal_override": fmt_num(min(100.0, self._limits.max_joint_speed_pct)), "cal_tool": self._tool_literal()}
+                "cal_override": fmt_num(min(100.0, self._limits.max_joint_speed_pct)), "cal_tool": self._tool_literal(),
+                "cal_epoch": str(self._epoch)}
 
     def _speeddata(self) -> tuple[float, float, float, float]:
         """``options.speed`` with v_tcp and v_leax clamped to the TCP speed cap (mm/s)."""

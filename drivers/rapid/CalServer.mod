@@ -64,6 +64,9 @@ MODULE CalServer
     ! tool0's frame carrying the payload (kg, centre of gravity mm in the
     ! flange frame); the PC writes the load data.
     PERS tooldata cal_tool:=[TRUE,[[0,0,0],[1,0,0,0]],[0.001,[0,0,0.001],[1,0,0,0],0,0,0]];
+    ! Written by the PC with the arguments above; 0 again after a reload
+    ! of this module (the PC then writes every argument anew).
+    PERS num cal_epoch:=0;
 
     VAR num cal_seq:=0;
     VAR jointtarget cal_check;

@@ -908,3 +908,21 @@ def test_production_program_running_without_calserver_is_explained(make_emu, mak
     emu.set_execution(True)
     with pytest.raises(RobotNotReady, match=r"program pointer is in MainModule/main: run cal_run"):
         make_robot(emu).connect()
+
+
+def test_reloaded_calserver_gets_every_argument_again(emu, make_robot):
+    """A module reload resets the PERS to their initial values (speed, caps, tool): the driver notices through
+    cal_epoch before the next trigger and rewrites them, so the caps hold."""
+    robot = make_robot(emu)
+    robot.set_motion_limits(MotionLimits(max_tcp_speed_mm_s=80.0, max_joint_speed_pct=50.0))
+    robot.set_payload(Payload(7.0, (0.0, 0.0, 40.0)))
+    robot.connect()
+    robot.move_joints([1, 1, 1, 1, 31, 1])
+    for name, initial in (("cal_speed", "[200,100,5000,1000]"), ("cal_vmax", "250"), ("cal_override", "100"),
+                          ("cal_epoch", "0"), ("cal_tool", "[TRUE,[[0,0,0],[1,0,0,0]],[0.001,[0,0,0.001],"
+                                                            "[1,0,0,0],0,0,0]]")):
+        emu.set_symbol(name, initial)                          # what a reload of the module does
+    robot.move_joints([2, 2, 2, 2, 32, 2])
+    rec = emu.executed[-1]
+    assert rec["vmax"] == 80.0 and rec["v_tcp_programmed"] <= 80.0 and rec["override"] == 50.0
+    assert rec["load_kg"] == 7.0
