@@ -91,6 +91,7 @@ class UROptions:
     ``power_on``: power on and release the brakes through the Dashboard at connect.
     ``unlock_protective_stop``: unlock a protective stop through the Dashboard before the next move (the
     controller refuses it for 5 s; retried for up to ``protective_stop_wait_s``); off = the operator unlocks.
+    ``tool_radius_mm``: the TCP speed cap also holds for points this far from the TCP (SMR, tool body).
     ``stall_s``: standing still this long away from the target -> MotionError.
     ``settle_timeout_s``: in position but not settled this long -> MotionError.
     ``stale_after_s``: controller timestamp must advance within this, else ConnectionLost.
@@ -116,6 +117,7 @@ class UROptions:
     power_on: bool = False
     unlock_protective_stop: bool = False
     protective_stop_wait_s: float = 10.0
+    tool_radius_mm: float = 200.0
 
     @classmethod
     def from_mapping(cls, url: str, options: Mapping[str, Any]) -> "UROptions":
@@ -645,22 +647,30 @@ class _Worker:
 
     def _capped_speed(self, q0: list[float], q1: list[float], speed: float, tcp_cap_m_s: float,
                       joint_pct: float) -> float:
-        """Leading-joint speed (rad/s) under the joint cap and the TCP cap: along the joint-interpolated path the
-        TCP moves |dp/ds| * omega / lead, with |dp/ds| sampled by the controller's forward kinematics."""
+        """Leading-joint speed (rad/s) under the joint cap and the TCP cap: along the joint-interpolated path a point
+        moves |dp/ds| * omega / lead (s in [0, 1]), so omega <= cap * lead / max |dp/ds| (with a 0.9 margin)."""
         omega = min(speed, joint_pct / 100.0 * self.rated_rad_s)
         lead = max(abs(a - b) for a, b in zip(q0, q1))
         if lead < 1e-9:
             return omega
-        s = np.linspace(0.0, 1.0, TCP_SAMPLES + 1)[:, None]
-        q = np.asarray(q0) + s * (np.asarray(q1) - np.asarray(q0))                  # (K, 6) rad
-        if self.dh is not None:
-            points = _dh_points(q, self.dh, self.tcp_offset[:3])
-        else:                                                                       # unknown model: controller FK
-            fk = self._controller().getForwardKinematics
-            points = np.array([fk(list(row), self.tcp_offset)[:3] for row in q[::4]])
-            s = s[::4]
-        path_per_s = float(np.max(np.linalg.norm(np.diff(points, axis=0), axis=1) / np.diff(s[:, 0])))
+        path_per_s = self._max_path_rate(np.asarray(q0), np.asarray(q1))
         return omega if path_per_s < 1e-12 else min(omega, TCP_MARGIN * tcp_cap_m_s * lead / path_per_s)
+
+    def _max_path_rate(self, q0: np.ndarray, q1: np.ndarray) -> float:
+        """max |dp/ds| (m per unit path parameter) of the TCP and of points ``tool_radius_mm`` from it along the
+        flange axes, from the nominal DH of the model (48 samples); unknown model: the TCP only, from the
+        controller's forward kinematics (13 samples)."""
+        if self.dh is None:
+            s = np.linspace(0.0, 1.0, TCP_SAMPLES // 4 + 1)
+            fk = self._controller().getForwardKinematics
+            points = np.array([fk(list(q0 + si * (q1 - q0)), self.tcp_offset)[:3] for si in s])
+            return float(np.max(np.linalg.norm(np.diff(points, axis=0), axis=1)) * (len(s) - 1))
+        s = np.linspace(0.0, 1.0, TCP_SAMPLES + 1)[:, None]
+        q = q0 + s * (q1 - q0)                                                      # (K, 6) rad
+        r = self.o.tool_radius_mm / 1000.0
+        offsets = [np.zeros(3)] + [sign * r * axis for axis in np.eye(3) for sign in (1.0, -1.0)]
+        points = np.stack([_dh_points(q, self.dh, np.asarray(self.tcp_offset[:3]) + d) for d in offsets])
+        return float(np.linalg.norm(np.diff(points, axis=1), axis=2).max()) * TCP_SAMPLES
 
     def _recover(self) -> None:
         """Protective stop: unlock it through the Dashboard if allowed (else ask the operator), close the safety
