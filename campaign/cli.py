@@ -174,7 +174,7 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_rejected, read_targets_csv, write_corrected
+    from campaign.correction import correct_targets, read_rejected, read_targets_csv, recorded_identity, write_corrected
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
@@ -185,7 +185,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     with forced(args.force):
         check_model_fits(cfg, model, str(args.model))
     targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets)
+    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
         paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))
