@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,17 +19,21 @@ from robocal.ik import solve_ik, solve_on_branch, wrist_angle_rad
 from robocal.kinematics import Kinematics
 
 from .config import CampaignConfig
+from .errors import ConfigError
+from .motion_safety import PathGuard, UnsafeMotion, plan_vias
 
 WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
 
 
 @dataclass(frozen=True)
 class PlanPoint:
-    """One measurement: id, set (calib | test | check), commanded joints (deg), target SMR position (mm, base)."""
+    """One measurement: id, set (calib | test | check), commanded joints (deg), target SMR position (mm, base),
+    and the via poses (deg) the robot passes on its way there (keep-out boxes; usually none)."""
     point_id: str
     set: str
     q_deg: tuple[float, ...]
     p_base_mm: tuple[float, float, float]
+    via_deg: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -137,14 +141,32 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
                         f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
     ok &= ~near
+    guard = PathGuard.from_config(cfg, kin)
+    if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
+        why = guard.pose_reasons(np.degrees(q_all[ok]))
+        blocked = np.flatnonzero(ok)[[w is not None for w in why]]
+        skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), w) for i, w in zip(np.flatnonzero(ok), why) if w]
+        ok[blocked] = False
     skipped = tuple(skipped)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
     order = _interleave(p_all, grid_ok, test_ok)
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
     points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
-    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] for p in points]).encode()).hexdigest()
+    if guard is not None:
+        points = _with_vias(cfg, guard, points)
+    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
+                                        for p in points]).encode()).hexdigest()
     return Plan(tuple(points), skipped, digest)
+
+
+def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -> list[PlanPoint]:
+    """Via poses where the swept path between consecutive points is blocked; ConfigError naming the pair if none."""
+    try:
+        vias = plan_vias(guard, np.array([p.q_deg for p in points]), [p.point_id for p in points])
+    except UnsafeMotion as exc:
+        raise ConfigError(cfg.source_path, "plan.keep_out", str(exc)) from None
+    return [replace(p, via_deg=v) if v else p for p, v in zip(points, vias)]
 
 
 def _interleave(p, grid_ok, test_ok) -> list[int]:
