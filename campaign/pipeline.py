@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from drivers.base import SystemClock
 from drivers.mock import MockWorld
@@ -25,6 +25,9 @@ from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
+from .eta import RunEta
+from .motion_safety import PathGuard, motion_limits, payload
+from .traceability import device_identity, identification, run_logging
 
 
 @dataclass(frozen=True)
@@ -45,23 +48,30 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                  console: Console | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    kin = nominal_kinematics(cfg)
+    plan = build_plan(cfg, kin)
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:
+        logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
         robot, tracker = _open_devices(cfg, world, stack)
-        log, run_dir = open_log(cfg, plan, run_dir, resume)
+        log, run_dir = open_log(cfg, plan, run_dir, resume, device_identity(robot, tracker))
+        logging_.to_file(run_dir)
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
-        with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
-            runner.on_point = lambda point, record: advance()
+        _safety(runner, cfg, kin, first_pass=resume is None)
+        eta = RunEta.for_plan(todo, cfg, kin)
+        with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
+            runner.on_point = lambda point, record: advance(record)
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
-    dataset = dataset_from_log(read_log(run_dir))
+    contents = read_log(run_dir)
+    dataset = dataset_from_log(contents)
     write_csv(run_dir / "data.csv", dataset)
     processed = process(dataset, cfg)
+    processed.report.update(identification(contents))
     write_outputs(processed, run_dir)
     return RunResult(run_dir, outcome, processed)
 
@@ -94,6 +104,7 @@ def verify(run_dir: Path, console: Console | None = None):
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
+        _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
 
         def measure(points):
             got = []
@@ -105,6 +116,13 @@ def verify(run_dir: Path, console: Console | None = None):
         if not log.closed:
             log.close(result.exit_status, result.reason)
     return result
+
+
+def _safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
+    """Speed caps, payload, swept-path guard and the optional reduced-speed first pass of a runner."""
+    runner.limits, runner.payload, runner.guard = motion_limits(cfg), payload(cfg), PathGuard.from_config(cfg, kin)
+    if first_pass and cfg.robot.first_pass_speed_pct is not None:
+        runner.first_pass_limits = motion_limits(cfg, cfg.robot.first_pass_speed_pct)
 
 
 def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):
@@ -131,7 +149,8 @@ def mock_world(cfg: CampaignConfig) -> MockWorld:
                      faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra)
 
 
-def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None) -> tuple[RunLog, Path]:
+def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None,
+             identity: dict | None = None) -> tuple[RunLog, Path]:
     """A new run directory with its log, config copy and plan CSV; or the resumed one after checking that
     neither the config nor the plan changed."""
     if resume is not None:
@@ -146,7 +165,7 @@ def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path
         run_dir = Path(cfg.output.dir) / f"{cfg.name}-{stamp}"
     run_dir = Path(run_dir)
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
-                                              datetime.now(timezone.utc).isoformat()))
+                                              datetime.now(timezone.utc).isoformat()) | (identity or {}))
     shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
     write_plan_csv(plan, run_dir / "plan.csv")
     return log, run_dir
@@ -157,17 +176,24 @@ def _scheme(url: str) -> str:
 
 
 class _progress:
-    """A rich progress bar with ETA on terminals; silent otherwise. Yields an ``advance()`` callable."""
+    """A rich progress bar with the run's ETA (tracker reading time and measured move times) on terminals;
+    silent otherwise. Yields an ``advance(record)`` callable."""
 
-    def __init__(self, console: Console, total: int, done: int):
-        self.bar = Progress(TextColumn("measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                            console=console, disable=not console.is_terminal)
-        self.total, self.done = total, done
+    def __init__(self, console: Console, total: int, done: int, eta: RunEta | None = None):
+        self.bar = Progress(TextColumn("measuring"), BarColumn(), MofNCompleteColumn(),
+                            TextColumn("{task.fields[eta]}"), console=console, disable=not console.is_terminal)
+        self.total, self.done, self.eta = total, done, eta
 
     def __enter__(self):
         self.bar.start()
-        task = self.bar.add_task("points", total=self.total, completed=self.done)
-        return lambda: self.bar.advance(task)
+        text = self.eta.text() if self.eta else ""
+        task = self.bar.add_task("points", total=self.total, completed=self.done, eta=text)
+
+        def advance(record=None):
+            if self.eta is not None and record is not None:
+                self.eta.observe(record)
+            self.bar.update(task, advance=1, eta=self.eta.text() if self.eta else "")
+        return advance
 
     def __exit__(self, *exc):
         self.bar.stop()

@@ -111,3 +111,14 @@ def peak_speed_per_unit_s(kin: Kinematics, q_a_rad: np.ndarray, q_b_rad: np.ndar
     pts = flange_points_base(kin, q, p_flange_points_mm).reshape(len(q_a), samples + 1, -1, 3)
     step = np.linalg.norm(np.diff(pts, axis=1), axis=-1)                 # (M, samples, P)
     return step.max(axis=(1, 2)) * samples
+
+
+def move_durations_s(kin: Kinematics, q_a_rad: np.ndarray, q_b_rad: np.ndarray, p_flange_points_mm: np.ndarray,
+                     joint_speed_rad_s: float, tcp_speed_mm_s: float, samples: int = 64) -> np.ndarray:
+    """(M,) shortest duration (s) of each joint-interpolated move with no joint faster than
+    ``joint_speed_rad_s`` and none of the points faster than ``tcp_speed_mm_s`` (constant-rate profile,
+    acceleration ignored)."""
+    dq = np.abs(np.atleast_2d(q_b_rad) - np.atleast_2d(q_a_rad)).max(axis=1)
+    t_joint = dq / joint_speed_rad_s
+    t_tcp = peak_speed_per_unit_s(kin, q_a_rad, q_b_rad, p_flange_points_mm, samples) / tcp_speed_mm_s
+    return np.maximum(t_joint, t_tcp)
