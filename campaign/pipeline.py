@@ -1,6 +1,7 @@
 """The whole campaign in one place: config -> plan -> drivers -> durable log -> calibration -> report."""
 from __future__ import annotations
 
+import logging
 import shutil
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -28,6 +29,9 @@ from .runner import RunOutcome, Runner, pending, start_record
 from .eta import RunEta
 from .motion_safety import PathGuard, motion_limits, payload
 from .traceability import device_identity, identification, run_logging
+
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,8 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         log, run_dir = open_log(cfg, plan, run_dir, resume, device_identity(robot, tracker))
         logging_.to_file(run_dir)
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
+        logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
+                    "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
         _safety(runner, cfg, kin, first_pass=resume is None)

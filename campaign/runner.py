@@ -17,6 +17,7 @@ With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping
 
@@ -30,6 +31,9 @@ from .motion_safety import PathGuard, UnsafeMotion
 from .plan import PlanPoint
 from .runlog import RunLog, RunLogError
 from .traceability import device_identity, environment_from_readings
+
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -116,6 +120,8 @@ class Runner:
         finally:
             if status != "success" or close:
                 self._safe_stop()
+                (logger.info if status == "success" else logger.warning)("run %s: %s (%d points measured now)",
+                                                                          status, reason, n)
                 try:
                     log.close(status, reason)
                 except Exception:                            # a broken log: a resume drops its torn tail
@@ -160,6 +166,10 @@ class Runner:
         override = robot.speed_override_pct() if callable(getattr(robot, "speed_override_pct", None)) else None
         info["speed_override_pct"] = override
         log.append_event({**info, "t_s": self.clock.now()})
+        rid = info["robot_identity"]
+        logger.info("robot %s %s serial %s software %s; caps %s; payload %s; speed override %s %%", rid["vendor"],
+                    rid["model"], rid["serial"], rid["software_version"], info.get("motion_limits"),
+                    info.get("payload"), override)
 
     def _first_pass(self, points: list[PlanPoint], log: RunLog) -> None:
         """Traverse every planned move (vias included) at the reduced caps without measuring, then restore."""
@@ -215,6 +225,7 @@ class Runner:
         if joint_temp is not None:
             record["joint_temp_c"] = joint_temp
         if self.payload is not None:
+            record["payload_kg"] = self.payload.mass_kg
             record["payload_cog_flange_mm"] = list(self.payload.cog_flange_mm)
         for k in range(2, self.n_smrs + 1):
             record.update(self._measure_smr(k, point, log))
