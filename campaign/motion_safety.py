@@ -16,12 +16,12 @@ import numpy as np
 
 from drivers.base import MotionLimits, Payload
 from robocal.kinematics import Kinematics
-from robocal.sweep import Boxes, check_segments, flange_points_base
+from robocal.sweep import Boxes, check_segments, clearances_mm, flange_points_base
 
 from .config import CampaignConfig
 from .errors import CampaignError
 
-STEP_MM = 10.0            # sample spacing bound along the path; boxes grow by half of it (see robocal.sweep)
+CHUNK = 16                # via candidates checked per batch
 N_NEAREST = 64            # planned poses tried as via candidates
 
 
@@ -68,31 +68,23 @@ class PathGuard:
 
     # -- poses
     def pose_reasons(self, q_deg: np.ndarray) -> list[str | None]:
-        """Per pose (N, n) deg: why it is not a safe stop (inside a grown keep-out box / outside the envelope)."""
+        """Per pose (N, n) deg: why it is not a safe stop (within the clearance of a keep-out box or of the
+        envelope's faces), None when it is."""
         q = np.radians(np.atleast_2d(q_deg))
-        pts = flange_points_base(self.kin, q, self.p_flange_points_mm)          # (N, P, 3)
-        out: list[str | None] = [None] * len(q)
-        margin = self.clearance_mm + STEP_MM / 2             # the margin a path sample must keep (robocal.sweep)
-        if len(self.keep_out.lo):
-            grown = self.keep_out.grown(margin)
-            hit = np.any((pts[:, :, None] > grown.lo) & (pts[:, :, None] < grown.hi), axis=1).all(axis=-1)
-            for i in np.flatnonzero(hit.any(axis=1)):
-                out[i] = f"within {self.clearance_mm:g} mm of keep-out box {self.names[int(np.argmax(hit[i]))]!r}"
-        if self.envelope is not None:
-            shrunk = self.envelope.grown(-margin)
-            ok = np.all((pts > shrunk.lo[0]) & (pts < shrunk.hi[0]), axis=(1, 2))
-            for i in np.flatnonzero(~ok):
-                out[i] = out[i] or f"outside the envelope {self.envelope_name!r} (clearance {self.clearance_mm:g} mm)"
-        return out
+        env = None if self.envelope is None else self.envelope.grown(-self.clearance_mm)
+        d, which = clearances_mm(flange_points_base(self.kin, q, self.p_flange_points_mm),
+                                 self.keep_out.grown(self.clearance_mm), env)
+        return [None if di > 0 else f"within {self.clearance_mm:g} mm of {self.describe(int(w))}"
+                for di, w in zip(d, which)]
 
     # -- segments
     def blocked(self, q_a_deg: np.ndarray, q_b_deg: np.ndarray):
         """robocal.sweep.Violation of the segments (M, n) -> (M, n) deg."""
         return check_segments(self.kin, np.radians(q_a_deg), np.radians(q_b_deg), self.p_flange_points_mm,
-                              self.keep_out, self.envelope, self.clearance_mm, STEP_MM)
+                              self.keep_out, self.envelope, self.clearance_mm)
 
     def describe(self, box: int) -> str:
-        return f"keep-out box {self.names[box]!r}" if box >= 0 else f"the envelope {self.envelope_name!r}"
+        return f"keep-out box {self.names[box]!r}" if box >= 0 else f"the envelope {self.envelope_name!r} faces"
 
     def route(self, q_a_deg, q_b_deg, others_deg: np.ndarray | None = None) -> list[tuple[float, ...]]:
         """Via poses (deg) making a -> b safe: [] when the direct path is clear, else one or two vias chosen
@@ -104,18 +96,20 @@ class PathGuard:
             return []
         c = self._candidates(a, b, others_deg)
         if len(c):
-            first = ~self.blocked(np.broadcast_to(a, c.shape), c).blocked
-            second = ~self.blocked(c, np.broadcast_to(b, c.shape)).blocked
             cost = np.abs(c - a).max(axis=1) + np.abs(b - c).max(axis=1)
-            one = np.flatnonzero(first & second)
-            if len(one):
-                best = one[np.argmin(cost[one])]
-                return [tuple(np.round(c[best], 6))]
-            i1 = np.flatnonzero(first)[np.argsort(cost[first])][:12]      # cheapest candidates of each leg
-            i2 = np.flatnonzero(second)[np.argsort(cost[second])][:12]
+            c = c[np.argsort(cost, kind="stable")]                     # cheapest first
+            first = np.zeros(len(c), bool)
+            second = np.zeros(len(c), bool)
+            for lo in range(0, len(c), CHUNK):                         # one via: stop at the first chunk that works
+                cc = c[lo:lo + CHUNK]
+                first[lo:lo + CHUNK] = ~self.blocked(np.broadcast_to(a, cc.shape), cc).blocked
+                second[lo:lo + CHUNK] = ~self.blocked(cc, np.broadcast_to(b, cc.shape)).blocked
+                one = np.flatnonzero(first[lo:lo + CHUNK] & second[lo:lo + CHUNK])
+                if len(one):
+                    return [tuple(np.round(cc[one[0]], 6))]
+            i1, i2 = np.flatnonzero(first)[:12], np.flatnonzero(second)[:12]   # two vias, cheapest legs
             if len(i1) and len(i2):
-                I, J = np.meshgrid(i1, i2, indexing="ij")
-                I, J = I.ravel(), J.ravel()
+                I, J = (x.ravel() for x in np.meshgrid(i1, i2, indexing="ij"))
                 mid = ~self.blocked(c[I], c[J]).blocked
                 if mid.any():
                     tot = (np.abs(c[I] - a).max(axis=1) + np.abs(c[J] - c[I]).max(axis=1)
