@@ -204,6 +204,7 @@ class Runner:
         self.clock.sleep(self.m.settle_s)
         q_read = np.asarray(self.robot.read_joints(), float)
         approach = self._approach(q_cmd)
+        t_measure = self.clock.now()                        # in position and settled: the readings start
         mean, spread, readings, retries = self._measure_with_retries(point, log)
         try:
             env = dict(self.tracker.environment() or {})
@@ -216,7 +217,7 @@ class Runner:
         record = {
             "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
             "p_tracker_mm": mean.tolist(), "cov_mm2": self.covariance(mean).tolist(), "spread_mm": spread,
-            "n_samples": len(readings), "t_start_s": t_start, "t_end_s": self.clock.now(),
+            "n_samples": len(readings), "t_start_s": t_start, "t_measure_s": t_measure, "t_end_s": self.clock.now(),
             "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
             "p_target_base_mm": list(point.p_base_mm),
         }
