@@ -26,7 +26,7 @@ from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
-from .eta import RunEta
+from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .traceability import device_identity, identification, run_logging
 
@@ -59,15 +59,18 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
         robot, tracker = _open_devices(cfg, world, stack)
+        runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
+                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
+        _safety(runner, cfg, kin, first_pass=resume is None)
+        times = point_times_s(plan.points, cfg, kin)
         log, run_dir = open_log(cfg, plan, run_dir, resume, device_identity(robot, tracker))
+        stack.push(lambda *exc: _close_on_error(log, exc[1]))    # the runner closes it from execute on
         logging_.to_file(run_dir)
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
-        runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
-                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
-        _safety(runner, cfg, kin, first_pass=resume is None)
-        eta = RunEta.for_plan(todo, cfg, kin)
+        left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
+        eta = RunEta(times[0][left], times[1][left])
         with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
             runner.on_point = lambda point, record: advance(record)
             outcome = runner.execute(todo, log)
@@ -122,6 +125,17 @@ def verify(run_dir: Path, console: Console | None = None):
         if not log.closed:
             log.close(result.exit_status, result.reason)
     return result
+
+
+def _close_on_error(log: RunLog, exc: BaseException | None) -> bool:
+    """Close a log left open by an exception raised outside the runner (stop record with the reason)."""
+    if exc is not None and not log.closed:
+        status = "fail" if isinstance(exc, Exception) else "abort"
+        try:
+            log.close(status, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        except Exception:
+            pass
+    return False
 
 
 def _safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
