@@ -110,7 +110,7 @@ def verify(run_dir: Path, console: Console | None = None):
     with ExitStack() as stack:
         robot, tracker = _open_devices(cfg, world, stack)
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
-                                      "software_version": software_version()})
+                                      "software_version": software_version()} | device_identity(robot, tracker))
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)

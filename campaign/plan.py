@@ -208,10 +208,13 @@ def _with_check_poses(points, q_grid, p_grid, grid_ids, cfg_check) -> list[PlanP
 
 
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
-    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order."""
+    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
+    (id ``POINT.viaK``, no position) before the point they lead to."""
     n = len(plan.points[0].q_deg) if plan.points else 0
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
         for p in plan.points:
+            for k, via in enumerate(p.via_deg):              # via poses (keep-out): passed through, not measured
+                w.writerow([f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""])
             w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])

@@ -51,9 +51,15 @@ def render_parameters(console: Console, report: dict) -> None:
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
 
 
+def _vias(plan: Plan) -> str:
+    n = sum(len(p.via_deg) for p in plan.points)
+    return f", {n} via poses around keep-out boxes" if n else ""
+
+
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
-                  f"{plan.count('check')} check-pose measurements, {len(plan.skipped)} skipped; "
+                  f"{plan.count('check')} check-pose measurements, {len(plan.skipped)} skipped"
+                  f"{_vias(plan)}; "
                   f"estimated duration {duration_s / 60:.1f} min")
     if plan.skipped:
         t = Table(title="Skipped points")
