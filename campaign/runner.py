@@ -83,8 +83,8 @@ class Runner:
     def execute(self, points: Iterable[PlanPoint], log: RunLog, close: bool = True) -> RunOutcome:
         """Measure ``points`` in order; return how the run ended. The log is closed on every failure path,
         and on success unless ``close`` is False (a caller measuring in several passes)."""
-        n, status, reason = 0, "fail", "internal error"
-        self._stopped = False
+        n = 0
+        status, reason, self._stopped = "fail", "internal error", False
         try:
             points = list(points)
             self._poses = np.array([p.q_deg for p in points], float) if points else None
@@ -102,9 +102,11 @@ class Runner:
             self._safe_stop()
             status, reason = "paused", str(exc)
             self._event(log, {"type": "pause", "reason": reason})
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:                     # Ctrl-C, or a signal raised as a subclass with a reason
             self._safe_stop()
-            status, reason = "abort", "interrupted by the operator (Ctrl-C)"
+            status = "abort"
+            reason = _one_line(exc) if type(exc) is not KeyboardInterrupt and str(exc) else \
+                "interrupted by the operator (Ctrl-C)"
         except (DriverError, UnsafeMotion) as exc:
             self._safe_stop()
             status, reason = "fail", _one_line(exc)

@@ -1,5 +1,5 @@
 """Runner lifecycle under fault injection: every exception type at every step stops the robot exactly once and
-leaves the log ending with a stop record; caps, payload and override reach the driver before the first move."""
+leaves the log ending with a stop record (14 exception types x 5 steps); caps, payload and override reach the driver before the first move."""
 import json
 
 import numpy as np
@@ -96,7 +96,11 @@ class Clock(VirtualClock):
         super().sleep(seconds)
 
 
-EXCEPTIONS = [Exception("bug"), RuntimeError("bug"), OSError(28, "No space left on device"), KeyboardInterrupt(),
+class Terminated(KeyboardInterrupt):
+    """A signal turned into an exception with its reason (as the CLI does for SIGTERM / SIGHUP)."""
+
+
+EXCEPTIONS = [Terminated("terminated by SIGTERM"), Exception("bug"), RuntimeError("bug"), OSError(28, "No space left on device"), KeyboardInterrupt(),
               SystemExit(3), DriverError("drv"), ConnectionLost("link down"), RobotError("refused"),
               RobotNotReady("motors off"), MotionError("limit"), BeamBroken("beam"), TrackerTimeout("no reply"),
               RunLogError("log.jsonl", "record not storable")]
@@ -141,6 +145,8 @@ def test_every_fault_at_every_step_stops_once_and_closes_the_log(tmp_path, step,
     assert robot.calls[-1] == ("stop",)                      # nothing commanded after the stop
     last = json.loads((tmp_path / "run" / "log.jsonl").read_text().splitlines()[-1])
     assert last["kind"] == "stop" and last["data"]["exit_status"] == status and log.closed
+    if isinstance(exc, Terminated):
+        assert last["data"]["reason"] == "terminated by SIGTERM"
     contents = read_log(tmp_path / "run")
     tracker_retry = step == "measure" and isinstance(exc, (BeamBroken, TrackerTimeout))
     if tracker_retry:                                        # retried within limits: the run completes
