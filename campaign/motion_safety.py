@@ -94,6 +94,9 @@ class PathGuard:
         v = self.blocked(a[None], b[None])
         if not v.blocked[0]:
             return []
+        here = self.pose_reasons(a)[0]
+        if here is not None:
+            raise UnsafeMotion(f"the robot stands {here}: jog it clear before moving")
         c = self._candidates(a, b, others_deg)
         if len(c):
             cost = np.abs(c - a).max(axis=1) + np.abs(b - c).max(axis=1)

@@ -28,7 +28,7 @@ from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
-from .traceability import device_identity, identification, run_logging
+from .traceability import device_identity, identification, identity_changes, run_logging
 
 
 logger = logging.getLogger(__name__)
@@ -63,9 +63,12 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
-        log, run_dir = open_log(cfg, plan, run_dir, resume, device_identity(robot, tracker))
+        identity = device_identity(robot, tracker)
+        log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.push(lambda *exc: _close_on_error(log, exc[1]))    # the runner closes it from execute on
         logging_.to_file(run_dir)
+        for change in identity_changes(log.contents.start, identity) if resume else ():
+            logger.warning("resuming on different hardware: %s", change)   # also in the devices event
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))

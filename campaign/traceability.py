@@ -144,3 +144,14 @@ def identification(contents) -> dict:
     start = contents.start
     return {k: start[k] for k in ("robot_identity", "tracker_identity", "driver_versions", "software_version")
             if k in start}
+
+
+def identity_changes(start: dict, now: dict) -> list[str]:
+    """What differs between the hardware a run started with and the hardware now (resume): one line each."""
+    out = []
+    for role, keys in (("robot", ("controller_type", "serial", "software_version")),
+                       ("tracker", ("model", "serial", "firmware"))):
+        before, after = start.get(f"{role}_identity") or {}, now.get(f"{role}_identity") or {}
+        out += [f"{role} {k} was {before[k]!r}, now {after.get(k)!r}" for k in keys
+                if k in before and before[k] != after.get(k)]
+    return out

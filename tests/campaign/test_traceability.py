@@ -84,3 +84,31 @@ def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
     refined_error = abs(eta.remaining_s() - actual[k:].sum()) / actual[k:].sum()
     print(f"ETA error: prior {100 * prior_error:.0f} %, after {k}/{n} points {100 * refined_error:.0f} %")
     assert refined_error < 0.1 and refined_error < prior_error
+
+
+@pytest.mark.unit
+def test_identity_changes_name_what_differs():
+    from campaign.traceability import identity_changes
+    start = {"robot_identity": {"serial": "A1", "software_version": "7.1", "controller_type": "OmniCore"},
+             "tracker_identity": {"serial": "T1", "firmware": "2.0", "model": "AT960"}}
+    now = {"robot_identity": {"serial": "A2", "software_version": "7.1", "controller_type": "OmniCore"},
+           "tracker_identity": {"serial": "T1", "firmware": "2.1", "model": "AT960"}}
+    assert identity_changes(start, now) == ["robot serial was 'A1', now 'A2'", "tracker firmware was '2.0', now '2.1'"]
+    assert identity_changes(start, start) == []
+
+
+@pytest.mark.unit
+def test_a_robot_standing_inside_the_clearance_is_told_to_jog_clear(tmp_path):
+    from campaign.motion_safety import PathGuard, UnsafeMotion
+    cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT]}))
+    kin = nominal_kinematics(cfg)
+    guard = PathGuard.from_config(cfg, kin)
+    q_ref = np.asarray(cfg.plan.q_ref_deg, float)
+    centre = (np.array(KEEP_OUT["min_mm"]) + np.array(KEEP_OUT["max_mm"])) / 2
+    from robocal.ik import solve_ik
+    from campaign.plan import tool_rotation
+    res = solve_ik(kin, centre[None], tool_rotation(cfg.plan.tool_direction), np.radians(q_ref))
+    inside_q = np.degrees(res.q_rad[0])
+    assert guard.pose_reasons(inside_q)[0] is not None
+    with pytest.raises(UnsafeMotion, match="jog it clear"):
+        guard.route(inside_q, q_ref)
