@@ -176,3 +176,15 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
           f"{blocked_direct} had a blocked direct move; swept-path violations {violations}")
     assert violations == 0
     assert with_vias >= 20 and routed >= 100                        # the property is exercised, not vacuous
+
+
+@pytest.mark.system
+def test_plan_refuses_with_the_pair_of_points_when_no_via_clears(tmp_path, capsys):
+    from campaign.cli import main
+    wall = {"name": "wall", "min_mm": [1050, -4000, -2000], "max_mm": [1150, 4000, 4000]}   # splits the grid in x
+    cfg = small_config(tmp_path, **{"plan.grid.step_mm": 400, "plan.test.count": 0,
+                                    "plan.check_poses": {"count": 0, "every_n_points": 50}, "plan.keep_out": [wall]})
+    assert main(["plan", str(cfg)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "plan.keep_out" in err and "no safe path from point G" in err and "to point G" in err
+    assert "keep-out box 'wall'" in err

@@ -1,11 +1,12 @@
 """Runner lifecycle under fault injection: every exception type at every step stops the robot exactly once and
-leaves the log ending with a stop record (14 exception types x 5 steps); caps, payload and override reach the driver before the first move."""
+leaves the log ending with a stop record (15 exception types x 5 steps); caps, payload and override reach the driver before the first move."""
 import json
 
 import numpy as np
 import pytest
 
 from campaign.config import MeasurementConfig
+from campaign.motion_safety import UnsafeMotion
 from campaign.plan import PlanPoint
 from campaign.runlog import RunLog, RunLogError, read_log
 from campaign.runner import Runner
@@ -103,7 +104,7 @@ class Terminated(KeyboardInterrupt):
 EXCEPTIONS = [Terminated("terminated by SIGTERM"), Exception("bug"), RuntimeError("bug"), OSError(28, "No space left on device"), KeyboardInterrupt(),
               SystemExit(3), DriverError("drv"), ConnectionLost("link down"), RobotError("refused"),
               RobotNotReady("motors off"), MotionError("limit"), BeamBroken("beam"), TrackerTimeout("no reply"),
-              RunLogError("log.jsonl", "record not storable")]
+              RunLogError("log.jsonl", "record not storable"), UnsafeMotion("would enter keep-out box")]
 STEPS = ["move", "settle", "measure", "log_append", "progress"]
 
 
@@ -132,7 +133,8 @@ def _runner(step, exc, tmp_path):
 @pytest.mark.parametrize("exc", EXCEPTIONS, ids=lambda e: type(e).__name__)
 def test_every_fault_at_every_step_stops_once_and_closes_the_log(tmp_path, step, exc):
     runner, robot, log = _runner(step, exc, tmp_path)
-    reraised = (isinstance(exc, (Exception, SystemExit)) and not isinstance(exc, (OSError, DriverError, RunLogError))
+    reraised = (isinstance(exc, (Exception, SystemExit))
+                and not isinstance(exc, (OSError, DriverError, RunLogError, UnsafeMotion))
                 and not isinstance(exc, KeyboardInterrupt))
     if reraised:
         with pytest.raises(type(exc)):

@@ -39,7 +39,7 @@ def test_mock_run_carries_identification_and_writes_campaign_log(tmp_path):
     assert "MOCK-R-0001" in text and "run success" in text
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
     cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT], "plan.clearance_mm": 30}))
     kin = nominal_kinematics(cfg)
@@ -64,7 +64,7 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
     assert not inside.any(), f"{inside.sum()} samples of executed moves inside the keep-out box"
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
     cfg = load_config(small_config(tmp_path, **SMALL))
     slow = load_config(small_config(tmp_path, **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
