@@ -54,8 +54,9 @@ class Plan:
         return sum(p.set == set_name for p in self.points)
 
     def estimated_duration_s(self, joint_speed_deg_s: float, settle_s: float, samples: int,
-                             sample_s: float = 0.1) -> float:
-        """Rough campaign duration: moves at the joint speed + settle + sampling per point."""
+                             sample_s: float = 1.5) -> float:
+        """Rough campaign duration: moves at the joint speed + settle + sampling per point (``sample_s`` per
+        stationary reading). ``campaign.eta.estimate_duration_s`` adds the speed caps and via poses."""
         if not self.points:
             return 0.0
         q = np.array([p.q_deg for p in self.points])

@@ -182,7 +182,7 @@ class Runner:
         for point in points:
             self._move_to(point)
         log.append_event({"type": "first_pass", "state": "done", "t_s": self.clock.now()})
-        self.robot.set_motion_limits(self.limits)
+        self.robot.set_motion_limits(self.limits if self.limits is not None else MotionLimits())
 
     def _move_to(self, point: PlanPoint) -> None:
         """Move through the point's via poses to it; with a guard every leg is checked (and routed) first."""
