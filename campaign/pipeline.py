@@ -111,9 +111,11 @@ def verify(run_dir: Path, console: Console | None = None):
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     with ExitStack() as stack:
+        logging_ = stack.enter_context(run_logging(console))
         robot, tracker = _open_devices(cfg, world, stack)
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()} | device_identity(robot, tracker))
+        logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
