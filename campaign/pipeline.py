@@ -191,8 +191,12 @@ def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path
     run_dir = Path(run_dir)
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
                                               datetime.now(timezone.utc).isoformat()) | (identity or {}))
-    shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
-    write_plan_csv(plan, run_dir / "plan.csv")
+    try:
+        shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
+        write_plan_csv(plan, run_dir / "plan.csv")
+    except BaseException as exc:                            # the log never stays open without a stop record
+        _close_on_error(log, exc)
+        raise
     return log, run_dir
 
 
