@@ -4,7 +4,8 @@ The planner and the runner share one ``PathGuard``: the flange origin and every 
 ``plan.clearance_mm`` away from every ``plan.keep_out`` box and inside ``plan.envelope`` along the whole
 joint-interpolated path between consecutive poses (proven on the continuous path, ``robocal.sweep``).
 A blocked move gets one or two via poses (the reference configuration, blends towards it, other planned
-poses); when none is found the plan is refused naming the pair of points. The runner checks every move
+poses), or one of the next points is visited first; when neither works the plan is refused naming the pair of
+points. The runner checks every move
 again, and routes the first move from wherever the robot stands.
 """
 from __future__ import annotations
@@ -22,6 +23,7 @@ from .config import CampaignConfig
 from .errors import CampaignError
 
 CHUNK = 16                # via candidates checked per batch
+REORDER_WINDOW = 4        # later points tried first when no via clears a move
 N_NEAREST = 64            # planned poses tried as via candidates
 
 
@@ -139,17 +141,45 @@ class PathGuard:
 
 
 def plan_vias(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str]) -> list[tuple[tuple[float, ...], ...]]:
-    """Via poses before each of the planned poses (N, n) deg (none before the first: the runner routes the move
-    from wherever the robot stands). Raises UnsafeMotion naming the pair of points when a move cannot be made safe."""
-    q = np.asarray(q_deg, float)
-    vias: list[tuple[tuple[float, ...], ...]] = [()] * len(q)
-    if len(q) < 2:
-        return vias
-    v = guard.blocked(q[:-1], q[1:])
-    for k in np.flatnonzero(v.blocked):                 # only the blocked pairs (rare) take the search
-        try:
-            vias[k + 1] = tuple(guard.route(q[k], q[k + 1], q))
-        except UnsafeMotion as exc:
-            raise UnsafeMotion(f"no safe path from point {ids[k]} to point {ids[k + 1]}: {exc}") from None
+    """Via poses before each of the planned poses (N, n) deg, in the given order (none before the first: the
+    runner routes the move from wherever the robot stands). Raises UnsafeMotion naming the pair of points when a
+    move cannot be made safe."""
+    order, vias = plan_route(guard, q_deg, ids, reorder=0)
     return vias
 
+
+def plan_route(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str],
+               reorder: int = REORDER_WINDOW) -> tuple[list[int], list[tuple[tuple[float, ...], ...]]]:
+    """Visiting order and via poses of the planned poses (N, n) deg. A move that no via pose clears is avoided by
+    visiting one of the next ``reorder`` points first (when both new moves can be made safe); otherwise
+    UnsafeMotion names the pair of points. Returns (order (N,) indices, vias per visited point)."""
+    q = np.asarray(q_deg, float)
+    n = len(q)
+    if n < 2:
+        return list(range(n)), [()] * n
+    direct = ~guard.blocked(q[:-1], q[1:]).blocked        # one batched check; only blocked pairs are searched
+    order, vias, todo = [0], [()], list(range(1, n))
+    while todo:
+        a, b = order[-1], todo.pop(0)
+        if b == a + 1 and direct[a]:
+            order.append(b)
+            vias.append(())
+            continue
+        try:
+            vias.append(tuple(guard.route(q[a], q[b], q)))
+            order.append(b)
+            continue
+        except UnsafeMotion as exc:
+            failure = exc
+        for j in todo[:reorder]:                          # visit a later point first, then come back to b
+            try:
+                v1, v2 = tuple(guard.route(q[a], q[j], q)), tuple(guard.route(q[j], q[b], q))
+            except UnsafeMotion:
+                continue
+            todo.remove(j)
+            order += [j, b]
+            vias += [v1, v2]
+            break
+        else:
+            raise UnsafeMotion(f"no safe path from point {ids[a]} to point {ids[b]}: {failure}")
+    return order, vias

@@ -20,7 +20,7 @@ from robocal.kinematics import Kinematics
 
 from .config import CampaignConfig
 from .errors import ConfigError
-from .motion_safety import PathGuard, UnsafeMotion, plan_vias
+from .motion_safety import PathGuard, UnsafeMotion, plan_route
 
 WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
 
@@ -162,12 +162,13 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
 
 
 def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -> list[PlanPoint]:
-    """Via poses where the swept path between consecutive points is blocked; ConfigError naming the pair if none."""
+    """Via poses where the swept path between consecutive points is blocked, or a point visited a little later;
+    ConfigError naming the pair of points when neither works."""
     try:
-        vias = plan_vias(guard, np.array([p.q_deg for p in points]), [p.point_id for p in points])
+        order, vias = plan_route(guard, np.array([p.q_deg for p in points]), [p.point_id for p in points])
     except UnsafeMotion as exc:
         raise ConfigError(cfg.source_path, "plan.keep_out", str(exc)) from None
-    return [replace(p, via_deg=v) if v else p for p, v in zip(points, vias)]
+    return [replace(points[i], via_deg=v) if v else points[i] for i, v in zip(order, vias)]
 
 
 def _interleave(p, grid_ok, test_ok) -> list[int]:

@@ -6,7 +6,7 @@ import pytest
 from campaign.cell import nominal_kinematics
 from campaign.config import load_config
 from campaign.errors import ConfigError
-from campaign.motion_safety import PathGuard, UnsafeMotion, motion_limits, payload, plan_vias
+from campaign.motion_safety import PathGuard, UnsafeMotion, motion_limits, payload, plan_route
 from campaign.pipeline import mock_world
 from campaign.plan import build_plan
 from campaign.runlog import RunLog, read_log
@@ -136,7 +136,8 @@ def _random_plan(rng, kin, p_pts):
 
 @pytest.mark.unit
 def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(tmp_path):
-    """200 random plans: plan_vias either routes every move or refuses naming the pair; on every routed plan a
+    """200 random plans: plan_route either routes every move (via poses, a point visited later) or refuses naming
+    the pair; on every routed plan a
     4x finer independent sampling of the whole joint path finds no point of the flange or SMR within the
     clearance of a keep-out box or outside the envelope."""
     cfg = _cfg(tmp_path)
@@ -145,7 +146,7 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
     p_pts = np.array([[0.0, 0.0, 0.0], cfg.tool.p_flange_smr_mm])
     envelope = Boxes(np.array([[-1800.0, -1800.0, -200.0]]), np.array([[1800.0, 1800.0, 2400.0]]))
     clearance = 20.0
-    routed = refused = with_vias = blocked_direct = 0
+    routed = refused = with_vias = blocked_direct = reordered = 0
     violations = 0
     for trial in range(200):
         q, boxes, q_ref = _random_plan(rng, kin, p_pts)
@@ -157,14 +158,16 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
             continue
         blocked_direct += int(guard.blocked(q[:-1], q[1:]).blocked.any())
         try:
-            vias = plan_vias(guard, q, [f"Q{i}" for i in range(len(q))])
+            order, vias = plan_route(guard, q, [f"Q{i}" for i in range(len(q))])
         except UnsafeMotion as exc:
             refused += 1
             assert "no safe path from point Q" in str(exc) and " to point Q" in str(exc)
             continue
+        assert sorted(order) == list(range(len(q)))            # every point visited once
         routed += 1
         with_vias += any(vias)
-        path = np.array([w for qi, v in zip(q, vias) for w in (*v, qi)])
+        reordered += order != sorted(order)
+        path = np.array([w for i, v in zip(order, vias) for w in (*v, q[i])])
         fine, _ = sample_segments(np.radians(path[:-1]), np.radians(path[1:]), np.full(len(path) - 1, 400))
         pts = flange_points_base(kin, fine, p_pts).reshape(-1, 3)
         g = boxes.grown(clearance)
@@ -172,7 +175,7 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
         e = envelope.grown(-clearance)
         out_env = ~np.all((pts > e.lo[0]) & (pts < e.hi[0]), axis=1)
         violations += int(in_box.sum() + out_env.sum())
-    print(f"200 random plans: {routed} routed ({with_vias} with via poses), {refused} refused, "
+    print(f"200 random plans: {routed} routed ({with_vias} with via poses, {reordered} reordered), {refused} refused, "
           f"{blocked_direct} had a blocked direct move; swept-path violations {violations}")
     assert violations == 0
     assert with_vias >= 20 and routed >= 100                        # the property is exercised, not vacuous
@@ -188,3 +191,28 @@ def test_plan_refuses_with_the_pair_of_points_when_no_via_clears(tmp_path, capsy
     err = " ".join(capsys.readouterr().err.split())
     assert "plan.keep_out" in err and "no safe path from point G" in err and "to point G" in err
     assert "keep-out box 'wall'" in err
+
+
+@pytest.mark.unit
+def test_a_move_no_via_clears_is_avoided_by_visiting_a_later_point_first():
+    """A table-driven guard: 0 -> 1 cannot be made safe, 0 -> 2 -> 1 -> 3 can; 1 -> 3 needs a via."""
+    from types import SimpleNamespace
+
+    impossible = {(0, 1)}
+    needs_via = {(1, 3): [(9.0,)]}
+
+    class TableGuard:
+        def blocked(self, q_a, q_b):
+            pairs = zip(q_a[:, 0].astype(int), q_b[:, 0].astype(int))
+            return SimpleNamespace(blocked=np.array([p in impossible or p in needs_via for p in pairs]))
+
+        def route(self, a, b, others=None):
+            pair = (int(a[0]), int(b[0]))
+            if pair in impossible:
+                raise UnsafeMotion("the joint move would pass keep-out box 'x'")
+            return needs_via.get(pair, [])
+    q = np.arange(4, dtype=float)[:, None]
+    order, vias = plan_route(TableGuard(), q, ["A", "B", "C", "D"])
+    assert order == [0, 2, 1, 3] and vias == [(), (), (), ((9.0,),)]
+    with pytest.raises(UnsafeMotion, match="no safe path from point A to point B"):
+        plan_route(TableGuard(), q, ["A", "B", "C", "D"], reorder=0)
