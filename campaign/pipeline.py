@@ -90,8 +90,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
 
 def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file."""
-    dataset = dataset_from_log(read_log(source)) if source.is_dir() else read_csv(source)
+    contents = read_log(source) if source.is_dir() else None
+    dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
     processed = process(dataset, cfg)
+    if contents is not None:
+        processed.report.update(identification(contents))      # the hardware the log was measured with
     write_outputs(processed, out_dir)
     return processed
 
