@@ -286,7 +286,8 @@ class PlanConfig:
     ``tool_direction``: fixed flange z-axis in the base frame (non-zero, not
     normalised). ``q_ref_deg``: reference joint configuration (one value per
     joint, inside the limits) selecting the IK branch. ``test`` and
-    ``check_poses`` are optional.
+    ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
+    (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     """
 
     grid: GridConfig
