@@ -216,3 +216,18 @@ def test_a_move_no_via_clears_is_avoided_by_visiting_a_later_point_first():
     assert order == [0, 2, 1, 3] and vias == [(), (), (), ((9.0,),)]
     with pytest.raises(UnsafeMotion, match="no safe path from point A to point B"):
         plan_route(TableGuard(), q, ["A", "B", "C", "D"], reorder=0)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("key, value, where", [
+    ("plan.keep_out", [{"name": "b", "min_mm": [0, 0, 0], "max_mm": [10, -5, 10]}], r"plan\.keep_out\[0\]\.max_mm.*max_mm\.y"),
+    ("plan.keep_out", [{"min_mm": [0, 0, 0], "max_mm": [1, 1, 1], "size": 3}], r"plan\.keep_out\[0\]\.size.*unknown key"),
+    ("plan.envelope", [1, 2], r"plan\.envelope.*expected a mapping"),
+    ("plan.clearance_mm", -1, r"plan\.clearance_mm"),
+    ("robot.first_pass_speed_pct", 150, r"robot\.first_pass_speed_pct"),
+    ("tracker.measurement.reading_time_s", 0, r"tracker\.measurement\.reading_time_s"),
+    ("tool.payload_cog_flange_mm", [0, 0], r"tool\.payload_cog_flange_mm"),
+])
+def test_safety_keys_are_validated_with_the_key_path(tmp_path, key, value, where):
+    with pytest.raises(ConfigError, match=where):
+        _cfg(tmp_path, **{key: value})
