@@ -112,3 +112,24 @@ def test_a_robot_standing_inside_the_clearance_is_told_to_jog_clear(tmp_path):
     assert guard.pose_reasons(inside_q)[0] is not None
     with pytest.raises(UnsafeMotion, match="jog it clear"):
         guard.route(inside_q, q_ref)
+
+
+@pytest.mark.unit
+def test_driver_warnings_reach_campaign_log_even_before_the_run_directory_exists(tmp_path):
+    import io
+    import logging
+
+    from rich.console import Console
+
+    from campaign.traceability import run_logging
+    out = io.StringIO()
+    with run_logging(Console(file=out, width=200)) as rl:
+        logging.getLogger("drivers.some_driver").warning("controller said: motors off")
+        logging.getLogger("campaign.runner").info("first point")
+        path = rl.to_file(tmp_path)
+        logging.getLogger("drivers.some_driver").warning("link slow")
+    text = path.read_text()
+    assert text.index("motors off") < text.index("first point") < text.index("link slow")
+    assert "WARNING drivers.some_driver" in text
+    assert "motors off" in out.getvalue() and "first point" not in out.getvalue()   # console: warnings only
+    assert not logging.getLogger("drivers").handlers                                    # detached afterwards
