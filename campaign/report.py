@@ -35,6 +35,16 @@ def render_stages(console: Console, report: dict) -> None:
     console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
                   f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
+    render_identity(console, report)
+
+
+def render_identity(console: Console, report: dict) -> None:
+    """One line naming the hardware the data was measured with (when the report carries it)."""
+    r, t = report.get("robot_identity"), report.get("tracker_identity")
+    if r and t:
+        console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
+                      f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
+                      f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
 
 
 def render_parameters(console: Console, report: dict) -> None:
