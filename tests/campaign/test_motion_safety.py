@@ -120,7 +120,8 @@ def test_a_segment_with_safe_ends_through_a_box_is_blocked(tmp_path):
 
 
 def _random_plan(rng, kin, p_pts):
-    """6 random poses near a working configuration and 1-3 boxes placed across their swept paths."""
+    """6 random poses near a working configuration, 1-3 boxes placed across their swept paths, and an envelope
+    30-200 mm beyond the poses (joint-interpolated arcs bulge out of it)."""
     q_ref = np.array([0, 10, 0, 0, 45, 0.0])
     q = q_ref + rng.uniform(-1, 1, (6, 6)) * np.array([60, 30, 30, 60, 40, 90])
     fl = flange_points_base(kin, np.radians(q), p_pts)[:, 0]
@@ -131,7 +132,10 @@ def _random_plan(rng, kin, p_pts):
         half = rng.uniform(40, 150, 3)
         boxes.append((centre - half, centre + half))
     lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
-    return q, Boxes(lo, hi), q_ref
+    all_pts = flange_points_base(kin, np.radians(np.vstack([q, q_ref])), p_pts).reshape(-1, 3)
+    envelope = Boxes(all_pts.min(axis=0)[None] - rng.uniform(30, 200, 3),
+                     all_pts.max(axis=0)[None] + rng.uniform(30, 200, 3))
+    return q, Boxes(lo, hi), q_ref, envelope
 
 
 @pytest.mark.unit
@@ -144,19 +148,20 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
     kin = nominal_kinematics(cfg)
     rng = np.random.default_rng(2026)
     p_pts = np.array([[0.0, 0.0, 0.0], cfg.tool.p_flange_smr_mm])
-    envelope = Boxes(np.array([[-1800.0, -1800.0, -200.0]]), np.array([[1800.0, 1800.0, 2400.0]]))
     clearance = 20.0
-    routed = refused = with_vias = blocked_direct = reordered = 0
+    routed = refused = with_vias = blocked_direct = reordered = by_envelope = 0
     violations = 0
     for trial in range(200):
-        q, boxes, q_ref = _random_plan(rng, kin, p_pts)
+        q, boxes, q_ref, envelope = _random_plan(rng, kin, p_pts)
         guard = PathGuard(kin, p_pts, boxes, tuple(f"b{i}" for i in range(len(boxes.lo))), envelope, "cell",
                           clearance, q_ref)
         safe = np.array([r is None for r in guard.pose_reasons(q)])
         q = q[safe]
         if len(q) < 2:
             continue
-        blocked_direct += int(guard.blocked(q[:-1], q[1:]).blocked.any())
+        direct = guard.blocked(q[:-1], q[1:])
+        blocked_direct += int(direct.blocked.any())
+        by_envelope += int((direct.box == -1).any())
         try:
             order, vias = plan_route(guard, q, [f"Q{i}" for i in range(len(q))])
         except UnsafeMotion as exc:
@@ -176,8 +181,10 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
         out_env = ~np.all((pts > e.lo[0]) & (pts < e.hi[0]), axis=1)
         violations += int(in_box.sum() + out_env.sum())
     print(f"200 random plans: {routed} routed ({with_vias} with via poses, {reordered} reordered), {refused} refused, "
-          f"{blocked_direct} had a blocked direct move; swept-path violations {violations}")
+          f"{blocked_direct} had a blocked direct move ({by_envelope} by the envelope); swept-path violations "
+          f"{violations}")
     assert violations == 0
+    assert by_envelope >= 20                                        # the envelope is exercised too
     assert with_vias >= 20 and routed >= 100                        # the property is exercised, not vacuous
 
 
