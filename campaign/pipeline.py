@@ -18,7 +18,7 @@ from drivers.base import SystemClock
 from drivers.mock import MockWorld
 from drivers.registry import open_robot, open_tracker
 
-from .cell import measurement_covariance, nominal_kinematics, simulated_cell
+from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
 from .errors import CampaignError
 from .interchange import dataset_from_log, read_csv, write_csv
@@ -28,6 +28,7 @@ from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
+from .tracker_quality import SmrPredictor
 from .traceability import device_identity, identification, identity_changes, run_logging
 
 
@@ -74,8 +75,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
         eta = RunEta(times[0][left], times[1][left])
+        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
-            runner.on_point = lambda point, record: advance(record)
+            runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
+                                                     advance(record))
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
@@ -122,6 +126,8 @@ def verify(run_dir: Path, console: Console | None = None):
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
         def measure(points):
             got = []
@@ -151,6 +157,16 @@ def _safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
     runner.limits, runner.payload, runner.guard = motion_limits(cfg), payload(cfg), PathGuard.from_config(cfg, kin)
     if first_pass and cfg.robot.first_pass_speed_pct is not None:
         runner.first_pass_limits = motion_limits(cfg, cfg.robot.first_pass_speed_pct)
+
+
+def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
+    """Where to aim the tracker after a beam break: nominal model + registration from the point ``records`` measured
+    so far (a resumed or verified run's), else the config's rough tracker position."""
+    predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+    for record in records:
+        if record.get("q_read_deg") is not None and record.get("p_tracker_mm") is not None:
+            predictor.observe(record["q_read_deg"], record["p_tracker_mm"])
+    return predictor
 
 
 def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):

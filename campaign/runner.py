@@ -23,13 +23,14 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from drivers.base import (Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError, TrackerReading,
-                          Unstable)
+from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
+                          TrackerReading, Unstable)
 
 from .config import MeasurementConfig
 from .motion_safety import PathGuard, UnsafeMotion
 from .plan import PlanPoint
 from .runlog import RunLog, RunLogError
+from .tracker_quality import check_device_stability, device_covariance
 from .traceability import device_identity, environment_from_readings
 
 
@@ -63,13 +64,20 @@ class Runner:
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
-                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1) -> None:
+                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1,
+                 predict_p_tracker_mm: Callable[[np.ndarray], np.ndarray] | None = None,
+                 covariance_from_device: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
         if n_smrs > 1 and not callable(getattr(tracker, "select_smr", None)):
             raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
                               "driver cannot aim at another SMR (no select_smr)")
         self.n_smrs = n_smrs
+        # after a beam break: aim the tracker at predict_p_tracker_mm(q_read_deg) (mm, tracker frame) and search;
+        # covariance_from_device(device cov (3, 3)) -> the logged covariance when the tracker reports its own
+        self.predict_p_tracker_mm, self.covariance_from_device = predict_p_tracker_mm, covariance_from_device
+        self.q_read: np.ndarray | None = None
+        self._smr = 1
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
         self.limits: MotionLimits | None = None           # caps sent to the driver before the first move
@@ -205,6 +213,7 @@ class Runner:
         self._move_to(point)
         self.clock.sleep(self.m.settle_s)
         q_read = np.asarray(self.robot.read_joints(), float)
+        self.q_read = q_read
         approach = self._approach(q_cmd)
         t_measure = self.clock.now()                        # in position and settled: the readings start
         mean, spread, readings, retries = self._measure_with_retries(point, log)
@@ -216,9 +225,13 @@ class Runner:
                               "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
         env = {**environment_from_readings(readings), **env}
         joint_temp = self._joint_temperatures(point, log)
+        dev_cov = device_covariance(readings)
+        use_dev = dev_cov is not None and self.covariance_from_device is not None
         record = {
             "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
-            "p_tracker_mm": mean.tolist(), "cov_mm2": self.covariance(mean).tolist(), "spread_mm": spread,
+            "p_tracker_mm": mean.tolist(),
+            "cov_mm2": (self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)).tolist(),
+            "cov_source": "device" if use_dev else "spec", "spread_mm": spread,
             "n_samples": len(readings), "t_start_s": t_start, "t_measure_s": t_measure, "t_end_s": self.clock.now(),
             "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
             "p_target_base_mm": list(point.p_base_mm),
@@ -230,6 +243,9 @@ class Runner:
         if self.payload is not None:
             record["payload_kg"] = self.payload.mass_kg
             record["payload_cog_flange_mm"] = list(self.payload.cog_flange_mm)
+        if dev_cov is not None:
+            record["device_std_mm"] = np.sqrt(np.diag(dev_cov)).tolist()
+            record["device_cov_mm2"] = dev_cov.tolist()
         for k in range(2, self.n_smrs + 1):
             record.update(self._measure_smr(k, point, log))
         return record
@@ -250,9 +266,11 @@ class Runner:
     def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
         self.tracker.select_smr(k)
+        self._smr = k
         try:
             mean, spread, _, retries = self._measure_with_retries(point, log)
         finally:
+            self._smr = 1
             self.tracker.select_smr(1)
         return {f"p{k}_tracker_mm": mean.tolist(), f"cov{k}_mm2": self.covariance(mean).tolist(),
                 f"spread{k}_mm": spread, f"retries{k}": retries}
@@ -277,17 +295,56 @@ class Runner:
                 while len(readings) < self.m.samples:
                     readings.append(self.tracker.measure())
                 mean, spread = average_samples(readings, self.m.stability_mm)
+                check_device_stability(readings, self.m.stability_mm)
+                self._log_tracker_steps(point, log)
                 return mean, spread, readings, faults
             except TrackerError as exc:
                 faults += 1
                 if isinstance(exc, Unstable):
                     readings = []
-                log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
-                                  "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
-                if faults > self.m.retries:
-                    raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
-                                      f"{faults} failed readings, retry limit {self.m.retries}") from None
+                self._fault(point, log, exc, faults)
+                if isinstance(exc, BeamBroken):
+                    faults = self._reacquire(point, log, faults)
+                else:
+                    self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+
+    def _fault(self, point: PlanPoint, log: RunLog, exc: TrackerError, faults: int) -> None:
+        """Log a failed reading (and the driver's recovery steps); PointFailed once the retry limit is spent."""
+        self._log_tracker_steps(point, log)
+        log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
+                          "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        if faults > self.m.retries:
+            raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
+                              f"{faults} failed readings, retry limit {self.m.retries}") from None
+
+    def _reacquire(self, point: PlanPoint, log: RunLog, faults: int) -> int:
+        """After a beam break: aim at the predicted SMR position and search (each step logged); every failed
+        search uses one of the point's retries (then PointFailed names it). Returns the updated fault count."""
+        reacquire = getattr(self.tracker, "reacquire", None)
+        if not callable(reacquire) or not getattr(self.tracker, "can_reacquire", True) \
+                or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
+            self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+            return faults
+        p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
+        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "predicted",
+                          "p_tracker_mm": [round(float(v), 3) for v in p], "t_s": self.clock.now()})
+        while True:                                 # search again until found or the point's retries are spent
+            try:
+                reacquire(p.tolist())
+                break
+            except TrackerError as exc:
+                faults += 1
+                self._fault(point, log, exc, faults)
                 self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+        self._log_tracker_steps(point, log)
+        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "found", "t_s": self.clock.now()})
+        return faults
+
+    def _log_tracker_steps(self, point: PlanPoint, log: RunLog) -> None:
+        """The driver's own recovery steps (reconnect, initialise, aim, search), if it reports them."""
+        drain = getattr(self.tracker, "drain_events", None)
+        for step in (drain() if callable(drain) else ()):
+            log.append_event({"type": "tracker_step", "point_id": point.point_id, **step, "t_s": self.clock.now()})
 
 
 def _one_line(exc: BaseException) -> str:
