@@ -3,6 +3,7 @@ dense sampling (every segment sampled so no point moves more than 2 mm between s
 Prints medians, the ratio, and whether both agree on which segments are blocked; also the plan build time with
 and without a keep-out box (via search included)."""
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -42,11 +43,11 @@ def timed(fn, repeats):
 
 def main(repeats: int = 5) -> None:
     doc = yaml.safe_load((ROOT / "configs" / "irb2600.yaml").read_text())
-    tmp = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/tmp")
-    (tmp / "bench_sweep_plain.yaml").write_text(yaml.safe_dump(doc))
-    doc["plan"]["keep_out"] = [BOX]
-    (tmp / "bench_sweep_box.yaml").write_text(yaml.safe_dump(doc))
-    plain, boxed = load_config(tmp / "bench_sweep_plain.yaml"), load_config(tmp / "bench_sweep_box.yaml")
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "plain.yaml").write_text(yaml.safe_dump(doc))
+        doc["plan"]["keep_out"] = [BOX]
+        (Path(tmp) / "box.yaml").write_text(yaml.safe_dump(doc))
+        plain, boxed = load_config(Path(tmp) / "plain.yaml"), load_config(Path(tmp) / "box.yaml")
     kin = nominal_kinematics(plain)
     plan, t_plain = timed(lambda: build_plan(plain, kin), 3)
     _, t_box = timed(lambda: build_plan(boxed, kin), 3)
