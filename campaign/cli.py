@@ -123,13 +123,13 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
 def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.cell import nominal_kinematics
+    from campaign.eta import estimate_duration_s
     from campaign.plan import build_plan, write_plan_csv
     from campaign.report import render_plan
 
     cfg = load_config(args.config)
     plan = build_plan(cfg, nominal_kinematics(cfg))
-    m = cfg.tracker.measurement
-    render_plan(_stdout(), plan, plan.estimated_duration_s(cfg.robot.max_joint_speed_deg_s, m.settle_s, m.samples))
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, nominal_kinematics(cfg)))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
