@@ -128,13 +128,13 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
 def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.cell import nominal_kinematics
+    from campaign.eta import estimate_duration_s
     from campaign.plan import build_plan, write_plan_csv
     from campaign.report import render_plan
 
     cfg = load_config(args.config)
     plan = build_plan(cfg, nominal_kinematics(cfg))
-    m = cfg.tracker.measurement
-    render_plan(_stdout(), plan, plan.estimated_duration_s(cfg.robot.max_joint_speed_deg_s, m.settle_s, m.samples))
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, nominal_kinematics(cfg)))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -179,7 +179,7 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_rejected, read_targets_csv, write_corrected
+    from campaign.correction import correct_targets, read_rejected, read_targets_csv, recorded_identity, write_corrected
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
@@ -190,7 +190,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     with forced(args.force):
         check_model_fits(cfg, model, str(args.model))
     targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets)
+    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
         paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))

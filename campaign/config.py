@@ -54,6 +54,7 @@ __all__ = [
     "SimulationConfig",
     "TestSetConfig",
     "ToolConfig",
+    "BoxConfig",
     "TrackerConfig",
     "TrackerUncertainty",
     "load_config",
@@ -146,6 +147,10 @@ class RobotConfig:
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
+    Motion caps the driver enforces before any command is sent: ``max_tcp_speed_mm_s`` (default 250, at most
+    ``datasheet_max_tcp_speed_mm_s``, the manufacturer's maximum TCP speed, when given) and
+    ``max_joint_speed_pct`` (default 100, percent of the rated joint speed). ``first_pass_speed_pct``
+    (default none): before measuring, traverse the whole plan once with both caps scaled to this percentage.
     """
 
     model: str
@@ -156,6 +161,10 @@ class RobotConfig:
     repeatability_mm: float
     max_joint_speed_deg_s: float
     options: Mapping[str, Any]
+    max_tcp_speed_mm_s: float = 250.0
+    max_joint_speed_pct: float = 100.0
+    datasheet_max_tcp_speed_mm_s: float | None = None
+    first_pass_speed_pct: float | None = None
 
     @property
     def n_joints(self) -> int:
@@ -171,7 +180,8 @@ class ToolConfig:
     A multi-SMR tool (seed 003) adds ``p_flange_smr2_mm`` and
     ``p_flange_smr3_mm`` (default ``None``; the third only with the second;
     centres at least ``smr_diameter_mm`` apart): every point then also logs
-    the second and third SMR.
+    the second and third SMR. ``payload_cog_flange_mm`` (default origin): centre of gravity of the payload
+    in the flange frame (mm), sent to the controller with ``payload_kg``.
     """
 
     p_flange_smr_mm: Vec3
@@ -179,6 +189,7 @@ class ToolConfig:
     payload_kg: float
     p_flange_smr2_mm: Vec3 | None = None
     p_flange_smr3_mm: Vec3 | None = None
+    payload_cog_flange_mm: Vec3 = (0.0, 0.0, 0.0)
 
     @property
     def smrs_mm(self) -> tuple[Vec3, ...]:
@@ -208,7 +219,8 @@ class MeasurementConfig:
 
     Defaults: ``samples`` 5 readings averaged (int >= 1), ``stability_mm`` 0.02
     max spread, ``settle_s`` 0.5 after the robot is in position, ``timeout_s``
-    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses.
+    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses, ``reading_time_s`` 1.5
+    (time one stationary tracker reading takes; duration estimates).
     """
 
     samples: int
@@ -216,6 +228,7 @@ class MeasurementConfig:
     settle_s: float
     timeout_s: float
     retries: int
+    reading_time_s: float = 1.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -289,7 +302,8 @@ class PlanConfig:
     ``tool_direction``: fixed flange z-axis in the base frame (non-zero, not
     normalised). ``q_ref_deg``: reference joint configuration (one value per
     joint, inside the limits) selecting the IK branch. ``test`` and
-    ``check_poses`` are optional.
+    ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
+    (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     """
 
     grid: GridConfig
@@ -297,8 +311,24 @@ class PlanConfig:
     tool_direction: Vec3
     q_ref_deg: tuple[float, ...]
     check_poses: CheckPosesConfig
+    keep_out: tuple["BoxConfig", ...] = ()
+    envelope: "BoxConfig | None" = None
+    clearance_mm: float = 25.0
     kind: str = "grid"                          # grid (calibration campaign) | iso9283 (acceptance test)
     iso9283: Iso9283Config = Iso9283Config()
+
+
+@dataclass(frozen=True, slots=True)
+class BoxConfig:
+    """An axis-aligned box in the robot base frame (mm): ``min_mm`` < ``max_mm`` per axis; ``name`` for messages.
+
+    ``plan.keep_out`` boxes must never be entered, ``plan.envelope`` never left, by the flange origin or any
+    SMR centre (with ``plan.clearance_mm``, default 25) anywhere along the joint-interpolated path.
+    """
+
+    name: str
+    min_mm: Vec3
+    max_mm: Vec3
 
 
 @dataclass(frozen=True, slots=True)
@@ -845,7 +875,23 @@ def _robot(r: _Reader) -> RobotConfig:
         repeatability_mm=r.number("repeatability_mm", 0.05, lo=0.0),
         max_joint_speed_deg_s=r.number("max_joint_speed_deg_s", 30.0, positive=True),
         options=r.mapping("options", {}),
+        **_motion_caps(r),
     )
+
+
+def _motion_caps(r: _Reader) -> dict[str, Any]:
+    """Speed caps: the TCP cap must not exceed the datasheet maximum (mm/s) when one is given."""
+    given = r.data.get("datasheet_max_tcp_speed_mm_s") is not None
+    datasheet = r.number("datasheet_max_tcp_speed_mm_s", positive=True) if given else None
+    tcp = r.number("max_tcp_speed_mm_s", 250.0, positive=True)
+    if datasheet is not None and tcp > datasheet:
+        raise r.error("max_tcp_speed_mm_s", f"{_fmt(tcp)} mm/s exceeds the robot's datasheet maximum "
+                                            f"datasheet_max_tcp_speed_mm_s = {_fmt(datasheet)} mm/s")
+    first = r.data.get("first_pass_speed_pct")
+    return {"max_tcp_speed_mm_s": tcp, "datasheet_max_tcp_speed_mm_s": datasheet,
+            "max_joint_speed_pct": r.number("max_joint_speed_pct", 100.0, positive=True, hi=100.0),
+            "first_pass_speed_pct": None if first is None else r.number("first_pass_speed_pct", positive=True,
+                                                                        hi=100.0)}
 
 
 def _joint(r: _Reader) -> JointConfig:
@@ -870,6 +916,7 @@ def _tool(r: _Reader) -> ToolConfig:
         payload_kg=r.number("payload_kg", 0.0, lo=0.0),
         p_flange_smr2_mm=r.vector("p_flange_smr2_mm", 3, None),
         p_flange_smr3_mm=r.vector("p_flange_smr3_mm", 3, None),
+        payload_cog_flange_mm=r.vector("payload_cog_flange_mm", 3, [0.0, 0.0, 0.0]),
     )
     _check_smrs(tool, r)
     return tool
@@ -917,6 +964,7 @@ def _measurement(r: _Reader) -> MeasurementConfig:
         settle_s=r.number("settle_s", 0.5, lo=0.0),
         timeout_s=r.number("timeout_s", 5.0, positive=True),
         retries=r.integer("retries", 3, lo=0),
+        reading_time_s=r.number("reading_time_s", 1.5, positive=True),
     )
 
 
@@ -934,9 +982,27 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         tool_direction=direction,
         q_ref_deg=q_ref,
         check_poses=_check_poses(r.section("check_poses", CheckPosesConfig, required=False)),
+        keep_out=_keep_out(r),
+        envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
+        clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
         kind=r.choice("kind", ("grid", "iso9283"), "grid"),
         iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
     )
+
+
+def _keep_out(r: _Reader) -> tuple[BoxConfig, ...]:
+    """``plan.keep_out``: a list of boxes ``{name, min_mm, max_mm}`` (base frame, mm)."""
+    where = r.child_list("keep_out")
+    return tuple(_box(where.reader(i, item, BoxConfig), f"keep_out[{i}]")
+                 for i, item in enumerate(r.items("keep_out", [], what="boxes")))
+
+
+def _box(r: _Reader, default_name: str) -> BoxConfig:
+    lo, hi = r.vector("min_mm", 3), r.vector("max_mm", 3)
+    for k, axis in enumerate("xyz"):
+        if hi[k] <= lo[k]:
+            raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
+    return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
 
 
 def _iso9283(r: _Reader) -> Iso9283Config:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -145,9 +146,50 @@ def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     return np.column_stack([quad, cfx]).astype(int)
 
 
+class AbsAccRobot(DataError):
+    """The measured robot runs ABB Absolute Accuracy: corrected Cartesian targets would be corrected twice."""
+
+
+def absacc_guard(identity: dict | None, *, allow: bool = False, where: str = "model") -> str | None:
+    """Refuse (``AbsAccRobot``, exit 2) or, with ``allow``, warn when the controller identity recorded for the run
+    (``absacc: yes``, read by the ABB driver from the controller's options) says Absolute Accuracy is active. The
+    controller applies its own compensation to every Cartesian target, so robtargets corrected here would be
+    corrected twice; joint targets (``MoveAbsJ``) are not affected. Returns the warning text, or None."""
+    if not identity or str(identity.get("absacc", "")).strip().lower() not in ("yes", "true", "1", "on"):
+        return None
+    robot = f"{identity.get('model', 'robot')} (serial {identity.get('serial', '?')})"
+    message = (f"{robot} has ABB Absolute Accuracy active: the controller compensates Cartesian targets itself, so "
+               "targets corrected with this model would be corrected twice")
+    if not allow:
+        raise AbsAccRobot(where, message + "; deactivate AbsAcc for the corrected program or use the joint targets")
+    warnings.warn(message + "; use the joint targets (MoveAbsJ) only", stacklevel=2)
+    return message
+
+
+def recorded_identity(model: CalibratedModel, model_path: str | Path | None = None) -> dict | None:
+    """The robot identity recorded for a model: ``model.meta["robot_identity"]``, else the start record of the run
+    log beside ``model_path`` (``robot_identity`` or ``identity``); None when nothing was recorded."""
+    meta = model.meta or {}
+    if isinstance(meta.get("robot_identity"), dict):
+        return meta["robot_identity"]
+    if model_path is None:
+        return None
+    log_path = Path(model_path).parent / "log.jsonl"
+    try:
+        from .runlog import read_log
+        start = read_log(log_path).start or {}
+    except Exception:                                # noqa: BLE001 - no readable log: nothing recorded
+        return None
+    found = start.get("robot_identity") or start.get("identity")
+    return found if isinstance(found, dict) else None
+
+
 def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Targets,
-                    T_tool: np.ndarray | None = None) -> tuple[list[CorrectedTarget], list[Rejected]]:
-    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason."""
+                    T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
+                    allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
+    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
+    An Absolute Accuracy robot (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
+    absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     kin = nominal_kinematics(cfg)
     T_tool = tool_transform(cfg.tool.p_flange_smr_mm) if T_tool is None else T_tool
     R_flange = targets.R_base @ T_tool[:3, :3].T

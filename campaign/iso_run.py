@@ -26,7 +26,7 @@ from robocal.noise import noise_floor_mm
 
 from .cell import tracker_uncertainty
 from .config import CampaignConfig
-from .errors import CampaignError, DataError
+from .errors import CampaignError, ConfigError, DataError
 from .plan import Plan, PlanPoint, tool_rotation
 
 REPORT_FORMAT = "campaign-iso9283/1"
@@ -49,18 +49,30 @@ class IsoCube:
 
 def iso_cube(cfg: CampaignConfig, kin: Kinematics) -> IsoCube:
     """The largest cube inside the plan's box whose P1..P5 are reachable on the plan's configuration."""
-    g, iso = cfg.plan.grid, cfg.plan.iso9283
-    center, edge = largest_cube(g.center_mm, g.size_mm)
-    if iso.edge_mm > 0:
-        edge = min(edge, iso.edge_mm)
-    R = tool_rotation(cfg.plan.tool_direction)
+    from .motion_safety import PathGuard
+
+    g, pl = cfg.plan.grid, cfg.plan
+    lo = np.asarray(g.center_mm, float) - np.asarray(g.size_mm, float) / 2
+    hi = np.asarray(g.center_mm, float) + np.asarray(g.size_mm, float) / 2
+    if pl.envelope is not None:                           # inside the plan's envelope, with the clearance
+        lo = np.maximum(lo, np.asarray(pl.envelope.min_mm, float) + pl.clearance_mm)
+        hi = np.minimum(hi, np.asarray(pl.envelope.max_mm, float) - pl.clearance_mm)
+        if np.any(hi <= lo):
+            raise CampaignError(f"{cfg.source_path}: plan.grid and plan.envelope do not overlap: no ISO 9283 cube")
+    center, edge = largest_cube((lo + hi) / 2, hi - lo)
+    if pl.iso9283.edge_mm > 0:
+        edge = min(edge, pl.iso9283.edge_mm)
+    R = tool_rotation(pl.tool_direction)
+    guard = PathGuard.from_config(cfg, kin)
     start = edge
     for _ in range(60):
         p = cube_poses(center, edge)
-        q, ok = solve_on_branch(kin, p, R, np.radians(cfg.plan.q_ref_deg))
+        q, ok = solve_on_branch(kin, p, R, np.radians(pl.q_ref_deg))
+        if ok.all() and guard is not None:                # stops inside keep-out boxes / outside the envelope
+            ok &= np.array([w is None for w in guard.pose_reasons(np.degrees(q))])
         if ok.all():
-            note = "" if edge == start else (f"shrunk from {start:.0f} mm: poses outside the joint limits or "
-                                             "unreachable on the plan's configuration")
+            note = "" if edge == start else (f"shrunk from {start:.0f} mm: poses outside the joint limits, "
+                                             "unreachable on the plan's configuration or in a keep-out box")
             return IsoCube(center, float(edge), p, np.degrees(q), note)
         edge *= SHRINK
     raise CampaignError(f"{cfg.source_path}: no ISO 9283 cube inside the plan's box is reachable on the plan's "
@@ -78,11 +90,22 @@ def iso_plan(cfg: CampaignConfig, kin: Kinematics, corrected_q_deg: np.ndarray |
     import hashlib
     import json
 
+    from .motion_safety import PathGuard
+    from .plan import _with_vias
+
     cube = iso_cube(cfg, kin)
     points = cycle_points(cube.q_deg, cube.p_base_mm, cfg.plan.iso9283.cycles, "N")
     if corrected_q_deg is not None:
         points += cycle_points(corrected_q_deg, cube.p_base_mm, cfg.plan.iso9283.cycles, "C")
-    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] for p in points]).encode()).hexdigest()
+    guard = PathGuard.from_config(cfg, kin)
+    if guard is not None:                                 # swept path: via poses, never a changed cycle order
+        ids = [p.point_id for p in points]
+        points = _with_vias(cfg, guard, points)
+        if [p.point_id for p in points] != ids:
+            raise ConfigError(cfg.source_path, "plan.keep_out", "a keep-out box blocks the ISO 9283 cycle between two "
+                              "poses and no via pose keeps the standard's order; move the box or plan.grid")
+    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
+                                        for p in points]).encode()).hexdigest()
     return Plan(tuple(points), (), digest)
 
 
@@ -170,34 +193,25 @@ def finish(cfg: CampaignConfig, run_dir, model: CalibratedModel | None = None) -
 
 
 def run_iso9283(cfg: CampaignConfig, model: CalibratedModel | None, run_dir=None, console=None):
-    """``campaign iso9283``: nominal cycles, then (with a model) corrected cycles, one log; returns
-    (RunResult, report or None)."""
-    from contextlib import ExitStack
+    """``campaign iso9283``: nominal cycles, then (with a model) corrected cycles, through ``run_campaign`` (same
+    safety, log and lifecycle); returns (RunResult, report or None)."""
+    from dataclasses import replace
 
-    from rich.console import Console
+    from .cell import nominal_kinematics
+    from .html_report import write_report
+    from .pipeline import run_campaign
 
-    from drivers.base import SystemClock
-
-    from .cell import measurement_covariance, nominal_kinematics
-    from .pipeline import RunResult, _open_devices, _progress, _scheme, mock_world, open_log
-    from .runner import Runner
-
-    console = console or Console()
     kin = nominal_kinematics(cfg)
     cube = iso_cube(cfg, kin)
     plan = iso_plan(cfg, kin, None if model is None else corrected_joints(cfg, model, cube))
-    world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
-    with ExitStack() as stack:
-        robot, tracker = _open_devices(cfg, world, stack)
-        log, run_dir = open_log(cfg, plan, run_dir, None)
-        runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
-                        lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)
-        with _progress(console, len(plan.points), 0) as advance:
-            runner.on_point = lambda point, record: advance()
-            outcome = runner.execute(plan.points, log)
-    if outcome.exit_status != "success":
-        return RunResult(run_dir, outcome, None), None
-    report = finish(cfg, run_dir, model)
-    from .html_report import write_report
-    write_report(run_dir)
-    return RunResult(run_dir, outcome, None, report), report
+    result = run_campaign(cfg, run_dir, None, console, plan=plan)
+    if result.iso9283 is None:
+        return result, None
+    report = finish(cfg, result.run_dir, model)            # again with the model's registration as the frame
+    write_report(result.run_dir)
+    return replace(result, iso9283=report), report
+
+
+def is_iso_plan(plan: Plan) -> bool:
+    """True for a plan built by :func:`iso_plan` (every id ``N:Pk.cNN`` or ``C:Pk.cNN``)."""
+    return bool(plan.points) and all(p.point_id[:2] in ("N:", "C:") for p in plan.points)

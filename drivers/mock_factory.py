@@ -13,7 +13,7 @@ def _world(url, context):
 
 
 def robot(url, options, **context) -> MockRobot:
-    return MockRobot(_world(url, context), url)
+    return MockRobot(_world(url, context), url, float(options.get("speed_override_pct", 100.0)))
 
 
 def tracker(url, options, **context) -> MockTracker:
