@@ -80,3 +80,14 @@ def test_iso_bad_model_is_a_one_line_error(tmp_path, capsys):
     (tmp_path / "m.json").write_text("{}")
     assert main(["iso9283", str(cfg), "--model", str(tmp_path / "m.json")]) == 2
     assert "not a readable calibrated model" in capsys.readouterr().err
+
+
+def test_cube_stays_inside_the_envelope(tmp_path):
+    env = {"name": "cell", "min_mm": [600, -500, 500], "max_mm": [1400, 500, 1500]}
+    cfg = load_config(small_config(tmp_path, **{"plan.kind": "iso9283", "plan.envelope": env,
+                                                "plan.clearance_mm": 25.0}))
+    cube = iso_cube(cfg, nominal_kinematics(cfg))
+    # grid box (500..1300, -800..800, 400..1600) inside envelope - 25 mm: x 625..1300 -> edge 675 at most
+    assert cube.edge_mm <= 675.0 + 1e-9
+    assert np.allclose(cube.center_mm, [962.5, 0.0, 1000.0])
+    assert np.all(cube.p_base_mm >= np.array(env["min_mm"]) + 25) and np.all(cube.p_base_mm <= np.array(env["max_mm"]) - 25)
