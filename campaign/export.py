@@ -70,6 +70,10 @@ def urdf_text(model: CalibratedModel, name: str = "robot") -> str:
              "units: metres and radians; joint values are the controller's (the DH theta offsets are in the origins)",
              "tool link = SMR centre p_flange_smr_mm = " + ", ".join(f"{v:.4f}" for v in kin.p_flange_smr_mm) + " mm",
              "registration T_tracker_base (mm) rows: " + "; ".join(" ".join(f"{v:.6f}" for v in row) for row in T)]
+    if getattr(model, "effects", ()):
+        names = ", ".join(getattr(fe.choice, "label", type(fe).__name__) for fe in model.effects)
+        notes.append(f"NOT exported: the physical effects of the model ({names}: joint-angle dependent, not a fixed "
+                     "chain); this URDF is its geometric part only")
     if model.residual is not None:
         kind = type(model.residual).__name__
         notes.append(f"NOT exported: the non-kinematic residual layer ({kind}) of the model corrects positions "
@@ -145,8 +149,9 @@ def robodk_text(model: CalibratedModel) -> str:
             out.append(f"{r['joint']:>5} {r['alpha_deg']:>14.6f} {r['a_mm']:>14.6f} {r['theta_deg']:>14.6f} "
                        f"{r['d_mm']:>14.6f} {r['beta_deg']:>14.6f}")
     out.append(f"# tool (TCP = SMR centre, flange frame): X {p[0]:.6f}  Y {p[1]:.6f}  Z {p[2]:.6f} mm")
-    if model.residual is not None:
-        out.append("# not representable here: the model's residual layer (use model.json with campaign correct)")
+    if model.residual is not None or getattr(model, "effects", ()):
+        out.append("# not representable here: the model's physical effects / residual layer (use model.json with "
+                   "campaign correct)")
     return "\n".join(out) + "\n"
 
 

@@ -95,3 +95,12 @@ def test_robodk_dhm_conversion_is_exact():
     from campaign.export import _rot, _trans
     T = fk(mdh, q) @ _trans("x", a_f) @ _rot("x", np.radians(al_f))
     assert np.max(np.abs(T[:, :3, 3] - fk(kin, q)[:, :3, 3])) < 1e-3
+
+
+def test_physical_effects_are_noted_not_exported(tmp_path):
+    from robocal.elastic import EffectChoice
+    cfg = load_config(ROOT / "configs" / "irb2600.yaml")
+    kin = nominal_kinematics(cfg)
+    fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
+    text = urdf_text(CalibratedModel(kin, None, None, (fake,)))
+    assert "NOT exported: the physical effects of the model (joint_compliance" in text
