@@ -46,7 +46,7 @@ from .frames import skew
 from .identify import CalibrationOptions, calibrate
 from .kinematics import Kinematics, ParamLayout, apply_update, chain, identification_jacobian
 
-EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
+EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
                 "axis_coupling", "registration_drift")
 TIME_EFFECTS = ("thermal_drift", "registration_drift")
 REMEDY = {
@@ -54,6 +54,7 @@ REMEDY = {
     "payload_deflection": "measure with a second payload (e.g. none and the rated load), alternating in blocks",
     "gear_cyclic": "cover the joint's whole range; dense single-joint sweeps (0.05-0.2 deg) for motor-rate terms",
     "backlash": "approach the poses from random, recorded directions (or paired +/- approaches)",
+    "readback_lag": "log the commanded joints next to the read-back ones (qc1..qcn) and vary the size of the moves",
     "thermal_drift": "log timestamps (and temperatures) from a cold start, poses in random order over >= 2 h",
     "axis_coupling": "mount the SMR >= 50 mm off the J6 axis and cover J4/J5 widely",
     "registration_drift": "log timestamps and re-measure 3-4 floor nests every 10-15 min",
@@ -110,9 +111,31 @@ class DiagnosisInput:
     temp_c: np.ndarray | None = None
     payload_kg: np.ndarray | None = None
     approach: np.ndarray | None = None
+    move_rad: np.ndarray | None = None           # (N, n) signed last move of each joint (rad), None: from row order
+    prev_move_rad: np.ndarray | None = None      # (N, n) the move before it
+    qc_rad: np.ndarray | None = None             # (N, n) commanded joints next to the read-back q_rad
+    baseline: Kinematics | None = None           # the best geometric model (reprocess's kinematic stage)
+    baseline_identified: tuple[str, ...] | None = None   # its identified parameter names
+    nests: "NestReadings | None" = None
+    order: np.ndarray | None = None              # (N,) position of each row in the measurement sequence
+    payload_rated_kg: float | None = None
 
     def meta(self) -> dict:
-        return {"t_s": self.t_s, "temp_c": self.temp_c, "payload_kg": self.payload_kg, "approach": self.approach}
+        move, prev = self.move_rad, self.prev_move_rad
+        if move is None:
+            move, prev = moves_from_order(self.q_rad)
+        return {"t_s": self.t_s, "temp_c": self.temp_c, "payload_kg": self.payload_kg, "approach": self.approach,
+                "move": move, "prev_move": prev, "qc": self.qc_rad, "payload_rated_kg": self.payload_rated_kg}
+
+
+@dataclass(frozen=True, eq=False)
+class NestReadings:
+    """Reference-nest readings in measurement order: ``p_mm`` (M, 3) tracker frame, ``nest_id`` (M,),
+    ``t_s`` (M,) or None, ``order`` (M,) position in the measurement sequence (any monotone index)."""
+    p_mm: np.ndarray
+    nest_id: tuple[str, ...]
+    t_s: np.ndarray | None
+    order: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -249,6 +272,8 @@ class Candidate:
     reason: str = ""                    # why the data cannot reveal it ("" = diagnosable)
     notes: tuple[str, ...] = ()
     extends: bool = False               # the unselected groups of an accepted candidate
+    veto: str = ""                      # a gate that rules it out whatever the fit says (e.g. direct comparison)
+    info: dict = field(default_factory=dict)   # extra evidence (direct comparisons, nest drift)
 
     @property
     def key(self) -> str:
@@ -268,7 +293,7 @@ class Candidate:
         """The same candidate restricted to ``profile``'s groups not in ``used`` (None if nothing is left)."""
         left = tuple(g for g in profile.groups if all(g is not u for u in used))
         return Candidate(self.name, self.joints, (Profile(profile.label, left),), notes=self.notes,
-                         extends=True) if left else None
+                         extends=True, info=self.info) if left else None
 
 
 def _torque_per_kg(axis_j, origin_j, P):
@@ -319,6 +344,71 @@ def payload_levers(kin: Kinematics, q_rad: np.ndarray, joint: int, payload_kg: n
         * np.asarray(payload_kg, float)[:, None]
 
 
+def arm_mass_kg(kin: Kinematics) -> float:
+    """Moving mass of an arm of this size (kg): about 25 kg at 0.58 m reach, growing with reach^2.5 (the size
+    law of industrial 6-axis arms from 0.5 to 3 m reach)."""
+    return 25.0 * (robot_reach_mm(kin) / 580.0) ** 2.5
+
+
+def robot_reach_mm(kin: Kinematics) -> float:
+    """Reach from the shoulder: sum of the link lengths after J1 (mm)."""
+    return float(np.sum(np.hypot(kin.a_mm[1:], kin.d_mm[1:])) + np.linalg.norm(kin.p_flange_smr_mm))
+
+
+def physical_torque_nm(kin: Kinematics, q_rad: np.ndarray, payload_kg: np.ndarray | None, arm: bool = True
+                       ) -> np.ndarray:
+    """Gravity torque (N, n) N*m about every joint of a physical lumped-mass model from the robot's size: the
+    moving mass (``arm_mass_kg``) shared over the links after J1 in proportion to their lengths, each at its
+    link's midpoint, plus the payload at the flange. Gravity is -z of the base frame."""
+    c = chain(kin, q_rad, full=False)
+    N, n = np.shape(q_rad)
+    o = np.concatenate([c.origin, c.T_base_flange[:, None, :3, 3]], axis=1)
+    mid = 0.5 * (o[:, :-1] + o[:, 1:])
+    length = np.hypot(kin.a_mm, kin.d_mm)
+    length[0] = 0.0
+    m = arm_mass_kg(kin) * length / max(float(length.sum()), 1e-9) if arm else np.zeros(n)
+    pay = np.zeros(N) if payload_kg is None else np.asarray(payload_kg, float)
+    tau = np.zeros((N, n))
+    for j in range(n):
+        t_links = np.stack([_torque_per_kg(c.axis[:, j], c.origin[:, j], mid[:, i]) for i in range(j, n)], axis=1)
+        tau[:, j] = t_links @ m[j:] + _torque_per_kg(c.axis[:, j], c.origin[:, j], o[:, -1]) * pay
+    return tau
+
+
+def moves_from_order(q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(last move, the move before) per row and joint (N, n) rad, from rows in measurement order."""
+    q = np.asarray(q_rad, float)
+    move = np.zeros_like(q)
+    move[1:] = np.diff(q, axis=0)
+    prev = np.zeros_like(q)
+    prev[1:] = move[:-1]
+    return move, prev
+
+
+def direct_lag(q_read_rad: np.ndarray, qc_rad: np.ndarray, move_rad: np.ndarray, prev_rad: np.ndarray) -> dict:
+    """Read-back minus commanded joints regressed per joint on [1, last move, move before]: the lag (deg/deg),
+    its t value, the memory term and the correlation of the difference with the move."""
+    d = np.asarray(q_read_rad, float) - np.asarray(qc_rad, float)
+    out = {}
+    for j in range(d.shape[1]):
+        ok = np.isfinite(d[:, j]) & np.isfinite(move_rad[:, j])
+        A = np.column_stack([np.ones(ok.sum()), move_rad[ok, j], prev_rad[ok, j]])
+        y = d[ok, j]
+        if ok.sum() < 10 or np.ptp(move_rad[ok, j]) <= 0:
+            continue
+        beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ beta
+        s2 = float(r @ r) / max(len(y) - 3, 1)
+        cov = s2 * np.linalg.pinv(A.T @ A)
+        se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        corr = float(np.corrcoef(y, move_rad[ok, j])[0, 1]) if np.std(y) > 0 else 0.0
+        out[j + 1] = {"lag_deg_per_deg": float(beta[1]), "t": float(beta[1] / se[1]),
+                      "memory_deg_per_deg": float(beta[2]), "t_memory": float(beta[2] / se[2]),
+                      "offset_deg": float(np.degrees(beta[0])), "std_deg": float(np.degrees(np.std(y))),
+                      "correlation_with_move": corr}
+    return out
+
+
 def _dq_group(label, joint_cols: dict, names, n, N, joints, **kw) -> Group:
     """Group whose columns act on single joints: joint_cols {joint (1-based): (N, k_j) array}."""
     k = sum(a.shape[1] for a in joint_cols.values())
@@ -347,23 +437,37 @@ def _compliance(kin, q, meta, rows, opt, payload_only: bool) -> Candidate:
         why = "no payload logged" if payload is None else "one payload only"
         return Candidate(name, joints, reason=f"{why}: a payload-dependent deflection cannot be told from "
                                               "geometry and link-mass compliance")
-    groups = []
+    groups, shape = [], []
+    tau = physical_torque_nm(kin, q, None if payload is None else np.asarray(payload, float), arm=not payload_only)
     for jt in joints:
+        groups.append(_dq_group(f"J{jt}", {jt: tau[:, jt - 1:jt]}, (f"c{jt}",), n, N, (jt,), dq_limit=np.inf))
         parts, names = [], []
         if not payload_only:
             lev, labels = gravity_levers(kin, q, jt)
-            keep = _independent(lev, rows)
-            parts.append(lev[:, keep])
-            names += [f"c{jt}_{labels[i]}" for i in keep]
+            parts.append(lev)
+            names += [f"c{jt}_{lb}" for lb in labels]
         if varies:
             parts.append(payload_levers(kin, q, jt, payload))
             names += [f"c{jt}_payload_flange", f"c{jt}_payload_tool"]
         cols = np.concatenate(parts, axis=1)
-        groups.append(_dq_group(f"J{jt}", {jt: cols}, names, n, N, (jt,)))
+        t = tau[rows, jt - 1]
+        cols = cols - np.outer(tau[:, jt - 1], cols[rows].T @ t / max(float(t @ t), 1e-300))   # beyond the physical
+        keep = _independent(cols, rows, 1e-2)
+        if len(keep):
+            shape.append(_dq_group(f"J{jt} mass distribution", {jt: cols[:, keep]}, tuple(names[i] for i in keep),
+                                   n, N, (jt,), dq_limit=np.inf))
+    groups += shape
     notes = [ELASTIC_CLASS] if not payload_only else []
     if not payload_only and not varies:
         notes.append("one payload only: compliance is partly confounded with geometry (log a second payload)")
-    return Candidate(name, joints, (Profile("gravity levers", tuple(groups)),), notes=tuple(notes))
+    return Candidate(name, joints, (Profile("gravity torque", tuple(groups)),), notes=tuple(notes),
+                     info={"torque_nm": tau, "stiffness_min_nm_per_rad": stiffness_floor_nm_per_rad(kin)})
+
+
+def stiffness_floor_nm_per_rad(kin: Kinematics) -> float:
+    """Lowest plausible joint stiffness of an arm of this size (N*m/rad): 2e4 x (reach in m)^3, about ten times
+    softer than the main axes of industrial arms (stiffness grows with the cube of the size)."""
+    return 2e4 * (robot_reach_mm(kin) / 1000.0) ** 3
 
 
 def _gear(kin, q, joint, rows, opt) -> Candidate:
@@ -400,6 +504,33 @@ def _backlash(kin, q, meta, rows) -> Candidate:
     notes = (f"approach direction constant on J{', J'.join(map(str, constant))}",) if constant else ()
     return Candidate("backlash", tuple(g.joints[0] for g in groups), (Profile("approach", tuple(groups)),),
                      notes=notes)
+
+
+def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
+    """Read-back lag: the reported joint is off by lambda x (signed last move) [+ mu x (move before)]; the model
+    input is corrected by dq = -lambda move (parameter -lambda, rad/rad). With commanded joints the difference is
+    measured directly and decides which joints can carry it."""
+    N, n = q.shape
+    move, prev, qc = meta.get("move"), meta.get("prev_move"), meta.get("qc")
+    joints = tuple(j for j in range(1, n + 1) if np.std(move[rows, j - 1]) > np.radians(1.0))
+    if not joints:
+        return Candidate("readback_lag", tuple(range(1, n + 1)), reason="the joints hardly move between points")
+    veto, direct = "", {}
+    if qc is not None:
+        qcm, qcp = moves_from_order(qc) if meta.get("move_cmd") is None else (meta["move_cmd"], meta["prev_cmd"])
+        direct = direct_lag(q, qc, qcm, qcp)
+        sig = tuple(j for j in joints if j in direct and abs(direct[j]["t"]) >= 5.0
+                    and abs(direct[j]["lag_deg_per_deg"]) >= 2e-5)
+        if not sig:
+            veto = ("commanded and read-back joints agree: no lag proportional to the move (direct comparison, "
+                    "|t| < 5 on every joint)")
+        else:
+            joints = sig
+    groups = [_dq_group(f"J{j}", {j: move[:, j - 1:j]}, (f"lag{j}",), n, N, (j,), limit=5e-3) for j in joints]
+    groups += [_dq_group(f"J{j} memory", {j: prev[:, j - 1:j]}, (f"lag{j}_memory",), n, N, (j,), limit=5e-3)
+               for j in joints]
+    return Candidate("readback_lag", joints, (Profile("signed last move", tuple(groups)),), veto=veto,
+                     info={"direct_comparison": direct} if direct else {})
 
 
 def _time_profiles(meta, rows, opt) -> tuple[list[tuple[str, np.ndarray]], str]:
@@ -454,12 +585,24 @@ def _thermal(kin, q, meta, J, layout, rows, opt) -> Candidate:
 
 
 def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
+    drift = meta.get("nest_drift")
+    info = {"nest_drift": drift} if drift else {}
+    if drift and drift["ruled_out"]:
+        return Candidate("registration_drift", (), veto=f"ruled out by the reference nests: {drift['summary']}",
+                         info=info)
     if meta.get("t_s") is None:
-        return Candidate("registration_drift", (), reason="no timestamps in the data")
-    profiles, why = _time_profiles(meta, rows, opt)
-    profiles = [(label, u) for label, u in profiles if label != "temperature"]
-    if why or not profiles:
-        return Candidate("registration_drift", (), reason=why or "no timestamps in the data")
+        if drift and drift["detected"]:              # no timestamps: the measurement order carries the time
+            x = np.asarray(meta["order"], float)
+            x = (x - x[rows].min()) / max(np.ptp(x[rows]), 1e-9)
+            profiles = [("linear in measurement order", x), ("quadratic in measurement order", x**2)]
+        else:
+            return Candidate("registration_drift", (), reason="no timestamps in the data"
+                             + ("" if drift else " and no reference nests"), info=info)
+    else:
+        profiles, why = _time_profiles(meta, rows, opt)
+        profiles = [(label, u) for label, u in profiles if label != "temperature"]
+        if why or not profiles:
+            return Candidate("registration_drift", (), reason=why or "no timestamps in the data", info=info)
     centre = p_model[rows].mean(axis=0)
     screw = np.concatenate([np.broadcast_to(np.eye(3), (len(q), 3, 3)), -skew(p_model - centre)], axis=2)
     names = ("vx", "vy", "vz", "wx", "wy", "wz")
@@ -467,7 +610,7 @@ def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
     out = [Profile(label, (Group("translation", (), names[:3], dp=u[:, None, None] * screw[:, :, :3], limit=limit[:3]),
                            Group("rotation", (), names[3:], dp=u[:, None, None] * screw[:, :, 3:], limit=limit[3:])))
            for label, u in profiles]
-    return Candidate("registration_drift", (), tuple(out))
+    return Candidate("registration_drift", (), tuple(out), info=info)
 
 
 def _coupling(kin, q) -> Candidate:
@@ -493,7 +636,7 @@ def build_candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, rows: np
     n = kin.n
     cands = [_compliance(kin, q_rad, meta, rows, options, False), _compliance(kin, q_rad, meta, rows, options, True)]
     cands += [_gear(kin, q_rad, j, rows, options) for j in range(1, n + 1)]
-    cands += [_backlash(kin, q_rad, meta, rows), _thermal(kin, q_rad, meta, J, layout, rows, options),
+    cands += [_backlash(kin, q_rad, meta, rows), _readback_lag(kin, q_rad, meta, rows, options), _thermal(kin, q_rad, meta, J, layout, rows, options),
               _coupling(kin, q_rad), _registration(kin, q_rad, meta, p_model, rows, options)]
     return cands
 
@@ -661,7 +804,11 @@ class _Score:
     cv: dict | None = None
     plausible: tuple[bool, str] | None = None
     rejected: str = ""
+    backward_delta_bic: float = float("nan")
+    refit_cv_t: float = float("nan")
     steps: list = field(default_factory=list)      # 1-based selection steps that added groups of this effect
+    physical: dict = field(default_factory=dict)    # physical parameters (stiffness, lag, half-widths)
+    shadowed: list = field(default_factory=list)    # better-scored candidates rejected by a gate, overlapping
     confusable: list = field(default_factory=list)
     extensions: list = field(default_factory=list)
 
@@ -777,6 +924,8 @@ class _Selector:
                 "ok": bool(np.mean(d) > 0 and t >= self.opt.cv_min_t and frac >= self.opt.min_excess_fraction)}
 
     def plausibility(self, st: _State, sc: _Score) -> tuple[bool, str]:
+        if sc.cand.name in ("joint_compliance", "payload_deflection") and "torque_nm" in sc.cand.info:
+            return self._physical_compliance(sc)
         at, problems = 0, []
         for g in sc.groups:
             th = sc.gamma[at:at + g.k]
@@ -791,6 +940,96 @@ class _Selector:
                     problems.append(f"implied joint deflection {np.degrees(dq) * 60:.1f} arcmin > "
                                     f"{np.degrees(g.dq_limit) * 60:.1f} arcmin")
         return (not problems, "; ".join(problems) if problems else "within physical bounds")
+
+
+    def _physical_compliance(self, sc: _Score) -> tuple[bool, str]:
+        """Judge compliance on physical parameters: the fitted deflection of each joint (whatever groups carry it)
+        regressed on the physical gravity torque gives the compliance c (rad/N*m) and stiffness k = 1/c; k must be
+        at least the size-derived floor. Coefficients of a general basis are never judged on their own."""
+        rows = self.rows
+        tau = sc.cand.info["torque_nm"]
+        k_min = sc.cand.info["stiffness_min_nm_per_rad"]
+        dq = np.zeros((len(rows), self.inp.q_rad.shape[1]))
+        at = 0
+        for g in sc.groups:
+            dq += g.dq[rows] @ sc.gamma[at:at + g.k]
+            at += g.k
+        problems, values = [], {}
+        for j in sorted({j for g in sc.groups for j in g.joints}):
+            t = tau[rows, j - 1]
+            A = np.column_stack([t, np.ones(len(t))])
+            c = float(np.linalg.lstsq(A, dq[:, j - 1], rcond=None)[0][0])
+            k = 1.0 / c if abs(c) > 1e-300 else np.inf
+            defl = abs(c) * float(np.ptp(t))
+            values[j] = (k, defl)
+            if abs(k) < k_min:
+                problems.append(f"J{j} stiffness {abs(k):.3g} N*m/rad < {k_min:.3g} (size floor)")
+        sc.physical = {f"J{j}": {"stiffness_nm_per_rad": k, "deflection_range_arcmin": np.degrees(d) * 60.0}
+                       for j, (k, d) in values.items()}
+        desc = "; ".join(f"J{j} k = {k:.3g} N*m/rad ({np.degrees(d) * 60:.2f}' over the data)"
+                         for j, (k, d) in values.items())
+        neg = [j for j, (k, _) in values.items() if k < 0]
+        if neg:
+            desc += f"; negative on J{', J'.join(map(str, neg))} (balancer over-compensation or another effect)"
+        return (not problems, "; ".join(problems) if problems else desc)
+
+    def given(self, st: _State, sc: _Score, other_groups, Q, y) -> float:
+        """ΔBIC of sc's groups once ``other_groups`` are in the model (both orthogonalised against Q)."""
+        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in other_groups],
+                           axis=1)
+        P = _orth(X - Q @ (Q.T @ X), 1e-3)
+        Z = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in sc.groups], axis=1)
+        Z = Z - Q @ (Q.T @ Z)
+        Z = Z - P @ (P.T @ Z)
+        U = _orth(Z, 1e-3)
+        y2 = y - P @ (P.T @ y)
+        rss0 = float(y2 @ y2)
+        d = float(np.sum((U.T @ y2) ** 2))
+        return self.n * math.log(max(rss0 - d, 1e-300) / rss0) + U.shape[1] * self.lnn
+
+    def half_widths(self, st: _State, sc: _Score) -> dict:
+        """Approach-direction offset (half-width, arcmin) of each joint's residual by size of the last move:
+        constant for backlash (it saturates), growing with the move for a read-back lag."""
+        rows = self.rows
+        move = self.inp.meta()["move"][rows]
+        appr = self.inp.approach
+        if appr is None:
+            return {}
+        r = self.eng.resid(st)[rows]
+        Jq = st.J[rows][:, :, self.eng.joint_cols]
+        out = {}
+        edges = (0.0, 10.0, 30.0, 60.0, 100.0, np.inf)
+        for j in sorted({j for g in sc.groups for j in g.joints}):
+            jq = Jq[:, :, j - 1]
+            x = np.einsum("ni,ni->n", r, jq) / np.maximum(np.einsum("ni,ni->n", jq, jq), 1e-12)   # rad
+            s, m = np.asarray(appr)[rows, j - 1], np.degrees(np.abs(move[:, j - 1]))
+            bins = {}
+            for lo, hi in zip(edges[:-1], edges[1:]):
+                b = (m >= lo) & (m < hi)
+                if np.sum(b & (s > 0)) >= 5 and np.sum(b & (s < 0)) >= 5:
+                    hw = 0.5 * (np.mean(x[b & (s > 0)]) - np.mean(x[b & (s < 0)]))
+                    bins[f"{lo:.0f}-{hi:.0f} deg" if np.isfinite(hi) else f">{lo:.0f} deg"] = np.degrees(hw) * 60.0
+            out[f"J{j}"] = bins
+        return out
+
+
+SEPARATING_EXPERIMENT = {
+    frozenset({"joint_compliance", "gear_cyclic"}): "compare poses with equal q2 and different q3 (a J2 harmonic "
+    "cannot depend on q3, gravity compliance does), or measure with a second payload",
+    frozenset({"payload_deflection", "gear_cyclic"}): "measure the same poses with and without the payload",
+    frozenset({"backlash", "readback_lag"}): "log the commanded joints (qc1..qcn), or approach the same poses with "
+    "short and long moves from both sides",
+    frozenset({"thermal_drift", "registration_drift"}): "re-measure floor reference nests during the run (tracker "
+    "drift moves the nests, thermal growth does not)",
+    frozenset({"joint_compliance", "payload_deflection"}): "measure with two payloads in alternating blocks",
+    frozenset({"joint_compliance", "thermal_drift"}): "measure the poses in random order over the whole run",
+}
+
+
+def separating_experiment(a: str, b: str) -> str:
+    return SEPARATING_EXPERIMENT.get(frozenset({a, b}),
+                                     "widen the range of the inputs where they differ (joints, time, payload) "
+                                     "or add a second SMR for orientation")
 
 
 def _absorption(X, Qgeo) -> float:
@@ -1006,6 +1245,50 @@ def structure_test(w: np.ndarray, spaces: Mapping[str, np.ndarray], rng: np.rand
 
 
 # ============================================================================ the diagnosis
+def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dict | None:
+    """Tracker drift seen by reference nests: each nest's readings (minus their mean) fitted with a quadratic in
+    time (or in measurement order without timestamps); pooled F test against a constant; the drift is the largest
+    3-D excursion of the fitted trends. ``ruled_out`` when not detected and its upper bound (trend + 3 standard
+    errors) is below half the noise floor. None with fewer than 3 readings of any nest."""
+    ids = np.asarray(nests.nest_id)
+    x_all = np.asarray(nests.t_s if nests.t_s is not None else nests.order, float)
+    span = float(np.ptp(x_all)) if len(x_all) else 0.0
+    if span <= 0:
+        return None
+    rss0 = rss1 = 0.0
+    dof1, k_extra, excursion, m_min = 0, 0, 0.0, np.inf
+    for nid in np.unique(ids):
+        sel = ids == nid
+        if sel.sum() < 4:
+            continue
+        x = (x_all[sel] - x_all.min()) / span
+        p = np.asarray(nests.p_mm)[sel] - np.asarray(nests.p_mm)[sel].mean(axis=0)
+        A = np.column_stack([np.ones(len(x)), x - x.mean(), (x - x.mean()) ** 2])
+        beta, *_ = np.linalg.lstsq(A, p, rcond=None)
+        trend = A[:, 1:] @ beta[1:]
+        r = p - A @ beta
+        rss0 += float(np.sum(p**2))
+        rss1 += float(np.sum(r**2))
+        dof1 += 3 * (len(x) - 3)
+        k_extra += 6
+        excursion = max(excursion, float(np.max(np.linalg.norm(trend - trend[:, None].mean(axis=0), axis=1))) * 2.0)
+        m_min = min(m_min, len(x))
+    if k_extra == 0 or dof1 <= 0:
+        return None
+    sigma = math.sqrt(rss1 / dof1)
+    F = ((rss0 - rss1) / k_extra) / max(rss1 / dof1, 1e-300)
+    p_value = float(stats.f.sf(F, k_extra, dof1))
+    bound = excursion + 3.0 * sigma * math.sqrt(12.0 / m_min)
+    detected = p_value < alpha
+    ruled_out = (not detected) and bound < 0.5 * floor_mm
+    basis = "time" if nests.t_s is not None else "measurement order"
+    summary = (f"nests moved {excursion:.3f} mm over the run (p = {p_value:.2g}, by {basis})" if detected else
+               f"nests stable within {bound:.3f} mm (drift {excursion:.3f} mm, p = {p_value:.2g}, by {basis})")
+    return {"detected": detected, "ruled_out": ruled_out, "drift_mm": excursion, "upper_bound_mm": bound,
+            "p_value": p_value, "nest_sigma_mm": sigma, "n_nests": int(k_extra // 6), "basis": basis,
+            "summary": summary}
+
+
 def approach_from_order(q: np.ndarray) -> np.ndarray:
     """(N, n) sign of each joint's last motion from row order (rows in measurement order): the same rule as the
     interchange CSV (a joint that did not move keeps its previous sign; 0 before its first move)."""
@@ -1048,18 +1331,32 @@ def _base_fit(inp: DiagnosisInput, opt: DiagnosisOptions):
 def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()) -> Diagnosis:
     """Run the whole diagnosis on one dataset (see the module docstring)."""
     opt = options
-    res, cols = _base_fit(inp, opt)
+    if inp.baseline is not None and inp.baseline_identified is not None:
+        kin0 = inp.baseline
+        layout = ParamLayout.of(kin0)
+        cols = np.array([layout.index(nm) for nm in inp.baseline_identified], int)
+    else:
+        res, cols = _base_fit(inp, opt)
+        kin0 = res.kinematics if inp.baseline is None else inp.baseline
     eng = _Engine(inp, cols, np.flatnonzero(inp.calib), np.flatnonzero(inp.test))
-    st = eng.fit(res.kinematics, [])
+    if inp.baseline is not None:              # the best geometric model as given: "before" agrees everywhere
+        pred, J = eng.predict(kin0, [], np.zeros(0))
+        geo_state = _State(kin0, [], np.zeros(0), pred, J)
+    st = eng.fit(kin0, [])
     outliers = _outliers(eng, st, opt)
     if len(outliers):
         eng.fit_rows = np.setdiff1d(eng.fit_rows, outliers)
         st = eng.fit(st.kin, [])
-    cands = build_candidates(st.kin, inp.q_rad, inp.meta(), eng.fit_rows, st.J, st.pred, opt)
+    if inp.baseline is None:
+        geo_state = st
+    drift = nest_drift(inp.nests, inp.noise_floor_mm) if inp.nests is not None else None
+    meta = dict(inp.meta(), nest_drift=drift, order=np.arange(len(inp.q_rad)) if inp.order is None else inp.order)
+    cands = build_candidates(st.kin, inp.q_rad, meta, eng.fit_rows, st.J, st.pred, opt)
     sel = _Selector(eng, inp, opt)
     Qgeo = _orth(eng.wflat(st.J[:, :, cols], eng.fit_rows))
-    geo_state = st
-    stages = [_stage_summary(eng, st, [], opt)]
+    stages = [_stage_summary(eng, geo_state, [], opt)]
+    if st is not geo_state:
+        stages[0]["refit_test_rms_mm"] = eng.test_rms(st)
     st, accepted, last_scores = _forward(eng, sel, st, cands, stages, Qgeo, opt)
     st, accepted, stages, dropped = _backward(eng, sel, st, accepted, stages, opt)
     return _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_scores, dropped, outliers, Qgeo)
@@ -1074,7 +1371,7 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
         Q, y, _ = sel.base(st)
         scores = sorted((sel.score(c, st, Q, y, Qgeo) for c in pool), key=lambda s: s.delta_bic)
         last_scores = {s.cand.key: s for s in scores}
-        chosen = _pick(sel, st, scores, opt)
+        chosen = _pick(sel, st, scores, opt, pool)
         if chosen is None:
             break
         new = eng.fit(st.kin, st.groups + list(chosen.groups), np.concatenate([st.theta, chosen.gamma]))
@@ -1088,13 +1385,24 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
     return st, accepted, last_scores
 
 
-def _pick(sel, st, scores, opt) -> _Score | None:
-    """The best-scoring candidate that passes every gate: ΔBIC, absorption, blocked CV, plausibility."""
+SATURATION_PARTNER = {"backlash": "readback_lag", "readback_lag": "backlash"}
+
+
+def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
+    """The strongest evidence (lowest ΔBIC) that passes every named gate: absorption, veto (direct comparison),
+    blocked CV, physical plausibility, saturation test (backlash vs read-back lag). A better-scored candidate that
+    a gate rejected and whose visible subspace overlaps the winner's is kept with it as one confusable class."""
+    rejected = []
+    Q = y = None
     for sc in scores:
         if sc.delta_bic >= -opt.bic_threshold:
             return None
         if sc.absorbed_min > opt.absorbed_limit:
             sc.rejected = f"{100 * sc.absorbed_min:.0f} % absorbed by the geometric model"
+            continue
+        if sc.cand.veto:
+            sc.rejected = sc.cand.veto
+            rejected.append(sc)
             continue
         sc.cv = sel.cross_validate(st, sc)
         sc.plausible = sel.plausibility(st, sc)
@@ -1103,7 +1411,29 @@ def _pick(sel, st, scores, opt) -> _Score | None:
         elif not sc.plausible[0]:
             sc.rejected = f"implausible values: {sc.plausible[1]}"
         else:
+            partner = SATURATION_PARTNER.get(sc.cand.name)
+            other = next((c for c in pool if c.name == partner and c.profiles and not c.reason and not c.veto
+                          and not c.extends), None)
+            if other is not None:
+                if Q is None:
+                    Q, y, _ = sel.base(st)
+                js = {j for g in sc.groups for j in g.joints}
+                og = [g for g in other.profiles[0].groups if set(g.joints) & js]
+                if og:
+                    dbic = sel.given(st, sc, og, Q, y)
+                    sc.physical["saturation_test"] = {
+                        "delta_bic_given_" + partner: dbic, "half_width_arcmin_by_move": sel.half_widths(st, sc)}
+                    if dbic >= -opt.bic_threshold:
+                        sc.rejected = ("saturation test: " + (
+                            "the approach offset grows with the size of the move (read-back lag); backlash adds "
+                            if sc.cand.name == "backlash" else
+                            "the approach offset does not grow with the move (it saturates: backlash); the lag adds ")
+                            + f"ΔBIC {dbic:+.1f} once {partner} is modelled")
+                        rejected.append(sc)
+                        continue
+            sc.shadowed = [r for r in rejected if r.cand.name != sc.cand.name and _overlap(r.U, sc.U) > 0.5]
             return sc
+        rejected.append(sc)
     return None
 
 
@@ -1119,7 +1449,8 @@ def _record(chosen: _Score, accepted: list, scores, step: int, opt) -> None:
     chosen.confusable = [_confusion_entry(chosen, o) for o in scores if o is not chosen
                          and o.delta_bic < -opt.bic_threshold and o.cand.name != chosen.cand.name
                          and o.delta_bic - chosen.delta_bic < opt.bic_threshold
-                         and _overlap(chosen.U, o.U) > 0.5]
+                         and _overlap(chosen.U, o.U) > 0.5 and not any(o is r for r in chosen.shadowed)]
+    chosen.confusable += [dict(_confusion_entry(chosen, o), rejected_by=o.rejected) for o in chosen.shadowed]
     chosen.steps.append(step)
     accepted.append(chosen)
 
@@ -1162,11 +1493,25 @@ def _backward(eng, sel, st, accepted, stages, opt):
     """One backward pass: drop an accepted effect whose removal no longer costs ΔBIC < -threshold given the
     others (its fitted contribution, orthogonalised against everything else, is what removing it would cost)."""
     dropped = []
-    if len(accepted) < 2:
+    if not accepted:
         return st, accepted, stages, dropped
     _, y, A = sel.base(st)
     rss = float(y @ y)
     for sc in accepted:
+        cols, th = _columns_of(eng, st, sc.groups)
+        mask = np.ones(A.shape[1], bool)
+        mask[cols] = False
+        by_time = sc.cand.time_effect and sel.inp.t_s is not None
+        folds = eng.folds(by_time, sel.inp.t_s, opt.cv_folds, opt.seed)
+        yr = eng.wflat(eng.resid(st), eng.fit_rows) + A[:, cols] @ th     # the data as the model without it sees them
+        e0, e1 = eng.cv_errors(A[:, mask], yr, folds), eng.cv_errors(A, yr, folds)
+        dd = np.sum(e0**2, axis=1) - np.sum(e1**2, axis=1)
+        sc.refit_cv_t = float(np.mean(dd) / max(np.std(dd, ddof=1) / math.sqrt(len(dd)), 1e-300))
+        if sc.refit_cv_t < opt.cv_min_t:
+            dropped.append(sc)
+    for sc in (accepted if len(accepted) >= 2 else ()):
+        if sc in dropped:
+            continue
         cols, th = _columns_of(eng, st, sc.groups)
         mask = np.ones(A.shape[1], bool)
         mask[cols] = False
@@ -1195,7 +1540,8 @@ def _backward(eng, sel, st, accepted, stages, opt):
 def _confusion_entry(best: _Score, other: _Score) -> dict:
     return {"effect": other.cand.name, "joints": list(other.joints), "delta_bic": other.delta_bic,
             "log10_bayes_factor": (other.delta_bic - best.delta_bic) / (2.0 * math.log(10.0)),
-            "overlap": _overlap(best.U, other.U)}
+            "overlap": _overlap(best.U, other.U),
+            "experiment": separating_experiment(best.cand.name, other.cand.name)}
 
 
 def _params(sc: _Score, theta: np.ndarray | None = None) -> dict:
@@ -1225,7 +1571,9 @@ def _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_s
     final = stages[-1][key]
     for sc in dropped:
         ev = _evidence(sc, inp.noise_floor_mm, final)
-        ev["reason"] = f"dropped in the backward step (ΔBIC of keeping it {sc.backward_delta_bic:.1f})"
+        ev["reason"] = (f"does not survive the refit with the other accepted effects (cross-validated t "
+                        f"{sc.refit_cv_t:.1f} < {opt.cv_min_t:g})" if sc.refit_cv_t < opt.cv_min_t else
+                        f"dropped in the backward step (ΔBIC of keeping it {sc.backward_delta_bic:.1f})")
         findings.append(Finding(sc.cand.name, sc.joints, False, final, final, ev))
     done = {s.cand.key for s in accepted} | {s.cand.key for s in dropped}
     others, undiagnosable = _other_findings(eng, sel, st, [c for c in cands if c.key not in done], last_scores,
@@ -1256,6 +1604,8 @@ def _accepted_findings(eng, st, accepted, stages, key, floor) -> list[Finding]:
         achieved = sum(stages[s - 1][key] - stages[s][key] for s in sc.steps)
         ev.update(step=first, parameters=_params(sc, _columns_of(eng, st, sc.groups)[1]),
                   predicted_shrinkage_mm=predicted, achieved_shrinkage_mm=achieved)
+        if sc.cand.name == "readback_lag":
+            ev["lag_deg_per_deg"] = _lags(ev["parameters"])
         if sc.extensions:
             ev["extended"] = sc.extensions
             ev["dof"] = sc.rank + sum(e["dof"] for e in sc.extensions)
@@ -1271,6 +1621,11 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
     Q, y, _ = sel.base(st)
     rest, undiagnosable = [], []
     for c in cands:
+        if c.veto and not c.profiles:
+            ev = {"diagnosable": True, "reason": c.veto}
+            ev.update({k: v for k, v in c.info.items() if k != "torque_nm"})
+            rest.append((np.inf, Finding(c.name, c.joints, False, final, final, ev)))
+            continue
         if c.reason or not c.profiles:
             undiagnosable.append({"effect": c.name, "joints": list(c.joints), "reason": c.reason,
                                   "remedy": REMEDY[c.name]})
@@ -1293,7 +1648,7 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
             sc.cv = sel.cross_validate(st, sc)
             sc.plausible = sel.plausibility(st, sc)
             ev = _evidence(sc, floor, final)
-            ev["reason"] = (prev.rejected if prev is not None and prev.rejected else
+            ev["reason"] = (c.veto if c.veto else prev.rejected if prev is not None and prev.rejected else
                             _cv_reason(sc.cv, opt) if not sc.cv["ok"] else
                             f"implausible values: {sc.plausible[1]}" if not sc.plausible[0] else
                             f"limit of {opt.max_effects} effects reached")
@@ -1327,9 +1682,23 @@ def _evidence(sc: _Score, floor: float, after: float) -> dict:
     if conf:
         ev["confusable_with"] = conf
         ev["class"] = " / ".join([sc.cand.name] + [c["effect"] for c in conf])
+        ev["experiment"] = "; ".join(dict.fromkeys(c["experiment"] for c in conf))
     if sc.cand.name == "joint_compliance":
-        ev["class"] = ELASTIC_CLASS
+        ev["elastic_class"] = ELASTIC_CLASS
+    if sc.physical:
+        ev["physical"] = sc.physical
+    if "direct_comparison" in sc.cand.info:
+        ev["direct_comparison"] = {f"J{j}": v for j, v in sc.cand.info["direct_comparison"].items()}
+    if sc.cand.name == "readback_lag" and sc.gamma is not None:
+        ev["lag_deg_per_deg"] = _lags(_params(sc))
+    if np.isfinite(sc.refit_cv_t):
+        ev["refit_cv_t"] = sc.refit_cv_t
     return ev
+
+
+def _lags(params: dict) -> dict:
+    """Read-back lag per joint (deg/deg) from the fitted parameters (-lambda)."""
+    return {k.split(":")[-1].replace("lag", "J"): -v for k, v in params.items() if k.split(":")[-1].startswith("lag")}
 
 
 def _what_if(eng: _Engine, st: _State, sc: _Score) -> float:
