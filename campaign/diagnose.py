@@ -24,7 +24,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, diagnose
+from robocal.diagnose import (Diagnosis, DiagnosisInput, DiagnosisOptions, NestReadings, approach_from_order, diagnose,
+                              moves_from_order)
 from robocal.identify import IdentificationError
 from robocal.noise import noise_floor_mm
 from robocal.selfcheck import LABELS, SelfCheckResult
@@ -33,7 +34,7 @@ from .cell import measurement_covariance, nominal_kinematics, tracker_uncertaint
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset, dataset_from_log, read_csv
-from .process import noise_floor_from_repeats, repeat_groups
+from .process import geometric_fit, noise_floor_from_repeats, repeat_groups
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -65,34 +66,70 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
 
 
-def diagnosis_input(ds: Dataset, cfg: CampaignConfig) -> tuple[DiagnosisInput, dict]:
-    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata."""
+def _rows(ds: Dataset, name: str) -> np.ndarray:
+    """(N,) bool: rows of set ``name`` (also for sets this Dataset version does not know, e.g. "nest")."""
+    return np.fromiter((s == name for s in ds.set), dtype=bool, count=len(ds))
+
+
+def _nests(ds: Dataset) -> NestReadings | None:
+    """Reference-nest rows (set "nest", with ``nest_id``; their joints may be empty) in measurement order."""
+    nest = _rows(ds, "nest")
+    ids = getattr(ds, "nest_id", None)
+    if not nest.any() or ids is None:
+        return None
+    idx = np.flatnonzero(nest)
+    return NestReadings(ds.p_tracker_mm[idx], tuple(str(ids[i]) for i in idx),
+                        None if ds.t_s is None else np.asarray(ds.t_s, float)[idx], idx.astype(float))
+
+
+def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None) -> tuple[DiagnosisInput, dict]:
+    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata.
+    ``baseline``: the geometric fit (``campaign.process.geometric_fit``) to start from."""
     _check(ds, cfg)
     check = ds.mask("check")
-    use = ~check
+    robot = ~_rows(ds, "nest")                         # rows with joints, in measurement order
+    use = ds.mask("calib") | ds.mask("test")
     p = ds.p_tracker_mm
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    qc_deg = getattr(ds, "qc_deg", None)
+    q_rep = ds.q_deg if qc_deg is None else qc_deg     # repeated poses are repeated commands
+    repeats = noise_floor_from_repeats(q_rep[check], p[check]) if check.any() else None
     specs = noise_floor_mm(p[use], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
     floor, source = (repeats, "repeats") if repeats is not None else (specs, "specs")
-    approach = ds.approach_sign()[use]
+    q_rad = np.radians(ds.q_deg)
+    approach = np.zeros_like(q_rad)
+    move, prev = np.zeros_like(q_rad), np.zeros_like(q_rad)
+    approach[robot] = approach_from_order(q_rad[robot])
+    move[robot], prev[robot] = moves_from_order(q_rad[robot])
     meta = {name: (None if getattr(ds, name) is None else getattr(ds, name)[use])
             for name in ("t_s", "temp_c", "payload_kg")}
-    dof = sum(len(g) - 1 for g in repeat_groups(ds.q_deg[check])) if repeats is not None else None
-    inp = DiagnosisInput(nominal_kinematics(cfg), np.radians(ds.q_deg[use]), p[use], measurement_covariance(cfg, p)[use],
-                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach, **meta)
+    dof = sum(len(g) - 1 for g in repeat_groups(q_rep[check])) if repeats is not None else None
+    kin = None if baseline is None else getattr(baseline, "kinematics", baseline)
+    identified = None if baseline is None else getattr(baseline, "identified", None)
+    inp = DiagnosisInput(nominal_kinematics(cfg), q_rad[use], p[use], measurement_covariance(cfg, p)[use],
+                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach[use],
+                         move_rad=move[use], prev_move_rad=prev[use],
+                         qc_rad=None if qc_deg is None else np.radians(np.asarray(qc_deg, float)[use]),
+                         baseline=kin, baseline_identified=None if identified is None else tuple(identified),
+                         nests=_nests(ds), order=np.flatnonzero(use).astype(float), **meta)
     payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
+    nests = inp.nests
     info = {"noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
             "n": {"calib": int(ds.mask("calib").sum()), "test": int(ds.mask("test").sum()), "check": int(check.sum())},
             "metadata": {"timestamps": ds.t_s is not None, "temperatures": ds.temp_c is not None,
-                         "payloads_kg": payloads, "approach": "from row order"}}
+                         "payloads_kg": payloads, "approach": "from row order",
+                         "commanded_joints": qc_deg is not None,
+                         "reference_nests": 0 if nests is None else len(set(nests.nest_id))},
+            "baseline": "campaign.process.geometric_fit (the kinematic stage of reprocess)"}
     return inp, info
 
 
 def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions = DiagnosisOptions()
                      ) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract."""
-    inp, info = diagnosis_input(ds, cfg)
+    _check(ds, cfg)
     try:
+        base = geometric_fit(ds, cfg)
+        inp, info = diagnosis_input(ds, cfg, base)
         d = diagnose(inp, options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"diagnosis failed: {exc}") from None

@@ -144,6 +144,19 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     return Processed(report, model, result)
 
 
+def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
+    """The geometric-only calibration that ``process`` reports as its "kinematic" stage: registration and
+    identification on the calib rows with the configured estimator (``diagnose`` uses it as its baseline, so
+    "before" agrees everywhere)."""
+    _check_dataset(ds, cfg)
+    q, p, cal = np.radians(ds.q_deg), ds.p_tracker_mm, ds.mask("calib")
+    try:
+        return calibrate(nominal_kinematics(cfg), q[cal], p[cal], measurement_covariance(cfg, p)[cal],
+                         calibration_options(cfg))
+    except IdentificationError as exc:
+        raise DataError(ds.source, f"calibration failed: {exc}") from None
+
+
 def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
     """The configured residual layer (IDW or GPR) fitted on calibration points, or None."""
     c = cfg.calibration

@@ -39,6 +39,7 @@ from typing import Mapping
 
 import numpy as np
 from scipy import stats
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from .effects import G_MM_S2
@@ -251,10 +252,18 @@ class Group:
     dp: np.ndarray | None = None
     limit: np.ndarray | float = np.inf
     dq_limit: float = 2e-3
+    u: np.ndarray | None = None          # (N,) per-point scale of ``base`` (time profiles): X = u * X_base
+    base: "Group | None" = None
 
     @property
     def k(self) -> int:
         return len(self.names)
+
+    def scaled(self, u: np.ndarray) -> "Group":
+        """This group times a per-point profile u (N,): its regressor is u times this one's (exactly, since the
+        whitening is per point), which lets the scoring whiten the base once for all profiles."""
+        return Group(self.label, self.joints, self.names, None if self.dq is None else u[:, None, None] * self.dq,
+                     None if self.dp is None else u[:, None, None] * self.dp, self.limit, self.dq_limit, u, self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -526,8 +535,9 @@ def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
                     "|t| < 5 on every joint)")
         else:
             joints = sig
-    groups = [_dq_group(f"J{j}", {j: move[:, j - 1:j]}, (f"lag{j}",), n, N, (j,), limit=5e-3) for j in joints]
-    groups += [_dq_group(f"J{j} memory", {j: prev[:, j - 1:j]}, (f"lag{j}_memory",), n, N, (j,), limit=5e-3)
+    kw = {"limit": 5e-3, "dq_limit": np.inf}          # judged on the lag itself (deg/deg), not on move x lag
+    groups = [_dq_group(f"J{j}", {j: move[:, j - 1:j]}, (f"lag{j}",), n, N, (j,), **kw) for j in joints]
+    groups += [_dq_group(f"J{j} memory", {j: prev[:, j - 1:j]}, (f"lag{j}_memory",), n, N, (j,), **kw)
                for j in joints]
     return Candidate("readback_lag", joints, (Profile("signed last move", tuple(groups)),), veto=veto,
                      info={"direct_comparison": direct} if direct else {})
@@ -573,14 +583,12 @@ def _thermal(kin, q, meta, J, layout, rows, opt) -> Candidate:
                for c, i, k in layout.joint_cols if k in (1, 2) and abs((kin.d_mm if k == 1 else kin.a_mm)[i]) > 50.0]
     uniform = sum(J[:, :, c] * L for c, _, L in lengths)
     single = [(c, name, L) for c, name, L in lengths if name != "d1"]
-    out = []
-    for label, u in profiles:
-        groups = [Group("uniform growth", (), ("growth_all",), dp=(u[:, None] * uniform)[:, :, None], limit=1e-3)]
-        groups += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(u[:, None] * J[:, :, c] * L)[:, :, None],
-                         limit=1e-3) for c, name, L in single]
-        groups += [_dq_group(f"zero J{j}", {j: u[:, None]}, (f"zero_drift{j}",), n, N, (j,), limit=2e-3)
-                   for j in joints]
-        out.append(Profile(label, tuple(groups)))
+    bases = [Group("uniform growth", (), ("growth_all",), dp=uniform[:, :, None], limit=1e-3)]
+    bases += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(J[:, :, c] * L)[:, :, None], limit=1e-3)
+              for c, name, L in single]
+    bases += [_dq_group(f"zero J{j}", {j: np.ones((N, 1))}, (f"zero_drift{j}",), n, N, (j,), limit=2e-3)
+              for j in joints]
+    out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
     return Candidate("thermal_drift", joints, tuple(out))
 
 
@@ -607,9 +615,9 @@ def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
     screw = np.concatenate([np.broadcast_to(np.eye(3), (len(q), 3, 3)), -skew(p_model - centre)], axis=2)
     names = ("vx", "vy", "vz", "wx", "wy", "wz")
     limit = np.array([1.0, 1.0, 1.0, 5e-4, 5e-4, 5e-4])
-    out = [Profile(label, (Group("translation", (), names[:3], dp=u[:, None, None] * screw[:, :, :3], limit=limit[:3]),
-                           Group("rotation", (), names[3:], dp=u[:, None, None] * screw[:, :, 3:], limit=limit[3:])))
-           for label, u in profiles]
+    bases = (Group("translation", (), names[:3], dp=screw[:, :, :3], limit=limit[:3]),
+             Group("rotation", (), names[3:], dp=screw[:, :, 3:], limit=limit[3:]))
+    out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
     return Candidate("registration_drift", (), tuple(out), info=info)
 
 
@@ -827,6 +835,7 @@ def _greedy(blocks, y, rss0, n, lnn, extra, rank_tol=1e-3, margin=0.0):
     after the first must lower BIC by ``margin``. Returns (chosen indices, ΔBIC, ΔRSS, rank, U)."""
     chosen, S = [], np.zeros((len(y), 0))
     rss, best, r_tot = rss0, 0.0, 0
+    look = 2.0 * math.log(len(blocks)) if len(blocks) > 1 else 0.0     # prior 1/G on which group: look-elsewhere
     y_res = y.copy()
     while len(chosen) < len(blocks):
         trial = None
@@ -834,12 +843,16 @@ def _greedy(blocks, y, rss0, n, lnn, extra, rank_tol=1e-3, margin=0.0):
             if i in chosen:
                 continue
             Zs = Z - S @ (S.T @ Z)
-            U, s, _ = np.linalg.svd(Zs, full_matrices=False)
-            Ug = U[:, s > rank_tol]
+            if Zs.shape[1] == 1:                      # one column: its direction, no SVD needed
+                nz = float(np.linalg.norm(Zs))
+                Ug = Zs / nz if nz > rank_tol else Zs[:, :0]
+            else:
+                U, s, _ = np.linalg.svd(Zs, full_matrices=False)
+                Ug = U[:, s > rank_tol]
             if Ug.shape[1] == 0:
                 continue
             d = float(np.sum((Ug.T @ y_res) ** 2))
-            bic = n * math.log(max(rss - d, 1e-300) / rss0) + (r_tot + Ug.shape[1] + extra) * lnn
+            bic = n * math.log(max(rss - d, 1e-300) / rss0) + (r_tot + Ug.shape[1] + extra) * lnn + look
             if trial is None or bic < trial[0]:
                 trial = (bic, i, Ug, d)
         if trial is None or trial[0] >= best - (margin if chosen else 0.0):
@@ -873,8 +886,9 @@ class _Selector:
         rss0 = float(y @ y)
         best = _Score(cand)
         absorbed_min = 1.0
+        cache: dict[int, np.ndarray] = {}
         for prof in cand.profiles:
-            X = [self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in prof.groups]
+            X = [self.whitened(st, g, cache) for g in prof.groups]
             blocks = []
             for Xg in X:
                 nrm = np.linalg.norm(Xg, axis=0)
@@ -904,6 +918,15 @@ class _Selector:
         else:
             best.delta_bic, best.groups = 0.0, ()
         return best
+
+    def whitened(self, st: _State, g: Group, cache: dict) -> np.ndarray:
+        """Whitened calibration-row regressor (3m, k) of a group; a profile-scaled group reuses its base's."""
+        if g.base is None:
+            return self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows)
+        key = id(g.base)
+        if key not in cache:
+            cache[key] = self.eng.wflat(self.eng.regressor(st.J, st.kin, g.base), self.rows)
+        return cache[key] * np.repeat(g.u[self.rows], 3)[:, None]
 
     def cross_validate(self, st: _State, sc: _Score) -> dict:
         """Blocked K-fold CV of the linear model with and without the candidate's selected groups."""
@@ -1237,8 +1260,10 @@ def structure_test(w: np.ndarray, spaces: Mapping[str, np.ndarray], rng: np.rand
         F = F + 1e-9 * rng.standard_normal(F.shape)          # break ties (repeated values)
         _, nn = cKDTree(F).query(F, k=k + 1)
         nn = nn[:, 1:]
-        S = float(np.mean(np.sum(w * w[nn].mean(axis=1), axis=1)))
-        Sp = np.array([np.mean(np.sum(w[pp] * w[pp][nn].mean(axis=1), axis=1)) for pp in perms])
+        A = sparse.csr_matrix((np.full(m * k, 1.0 / k), nn.ravel(), np.arange(0, m * k + 1, k)), shape=(m, m))
+        S = float(np.mean(np.sum(w * (A @ w), axis=1)))
+        Wp = np.concatenate([w[pp] for pp in perms], axis=1)            # (m, 3 x permutations)
+        Sp = np.sum((Wp * (A @ Wp)).reshape(m, len(perms), 3), axis=(0, 2)) / m
         z = float((S - Sp.mean()) / max(Sp.std(ddof=1), 1e-12))
         out[name] = {"S": S, "z": z}
     return out
@@ -1249,7 +1274,7 @@ def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dic
     """Tracker drift seen by reference nests: each nest's readings (minus their mean) fitted with a quadratic in
     time (or in measurement order without timestamps); pooled F test against a constant; the drift is the largest
     3-D excursion of the fitted trends. ``ruled_out`` when not detected and its upper bound (trend + 3 standard
-    errors) is below half the noise floor. None with fewer than 3 readings of any nest."""
+    errors) is below 1.5 x the noise floor (a drift range that adds less than 0.45 x the floor in RMS). None with fewer than 3 readings of any nest."""
     ids = np.asarray(nests.nest_id)
     x_all = np.asarray(nests.t_s if nests.t_s is not None else nests.order, float)
     span = float(np.ptp(x_all)) if len(x_all) else 0.0
@@ -1257,6 +1282,7 @@ def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dic
         return None
     rss0 = rss1 = 0.0
     dof1, k_extra, excursion, m_min = 0, 0, 0.0, np.inf
+    slopes = []
     for nid in np.unique(ids):
         sel = ids == nid
         if sel.sum() < 4:
@@ -1273,14 +1299,20 @@ def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dic
         k_extra += 6
         excursion = max(excursion, float(np.max(np.linalg.norm(trend - trend[:, None].mean(axis=0), axis=1))) * 2.0)
         m_min = min(m_min, len(x))
+        xc = x - x.mean()
+        slopes.append(xc @ p / max(float(xc @ xc), 1e-300))      # linear drift over the run (mm per run)
     if k_extra == 0 or dof1 <= 0:
         return None
     sigma = math.sqrt(rss1 / dof1)
     F = ((rss0 - rss1) / k_extra) / max(rss1 / dof1, 1e-300)
     p_value = float(stats.f.sf(F, k_extra, dof1))
-    bound = excursion + 3.0 * sigma * math.sqrt(12.0 / m_min)
+    linear = float(np.linalg.norm(np.mean(slopes, axis=0)))        # common to all nests (the tracker moved)
+    se = sigma * math.sqrt(12.0 / m_min) / math.sqrt(len(slopes))
     detected = p_value < alpha
-    ruled_out = (not detected) and bound < 0.5 * floor_mm
+    if not detected:
+        excursion = linear
+    bound = linear + 2.0 * math.sqrt(3.0) * se
+    ruled_out = (not detected) and bound < 1.5 * floor_mm         # a range of 1.5 x floor is < 0.45 x floor RMS
     basis = "time" if nests.t_s is not None else "measurement order"
     summary = (f"nests moved {excursion:.3f} mm over the run (p = {p_value:.2g}, by {basis})" if detected else
                f"nests stable within {bound:.3f} mm (drift {excursion:.3f} mm, p = {p_value:.2g}, by {basis})")
@@ -1382,9 +1414,16 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
         rest = chosen.cand.rest(chosen.profile, chosen.groups)      # its other groups may enter later
         if rest is not None:
             pool.append(rest)
+        twin = ELASTIC_TWIN.get(chosen.cand.name)
+        other = next((c for c in pool if c.name == twin and not c.extends), None)
+        if other is not None and not chosen.cand.extends:     # one gravity-elastic effect: the other refines it
+            pool = [c for c in pool if c is not other]
+            pool.append(Candidate(chosen.cand.name, chosen.cand.joints, other.profiles, notes=chosen.cand.notes,
+                                  extends=True, info=other.info))
     return st, accepted, last_scores
 
 
+ELASTIC_TWIN = {"joint_compliance": "payload_deflection", "payload_deflection": "joint_compliance"}
 SATURATION_PARTNER = {"backlash": "readback_lag", "readback_lag": "backlash"}
 
 
@@ -1580,6 +1619,12 @@ def _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_s
                                             final, inp.noise_floor_mm, Qgeo, opt)
     where, maps = _where_stages(inp, opt, eng, geo_state, st, stages)
     structure, unexplained, notes = _leftover(inp, opt, eng, st, stages, inp.noise_floor_mm)
+    drift = next((c.info["nest_drift"] for c in cands if c.name == "registration_drift" and c.info.get("nest_drift")),
+                 None)
+    if drift:
+        notes.append(("tracker drift ruled out by the reference nests: " if drift["ruled_out"] else
+                      "reference nests: tracker drift detected, " if drift["detected"] else
+                      "reference nests: drift neither detected nor ruled out, ") + drift["summary"])
     final_regions = maps.pop("_final_regions")
     if unexplained:
         where += [r for r in final_regions if r.kind != "all"]
@@ -1629,8 +1674,10 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
         if c.reason or not c.profiles:
             undiagnosable.append({"effect": c.name, "joints": list(c.joints), "reason": c.reason,
                                   "remedy": REMEDY[c.name]})
-            rest.append((np.inf, Finding(c.name, c.joints, False, final, final,
-                                         {"diagnosable": False, "reason": c.reason, "remedy": REMEDY[c.name]})))
+            ev = {"diagnosable": False, "reason": c.reason, "remedy": REMEDY[c.name]}
+            if c.info.get("nest_drift"):
+                ev["nest_drift"] = c.info["nest_drift"]
+            rest.append((np.inf, Finding(c.name, c.joints, False, final, final, ev)))
             continue
         sc = sel.score(c, st, Q, y, Qgeo)
         prev = last_scores.get(c.key)
@@ -1652,6 +1699,8 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
                             _cv_reason(sc.cv, opt) if not sc.cv["ok"] else
                             f"implausible values: {sc.plausible[1]}" if not sc.plausible[0] else
                             f"limit of {opt.max_effects} effects reached")
+        if c.veto:
+            ev["reason"] = c.veto
         if c.notes:
             ev["notes"] = list(c.notes)
         after = _what_if(eng, st, sc) if sc.rank else final
@@ -1687,6 +1736,8 @@ def _evidence(sc: _Score, floor: float, after: float) -> dict:
         ev["elastic_class"] = ELASTIC_CLASS
     if sc.physical:
         ev["physical"] = sc.physical
+    if sc.cand.info.get("nest_drift"):
+        ev["nest_drift"] = sc.cand.info["nest_drift"]
     if "direct_comparison" in sc.cand.info:
         ev["direct_comparison"] = {f"J{j}": v for j, v in sc.cand.info["direct_comparison"].items()}
     if sc.cand.name == "readback_lag" and sc.gamma is not None:
