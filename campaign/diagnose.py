@@ -28,7 +28,7 @@ from robocal.diagnose import (Diagnosis, DiagnosisInput, DiagnosisOptions, NestR
                               moves_from_order)
 from robocal.identify import IdentificationError
 from robocal.noise import noise_floor_mm
-from robocal.selfcheck import LABELS, SelfCheckResult
+from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 
 from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .config import CampaignConfig
@@ -227,26 +227,28 @@ def render(console: Console, report: dict) -> None:
 
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:
-    short = {"none": "none", "joint_compliance": "comp", "payload_deflection": "pay", "gear_cyclic": "cyc",
-             "backlash": "back", "thermal_drift": "therm", "axis_coupling": "coup", "registration_drift": "tdrift"}
     m = result.confusion()
     t = Table(title="Self-check: true effect (rows) vs diagnosed effect (first accepted)")
-    t.add_column("truth \\ diagnosed")
+    t.add_column("truth \\ diagnosed", no_wrap=True)
     for b in LABELS:
-        t.add_column(short[b], justify="right")
+        t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
-            t.add_row(short[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
+            t.add_row(SHORT[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
     console.print(t)
     s = result.summary()
     e = s["shrinkage_error_mm"]
     console.print(
-        f"single effects: {s['primary_correct']}/{s['single_trials']} correctly attributed "
-        f"(exact set {s['exact_set']}, joints right {s['joints_ok']}); effect-free controls: "
-        f"{s['controls_clean']}/{s['controls']} with no effect accepted ({s['controls_unexplained']} flagged "
-        f"unexplained); two-effect combinations: {s['combo_exact']}/{s['combo_trials']} exact, recall "
-        f"{_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}", highlight=False)
+        f"single effects: {s['named_right']}/{s['single_trials']} correctly attributed (named, or in the named "
+        f"confusable class; first accepted = truth {s['primary_correct']}, exact set {s['exact_set']}, joints right "
+        f"{s['joints_ok']}); effect-free controls: {s['controls_clean']}/{s['controls']} with no effect accepted "
+        f"({s['controls_unexplained']} flagged unexplained); two-effect combinations: {s['combo_exact']}/"
+        f"{s['combo_trials']} exact, recall {_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}; "
+        f"outside the library: {s['outside_unexplained']}/{s['outside_trials']} flagged unexplained",
+        highlight=False)
+    console.print(f"spurious acceptances: {s['spurious_acceptances']} in {s['datasets']} datasets "
+                  f"({s['spurious_per_20']:.2f} per 20; target <= 1)", highlight=False)
     if e["n"]:
         console.print(f"predicted (calibration CV) minus achieved (test) shrinkage over {e['n']} accepted true effects: "
                       f"mean {e['mean']:+.4f} mm, mean |error| {e['mean_abs']:.4f} mm, max |error| {e['max_abs']:.4f} mm "

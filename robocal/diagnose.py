@@ -1734,6 +1734,7 @@ def _evidence(sc: _Score, floor: float, after: float) -> dict:
         ev["experiment"] = "; ".join(dict.fromkeys(c["experiment"] for c in conf))
     if sc.cand.name == "joint_compliance":
         ev["elastic_class"] = ELASTIC_CLASS
+        ev.setdefault("class", ELASTIC_CLASS)
     if sc.physical:
         ev["physical"] = sc.physical
     if sc.cand.info.get("nest_drift"):

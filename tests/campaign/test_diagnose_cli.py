@@ -11,7 +11,7 @@ from campaign.interchange import Dataset, write_csv
 from robocal.selfcheck import simulate_campaign
 from tests.campaign.helpers import small_config
 
-EFFECTS = {"joint_compliance", "gear_cyclic", "backlash", "thermal_drift", "axis_coupling", "registration_drift",
+EFFECTS = {"joint_compliance", "gear_cyclic", "backlash", "readback_lag", "thermal_drift", "axis_coupling", "registration_drift",
            "payload_deflection"}
 
 
@@ -153,3 +153,27 @@ def test_self_check_entry_point_prints_the_confusion_matrix_and_writes_json(tmp_
     rep = json.loads(out.read_text())
     assert rep["passed"] and rep["confusion"]["backlash"]["backlash"] == 1 and rep["confusion"]["none"]["none"] == 1
     assert main(["diagnose", "--self-check", "--seeds", "0"]) == 2
+
+
+@pytest.mark.system
+def test_diagnose_baseline_is_the_reprocess_kinematic_stage(tmp_path):
+    """"Before" agrees everywhere: the diagnosis starts from campaign.process.geometric_fit, the fit whose test RMS
+    reprocess reports as its kinematic stage (same CSV, same config, default robust estimator)."""
+    from campaign.config import load_config
+    from campaign.diagnose import diagnose_source
+    from campaign.interchange import read_csv
+    from campaign.process import process
+    from robocal.truth import TruthProtocol, simulate
+
+    camp = simulate(["joint_compliance"], 71, TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4))
+    keep = np.ones(len(camp.sets), bool)
+    ds = Dataset(camp.point_id, camp.sets, np.degrees(camp.q_read_rad), camp.p_mm, t_s=camp.t_s,
+                 payload_kg=camp.payload_kg)
+    path = tmp_path / "truth.csv"
+    write_csv(path, ds)
+    cfg = load_config(small_config(tmp_path, **{"tool.p_flange_smr_mm": [float(x) for x in camp.nominal.p_flange_smr_mm]}))
+    kinematic = process(read_csv(path), cfg).report["stages"]["kinematic"]["test"]["rms_mm"]
+    rep = diagnose_source(path, cfg).report
+    assert keep.all() and rep["baseline_test_rms_mm"] == pytest.approx(kinematic, rel=1e-6)
+    assert rep["final_test_rms_mm"] < rep["baseline_test_rms_mm"]
+    assert "joint_compliance" in {f["effect"] for f in rep["findings"] if f["accepted"]}
