@@ -1651,6 +1651,7 @@ def _accepted_findings(eng, st, accepted, stages, key, floor) -> list[Finding]:
                   predicted_shrinkage_mm=predicted, achieved_shrinkage_mm=achieved)
         if sc.cand.name == "readback_lag":
             ev["lag_deg_per_deg"] = _lags(ev["parameters"])
+        ev.update(_physical_values(sc.cand.name, ev["parameters"]))
         if sc.extensions:
             ev["extended"] = sc.extensions
             ev["dof"] = sc.rank + sum(e["dof"] for e in sc.extensions)
@@ -1748,6 +1749,22 @@ def _evidence(sc: _Score, floor: float, after: float) -> dict:
     return ev
 
 
+def _physical_values(name: str, params: dict) -> dict:
+    """Physical reading of fitted parameters: gear amplitude per harmonic (arcsec), backlash half-width (arcmin)."""
+    if name == "gear_cyclic":
+        amp = {}
+        for k, v in params.items():
+            h = k.split(":")[-1]
+            if h.startswith("sin"):
+                c = params.get(k.replace("sin", "cos"), 0.0)
+                amp[f"h{h[3:]}"] = math.degrees(math.hypot(v, c)) * 3600.0
+        return {"amplitude_arcsec": amp}
+    if name == "backlash":
+        return {"half_width_arcmin": {k.split(":")[-1].replace("b", "J"): math.degrees(abs(v)) * 60.0 / 2.0
+                                      for k, v in params.items()}}
+    return {}
+
+
 def _lags(params: dict) -> dict:
     """Read-back lag per joint (deg/deg) from the fitted parameters (-lambda)."""
     return {k.split(":")[-1].replace("lag", "J"): -v for k, v in params.items() if k.split(":")[-1].startswith("lag")}
@@ -1816,7 +1833,8 @@ def _leftover(inp, opt, eng, st, stages, floor):
     T = st.kin.T_tracker_base
     p_base = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
     q = inp.q_rad[rows]
-    spaces = {"joint space": q, "workspace": p_base}
+    spaces = {"joint space": q, "workspace": p_base, "reach": np.hypot(p_base[:, 0], p_base[:, 1]),
+              "height": p_base[:, 2]}
     for j in range(q.shape[1]):
         spaces[f"J{j + 1}"] = q[:, j]
     if inp.t_s is not None and np.ptp(np.asarray(inp.t_s)[rows]) > 0:
