@@ -77,6 +77,8 @@ class TruthProtocol:
     timestamps: bool = True
     nest_every: int = 0                   # 0: no reference nests
     nests: int = 3
+    q3_fixed_deg: float | None = None     # hold J3 at one angle (data that cannot tell a J2 harmonic from gravity)
+    compliance_joints: tuple[int, ...] = (2, 3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,13 +122,16 @@ def perturbed_geometry(nominal: Kinematics, rng: np.random.Generator) -> Kinemat
                          theta_rad=nominal.theta_rad + np.radians(s(0.005, 0.05)), beta_rad=nominal.beta_rad + beta)
 
 
-def sample_configurations(kin: Kinematics, rng: np.random.Generator, n: int) -> np.ndarray:
+def sample_configurations(kin: Kinematics, rng: np.random.Generator, n: int, q3_fixed_deg: float | None = None
+                          ) -> np.ndarray:
     """n random joint vectors (rad): SMR above the floor and off the base column, wrist off its singularity."""
     lo = np.radians([-120, -50, -120, -180, -115, -180])[:kin.n]
     hi = np.radians([120, 90, 60, 180, 115, 180])[:kin.n]
     out, got = [], 0
     while got < n:
         q = rng.uniform(lo, hi, (4 * n, kin.n))
+        if q3_fixed_deg is not None:
+            q[:, 2] = np.radians(q3_fixed_deg)
         c = chain(kin, q, full=False)
         p = c.T_base_flange[:, :3, 3]
         ok = (p[:, 2] > 150) & (np.hypot(p[:, 0], p[:, 1]) > 450) & (np.abs(q[:, 4]) > np.radians(15))
@@ -267,9 +272,9 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     nominal = nominal.with_(p_flange_smr_mm=smr + rng.normal(0, 0.5, 3))
     pr = protocol
     n_main = pr.n_calib + pr.n_test
-    q_main = sample_configurations(nominal, rng, n_main)
+    q_main = sample_configurations(nominal, rng, n_main, pr.q3_fixed_deg)
     sets = list(np.array(["calib"] * pr.n_calib + ["test"] * pr.n_test)[rng.permutation(n_main)])
-    q_chk = sample_configurations(nominal, rng, pr.check_poses)
+    q_chk = sample_configurations(nominal, rng, pr.check_poses, pr.q3_fixed_deg)
     order = [pr.check_poses - 1] + list(range(pr.check_poses)) * pr.check_repeats
     q_cmd = np.concatenate([q_main, q_chk[order]])
     sets += ["calib"] + ["check"] * (len(order) - 1)
@@ -296,7 +301,8 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
         if te.name in ("joint_compliance", "payload_deflection"):
             tau = gravity_torque_nm(truth, q_cmd, mass, payload, arm=te.name == "joint_compliance")
             for j, k in v["stiffness_nm_per_rad"].items():
-                q_link[:, j - 1] += tau[:, j - 1] / k
+                if j in pr.compliance_joints:
+                    q_link[:, j - 1] += tau[:, j - 1] / k
         elif te.name == "gear_cyclic":
             j = te.joints[0] - 1
             for h, A in v["amplitude_rad"].items():

@@ -126,3 +126,17 @@ def test_reduced_self_check_meets_the_targets():
     assert s["controls_clean"] == s["controls"] == 3
     assert s["spurious_acceptances"] <= 1
     assert s["shrinkage_error_mm"]["mean_abs"] < 0.05
+
+
+@pytest.mark.unit
+def test_compliance_and_j2_gear_are_one_class_when_the_data_cannot_separate_them():
+    """J3 held at one angle and one payload: the J2 gravity torque is a pure function of q2, like a J2 harmonic.
+    Whichever is named first, the other is in its class, with the experiment that would separate them."""
+    pr = TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4, timestamps=False, q3_fixed_deg=-30.0,
+                       compliance_joints=(2,), payloads_kg=(0.0,))
+    for seed in (700, 701):
+        d = diagnose(truth_input(simulate(["joint_compliance"], seed, pr)))
+        first = next(f for f in d.findings if f.accepted)
+        assert {first.effect} | {c["effect"] for c in first.evidence["confusable_with"]} >= {"joint_compliance",
+                                                                                               "gear_cyclic"}
+        assert "equal q2 and different q3" in first.evidence["experiment"]
