@@ -171,12 +171,25 @@ def _short_evidence(f: dict) -> str:
     if not f["accepted"]:
         return ev.get("reason", "")
     parts = [f"ΔBIC {ev['delta_bic']:.0f}", f"CV t {ev['cv_gain_t']:.1f} ({ev.get('cv_blocking')} blocks)"]
-    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers"):
+    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers", "gravity torque",
+                                 "signed last move"):
         parts.append(ev["profile"])
     if ev.get("groups"):
         parts.append(", ".join(ev["groups"]))
+    if ev.get("lag_deg_per_deg"):
+        parts.append("lag " + ", ".join(f"{k} {v:+.2e} deg/deg" for k, v in ev["lag_deg_per_deg"].items()))
+    phys = ev.get("physical") or {}
+    stiff = {k: v["stiffness_nm_per_rad"] for k, v in phys.items() if isinstance(v, dict) and "stiffness_nm_per_rad" in v}
+    if stiff:
+        parts.append("stiffness " + ", ".join(f"{k} {v:.2g} N*m/rad" for k, v in stiff.items()))
+    if ev.get("half_width_arcmin"):
+        parts.append("half-width " + ", ".join(f"{k} {v:.2f}'" for k, v in ev["half_width_arcmin"].items()))
+    if ev.get("amplitude_arcsec"):
+        parts.append("amplitude " + ", ".join(f"{k} {v:.0f}\"" for k, v in ev["amplitude_arcsec"].items()))
     if ev.get("confusable_with"):
-        parts.append("confusable with " + ", ".join(c["effect"] for c in ev["confusable_with"]))
+        parts.append("one class with " + ", ".join(c["effect"] + (f" ({c['rejected_by']})" if c.get("rejected_by")
+                                                                   else "") for c in ev["confusable_with"]))
+        parts.append("to separate them: " + ev.get("experiment", ""))
     return "; ".join(parts)
 
 

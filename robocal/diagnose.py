@@ -1424,7 +1424,7 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
 
 
 ELASTIC_TWIN = {"joint_compliance": "payload_deflection", "payload_deflection": "joint_compliance"}
-SATURATION_PARTNER = {"backlash": "readback_lag", "readback_lag": "backlash"}
+SATURATION_PARTNER = {"backlash": "readback_lag", "readback_lag": "backlash", "joint_compliance": "payload_deflection"}
 
 
 def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
@@ -1460,14 +1460,19 @@ def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
                 og = [g for g in other.profiles[0].groups if set(g.joints) & js]
                 if og:
                     dbic = sel.given(st, sc, og, Q, y)
-                    sc.physical["saturation_test"] = {
-                        "delta_bic_given_" + partner: dbic, "half_width_arcmin_by_move": sel.half_widths(st, sc)}
+                    elastic = sc.cand.name == "joint_compliance"
+                    key = "nested_test" if elastic else "saturation_test"
+                    sc.physical[key] = {"delta_bic_given_" + partner: dbic}
+                    if not elastic:
+                        sc.physical[key]["half_width_arcmin_by_move"] = sel.half_widths(st, sc)
                     if dbic >= -opt.bic_threshold:
-                        sc.rejected = ("saturation test: " + (
-                            "the approach offset grows with the size of the move (read-back lag); backlash adds "
-                            if sc.cand.name == "backlash" else
-                            "the approach offset does not grow with the move (it saturates: backlash); the lag adds ")
-                            + f"ΔBIC {dbic:+.1f} once {partner} is modelled")
+                        sc.rejected = (
+                            f"nested test: the arm's own weight adds ΔBIC {dbic:+.1f} beyond the payload torque "
+                            "(payload deflection of a balanced arm)" if elastic else "saturation test: " + (
+                                "the approach offset grows with the size of the move (read-back lag); backlash adds "
+                                if sc.cand.name == "backlash" else
+                                "the approach offset does not grow with the move (it saturates: backlash); the lag "
+                                "adds ") + f"ΔBIC {dbic:+.1f} once {partner} is modelled")
                         rejected.append(sc)
                         continue
             sc.shadowed = [r for r in rejected if r.cand.name != sc.cand.name and _overlap(r.U, sc.U) > 0.5]

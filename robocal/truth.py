@@ -214,7 +214,7 @@ def draw_effect(name: str, rng: np.random.Generator, kin: Kinematics, scale: flo
                            {"stiffness_nm_per_rad": {2: k2, 3: k3}})
     if name == "payload_deflection":
         return TruthEffect(name, (2, 3), "payload torque only (balanced arm)",
-                           {"stiffness_nm_per_rad": {2: u(1.5e5, 3e5) / scale, 3: u(0.8e5, 1.6e5) / scale}})
+                           {"stiffness_nm_per_rad": {2: u(0.6e6, 1.5e6) / scale, 3: u(0.3e6, 0.8e6) / scale}})
     if name == "gear_cyclic":
         joint = int(rng.integers(1, 7))
         sets = [(1,), (2,), (1, 2), (2, 3), (1, 3)]
