@@ -88,6 +88,7 @@ class DiagnosisOptions:
     neighbours: int = 10
     permutations: int = 200
     max_regions: int = 12
+    split_alpha: float = 1e-4         # reach-split consistency: parameters of near and far halves must agree
     seed: int = 0
 
 
@@ -813,6 +814,7 @@ class _Score:
     plausible: tuple[bool, str] | None = None
     rejected: str = ""
     backward_delta_bic: float = float("nan")
+    proxy: bool = False                    # rejected as a stand-in for structure outside the library
     refit_cv_t: float = float("nan")
     steps: list = field(default_factory=list)      # 1-based selection steps that added groups of this effect
     physical: dict = field(default_factory=dict)    # physical parameters (stiffness, lag, half-widths)
@@ -995,6 +997,34 @@ class _Selector:
         if neg:
             desc += f"; negative on J{', J'.join(map(str, neg))} (balancer over-compensation or another effect)"
         return (not problems, "; ".join(problems) if problems else desc)
+
+    def split_consistency(self, st: _State, sc: _Score) -> dict:
+        """Effect-agnostic stability check: fit geometry + the candidate on the near and the far half of the poses
+        (horizontal reach below / above its median) and compare the candidate's parameters (Wald χ², k dof). A
+        physical effect has one set of parameters; a proxy for structure along the reach does not."""
+        rows = self.rows
+        T = st.kin.T_tracker_base
+        pb = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
+        reach = np.hypot(pb[:, 0], pb[:, 1])
+        A0 = self.eng.design(st, rows)
+        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), rows) for g in sc.groups], axis=1)
+        y = self.eng.wflat(self.eng.resid(st), rows)
+        k = X.shape[1]
+        est = []
+        for half in (reach < np.median(reach), reach >= np.median(reach)):
+            r3 = np.repeat(half, 3)
+            M = np.concatenate([A0[r3], X[r3]], axis=1)
+            nrm = np.linalg.norm(M, axis=0)
+            nrm[nrm < 1e-300] = 1.0
+            Ms = M / nrm
+            beta = np.linalg.lstsq(Ms, y[r3], rcond=1e-10)[0]
+            res = y[r3] - Ms @ beta
+            s2 = float(res @ res) / max(int(r3.sum()) - M.shape[1], 1)
+            C = s2 * np.linalg.pinv(Ms.T @ Ms)
+            est.append(((beta / nrm)[-k:], (C / np.outer(nrm, nrm))[-k:, -k:]))
+        d = est[0][0] - est[1][0]
+        W = float(d @ np.linalg.pinv(est[0][1] + est[1][1]) @ d)
+        return {"chi2": W, "dof": k, "p_value": float(stats.chi2.sf(W, k))}
 
     def given(self, st: _State, sc: _Score, other_groups, Q, y) -> float:
         """ΔBIC of sc's groups once ``other_groups`` are in the model (both orthogonalised against Q)."""
@@ -1449,7 +1479,18 @@ def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
             sc.rejected = _cv_reason(sc.cv, opt)
         elif not sc.plausible[0]:
             sc.rejected = f"implausible values: {sc.plausible[1]}"
+        elif (split := sel.split_consistency(st, sc))["p_value"] < opt.split_alpha:
+            sc.physical["reach_split"] = split
+            sc.rejected = (f"its parameters differ between near and far reach (Wald χ² {split['chi2']:.0f}, "
+                           f"p = {split['p_value']:.1g}): it stands in for structure along the reach")
+            sc.proxy = True
+        elif (proxy := next((r for r in rejected if r.proxy and _overlap(r.U, sc.U) > 0.5), None)) is not None:
+            sc.physical["reach_split"] = split
+            sc.rejected = (f"it overlaps {proxy.cand.name}, which stands in for structure along the reach: the same "
+                           "structure, not an effect of the library")
+            sc.proxy = True
         else:
+            sc.physical["reach_split"] = split
             partner = SATURATION_PARTNER.get(sc.cand.name)
             other = next((c for c in pool if c.name == partner and c.profiles and not c.reason and not c.veto
                           and not c.extends), None)
