@@ -814,7 +814,8 @@ class _Score:
     plausible: tuple[bool, str] | None = None
     rejected: str = ""
     backward_delta_bic: float = float("nan")
-    proxy: bool = False                    # rejected as a stand-in for structure outside the library
+    split_rejected: str = ""               # dropped as a stand-in for structure outside the library
+    pruned: list = field(default_factory=list)     # group labels dropped in the backward pass
     refit_cv_t: float = float("nan")
     steps: list = field(default_factory=list)      # 1-based selection steps that added groups of this effect
     physical: dict = field(default_factory=dict)    # physical parameters (stiffness, lag, half-widths)
@@ -998,7 +999,7 @@ class _Selector:
             desc += f"; negative on J{', J'.join(map(str, neg))} (balancer over-compensation or another effect)"
         return (not problems, "; ".join(problems) if problems else desc)
 
-    def split_consistency(self, st: _State, sc: _Score) -> dict:
+    def split_consistency(self, st: _State, sc: _Score, exclude=None) -> dict:
         """Effect-agnostic stability check: fit geometry + the candidate on the near and the far half of the poses
         (horizontal reach below / above its median) and compare the candidate's parameters (Wald χ², k dof). A
         physical effect has one set of parameters; a proxy for structure along the reach does not."""
@@ -1007,8 +1008,14 @@ class _Selector:
         pb = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
         reach = np.hypot(pb[:, 0], pb[:, 1])
         A0 = self.eng.design(st, rows)
-        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), rows) for g in sc.groups], axis=1)
         y = self.eng.wflat(self.eng.resid(st), rows)
+        if exclude is not None:                  # sc is in the model: take its columns out, add its part back
+            cols, th = exclude
+            y = y + A0[:, cols] @ th
+            keep = np.ones(A0.shape[1], bool)
+            keep[cols] = False
+            A0 = A0[:, keep]
+        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), rows) for g in sc.groups], axis=1)
         k = X.shape[1]
         est = []
         for half in (reach < np.median(reach), reach >= np.median(reach)):
@@ -1421,6 +1428,13 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
         stages[0]["refit_test_rms_mm"] = eng.test_rms(st)
     st, accepted, last_scores = _forward(eng, sel, st, cands, stages, Qgeo, opt)
     st, accepted, stages, dropped = _backward(eng, sel, st, accepted, stages, opt)
+    for _ in range(2):                  # what is left must pass again once the dropped effects are gone
+        if not dropped or not accepted:
+            break
+        st, accepted, stages, more = _backward(eng, sel, st, accepted, stages, opt)
+        if not more:
+            break
+        dropped += more
     return _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_scores, dropped, outliers, Qgeo)
 
 
@@ -1479,18 +1493,7 @@ def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
             sc.rejected = _cv_reason(sc.cv, opt)
         elif not sc.plausible[0]:
             sc.rejected = f"implausible values: {sc.plausible[1]}"
-        elif (split := sel.split_consistency(st, sc))["p_value"] < opt.split_alpha:
-            sc.physical["reach_split"] = split
-            sc.rejected = (f"its parameters differ between near and far reach (Wald χ² {split['chi2']:.0f}, "
-                           f"p = {split['p_value']:.1g}): it stands in for structure along the reach")
-            sc.proxy = True
-        elif (proxy := next((r for r in rejected if r.proxy and _overlap(r.U, sc.U) > 0.5), None)) is not None:
-            sc.physical["reach_split"] = split
-            sc.rejected = (f"it overlaps {proxy.cand.name}, which stands in for structure along the reach: the same "
-                           "structure, not an effect of the library")
-            sc.proxy = True
         else:
-            sc.physical["reach_split"] = split
             partner = SATURATION_PARTNER.get(sc.cand.name)
             other = next((c for c in pool if c.name == partner and c.profiles and not c.reason and not c.veto
                           and not c.extends), None)
@@ -1582,7 +1585,25 @@ def _backward(eng, sel, st, accepted, stages, opt):
         return st, accepted, stages, dropped
     _, y, A = sel.base(st)
     rss = float(y @ y)
+    proxies = []
+    for sc in accepted:                 # effect-agnostic: one physical effect has one set of parameters
+        split = sel.split_consistency(st, sc, _columns_of(eng, st, sc.groups))
+        sc.physical["reach_split"] = split
+        if split["p_value"] < opt.split_alpha:
+            sc.split_rejected = (f"its parameters differ between near and far reach in the final model (Wald χ² "
+                                 f"{split['chi2']:.0f}, p = {split['p_value']:.1g}): it stands in for structure "
+                                 "along the reach")
+            proxies.append(sc)
     for sc in accepted:
+        if sc not in proxies and any(_overlap(p.U, sc.U) > 0.5 for p in proxies):
+            p = next(p for p in proxies if _overlap(p.U, sc.U) > 0.5)
+            sc.split_rejected = (f"it overlaps {p.cand.name}, which stands in for structure along the reach: the "
+                                 "same structure, not an effect of the library")
+            proxies.append(sc)
+    dropped += proxies
+    for sc in accepted:
+        if sc in proxies:
+            continue
         cols, th = _columns_of(eng, st, sc.groups)
         mask = np.ones(A.shape[1], bool)
         mask[cols] = False
@@ -1608,7 +1629,16 @@ def _backward(eng, sel, st, accepted, stages, opt):
         sc.backward_delta_bic = sel.n * math.log(rss / (rss + float(d @ d))) + r_k * sel.lnn
         if sc.backward_delta_bic > -opt.bic_threshold:
             dropped.append(sc)
-    if not dropped:
+    pruned = False
+    for sc in accepted:                 # groups (joints, terms) that the final model no longer needs
+        if sc in dropped or len(sc.groups) < 2:
+            continue
+        for g in list(sc.groups):
+            if _removal_bic(sel, eng, st, A, rss, [g]) > -opt.group_bic_margin and len(sc.groups) > 1:
+                sc.groups = tuple(h for h in sc.groups if h is not g)
+                sc.pruned.append(g.label)
+                pruned = True
+    if not dropped and not pruned:
         return st, accepted, stages, dropped
     keep = [s for s in accepted if s not in dropped]
     stages = stages[:1]
@@ -1620,6 +1650,19 @@ def _backward(eng, sel, st, accepted, stages, opt):
     if not keep:
         st = eng.fit(kin, [])
     return st, keep, stages, dropped
+
+
+def _removal_bic(sel, eng, st, A, rss, groups) -> float:
+    """ΔBIC of keeping ``groups`` in the final linearised model (negative: they are needed)."""
+    cols, th = _columns_of(eng, st, groups)
+    mask = np.ones(A.shape[1], bool)
+    mask[cols] = False
+    Qo = _orth(A[:, mask])
+    d = A[:, cols] @ th
+    d = d - Qo @ (Qo.T @ d)
+    Xp = A[:, cols] - Qo @ (Qo.T @ A[:, cols])
+    r_k = _orth(Xp, 1e-3).shape[1] if np.any(Xp) else 0
+    return sel.n * math.log(rss / (rss + float(d @ d))) + r_k * sel.lnn
 
 
 def _confusion_entry(best: _Score, other: _Score) -> dict:
@@ -1656,7 +1699,8 @@ def _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_s
     final = stages[-1][key]
     for sc in dropped:
         ev = _evidence(sc, inp.noise_floor_mm, final)
-        ev["reason"] = (f"does not survive the refit with the other accepted effects (cross-validated t "
+        ev["reason"] = (sc.split_rejected if sc.split_rejected else
+                        f"does not survive the refit with the other accepted effects (cross-validated t "
                         f"{sc.refit_cv_t:.1f} < {opt.cv_min_t:g})" if sc.refit_cv_t < opt.cv_min_t else
                         f"dropped in the backward step (ΔBIC of keeping it {sc.backward_delta_bic:.1f})")
         findings.append(Finding(sc.cand.name, sc.joints, False, final, final, ev))
@@ -1698,6 +1742,8 @@ def _accepted_findings(eng, st, accepted, stages, key, floor) -> list[Finding]:
         if sc.cand.name == "readback_lag":
             ev["lag_deg_per_deg"] = _lags(ev["parameters"])
         ev.update(_physical_values(sc.cand.name, ev["parameters"]))
+        if sc.pruned:
+            ev["pruned_groups"] = list(sc.pruned)
         if sc.extensions:
             ev["extended"] = sc.extensions
             ev["dof"] = sc.rank + sum(e["dof"] for e in sc.extensions)
