@@ -18,10 +18,14 @@ Pure numerics: arrays in, dataclasses out. Steps (``diagnose``):
    a candidate are chosen greedily by BIC; score = ΔBIC (n = 3 x points, RSS-based so it does not trust the
    noise model's scale), extra-sum-of-squares F test, blocked K-fold cross-validation (by pose; contiguous time
    blocks for time effects), and the physical plausibility of the fitted values.
-4. **Forward selection**: accept the candidate with the lowest ΔBIC if ΔBIC < -10, the cross-validated error
-   falls significantly (paired t over points) and the values are plausible; refit geometry + accepted effects
-   with the exact (nonlinear) forward model; repeat until no candidate passes; then one backward pass.
-   Near-ties with overlapping subspaces are reported as a confusable class.
+4. **Forward selection, strongest evidence first**: accept the candidate with the lowest ΔBIC that passes the
+   named gates (ΔBIC < -10, absorption, veto by a direct comparison, blocked CV, physical plausibility judged on
+   physical parameters such as stiffness or lag, the saturation test backlash vs read-back lag, the nested test
+   compliance vs payload deflection); refit geometry + accepted effects with the exact (nonlinear) forward model;
+   repeat until no candidate passes. Then the survivors must pass again in the final model: an effect-agnostic
+   reach-split consistency check, CV against the model without them, ΔBIC of removal; groups no longer needed are
+   pruned. A better-scored candidate rejected by a gate whose visible subspace overlaps the winner's, and
+   near-ties with overlapping subspaces, are reported as one confusable class with the separating experiment.
 5. **Where**: held-out test residuals and cross-validated calibration residuals of the geometric model (and of
    the final model) mapped over workspace cells, each joint's range, base axes, time, approach direction and
    payload; regions whose RMS exceeds the noise floor significantly (chi-square, Bonferroni) are named.
@@ -88,7 +92,8 @@ class DiagnosisOptions:
     neighbours: int = 10
     permutations: int = 200
     max_regions: int = 12
-    split_alpha: float = 1e-4         # reach-split consistency: parameters of near and far halves must agree
+    split_alpha: float = 1e-4         # reach-split consistency: parameters of near and far halves must agree ...
+    split_min_ratio: float = 0.25     # ... to within this share of the effect's visible displacement
     seed: int = 0
 
 
@@ -1031,7 +1036,11 @@ class _Selector:
             est.append(((beta / nrm)[-k:], (C / np.outer(nrm, nrm))[-k:, -k:]))
         d = est[0][0] - est[1][0]
         W = float(d @ np.linalg.pinv(est[0][1] + est[1][1]) @ d)
-        return {"chi2": W, "dof": k, "p_value": float(stats.chi2.sf(W, k))}
+        Q0 = _orth(A0)
+        Xv = X - Q0 @ (Q0.T @ X)                                        # the visible part of the effect
+        full = _lstsq_scaled(np.concatenate([A0, X], axis=1), y)[-k:]
+        ratio = float(np.linalg.norm(Xv @ d) / max(np.linalg.norm(Xv @ full), 1e-300))
+        return {"chi2": W, "dof": k, "p_value": float(stats.chi2.sf(W, k)), "difference_ratio": ratio}
 
     def given(self, st: _State, sc: _Score, other_groups, Q, y) -> float:
         """ΔBIC of sc's groups once ``other_groups`` are in the model (both orthogonalised against Q)."""
@@ -1589,10 +1598,11 @@ def _backward(eng, sel, st, accepted, stages, opt):
     for sc in accepted:                 # effect-agnostic: one physical effect has one set of parameters
         split = sel.split_consistency(st, sc, _columns_of(eng, st, sc.groups))
         sc.physical["reach_split"] = split
-        if split["p_value"] < opt.split_alpha:
+        if split["p_value"] < opt.split_alpha and split["difference_ratio"] > opt.split_min_ratio:
             sc.split_rejected = (f"its parameters differ between near and far reach in the final model (Wald χ² "
-                                 f"{split['chi2']:.0f}, p = {split['p_value']:.1g}): it stands in for structure "
-                                 "along the reach")
+                                 f"{split['chi2']:.0f}, p = {split['p_value']:.1g}; the two fits differ by "
+                                 f"{100 * split['difference_ratio']:.0f} % of the effect): it stands in for "
+                                 "structure along the reach")
             proxies.append(sc)
     for sc in accepted:
         if sc not in proxies and any(_overlap(p.U, sc.U) > 0.5 for p in proxies):
