@@ -68,7 +68,7 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
 
 def _rows(ds: Dataset, name: str) -> np.ndarray:
     """(N,) bool: rows of set ``name`` (also for sets this Dataset version does not know, e.g. "nest")."""
-    return np.fromiter((s == name for s in ds.set), dtype=bool, count=len(ds))
+    return np.array([s == name for s in ds.set], dtype=bool)
 
 
 def _nests(ds: Dataset) -> NestReadings | None:
