@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
+from campaign.yaml_limits import load_limited, read_limited
 
 __all__ = [
     "CALIBRATION_METHODS",
@@ -53,6 +54,7 @@ __all__ = [
     "SimulationConfig",
     "TestSetConfig",
     "ToolConfig",
+    "BoxConfig",
     "TrackerConfig",
     "TrackerUncertainty",
     "load_config",
@@ -61,12 +63,15 @@ __all__ = [
 
 ROBOT_SCHEMES = frozenset({"mock", "abb-rws", "ur-rtde"})
 TRACKER_SCHEMES = frozenset(
-    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop"}
+    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop", "emscon"}
 )
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "gpr", "none")
+RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
+OUTLIER_SCREENS = ("local", "none")
+MODEL_EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
+                      "axis_coupling")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
 EFFECT_NAMES = (
@@ -142,6 +147,10 @@ class RobotConfig:
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
+    Motion caps the driver enforces before any command is sent: ``max_tcp_speed_mm_s`` (default 250, at most
+    ``datasheet_max_tcp_speed_mm_s``, the manufacturer's maximum TCP speed, when given) and
+    ``max_joint_speed_pct`` (default 100, percent of the rated joint speed). ``first_pass_speed_pct``
+    (default none): before measuring, traverse the whole plan once with both caps scaled to this percentage.
     """
 
     model: str
@@ -152,6 +161,10 @@ class RobotConfig:
     repeatability_mm: float
     max_joint_speed_deg_s: float
     options: Mapping[str, Any]
+    max_tcp_speed_mm_s: float = 250.0
+    max_joint_speed_pct: float = 100.0
+    datasheet_max_tcp_speed_mm_s: float | None = None
+    first_pass_speed_pct: float | None = None
 
     @property
     def n_joints(self) -> int:
@@ -167,7 +180,8 @@ class ToolConfig:
     A multi-SMR tool (seed 003) adds ``p_flange_smr2_mm`` and
     ``p_flange_smr3_mm`` (default ``None``; the third only with the second;
     centres at least ``smr_diameter_mm`` apart): every point then also logs
-    the second and third SMR.
+    the second and third SMR. ``payload_cog_flange_mm`` (default origin): centre of gravity of the payload
+    in the flange frame (mm), sent to the controller with ``payload_kg``.
     """
 
     p_flange_smr_mm: Vec3
@@ -175,6 +189,7 @@ class ToolConfig:
     payload_kg: float
     p_flange_smr2_mm: Vec3 | None = None
     p_flange_smr3_mm: Vec3 | None = None
+    payload_cog_flange_mm: Vec3 = (0.0, 0.0, 0.0)
 
     @property
     def smrs_mm(self) -> tuple[Vec3, ...]:
@@ -204,7 +219,8 @@ class MeasurementConfig:
 
     Defaults: ``samples`` 5 readings averaged (int >= 1), ``stability_mm`` 0.02
     max spread, ``settle_s`` 0.5 after the robot is in position, ``timeout_s``
-    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses.
+    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses, ``reading_time_s`` 1.5
+    (time one stationary tracker reading takes; duration estimates).
     """
 
     samples: int
@@ -212,6 +228,7 @@ class MeasurementConfig:
     settle_s: float
     timeout_s: float
     retries: int
+    reading_time_s: float = 1.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -273,7 +290,8 @@ class PlanConfig:
     ``tool_direction``: fixed flange z-axis in the base frame (non-zero, not
     normalised). ``q_ref_deg``: reference joint configuration (one value per
     joint, inside the limits) selecting the IK branch. ``test`` and
-    ``check_poses`` are optional.
+    ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
+    (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     """
 
     grid: GridConfig
@@ -281,15 +299,39 @@ class PlanConfig:
     tool_direction: Vec3
     q_ref_deg: tuple[float, ...]
     check_poses: CheckPosesConfig
+    keep_out: tuple["BoxConfig", ...] = ()
+    envelope: "BoxConfig | None" = None
+    clearance_mm: float = 25.0
+
+
+@dataclass(frozen=True, slots=True)
+class BoxConfig:
+    """An axis-aligned box in the robot base frame (mm): ``min_mm`` < ``max_mm`` per axis; ``name`` for messages.
+
+    ``plan.keep_out`` boxes must never be entered, ``plan.envelope`` never left, by the flange origin or any
+    SMR centre (with ``plan.clearance_mm``, default 25) anywhere along the joint-interpolated path.
+    """
+
+    name: str
+    min_mm: Vec3
+    max_mm: Vec3
 
 
 @dataclass(frozen=True, slots=True)
 class CalibrationConfig:
     """Identification settings (the whole section is optional).
 
-    Defaults: ``method`` robust_ridge, ``weights`` igg3, ``k0`` 1.5 < ``k1`` 2.5
+    Defaults: ``method`` lm, ``weights`` igg3 (robust_ridge only), ``k0`` 1.5 < ``k1`` 2.5
     (IGG-III thresholds, in units of sigma), ``ridge_mu`` 1e-6 (>= 0),
-    ``residual`` idw, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1).
+    ``residual`` auto, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1),
+    ``outliers`` local, ``effects`` auto, ``cv_folds`` 5 (int >= 2).
+
+    ``outliers``: ``local`` excludes a point only as a measurement fault (residual isolated against its
+    neighbours in joint space and in the workspace, tracker statistics, repeats); ``none`` keeps all.
+    ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
+    ``none``, or a list of effect specs (``name`` in ``MODEL_EFFECT_NAMES``, optional ``params`` with the
+    factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
+    ``residual`` ``auto`` chooses none / idw / gpr by k-fold CV and keeps a layer only on a significant gain.
 
     ``residual`` (one of ``RESIDUAL_MODELS``) is the layer fitted on top of
     the kinematic model: ``idw`` inverse distance weighting over positions
@@ -308,6 +350,9 @@ class CalibrationConfig:
     residual: str
     idw_power: float
     idw_k_nearest: int
+    outliers: str = "local"
+    effects: str | tuple["EffectSpec", ...] = "auto"
+    cv_folds: int = 5
 
 
 @dataclass(frozen=True, slots=True)
@@ -433,7 +478,7 @@ def load_config(path: str | Path) -> CampaignConfig:
     """
     file = str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_limited(path)
     except FileNotFoundError:
         raise ConfigError(file, "", "file not found") from None
     except IsADirectoryError:
@@ -454,8 +499,12 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
         raise ConfigError(file, "", "empty config file (expected a mapping of sections)")
     if not isinstance(doc, dict):
         raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
-    return _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
-                     sha256=hashlib.sha256(data).hexdigest())
+    cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
+                    sha256=hashlib.sha256(data).hexdigest())
+    from campaign.config_checks import check_config  # cross-key checks: drivers, sizes, Hayati, effects
+
+    check_config(cfg)
+    return cfg
 
 
 class _StrictSafeLoader(yaml.SafeLoader):
@@ -480,7 +529,7 @@ class _StrictSafeLoader(yaml.SafeLoader):
 def _parse_yaml(text: str, file: str) -> Any:
     """Safe-load YAML text; syntax errors become one-line ``ConfigError``s."""
     try:
-        return yaml.load(text, Loader=_StrictSafeLoader)  # noqa: S506 - a SafeLoader subclass
+        return load_limited(text, _StrictSafeLoader, file)  # size and alias-expansion limits
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "syntax error"
@@ -800,6 +849,9 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    from campaign.config_checks import check_joint_count  # before the plan's checks use the joints
+
+    check_joint_count(len(joints), r.file)
     return RobotConfig(
         model=model,
         url=url,
@@ -809,7 +861,23 @@ def _robot(r: _Reader) -> RobotConfig:
         repeatability_mm=r.number("repeatability_mm", 0.05, lo=0.0),
         max_joint_speed_deg_s=r.number("max_joint_speed_deg_s", 30.0, positive=True),
         options=r.mapping("options", {}),
+        **_motion_caps(r),
     )
+
+
+def _motion_caps(r: _Reader) -> dict[str, Any]:
+    """Speed caps: the TCP cap must not exceed the datasheet maximum (mm/s) when one is given."""
+    given = r.data.get("datasheet_max_tcp_speed_mm_s") is not None
+    datasheet = r.number("datasheet_max_tcp_speed_mm_s", positive=True) if given else None
+    tcp = r.number("max_tcp_speed_mm_s", 250.0, positive=True)
+    if datasheet is not None and tcp > datasheet:
+        raise r.error("max_tcp_speed_mm_s", f"{_fmt(tcp)} mm/s exceeds the robot's datasheet maximum "
+                                            f"datasheet_max_tcp_speed_mm_s = {_fmt(datasheet)} mm/s")
+    first = r.data.get("first_pass_speed_pct")
+    return {"max_tcp_speed_mm_s": tcp, "datasheet_max_tcp_speed_mm_s": datasheet,
+            "max_joint_speed_pct": r.number("max_joint_speed_pct", 100.0, positive=True, hi=100.0),
+            "first_pass_speed_pct": None if first is None else r.number("first_pass_speed_pct", positive=True,
+                                                                        hi=100.0)}
 
 
 def _joint(r: _Reader) -> JointConfig:
@@ -834,6 +902,7 @@ def _tool(r: _Reader) -> ToolConfig:
         payload_kg=r.number("payload_kg", 0.0, lo=0.0),
         p_flange_smr2_mm=r.vector("p_flange_smr2_mm", 3, None),
         p_flange_smr3_mm=r.vector("p_flange_smr3_mm", 3, None),
+        payload_cog_flange_mm=r.vector("payload_cog_flange_mm", 3, [0.0, 0.0, 0.0]),
     )
     _check_smrs(tool, r)
     return tool
@@ -881,6 +950,7 @@ def _measurement(r: _Reader) -> MeasurementConfig:
         settle_s=r.number("settle_s", 0.5, lo=0.0),
         timeout_s=r.number("timeout_s", 5.0, positive=True),
         retries=r.integer("retries", 3, lo=0),
+        reading_time_s=r.number("reading_time_s", 1.5, positive=True),
     )
 
 
@@ -898,7 +968,25 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         tool_direction=direction,
         q_ref_deg=q_ref,
         check_poses=_check_poses(r.section("check_poses", CheckPosesConfig, required=False)),
+        keep_out=_keep_out(r),
+        envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
+        clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
     )
+
+
+def _keep_out(r: _Reader) -> tuple[BoxConfig, ...]:
+    """``plan.keep_out``: a list of boxes ``{name, min_mm, max_mm}`` (base frame, mm)."""
+    where = r.child_list("keep_out")
+    return tuple(_box(where.reader(i, item, BoxConfig), f"keep_out[{i}]")
+                 for i, item in enumerate(r.items("keep_out", [], what="boxes")))
+
+
+def _box(r: _Reader, default_name: str) -> BoxConfig:
+    lo, hi = r.vector("min_mm", 3), r.vector("max_mm", 3)
+    for k, axis in enumerate("xyz"):
+        if hi[k] <= lo[k]:
+            raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
+    return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
 
 
 def _grid(r: _Reader) -> GridConfig:
@@ -953,15 +1041,34 @@ def _calibration(r: _Reader) -> CalibrationConfig:
     if k1 <= k0:
         raise r.error("k1", f"expected a number > k0 = {_fmt(k0)}, got {_fmt(k1)}")
     return CalibrationConfig(
-        method=r.choice("method", CALIBRATION_METHODS, "robust_ridge"),
+        method=r.choice("method", CALIBRATION_METHODS, "lm"),
         weights=r.choice("weights", WEIGHT_FUNCTIONS, "igg3"),
         k0=k0,
         k1=k1,
         ridge_mu=r.number("ridge_mu", 1e-6, lo=0.0),
-        residual=r.choice("residual", RESIDUAL_MODELS, "idw"),
+        residual=r.choice("residual", RESIDUAL_MODELS, "auto"),
         idw_power=r.number("idw_power", 2.0, positive=True),
         idw_k_nearest=r.integer("idw_k_nearest", 8, lo=1),
+        outliers=r.choice("outliers", OUTLIER_SCREENS, "local"),
+        effects=_model_effects(r),
+        cv_folds=r.integer("cv_folds", 5, lo=2, hi=20),
     )
+
+
+def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
+    """``calibration.effects``: ``auto`` | ``none`` | a list of effect specs of the robot model."""
+    value = r.data.get("effects", "auto")
+    if value is None or isinstance(value, str):
+        return r.choice("effects", ("auto", "none"), "auto")
+    specs = _effects(r)
+    where = r.child_list("effects")
+    for i, spec in enumerate(specs):
+        if spec.name not in MODEL_EFFECT_NAMES:
+            raise ConfigError(r.file, where.key_path(i) + ".name", f"effect {spec.name!r} is not a robot effect "
+                              f"(expected one of: {', '.join(MODEL_EFFECT_NAMES)})")
+        if spec.scale != 1.0:
+            raise ConfigError(r.file, where.key_path(i) + ".scale", "scale applies to simulated effects only")
+    return specs
 
 
 def _correction(r: _Reader) -> CorrectionConfig:

@@ -34,7 +34,8 @@ from .cell import measurement_covariance, nominal_kinematics, tracker_uncertaint
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset, dataset_from_log, read_csv
-from .process import geometric_fit, noise_floor_from_repeats, repeat_groups
+from .plausibility import check_dataset
+from .process import _prepare, geometric_fit, noise_floor_from_repeats, repeat_groups
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -82,9 +83,12 @@ def _nests(ds: Dataset) -> NestReadings | None:
                         None if ds.t_s is None else np.asarray(ds.t_s, float)[idx], idx.astype(float))
 
 
-def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None) -> tuple[DiagnosisInput, dict]:
+def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None, readback: Dataset | None = None
+                    ) -> tuple[DiagnosisInput, dict]:
     """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata.
-    ``baseline``: the geometric fit (``campaign.process.geometric_fit``) to start from."""
+    ``baseline``: the geometric fit (``campaign.process.geometric_fit``) to start from; ``ds`` the dataset as
+    that fit saw it (prepared), ``readback`` the original (its q_deg are the read-back joints, for the direct
+    comparison with the commanded ones when the preparation chose the commanded joints)."""
     _check(ds, cfg)
     check = ds.mask("check")
     robot = ~_rows(ds, "nest")                         # rows with joints, in measurement order
@@ -109,6 +113,8 @@ def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None) -> tuple[Di
                          ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach[use],
                          move_rad=move[use], prev_move_rad=prev[use],
                          qc_rad=None if qc_deg is None else np.radians(np.asarray(qc_deg, float)[use]),
+                         q_read_rad=None if readback is None or readback.q_deg is ds.q_deg
+                         or len(readback.q_deg) != len(ds.q_deg) else np.radians(np.asarray(readback.q_deg)[use]),
                          baseline=kin, baseline_identified=None if identified is None else tuple(identified),
                          nests=_nests(ds), order=np.flatnonzero(use).astype(float), **meta)
     payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
@@ -127,9 +133,12 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
                      ) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract."""
     _check(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     try:
         base = geometric_fit(ds, cfg)
-        inp, info = diagnosis_input(ds, cfg, base)
+        prepared = _prepare(ds, cfg)       # the same joints and drift compensation as the baseline's fit
+        inp, info = diagnosis_input(prepared, cfg, base, readback=ds)
+        info["plausibility"] = plaus.to_dict()
         d = diagnose(inp, options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"diagnosis failed: {exc}") from None

@@ -96,6 +96,7 @@ class Dataset:
     p3_tracker_mm: np.ndarray | None = None
     sigma_mm: np.ndarray | None = None
     source: str = ""
+    cov_mm2: np.ndarray | None = None  # (N, 3, 3) mm^2 from the tracker's own statistics (logs only), or None
 
     def __post_init__(self) -> None:
         put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
@@ -117,6 +118,8 @@ class Dataset:
         for name in (*_SCALARS, "sigma_mm"):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows,)))
+        if self.cov_mm2 is not None:
+            put("cov_mm2", _float_array(self.cov_mm2, "cov_mm2", (n_rows, 3, 3)))
 
     def __len__(self) -> int:
         return len(self.point_id)
@@ -580,6 +583,8 @@ def dataset_from_log(contents: Any) -> Dataset:
         if extra["t_s"] is not None:
             t = np.asarray(extra["t_s"], dtype=np.float64)
             extra["t_s"] = t - t[0]
+        device = [r.get("cov_mm2") if r.get("cov_source") == "device" else None for r in recs]
+        extra["cov_mm2"] = device if all(v is not None for v in device) else None    # all rows or none
         return Dataset(tuple(ids), tuple(sets), q, p, source=src, **extra)
     except DataError:
         raise

@@ -1,4 +1,4 @@
-"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ...
+"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ``emscon://host``, ...
 
 Real drivers are imported lazily so that a cell only needs the libraries of the drivers it uses.
 """
@@ -8,14 +8,14 @@ import importlib
 from typing import Any, Mapping
 from urllib.parse import urlsplit
 
-from .base import DriverError, Robot, Tracker
+from .base import DriverConfigError, DriverError, Robot, Tracker
 
 # scheme -> "module:factory"; factories take (url, options, **context)
 ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_rws:open_robot",
                  "ur-rtde": "drivers.ur:open_robot"}
 TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
                    "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
-                   "tracker+loop": "drivers.tracker:open_tracker"}
+                   "tracker+loop": "drivers.tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
 
 
 def _factory(table: Mapping[str, str], url: str, what: str):
@@ -35,5 +35,34 @@ def open_robot(url: str, options: Mapping[str, Any] | None = None, **context) ->
 
 
 def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) -> Tracker:
-    """Tracker driver for ``url`` (not yet connected)."""
-    return _factory(TRACKER_DRIVERS, url, "tracker")(url, dict(options or {}), **context)
+    """Tracker driver for ``url`` (not yet connected); bad options or url -> ``DriverConfigError``."""
+    factory = _factory(TRACKER_DRIVERS, url, "tracker")
+    try:
+        return factory(url, dict(options or {}), **context)
+    except ValueError as exc:                      # option validation of the line-protocol driver
+        raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
+
+
+def check_options(kind: str, url: str, options: Mapping[str, Any] | None = None, **context) -> str | None:
+    """Validate a driver's url and options as its factory would, without opening a connection.
+
+    ``kind`` is ``robot`` or ``tracker``. Returns None when both are accepted, else ``"url: message"`` or
+    ``"options: message"`` (which of the two the driver refused). The driver module declares the check as
+    ``validate_options(url, options, **context)``; a driver without one is only checked for its scheme."""
+    table = ROBOT_DRIVERS if kind == "robot" else TRACKER_DRIVERS
+    scheme = urlsplit(url).scheme
+    if scheme not in table:
+        return f"url: unknown driver {scheme!r} (expected one of: {', '.join(sorted(table))})"
+    module_name = table[scheme].split(":")[0]
+    try:
+        check = getattr(importlib.import_module(module_name), "validate_options", None)
+    except ImportError as exc:
+        return f"url: driver {scheme!r} is not available ({exc})"
+    if check is None:
+        return None
+    for where, opts in (("url", {}), ("options", dict(options or {}))):
+        try:
+            check(url, opts, **context)
+        except (DriverError, ValueError, TypeError) as exc:
+            return f"{where}: {' '.join(str(exc).split())}"
+    return None

@@ -121,6 +121,7 @@ class DiagnosisInput:
     move_rad: np.ndarray | None = None           # (N, n) signed last move of each joint (rad), None: from row order
     prev_move_rad: np.ndarray | None = None      # (N, n) the move before it
     qc_rad: np.ndarray | None = None             # (N, n) commanded joints next to the read-back q_rad
+    q_read_rad: np.ndarray | None = None         # (N, n) read-back joints when q_rad are not (commanded chosen)
     baseline: Kinematics | None = None           # the best geometric model (reprocess's kinematic stage)
     baseline_identified: tuple[str, ...] | None = None   # its identified parameter names
     nests: "NestReadings | None" = None
@@ -132,7 +133,8 @@ class DiagnosisInput:
         if move is None:
             move, prev = moves_from_order(self.q_rad)
         return {"t_s": self.t_s, "temp_c": self.temp_c, "payload_kg": self.payload_kg, "approach": self.approach,
-                "move": move, "prev_move": prev, "qc": self.qc_rad, "payload_rated_kg": self.payload_rated_kg}
+                "move": move, "prev_move": prev, "qc": self.qc_rad, "payload_rated_kg": self.payload_rated_kg,
+                "q_read": self.q_read_rad}
 
 
 @dataclass(frozen=True, eq=False)
@@ -533,7 +535,7 @@ def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
     veto, direct = "", {}
     if qc is not None:
         qcm, qcp = moves_from_order(qc) if meta.get("move_cmd") is None else (meta["move_cmd"], meta["prev_cmd"])
-        direct = direct_lag(q, qc, qcm, qcp)
+        direct = direct_lag(q if meta.get("q_read") is None else meta["q_read"], qc, qcm, qcp)
         sig = tuple(j for j in joints if j in direct and abs(direct[j]["t"]) >= 5.0
                     and abs(direct[j]["lag_deg_per_deg"]) >= 2e-5)
         if not sig:

@@ -120,7 +120,9 @@ def test_minimal_config_takes_documented_defaults(tmp_path: Path) -> None:
     assert cfg.tracker.model == "" and cfg.tracker.uncertainty.coverage_k == 2.0
     assert cfg.tracker.measurement.samples == 5 and cfg.tracker.measurement.retries == 3
     assert cfg.plan.check_poses.count == 0 and cfg.plan.test.count == 50
-    assert cfg.calibration.method == "robust_ridge" and cfg.calibration.weights == "igg3"
+    assert cfg.calibration.method == "lm" and cfg.calibration.weights == "igg3"
+    assert cfg.calibration.outliers == "local" and cfg.calibration.effects == "auto"
+    assert cfg.calibration.residual == "auto" and cfg.calibration.cv_folds == 5
     assert cfg.simulation.effects == () and cfg.simulation.faults.beam_break_probability == 0.0
     assert cfg.simulation.p_flange_smr_mm == cfg.tool.p_flange_smr_mm
     assert cfg.simulation.T_tracker_base[0] == (1.0, 0.0, 0.0, -4000.0)
@@ -131,18 +133,19 @@ def test_effects_and_options_are_frozen_mappings(tmp_path: Path) -> None:
     data = reference_dict()
     data["simulation"]["effects"] = [
         "backlash",
-        {"name": "gear_cyclic", "scale": 0.5, "params": {"harmonics": [1, 2], "axis": {"j": 3}}},
+        {"name": "gear_cyclic", "scale": 0.5, "params": {"harmonics": [1, 2], "joint": 3}},
     ]
-    data["robot"]["options"] = {"timeout_s": 2.5, "user": "Default User"}
+    data["robot"]["url"] = "abb-rws://192.168.125.1"      # driver options are checked by the driver (issue 12)
+    data["robot"]["options"] = {"task": "T_ROB1", "credentials": {"use_default": True}}
     path = tmp_path / "fx.yaml"
     path.write_text(yaml.safe_dump(data), encoding="utf-8")
     cfg = load_config(path)
     assert cfg.simulation.effects[0] == EffectSpec("backlash", 1.0, FrozenMap())
     gear = cfg.simulation.effects[1]
-    assert gear.scale == 0.5 and gear.params["harmonics"] == (1, 2) and gear.params["axis"]["j"] == 3
-    assert cfg.robot.options["user"] == "Default User"
+    assert gear.scale == 0.5 and gear.params["harmonics"] == (1, 2) and gear.params["joint"] == 3
+    assert cfg.robot.options["credentials"]["use_default"] is True
     hash(cfg)
-    assert cfg.to_dict()["simulation"]["effects"][1]["params"] == {"harmonics": [1, 2], "axis": {"j": 3}}
+    assert cfg.to_dict()["simulation"]["effects"][1]["params"] == {"harmonics": [1, 2], "joint": 3}
 
 
 def test_parse_config_from_bytes() -> None:
