@@ -284,6 +284,18 @@ class CheckPosesConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class Iso9283Config:
+    """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
+    P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
+
+    Defaults: ``cycles`` 30 (int >= 2), ``edge_mm`` 0 = the largest cube inside the grid box.
+    """
+
+    cycles: int = 30
+    edge_mm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class PlanConfig:
     """What to measure.
 
@@ -302,6 +314,8 @@ class PlanConfig:
     keep_out: tuple["BoxConfig", ...] = ()
     envelope: "BoxConfig | None" = None
     clearance_mm: float = 25.0
+    kind: str = "grid"                          # grid (calibration campaign) | iso9283 (acceptance test)
+    iso9283: Iso9283Config = Iso9283Config()
 
 
 @dataclass(frozen=True, slots=True)
@@ -971,6 +985,8 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         keep_out=_keep_out(r),
         envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
+        kind=r.choice("kind", ("grid", "iso9283"), "grid"),
+        iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
     )
 
 
@@ -987,6 +1003,10 @@ def _box(r: _Reader, default_name: str) -> BoxConfig:
         if hi[k] <= lo[k]:
             raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
     return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
+
+
+def _iso9283(r: _Reader) -> Iso9283Config:
+    return Iso9283Config(cycles=r.integer("cycles", 30, lo=2), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
 
 
 def _grid(r: _Reader) -> GridConfig:
