@@ -35,7 +35,9 @@ from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset, dataset_from_log, read_csv
 from .plausibility import check_dataset
-from .process import _prepare, geometric_fit, noise_floor_from_repeats, repeat_groups
+from robocal.repeats import noise_floor_from_repeats, repeat_dof
+
+from .process import _prepare, geometric_fit
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -106,7 +108,7 @@ def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None, readback: D
     move[robot], prev[robot] = moves_from_order(q_rad[robot])
     meta = {name: (None if getattr(ds, name) is None else getattr(ds, name)[use])
             for name in ("t_s", "temp_c", "payload_kg")}
-    dof = sum(len(g) - 1 for g in repeat_groups(q_rep[check])) if repeats is not None else None
+    dof = repeat_dof(q_rep[check]) if repeats is not None else None
     kin = None if baseline is None else getattr(baseline, "kinematics", baseline)
     identified = None if baseline is None else getattr(baseline, "identified", None)
     inp = DiagnosisInput(nominal_kinematics(cfg), q_rad[use], p[use], measurement_covariance(cfg, p)[use],

@@ -44,6 +44,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from robocal.approach import approach_signs
+
 from .fsutil import atomic_write
 
 from campaign.errors import DataError
@@ -165,14 +167,7 @@ class Dataset:
         that did not move (``|dq| <= tol_deg``) keeps the previous row's sign;
         row 0, and a joint that has not moved yet, is 0.
         """
-        n_rows, n_joints = self.q_deg.shape
-        step = np.zeros((n_rows, n_joints))
-        if n_rows > 1:
-            dq = np.diff(self.q_deg, axis=0)
-            step[1:] = np.where(np.abs(dq) > tol_deg, np.sign(dq), 0.0)
-        rows = np.where(step != 0.0, np.arange(n_rows)[:, None], 0)
-        last_move = np.maximum.accumulate(rows, axis=0)
-        return step[last_move, np.arange(n_joints)[None, :]]
+        return approach_signs(self.q_deg, tol_deg)
 
 
 # --------------------------------------------------------------------------

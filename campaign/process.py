@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.frames import transform_points
+from robocal.repeats import noise_floor_from_repeats, repeat_groups
 from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
@@ -45,23 +46,6 @@ class Processed:
     report: dict
     model: CalibratedModel
     calibration: CalibrationResult
-
-
-def repeat_groups(q_deg: np.ndarray, decimals: int = 3) -> list[np.ndarray]:
-    """Row indices of repeated poses (same commanded joints to 10^-decimals deg), groups of >= 2."""
-    keys = np.round(q_deg, decimals)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    return [np.flatnonzero(inverse.ravel() == g) for g in np.flatnonzero(counts >= 2)]
-
-
-def noise_floor_from_repeats(q_deg: np.ndarray, p_mm: np.ndarray) -> float | None:
-    """sqrt of the pooled within-pose variance of the 3-D position (mm), or None without enough repeats."""
-    groups = repeat_groups(q_deg)
-    dof = sum(len(g) - 1 for g in groups)
-    if len(groups) < 2 or dof < 6:
-        return None
-    ss = sum(np.sum((p_mm[g] - p_mm[g].mean(axis=0)) ** 2) for g in groups)
-    return float(np.sqrt(ss / dof))
 
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:

@@ -23,6 +23,8 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
+from robocal.approach import next_approach
+
 from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
                           TrackerReading, Unstable)
 
@@ -277,11 +279,7 @@ class Runner:
 
     def _approach(self, q_cmd: np.ndarray) -> np.ndarray:
         """Sign of the last motion of each joint before this stop (a joint that did not move keeps its sign)."""
-        if self.q_prev is None:
-            self.approach = np.zeros_like(q_cmd)
-        else:
-            d = q_cmd - self.q_prev
-            self.approach = np.where(np.abs(d) > 1e-9, np.sign(d), self.approach)
+        self.approach = next_approach(self.approach, self.q_prev, q_cmd)
         self.q_prev = q_cmd
         return self.approach
 

@@ -46,6 +46,8 @@ from scipy import stats
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from .approach import approach_signs as approach_from_order
+from .repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
 from .effects import G_MM_S2
 from .frames import skew
 from .identify import CalibrationOptions, calibrate
@@ -1367,36 +1369,6 @@ def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dic
     return {"detected": detected, "ruled_out": ruled_out, "drift_mm": excursion, "upper_bound_mm": bound,
             "p_value": p_value, "nest_sigma_mm": sigma, "n_nests": int(k_extra // 6), "basis": basis,
             "summary": summary}
-
-
-def approach_from_order(q: np.ndarray) -> np.ndarray:
-    """(N, n) sign of each joint's last motion from row order (rows in measurement order): the same rule as the
-    interchange CSV (a joint that did not move keeps its previous sign; 0 before its first move)."""
-    q = np.asarray(q, float)
-    step = np.zeros_like(q)
-    if len(q) > 1:
-        step[1:] = np.sign(np.diff(q, axis=0))
-    rows = np.where(step != 0.0, np.arange(len(q))[:, None], 0)
-    last = np.maximum.accumulate(rows, axis=0)
-    return step[last, np.arange(q.shape[1])[None, :]]
-
-
-def repeat_dof(q: np.ndarray, decimals: int = 3) -> int:
-    """Degrees of freedom (points) of ``repeat_floor``: sum over repeated poses of (count - 1)."""
-    _, counts = np.unique(np.round(np.asarray(q, float), decimals), axis=0, return_counts=True)
-    return int(np.sum(counts[counts >= 2] - 1))
-
-
-def repeat_floor(q: np.ndarray, p_mm: np.ndarray, decimals: int = 3) -> float | None:
-    """sqrt of the pooled within-pose variance of repeated poses (3-D, mm) or None without enough repeats
-    (at least 2 poses and 6 degrees of freedom); the estimator of ``campaign.process.noise_floor_from_repeats``."""
-    keys = np.round(np.asarray(q, float), decimals)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    groups = [np.flatnonzero(inverse.ravel() == g) for g in np.flatnonzero(counts >= 2)]
-    dof = sum(len(g) - 1 for g in groups)
-    if len(groups) < 2 or dof < 6:
-        return None
-    return float(np.sqrt(sum(np.sum((p_mm[g] - p_mm[g].mean(axis=0)) ** 2) for g in groups) / dof))
 
 
 def _base_fit(inp: DiagnosisInput, opt: DiagnosisOptions):

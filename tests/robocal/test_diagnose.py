@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal.diagnose import (DiagnosisOptions, _absorption, _greedy, _orth, approach_from_order, diagnose,
-                              repeat_floor, structure_test, where_analysis)
+from robocal.diagnose import (DiagnosisOptions, _absorption, _greedy, _orth, diagnose,
+                              structure_test, where_analysis)
 from robocal.effects import gravity_torques, lumped_gravity_torques, thermal_warmup, warmup_curve
 from robocal.selfcheck import Protocol, irb2600, simulate_campaign
 
@@ -136,24 +136,6 @@ def test_where_names_the_far_reach_region_in_words():
 
 
 # ---------------------------------------------------------------- helpers shared with the campaign layer
-def test_approach_from_order_matches_the_interchange_rule():
-    from campaign.interchange import Dataset
-    rng = np.random.default_rng(4)
-    q = np.round(rng.uniform(-10, 10, (50, 6)), 0)
-    q[10:13, 2] = q[9, 2]                       # a joint that does not move keeps its sign
-    ds = Dataset(tuple(f"P{i}" for i in range(50)), ("calib",) * 50, q, np.zeros((50, 3)))
-    np.testing.assert_array_equal(approach_from_order(q), ds.approach_sign())
-
-
-def test_repeat_floor_is_the_campaign_estimator():
-    from campaign.process import noise_floor_from_repeats
-    rng = np.random.default_rng(5)
-    q = np.repeat(rng.uniform(-50, 50, (6, 6)), 4, axis=0)
-    p = rng.normal(0, 0.02, (24, 3))
-    assert repeat_floor(q, p) == pytest.approx(noise_floor_from_repeats(q, p))
-    assert repeat_floor(q[:3], p[:3]) is None
-
-
 def test_alternative_effect_forms_reduce_to_the_library_ones():
     kin = irb2600()
     q = np.random.default_rng(6).uniform(-1, 1, (30, 6))
