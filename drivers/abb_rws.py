@@ -19,7 +19,6 @@ import stat
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from typing import Any, Callable, Iterator, Mapping, Sequence
 from urllib.parse import urlsplit
 
@@ -28,6 +27,8 @@ import httpx
 from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
 from .rws_client import (E_MASTER_REJECT, E_RESOURCE_HELD, Credentials, RetryPolicy, Routes, RwsError, RwsSession,
                          Timeouts, first)
+from .rapid import calserver_text
+from .rapid.literals import fmt_jointtarget, fmt_num, fmt_robtarget, fmt_string, parse_num, parse_string  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -38,59 +39,6 @@ _CACHED = ("cal_speed", "cal_settle_s", "cal_vmax", "cal_override", "cal_tool", 
 UNUSED_AXIS = 9e9
 KIND_PING, KIND_MOVEABSJ, KIND_MOVEL = 0, 1, 2
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
-
-
-# --------------------------------------------------------------------------- RAPID literals
-
-
-def fmt_num(value: float) -> str:
-    """RAPID num literal: fixed point, at most 6 decimals, ``9E9`` for unused axes, no ``-0``."""
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"not a finite number: {value}")
-    if abs(value) >= 1e9:
-        return "9E9" if value > 0 else "-9E9"
-    text = f"{value:.6f}".rstrip("0").rstrip(".")
-    return "0" if text in ("", "-0") else text
-
-
-def fmt_jointtarget(q_deg: Sequence[float], ext: Sequence[float] = ()) -> str:
-    """``[[j1..j6],[e1..e6]]`` (deg); missing robot axes are 0, missing external axes 9E9."""
-    rob = list(q_deg) + [0.0] * (6 - len(q_deg))
-    eax = list(ext) + [UNUSED_AXIS] * (6 - len(ext))
-    return f"[[{','.join(fmt_num(v) for v in rob)}],[{','.join(fmt_num(v) for v in eax)}]]"
-
-
-def fmt_robtarget(trans_mm: Sequence[float], quat_wxyz: Sequence[float], conf: Sequence[int] = (0, 0, 0, 0)) -> str:
-    """``[[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[9E9 x6]]`` with the quaternion normalised (w first)."""
-    norm = math.sqrt(sum(float(q) ** 2 for q in quat_wxyz))
-    if len(trans_mm) != 3 or len(quat_wxyz) != 4 or len(conf) != 4 or not norm > 0:
-        raise ValueError("robtarget needs xyz (3), a non-zero quaternion (4) and confdata (4)")
-    quat = [float(q) / norm for q in quat_wxyz]
-    parts = [",".join(fmt_num(v) for v in trans_mm), ",".join(fmt_num(v) for v in quat),
-             ",".join(str(int(c)) for c in conf), ",".join("9E9" for _ in range(6))]
-    return "[" + ",".join(f"[{p}]" for p in parts) + "]"
-
-
-def fmt_string(text: str) -> str:
-    """RAPID string literal with the quotes (``"`` and ``\\`` doubled as RAPID requires)."""
-    return '"' + text.replace("\\", "\\\\").replace('"', '""') + '"'
-
-
-def parse_string(literal: str) -> str:
-    """Inverse of ``fmt_string``; tolerates a value without quotes."""
-    text = literal.strip()
-    if len(text) >= 2 and text[0] == text[-1] == '"':
-        text = text[1:-1].replace('""', '"').replace("\\\\", "\\")
-    return text
-
-
-def parse_num(literal: str) -> float:
-    """A RAPID num literal (``12``, ``-0.5``, ``9E+09``)."""
-    try:
-        return float(literal.strip())
-    except ValueError as exc:
-        raise DriverError(f"not a RAPID num: {literal[:40]!r}") from exc
 
 
 # --------------------------------------------------------------------------- options
@@ -293,9 +241,7 @@ def _credentials_file(path: str) -> Credentials:
 # --------------------------------------------------------------------------- the robot
 
 
-def calserver_source() -> str:
-    """Text of the packaged ``drivers/rapid/CalServer.mod``."""
-    return resources.files("drivers").joinpath("rapid/CalServer.mod").read_text(encoding="latin-1")
+calserver_source = calserver_text   # the packaged drivers/rapid/CalServer.mod (one loader: drivers.rapid)
 
 
 class Deadline:

@@ -72,6 +72,10 @@ from typing import Any, Callable, Iterable, Sequence
 from urllib.parse import parse_qs, unquote, urlsplit
 from urllib.request import parse_http_list, parse_keqv_list
 
+from drivers.rapid import calserver_text
+from drivers.rapid.values import (SHAPES, Module, RapidSyntaxError, Symbol, matches, parse_literal,  # noqa: F401
+                                  parse_module, render)
+
 log = logging.getLogger(__name__)
 
 REALM = "validusers@robapi.abb"
@@ -110,151 +114,7 @@ DEFAULT_LIMITS_DEG = ((-180, 180), (-95, 155), (-180, 75), (-400, 400), (-120, 1
 UNUSED = 9e9
 
 
-# --------------------------------------------------------------------------- RAPID literals and modules
-
-
-class RapidSyntaxError(ValueError):
-    """A RAPID literal or module that does not parse."""
-
-
-_TOKEN = re.compile(r'\s*(?:(?P<open>\[)|(?P<close>\])|(?P<comma>,)|(?P<str>"(?:[^"]|"")*")'
-                    r'|(?P<bool>TRUE\b|FALSE\b)|(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?))', re.I)
-
-
-def parse_literal(text: str) -> Any:
-    """RAPID literal -> nested lists of float / str / bool (aggregates are lists)."""
-    value, pos = _parse_value(text, 0)
-    if text[pos:].strip():
-        raise RapidSyntaxError(f"trailing text after literal: {text[pos:pos + 20]!r}")
-    return value
-
-
-def _parse_value(text: str, pos: int) -> tuple[Any, int]:
-    m = _TOKEN.match(text, pos)
-    if not m or m.lastgroup in ("close", "comma"):
-        raise RapidSyntaxError(f"unexpected text at {pos}: {text[pos:pos + 20]!r}")
-    if m.lastgroup == "num":
-        return float(m.group("num")), m.end()
-    if m.lastgroup == "str":
-        return m.group("str")[1:-1].replace('""', '"'), m.end()
-    if m.lastgroup == "bool":
-        return m.group("bool").upper() == "TRUE", m.end()
-    items, pos = [], m.end()
-    while True:
-        item, pos = _parse_value(text, pos)
-        items.append(item)
-        m = _TOKEN.match(text, pos)
-        if m and m.lastgroup == "comma":
-            pos = m.end()
-        elif m and m.lastgroup == "close":
-            return items, m.end()
-        else:
-            raise RapidSyntaxError(f"expected ',' or ']' at {pos}")
-
-
-N, S, B = "num", "string", "bool"
-SHAPES: dict[str, Any] = {
-    "num": N, "dnum": N, "bool": B, "string": S, "speeddata": [N] * 4, "pos": [N] * 3, "orient": [N] * 4,
-    "confdata": [N] * 4, "robjoint": [N] * 6, "extjoint": [N] * 6, "jointtarget": [[N] * 6, [N] * 6],
-    "robtarget": [[N] * 3, [N] * 4, [N] * 4, [N] * 6], "pose": [[N] * 3, [N] * 4],
-    "loaddata": [N, [N] * 3, [N] * 4, N, N, N],
-    "tooldata": [B, [[N] * 3, [N] * 4], [N, [N] * 3, [N] * 4, N, N, N]],
-}
-
-
-def matches(value: Any, shape: Any) -> bool:
-    """Whether a parsed literal has the shape of a RAPID type (``SHAPES``)."""
-    if shape == N:
-        return isinstance(value, float)
-    if shape == S:
-        return isinstance(value, str)
-    if shape == B:
-        return isinstance(value, bool)
-    return isinstance(value, list) and len(value) == len(shape) and all(map(matches, value, shape))
-
-
-def render(value: Any) -> str:
-    """A parsed literal as the controller prints it: single precision, ``9E+09``, quoted strings."""
-    if isinstance(value, bool):
-        return "TRUE" if value else "FALSE"
-    if isinstance(value, float):
-        if abs(value) >= 1e9:
-            return "9E+09" if value > 0 else "-9E+09"
-        text = f"{value:.7g}".replace("e", "E")
-        return "0" if text == "-0" else text
-    if isinstance(value, str):
-        return '"' + value.replace('"', '""') + '"'
-    return "[" + ",".join(render(v) for v in value) + "]"
-
-
-@dataclass
-class Symbol:
-    """A module-level RAPID data declaration; ``value`` is the rendered literal."""
-    module: str
-    name: str
-    storage: str        # PERS, VAR, CONST
-    dtype: str
-    value: str
-    array: bool = False
-
-
-@dataclass
-class Module:
-    name: str
-    text: str
-    symbols: dict[str, Symbol]
-    has_main: bool
-    routines: dict[str, str] = field(default_factory=dict)   # lower-case PROC name -> its parameter text
-    main_calls: frozenset[str] = frozenset()                  # lower-case procedures main calls without arguments
-
-    def calls(self, routine: str, callee: str) -> bool:
-        """Whether PROC ``routine`` of this module calls ``callee`` (a procedure call statement)."""
-        code = _strip_comments(self.text)
-        m = re.search(rf"^\s*(?:LOCAL\s+)?PROC\s+{routine}\s*\(.*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
-        return bool(m and re.search(rf"^\s*{callee}\s*;", m.group(0), re.I | re.M))
-
-
-_ROUTINE = re.compile(r"^\s*(?:LOCAL\s+)?(PROC|FUNC|TRAP)\b.*?^\s*END(?:PROC|FUNC|TRAP)\b", re.I | re.M | re.S)
-_DECL = re.compile(r"^\s*(?:LOCAL\s+|TASK\s+)?(PERS|VAR|CONST)\s+(\w+)\s+(\w+)\s*(\{[^}]*\})?\s*(?::=\s*(.*?))?;",
-                   re.I | re.M | re.S)
-
-
-def _strip_comments(text: str) -> str:
-    """Remove ``!`` comments (outside string literals)."""
-    out = []
-    for line in text.splitlines():
-        quoted = False
-        for i, ch in enumerate(line):
-            if ch == '"':
-                quoted = not quoted
-            elif ch == "!" and not quoted:
-                line = line[:i]
-                break
-        out.append(line)
-    return "\n".join(out)
-
-
-def parse_module(text: str) -> Module:
-    """Parse a module's name, ``main`` and module-level data declarations (types checked for known types)."""
-    code = _strip_comments(text)
-    head = re.match(r"\s*MODULE\s+([A-Za-z]\w*)", code, re.I)
-    if not head or not re.search(r"^\s*ENDMODULE\b", code, re.I | re.M):
-        raise RapidSyntaxError("not a RAPID module (MODULE name ... ENDMODULE)")
-    has_main = bool(re.search(r"^\s*PROC\s+main\s*\(\s*\)", code, re.I | re.M))
-    routines = {name.lower(): params.strip() for name, params in
-                re.findall(r"^\s*(?:LOCAL\s+)?PROC\s+(\w+)\s*\(([^)]*)\)", code, re.I | re.M)}
-    data = _ROUTINE.sub("", code)
-    symbols = {}
-    for storage, dtype, name, dims, init in _DECL.findall(data):
-        value = _initial_value(dtype, init, bool(dims), name)
-        symbols[name.lower()] = Symbol(head.group(1), name, storage.upper(), dtype.lower(), value, bool(dims))
-    main = re.search(r"^\s*PROC\s+main\s*\(\s*\).*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
-    calls = frozenset(c.lower() for c in re.findall(r"^\s*(\w+)\s*;", main.group(0), re.M)) if main else frozenset()
-    return Module(head.group(1), text, symbols, has_main, routines, calls - RAPID_KEYWORDS)
-
-
-RAPID_KEYWORDS = frozenset({"stop", "exit", "return", "break", "endproc", "endwhile", "endif", "endfor", "endtest",
-                            "else", "retry", "trynext"})
+# --------------------------------------------------------------------------- RAPID (drivers.rapid.values)
 
 # The production program a cell runs: its main either calls CalServer's entry routine (the documented one-line
 # integration) or not (the driver then sets the PP to cal_run and restores it to main when it is done).
@@ -264,32 +124,6 @@ CUSTOMER_PROGRAMS = {
     "plain": "MODULE MainModule\n    PERS num cycle_count:=0;\n    PROC main()\n        ! production cycle\n"
              "        cycle_count:=cycle_count+1;\n        WaitTime 1;\n    ENDPROC\nENDMODULE\n",
 }
-
-
-def _initial_value(dtype: str, init: str, array: bool, name: str) -> str:
-    """Rendered initial value; zero/empty default when a VAR has no initialiser."""
-    shape = SHAPES.get(dtype.lower())
-    if not init.strip():
-        return render(_zero(shape)) if shape is not None and not array else "[]"
-    value = parse_literal(init)
-    if shape is not None and not array and not matches(value, shape):
-        raise RapidSyntaxError(f"initial value of {name} is not a {dtype}")
-    return render(value)
-
-
-def _zero(shape: Any) -> Any:
-    if shape == N:
-        return 0.0
-    if shape == S:
-        return ""
-    if shape == B:
-        return False
-    return [_zero(s) for s in shape]
-
-
-def calserver_text() -> str:
-    """The module shipped with the driver (``drivers/rapid/CalServer.mod``)."""
-    return (Path(__file__).resolve().parent.parent / "rapid" / "CalServer.mod").read_text(encoding="latin-1")
 
 
 # --------------------------------------------------------------------------- HTTP plumbing

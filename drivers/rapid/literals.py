@@ -5,14 +5,18 @@ Pure text functions shared by the target writer (``campaign.writeback``) and the
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Iterable, Sequence
+
+from drivers.base import DriverError
 
 RAPID_MAX_LINE = 100      # longest line the RAPID writer emits (characters) ...
 RAPID_MAX_STRING = 80     # RAPID string data: at most 80 characters
 RAPID_MAX_LINE_ID = 8 + 3 * RAPID_MAX_STRING + 3  # ... except an id line full of \\hh escapes (251)
 RAPID_MAX_IDENT = 32      # RAPID identifiers: at most 32 characters
 RAPID_UNUSED = "9E9"      # value of an unused external axis
+RAPID_UNUSED_AXIS = 9e9   # the same as a number
 
 
 def _fixed(x: float, decimals: int) -> str:
@@ -130,3 +134,56 @@ def _rapid_array(storage: str, type_name: str, name: str, elements: Sequence[str
         lines += _wrap(element + ("," if k < len(elements) - 1 else ""), " " * 8)
     lines.append("    ];")
     return lines
+
+
+# --------------------------------------------------------------------------- data values over RWS (ABB driver)
+
+
+def fmt_num(value: float) -> str:
+    """RAPID num literal: fixed point, at most 6 decimals, ``9E9`` for unused axes, no ``-0``."""
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"not a finite number: {value}")
+    if abs(value) >= 1e9:
+        return "9E9" if value > 0 else "-9E9"
+    text = f"{value:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text
+
+
+def fmt_jointtarget(q_deg: Sequence[float], ext: Sequence[float] = ()) -> str:
+    """``[[j1..j6],[e1..e6]]`` (deg); missing robot axes are 0, missing external axes 9E9."""
+    rob = list(q_deg) + [0.0] * (6 - len(q_deg))
+    eax = list(ext) + [RAPID_UNUSED_AXIS] * (6 - len(ext))
+    return f"[[{','.join(fmt_num(v) for v in rob)}],[{','.join(fmt_num(v) for v in eax)}]]"
+
+
+def fmt_robtarget(trans_mm: Sequence[float], quat_wxyz: Sequence[float], conf: Sequence[int] = (0, 0, 0, 0)) -> str:
+    """``[[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[9E9 x6]]`` with the quaternion normalised (w first)."""
+    norm = math.sqrt(sum(float(q) ** 2 for q in quat_wxyz))
+    if len(trans_mm) != 3 or len(quat_wxyz) != 4 or len(conf) != 4 or not norm > 0:
+        raise ValueError("robtarget needs xyz (3), a non-zero quaternion (4) and confdata (4)")
+    quat = [float(q) / norm for q in quat_wxyz]
+    parts = [",".join(fmt_num(v) for v in trans_mm), ",".join(fmt_num(v) for v in quat),
+             ",".join(str(int(c)) for c in conf), ",".join("9E9" for _ in range(6))]
+    return "[" + ",".join(f"[{p}]" for p in parts) + "]"
+
+
+def fmt_string(text: str) -> str:
+    """RAPID string literal with the quotes (``"`` and ``\\`` doubled as RAPID requires)."""
+    return '"' + text.replace("\\", "\\\\").replace('"', '""') + '"'
+
+
+def parse_string(literal: str) -> str:
+    """Inverse of ``fmt_string``; tolerates a value without quotes."""
+    text = literal.strip()
+    if len(text) >= 2 and text[0] == text[-1] == '"':
+        text = text[1:-1].replace('""', '"').replace("\\\\", "\\")
+    return text
+
+
+def parse_num(literal: str) -> float:
+    """A RAPID num literal (``12``, ``-0.5``, ``9E+09``)."""
+    try:
+        return float(literal.strip())
+    except ValueError as exc:
+        raise DriverError(f"not a RAPID num: {literal[:40]!r}") from exc
