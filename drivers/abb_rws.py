@@ -14,228 +14,26 @@ import logging
 import math
 import os
 import random
-import re
-import stat
 import time
-from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from dataclasses import replace
+from typing import Any, Callable, Mapping, Sequence
 from urllib.parse import urlsplit
 
 import httpx
 
 from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
-from .rws_client import (E_MASTER_REJECT, E_RESOURCE_HELD, Credentials, RetryPolicy, Routes, RwsError, RwsSession,
-                         Timeouts, first)
+from .rws_client import Credentials, Routes, RwsError, RwsSession, first
 from .rapid import calserver_text
 from .rapid.literals import fmt_jointtarget, fmt_num, fmt_robtarget, fmt_string, parse_num, parse_string  # noqa: F401
+from .abb_rws_options import (DEFAULT_PASSWORD, DEFAULT_USER, CredentialOptions, OptionsError, RapidRejected,  # noqa: F401
+                              RwsOptions, load_credentials)
+from .abb_rws_preflight import (CALSERVER_VERSION, KIND_MOVEABSJ, KIND_MOVEL, KIND_PING, PreflightMixin,  # noqa: F401
+                                _module_bytes)
+from .abb_rws_program import ENTRY_ROUTINE, Deadline, RapidProgramMixin, _MasterRejected  # noqa: F401
 
 log = logging.getLogger(__name__)
 
-DEFAULT_USER, DEFAULT_PASSWORD = "Default User", "robotics"   # ABB's documented factory account
-CALSERVER_VERSION = 2                                          # cal_version expected in CalServer.mod
-ENTRY_ROUTINE = "cal_run"                                      # CalServer's entry procedure (no main of its own)
 _CACHED = ("cal_speed", "cal_settle_s", "cal_vmax", "cal_override", "cal_tool", "cal_epoch")
-UNUSED_AXIS = 9e9
-KIND_PING, KIND_MOVEABSJ, KIND_MOVEL = 0, 1, 2
-_IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
-
-
-# --------------------------------------------------------------------------- options
-
-
-class RapidRejected(MotionError):
-    """CalServer rejected the request through ``cal_err_seq`` (RAPID still runs); ``errno`` is its ERRNO."""
-
-    def __init__(self, message: str, errno: int) -> None:
-        super().__init__(message)
-        self.errno = errno
-
-
-class OptionsError(DriverError):
-    """Invalid ``robot.options`` for the abb-rws driver (message starts with the key path)."""
-
-
-@dataclass(frozen=True)
-class CredentialOptions:
-    """Where the credentials come from: environment variable names, an optional ``key=value`` file, and whether
-    ABB's factory account (``Default User``/``robotics``) may be used when nothing else is set."""
-    user_env: str = "RWS_USER"
-    password_env: str = "RWS_PASSWORD"
-    file: str | None = None
-    use_default: bool = False
-
-
-@dataclass(frozen=True)
-class RwsOptions:
-    """Driver options (``robot.options`` in the campaign config); see ``docs/drivers_abb.md`` for the schema."""
-    rws_version: int | None = None            # None = detect
-    scheme: str | None = None                 # None = detect (http / https)
-    verify: bool | str = False                # TLS: False (OmniCore self-signed), True, or a CA/cert PEM path
-    task: str = "T_ROB1"
-    module: str = "CalServer"
-    mechunit: str = "ROB_1"
-    n_joints: int = 6
-    upload_module: bool = False
-    module_file: str | None = None            # default: the packaged drivers/rapid/CalServer.mod
-    remote_dir: str = "$HOME"
-    start_rapid: bool = False                 # start a stopped CalServer at connect (PP per ``entry`` + start)
-    entry: str = "routine"                    # routine: PP to cal_run, restored to main at close; main: PP to main
-    motors_on: bool = False                   # switch motors on at connect (AUTO only)
-    speed: tuple[float, float, float, float] = (200.0, 100.0, 200.0, 1000.0)    # speeddata mm/s, deg/s, mm/s, deg/s
-    settle_s: float = 0.5
-    poll_s: float = 0.25
-    health_s: float = 1.0
-    max_poll_rate_hz: float = 3.0             # requests/s ceiling of the polls while waiting for CalServer
-    timeouts: Timeouts = field(default_factory=Timeouts)
-    retry: RetryPolicy = field(default_factory=RetryPolicy)
-    credentials: CredentialOptions = field(default_factory=CredentialOptions)
-
-    @classmethod
-    def from_mapping(cls, options: Mapping[str, Any]) -> "RwsOptions":
-        """Validate a plain mapping (YAML) into options; unknown keys and wrong types raise OptionsError."""
-        return _OptionReader(options, "options").build()
-
-
-class _OptionReader:
-    """Reads one mapping level with key-path errors."""
-
-    _SCALARS = {"task": str, "module": str, "mechunit": str, "remote_dir": str, "module_file": str,
-                "upload_module": bool, "start_rapid": bool, "motors_on": bool, "entry": str}
-    _POSITIVE = {"settle_s": True, "poll_s": False, "health_s": False, "max_poll_rate_hz": False}
-    _NESTED = {"timeouts", "retry", "credentials"}
-
-    def __init__(self, data: Mapping[str, Any], where: str) -> None:
-        if not isinstance(data, Mapping):
-            raise OptionsError(f"{where}: expected a mapping, got {type(data).__name__}")
-        self.data, self.where = dict(data), where
-
-    def build(self) -> RwsOptions:
-        known = set(self._SCALARS) | set(self._POSITIVE) | self._NESTED | {"rws_version", "scheme", "verify",
-                                                                            "n_joints", "speed"}
-        self._unknown(known)
-        kw: dict[str, Any] = {k: self._typed(k, t) for k, t in self._SCALARS.items() if k in self.data}
-        kw.update({k: self._number(k, allow_zero=z) for k, z in self._POSITIVE.items() if k in self.data})
-        if kw.get("entry", "routine") not in ("routine", "main"):
-            raise self._err("entry", "expected routine or main")
-        kw.update(self._transport_keys())
-        if "n_joints" in self.data:
-            kw["n_joints"] = self._int("n_joints", 1, 6)
-        if "speed" in self.data:
-            kw["speed"] = self._speed()
-        kw["timeouts"] = self._dataclass("timeouts", Timeouts)
-        kw["retry"] = self._dataclass("retry", RetryPolicy)
-        kw["credentials"] = self._credentials()
-        return RwsOptions(**kw)
-
-    def _unknown(self, known: set[str]) -> None:
-        extra = sorted(set(self.data) - known)
-        if extra:
-            raise OptionsError(f"{self.where}: unknown key(s) {', '.join(extra)} "
-                               f"(expected: {', '.join(sorted(known))})")
-
-    def _err(self, key: str, msg: str) -> OptionsError:
-        return OptionsError(f"{self.where}.{key}: {msg}, got {self.data.get(key)!r}")
-
-    def _typed(self, key: str, typ: type) -> Any:
-        value = self.data[key]
-        if not isinstance(value, typ) or (typ is not bool and isinstance(value, bool)):
-            raise self._err(key, f"expected {typ.__name__}")
-        return value
-
-    def _number(self, key: str, *, allow_zero: bool) -> float:
-        value = self.data[key]
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        if not ok or value < 0 or (value == 0 and not allow_zero):
-            raise self._err(key, "expected a " + ("non-negative" if allow_zero else "positive") + " number")
-        return float(value)
-
-    def _int(self, key: str, lo: int, hi: int) -> int:
-        value = self.data[key]
-        if not isinstance(value, int) or isinstance(value, bool) or not lo <= value <= hi:
-            raise self._err(key, f"expected an integer in [{lo}, {hi}]")
-        return value
-
-    def _transport_keys(self) -> dict[str, Any]:
-        kw: dict[str, Any] = {}
-        version = self.data.get("rws_version", "auto")
-        if version not in ("auto", None, 1, 2, "1", "2", "1.0", "2.0"):
-            raise self._err("rws_version", "expected auto, 1 or 2")
-        kw["rws_version"] = None if version in ("auto", None) else int(float(version))
-        scheme = self.data.get("scheme", "auto")
-        if scheme not in ("auto", None, "http", "https"):
-            raise self._err("scheme", "expected auto, http or https")
-        kw["scheme"] = None if scheme in ("auto", None) else scheme
-        if "verify" in self.data:
-            verify = self.data["verify"]
-            if not isinstance(verify, (bool, str)):
-                raise self._err("verify", "expected true, false or a path to a CA/certificate PEM file")
-            kw["verify"] = verify
-        return kw
-
-    def _speed(self) -> tuple[float, float, float, float]:
-        value = self.data["speed"]
-        if (not isinstance(value, Sequence) or isinstance(value, str) or len(value) != 4
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 for v in value)):
-            raise self._err("speed", "expected speeddata [v_tcp mm/s, v_ori deg/s, v_leax mm/s, v_reax deg/s] > 0")
-        return tuple(float(v) for v in value)  # type: ignore[return-value]
-
-    def _dataclass(self, key: str, cls: type) -> Any:
-        """A Timeouts / RetryPolicy from a sub-mapping: ``retries`` an integer, the rest positive seconds."""
-        sub = _OptionReader(self.data.get(key, {}), f"{self.where}.{key}")
-        defaults = cls()
-        sub._unknown(set(defaults.__dataclass_fields__))
-        values = {name: sub._int(name, 0, 20) if name == "retries" else
-                  sub._number(name, allow_zero=name == "backoff_s") for name in sub.data}
-        return replace(defaults, **values)
-
-    def _credentials(self) -> CredentialOptions:
-        sub = _OptionReader(self.data.get("credentials", {}), f"{self.where}.credentials")
-        sub._unknown(set(CredentialOptions.__dataclass_fields__))
-        kw = {k: sub._typed(k, str) for k in ("user_env", "password_env", "file") if k in sub.data}
-        if "use_default" in sub.data:
-            kw["use_default"] = sub._typed("use_default", bool)
-        return CredentialOptions(**kw)
-
-
-# --------------------------------------------------------------------------- credentials
-
-
-def load_credentials(opts: CredentialOptions, environ: Mapping[str, str] | None = None) -> Credentials:
-    """Credentials from ``opts.file`` (``user=`` / ``password=`` lines), else the environment variables, else ABB's
-    factory account if ``use_default``; otherwise a DriverError that names where to put them (never their value)."""
-    env = os.environ if environ is None else environ
-    if opts.file:
-        return _credentials_file(opts.file)
-    user, password = env.get(opts.user_env), env.get(opts.password_env)
-    if user and password:
-        return Credentials(user, password)
-    if opts.use_default:
-        log.warning("using ABB's factory RWS account %r (options.credentials.use_default)", DEFAULT_USER)
-        return Credentials(DEFAULT_USER, DEFAULT_PASSWORD)
-    missing = [n for n, v in ((opts.user_env, user), (opts.password_env, password)) if not v]
-    raise DriverError(f"abb-rws: no RWS credentials: set {' and '.join(missing)} in the environment, or "
-                      "options.credentials.file, or options.credentials.use_default: true for ABB's factory account")
-
-
-def _credentials_file(path: str) -> Credentials:
-    """Parse a ``user=...`` / ``password=...`` file (``#`` comments); warn if others can read it."""
-    path = os.path.expanduser(path)
-    try:
-        text = open(path, encoding="utf-8").read()
-        mode = os.stat(path).st_mode
-    except OSError as exc:
-        raise DriverError(f"abb-rws: cannot read credentials file {path}: {exc.strerror}") from None
-    if os.name == "posix" and mode & (stat.S_IRWXG | stat.S_IRWXO):
-        log.warning("credentials file %s is readable by other users (chmod 600 it)", path)
-    values: dict[str, str] = {}
-    for line in text.splitlines():
-        key, sep, value = line.strip().partition("=")
-        if sep and not key.startswith("#"):
-            values[key.strip().lower()] = value.strip()
-    if not values.get("user") or not values.get("password"):
-        raise DriverError(f"abb-rws: credentials file {path} needs 'user=' and 'password=' lines")
-    return Credentials(values["user"], values["password"])
 
 
 # --------------------------------------------------------------------------- the robot
@@ -244,18 +42,7 @@ def _credentials_file(path: str) -> Credentials:
 calserver_source = calserver_text   # the packaged drivers/rapid/CalServer.mod (one loader: drivers.rapid)
 
 
-class Deadline:
-    """A point in monotonic time ``seconds`` from now."""
-
-    def __init__(self, seconds: float, clock: Callable[[], float] = time.monotonic) -> None:
-        self._clock, self.seconds = clock, seconds
-        self.end = clock() + seconds
-
-    def expired(self) -> bool:
-        return self._clock() >= self.end
-
-
-class AbbRwsRobot:
+class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
     """``Robot`` over RWS driving CalServer.mod; also ``move_linear``, ``write_module`` and ``heartbeat``."""
 
     def __init__(self, url: str, options: RwsOptions, credentials: Credentials, *,
@@ -462,130 +249,6 @@ class AbbRwsRobot:
         except DriverError as exc:
             log.warning("%s: RAPID could not be restarted after the failed load: %s", self.url, exc)
 
-    # -- preflight
-
-    def _preflight(self) -> None:
-        """AUTO, motors on, no foreign mastership, CalServer present/loaded, RAPID running, CalServer answering."""
-        self._check_opmode()
-        self._check_motors()
-        self._check_mastership()
-        self._elog_mark = self._newest_elog()
-        ident = self.identity()
-        log.info("%s: %s %s, serial %s, %s", self.url, ident["controller_type"], ident["model"], ident["serial"],
-                 ident["software_version"])
-        if ident["absacc"] == "yes":
-            log.warning("%s: Absolute Accuracy is installed: joint moves are unaffected, but Cartesian targets "
-                        "corrected by this campaign must not be written back (the controller would correct them "
-                        "twice)", self.url)
-        if self.opts.upload_module:
-            self._install_calserver()
-        else:
-            self._check_module()
-        self._check_running()
-        self._check_version()
-        self._sync_seq()
-        self._ping()
-        self._write_values(self._motion_arguments())     # cached from here on: a move writes 3 symbols
-
-    def _check_opmode(self) -> None:
-        mode = self._opmode()
-        if mode != "AUTO":
-            raise RobotNotReady(f"{self.url}: controller is in {mode} mode, not AUTO (turn the mode key to AUTO)")
-
-    def _check_motors(self) -> None:
-        state = self._ctrlstate()
-        if state == "motoroff" and self.opts.motors_on:
-            path, params = self._routes.set_ctrlstate()
-            self.session.post(path, params, {"ctrl-state": "motoron"})
-            self._sleep(min(0.5, self.opts.poll_s))
-            state = self._ctrlstate()
-        if state != "motoron":
-            hint = "press Motors On or set options.motors_on" if state == "motoroff" else "reset the stop first"
-            raise RobotNotReady(f"{self.url}: motors are not on (ctrlstate={state}; {hint})")
-
-    def _check_mastership(self) -> None:
-        for domain in (self._routes.edit_domain, "motion"):
-            path, params = self._routes.mastership(domain)
-            try:
-                items = self.session.get(path, params)
-            except RwsError as exc:
-                log.info("%s: mastership state %s not readable (%s)", self.url, domain, exc)
-                continue
-            item = items[0] if items else {}
-            holder = str(item.get("mastership", "nomaster")).lower()
-            mine = str(item.get("mastershipheldbyme", "false")).lower() == "true"
-            if holder not in ("nomaster", "", "internal") and not mine:     # internal: RAPID itself while it runs
-                who = item.get("application") or item.get("location") or holder
-                raise RobotNotReady(f"{self.url}: {domain} mastership is held by another client ({who}); "
-                                    "release write access in RobotStudio / close the FlexPendant editor")
-
-    def _check_module(self) -> None:
-        if self.opts.module.lower() not in {m.lower() for m in self._modules()}:
-            raise RobotNotReady(f"{self.url}: RAPID module {self.opts.module} is not loaded in {self.opts.task} "
-                                "(load drivers/rapid/CalServer.mod or set options.upload_module: true)")
-
-    def _check_running(self) -> None:
-        state = self._exec_state()
-        if state == "running":
-            return
-        if not self.opts.start_rapid:
-            raise RobotNotReady(f"{self.url}: RAPID execution is {state} (set the PP to routine {ENTRY_ROUTINE} "
-                                "and start, or set options.start_rapid: true)")
-        self._set_entry_pp()
-        self._rapid_start()
-
-    def _check_version(self) -> None:
-        try:
-            version = parse_num(self._read("cal_version"))
-        except RwsError as exc:
-            raise RobotNotReady(f"{self.url}: {self.opts.module} has no readable cal_version ({exc.code}); "
-                                "upload the module shipped with this driver") from exc
-        if int(version) != CALSERVER_VERSION:
-            raise RobotNotReady(f"{self.url}: {self.opts.module} interface version {version:g} on the controller, "
-                                f"driver needs {CALSERVER_VERSION} (upload the module shipped with this driver)")
-
-    def _sync_seq(self) -> None:
-        """Next request number = one above every sequence counter on the controller."""
-        names = ("cal_req_seq", "cal_ack_seq", "cal_done_seq", "cal_err_seq")
-        self._seq = max(int(parse_num(self._read(n))) for n in names)
-        self._written.clear()
-
-    def _ping(self) -> None:
-        """A no-motion request proves the CalServer loop answers."""
-        try:
-            self._command(KIND_PING, {}, "ping", move_s=0.0)
-        except MotionError as exc:
-            raise RobotNotReady(f"{self.url}: CalServer does not answer ({exc}){self._pp_hint()}") from exc
-
-    def _pp_hint(self) -> str:
-        """Where the program pointer is, for a CalServer that does not answer (best effort)."""
-        try:
-            item = self._first_item(self._routes.pcp(self.opts.task))
-        except DriverError:
-            return ""
-        module, routine = item.get("modulemame") or item.get("modulename"), item.get("routinename")
-        if not module or str(routine).lower() == ENTRY_ROUTINE:
-            return ""
-        return (f"; the program pointer is in {module}/{routine}: run {ENTRY_ROUTINE} (PP to routine, or call "
-                f"'{ENTRY_ROUTINE};' from main)")
-
-    def _install_calserver(self) -> None:
-        """Upload and verify CalServer, stop RAPID, load it with PP to main, and start RAPID."""
-        text = _read_text(self.opts.module_file) if self.opts.module_file else calserver_source()
-        data = _module_bytes(self.opts.module, text, self.url)
-        remote = f"{self.opts.remote_dir}/{self.opts.module}.mod"
-        self.session.put_file(remote, data)
-        if self.session.get_file(remote) != data:
-            raise RobotNotReady(f"{self.url}: read-back of {remote} differs from the uploaded module")
-        if self._exec_state() == "running":
-            self._rapid_stop_and_wait()
-        self._load(remote, reset_pp=False)
-        self._check_module()
-        self._set_entry_pp()
-        self._rapid_start()
-        log.info("%s: %s uploaded to %s, loaded into %s and started", self.url, self.opts.module, remote,
-                 self.opts.task)
-
     # -- the handshake
 
     def _command(self, kind: int, args: Mapping[str, str], what: str, *, move_s: float | None = None) -> None:
@@ -731,180 +394,7 @@ class AbbRwsRobot:
         self._sync_seq()
         self._suspect = False
 
-    # -- RAPID program control
-
-    @contextmanager
-    def _edit_mastership(self) -> Iterator[None]:
-        """Hold the RAPID-edit mastership (``rapid`` on 1.0, ``edit`` on 2.0) for the block; always release.
-        A request refused because another client holds it is retried with backoff (``retry`` options)."""
-        domain = self._routes.edit_domain
-        delay = self.opts.retry.backoff_s
-        for attempt in range(self.opts.retry.retries + 1):
-            try:
-                self._mastership(domain, "request")
-                break
-            except RobotNotReady:
-                if attempt == self.opts.retry.retries:
-                    raise
-                log.info("%s: %s mastership held elsewhere; retry %d/%d in %.2f s", self.url, domain, attempt + 1,
-                         self.opts.retry.retries, delay)
-                self._sleep(delay)
-                delay = min(delay * 2, self.opts.retry.backoff_max_s)
-        try:
-            yield
-        finally:
-            self._mastership(domain, "release", quiet=True)
-
-    def _set_entry_pp(self) -> None:
-        """RAPID stopped: PP to routine ``cal_run`` (restored to main at close) or, with ``entry: main``, PP to
-        the task's main (which must call ``cal_run``)."""
-        with self._edit_mastership():
-            if self.opts.entry == "main":
-                self._post_resetpp()
-                return
-            path, params = self._routes.pp_to_routine(self.opts.task)
-            try:
-                self.session.post(path, params, {"module": self.opts.module, "routine": ENTRY_ROUTINE,
-                                                 "userlevel": "false"})
-            except RwsError as exc:
-                raise RobotNotReady(f"{self.url}: cannot set the program pointer to {self.opts.module}/"
-                                    f"{ENTRY_ROUTINE} ({exc})") from exc
-            self._restore_pp = True
-
-    def _load(self, remote: str, *, reset_pp: bool) -> None:
-        """``loadmod`` (replace) under edit mastership, optionally followed by PP to main."""
-        with self._edit_mastership():
-            path, params = self._routes.loadmod(self.opts.task)
-            self.session.post(path, params, {"modulepath": remote, "replace": "true"},
-                              timeout=self.opts.timeouts.load_s)
-            if reset_pp:
-                self._post_resetpp()
-
-    def _reset_pp(self) -> None:
-        """PP to main (edit mastership is required on RWS 2.0; taken on both)."""
-        with self._edit_mastership():
-            self._post_resetpp()
-
-    def _post_resetpp(self) -> None:
-        path, params = self._routes.execution_action("resetpp")
-        self.session.post(path, params, {})
-
-    def _rapid_start(self) -> None:
-        """Start RAPID (cycle forever) and wait until the execution state says running."""
-        path, params = self._routes.execution_action("start")
-        form = {"regain": "continue", "execmode": "continue", "cycle": "forever", "condition": "none",
-                "stopatbp": "disabled", "alltaskbytsp": "false"}
-        try:
-            self.session.post(path, params, form)
-        except RwsError as exc:
-            raise RobotNotReady(f"{self.url}: RAPID start refused ({exc})") from exc
-        self._wait_exec("running")
-
-    def _rapid_stop_and_wait(self) -> None:
-        path, params = self._routes.execution_action("stop")
-        self.session.post(path, params, {"stopmode": "stop", "usetsp": "normal"})
-        self._wait_exec("stopped")
-
-    def _wait_exec(self, wanted: str) -> None:
-        deadline = Deadline(self.opts.timeouts.ack_s)
-        while self._exec_state() != wanted:
-            if deadline.expired():
-                raise RobotNotReady(f"{self.url}: RAPID execution did not become {wanted} "
-                                    f"within {deadline.seconds:g} s")
-            self._sleep(min(self.opts.poll_s, 0.05))
-
-    def _mastership(self, domain: str, verb: str, *, quiet: bool = False) -> None:
-        path, params = self._routes.mastership_action(domain, verb)
-        try:
-            self.session.post(path, params, {})
-        except RwsError as exc:
-            if quiet:
-                log.warning("%s: mastership %s %s failed: %s", self.url, domain, verb, exc)
-                return
-            if exc.code == E_RESOURCE_HELD:
-                raise RobotNotReady(f"{self.url}: {domain} mastership is held by another client") from exc
-            raise
-
-    # -- reads and writes
-
-    def _read(self, name: str) -> str:
-        """Value literal of a CalServer symbol."""
-        path, params = self._routes.symbol(self.opts.task, self.opts.module, name)
-        return first(self.session.get(path, params), "value", name)
-
-    def _write(self, name: str, literal: str, *, cache: bool) -> None:
-        """Write a CalServer symbol (skipped if this session already wrote the same literal)."""
-        if cache and self._written.get(name) == literal:
-            return
-        path, params = self._routes.set_symbol(self.opts.task, self.opts.module, name, implicit=not self._explicit)
-        try:
-            self.session.post(path, params, {"value": literal})
-        except RwsError as exc:
-            self._written.pop(name, None)
-            if exc.code == E_MASTER_REJECT and not self._explicit:
-                raise _MasterRejected(str(exc)) from exc
-            if exc.code == E_RESOURCE_HELD:
-                raise RobotNotReady(f"{self.url}: cannot write {name}: RAPID mastership held by another client") \
-                    from exc
-            raise
-        self._written[name] = literal
-
-    def _ctrlstate(self) -> str:
-        path, params = self._routes.ctrlstate()
-        return first(self.session.get(path, params), "ctrlstate", "ctrlstate")
-
-    def _opmode(self) -> str:
-        path, params = self._routes.opmode()
-        return first(self.session.get(path, params), "opmode", "opmode")
-
-    def _exec_state(self) -> str:
-        path, params = self._routes.execution()
-        return first(self.session.get(path, params), "ctrlexecstate", "execution")
-
-    def _modules(self) -> list[str]:
-        path, params = self._routes.modules(self.opts.task)
-        return [str(i.get("name", "")) for i in self.session.get(path, params)]
-
-    def _elog_entries(self) -> list[dict]:
-        """Common elog entries (newest first) with int ``seqnum``; empty if the log is not readable."""
-        path, params = self._routes.elog()
-        try:
-            items = self.session.get(path, params)
-        except DriverError as exc:
-            log.info("%s: event log not readable: %s", self.url, exc)
-            return []
-        out = []
-        for item in items:
-            try:
-                out.append(dict(item, seqnum=int(str(item.get("_title", "")).rstrip("/").split("/")[-1])))
-            except ValueError:
-                continue
-        return out
-
-    def _newest_elog(self) -> int | None:
-        """Newest sequence number in the log (uint16 wrap-aware), or None for an empty/unreadable log."""
-        newest = None
-        for entry in self._elog_entries():
-            if _newer(entry["seqnum"], newest):
-                newest = entry["seqnum"]
-        return newest
-
-    def _elog_errors(self) -> str:
-        """``; elog: code title`` for error entries (msgtype >= 3) newer than the mark; advances the mark."""
-        entries = [e for e in self._elog_entries() if _newer(e["seqnum"], self._elog_mark)]
-        for entry in entries:
-            if _newer(entry["seqnum"], self._elog_mark):
-                self._elog_mark = entry["seqnum"]
-        errors = [f"{e.get('code', '?')} {e.get('title', '')}".strip() for e in entries
-                  if str(e.get("msgtype", "0")).isdigit() and int(e["msgtype"]) >= 3]
-        return f"; elog: {'; '.join(errors[:3])}" if errors else ""
-
-
 # --------------------------------------------------------------------------- helpers and factory
-
-
-class _MasterRejected(RobotError):
-    """A write refused for lack of mastership (403 E_MASTER_REJECT): switch to explicit mastership."""
 
 
 class _Pacer:
@@ -922,38 +412,12 @@ class _Pacer:
         self._n = 0
 
 
-def _newer(seq: int, mark: int | None) -> bool:
-    """uint16 sequence comparison with wrap-around."""
-    return mark is None or 0 < (seq - mark) % 65536 < 32768
-
-
 def _short(text: str, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _fmt_q(q: Sequence[float]) -> str:
     return "[" + ", ".join(f"{v:.3f}" for v in q) + "] deg"
-
-
-def _module_bytes(name: str, text: str, url: str) -> bytes:
-    """Validate a module name/text pair and encode it (ISO-8859-1, as RobotWare reads modules)."""
-    if not _IDENT.match(name):
-        raise RobotError(f"{url}: {name!r} is not a RAPID module name (letter, then letters/digits/_; max 32)")
-    if not re.search(rf"^\s*MODULE\s+{re.escape(name)}\b", text, re.IGNORECASE | re.MULTILINE) \
-            or not re.search(r"\bENDMODULE\b", text, re.IGNORECASE):
-        raise RobotError(f"{url}: module text must start with 'MODULE {name}' and end with 'ENDMODULE'")
-    try:
-        return text.encode("latin-1")
-    except UnicodeEncodeError as exc:
-        raise RobotError(f"{url}: module {name} has characters outside ISO-8859-1 ({exc.reason})") from None
-
-
-def _read_text(path: str) -> str:
-    """A local module file (ISO-8859-1); DriverError if unreadable."""
-    try:
-        return open(os.path.expanduser(path), encoding="latin-1").read()
-    except OSError as exc:
-        raise DriverError(f"abb-rws: options.module_file: cannot read {path}: {exc.strerror}") from None
 
 
 def _verify(value: bool | str) -> Any:
