@@ -9,7 +9,7 @@ import time
 from typing import Any
 from urllib.request import parse_http_list, parse_keqv_list
 
-from .rws_http import (E, REALM, Request, Response, S_OK, _Session, _cookies, _esc, _json, _md5, _xhtml)
+from .rws_http import E, REALM, Request, Response, S_OK, _Session, _cookies, _esc, _json, _md5, _xhtml
 
 
 class AuthMixin:

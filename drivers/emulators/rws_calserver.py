@@ -7,7 +7,7 @@ import time
 
 from drivers.rapid.values import Symbol, parse_literal, render
 
-from .rws_http import (ENTRY, EmulatedMotionFault, UNUSED, _Fault)
+from .rws_http import ENTRY, EmulatedMotionFault, UNUSED, _Fault
 
 log = logging.getLogger("drivers.emulators.rws_server")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from datetime import datetime
 
-from .rws_http import (_Fault, _Holder, _domain_key)
+from .rws_http import _Fault, _Holder, _domain_key
 
 log = logging.getLogger("drivers.emulators.rws_server")
 
