@@ -23,7 +23,6 @@ import argparse
 import csv
 import os
 import random
-import select
 import signal
 import socket
 import sys
@@ -31,6 +30,8 @@ import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Mapping, Protocol, Sequence
+
+from drivers.emulators.line_server import TcpServer
 
 ERROR_WORDS = {"beam_broken": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE", "timeout": "TIMEOUT",
                "error": "DEVICE_ERROR"}
@@ -206,30 +207,28 @@ class Reply:
     disconnect: bool = False
 
 
-class LineBridge:
+class LineBridge(TcpServer):
     """Serves the line protocol from ``backend`` over TCP (one client at a time, one background thread).
 
     Test hooks (to check a driver against the contract): ``inject(*faults)`` queues one-shot faults for the next
     MEAS requests (``FAULT_ORDER``); ``probabilities`` draws them at random with ``seed``; ``delay_s`` for ``delay``.
     ``requests``, ``connections`` and ``replies_sent`` count what happened.
     """
+    thread_name, label = "line-bridge", "line bridge"
+    poll_s = POLL_S
 
     def __init__(self, backend: Backend, port: int = 0, host: str = "127.0.0.1", *, seed: int = 0,
                  probabilities: Mapping[str, float] | None = None, delay_s: float = 0.5) -> None:
         bad = set(probabilities or {}) - set(FAULT_ORDER)
         if bad:
             raise ValueError(f"unknown faults {sorted(bad)} (expected {', '.join(FAULT_ORDER)})")
-        self.backend, self.host, self._requested_port = backend, host, port
+        super().__init__(host, port)
+        self.backend = backend
         self.probabilities, self.delay_s = dict(probabilities or {}), delay_s
         self._rng = random.Random(seed + 7919)
         self._queued: deque[str] = deque()
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
         self.requests: deque[str] = deque(maxlen=1000)
-        self.connections = 0
         self.replies_sent = 0
 
     @property
@@ -300,67 +299,21 @@ class LineBridge:
         return next((name for name, u in draws if u < self.probabilities.get(name, 0.0)), None)
 
     # -- transport
-    def start(self) -> "LineBridge":
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((self.host, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"line-bridge-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
     def stop(self, timeout_s: float = 2.0) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
+        self._join(timeout_s)
         self.backend.close()
 
-    def __enter__(self) -> "LineBridge":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
-
     def _serve_client(self, conn: socket.socket) -> None:
-        buf = b""
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(4096)
-            except OSError:
+        for raw in self._lines(conn):
+            reply = self.respond(raw.decode("ascii", errors="replace").strip())
+            if reply.disconnect or (reply.delay_s and self._stop.wait(reply.delay_s)):
                 return
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                raw, buf = buf.split(b"\n", 1)
-                reply = self.respond(raw.decode("ascii", errors="replace").strip())
-                if reply.disconnect or (reply.delay_s and self._stop.wait(reply.delay_s)):
+            if reply.data:
+                try:
+                    conn.sendall(reply.data)
+                except OSError:
                     return
-                if reply.data:
-                    try:
-                        conn.sendall(reply.data)
-                    except OSError:
-                        return
-                    self.replies_sent += 1
+                self.replies_sent += 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -35,7 +35,6 @@ import argparse
 import math
 import os
 import random
-import select
 import signal
 import socket
 import sys
@@ -45,6 +44,8 @@ from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
 from drivers import emscon_protocol as P
+
+from .line_server import TcpServer
 
 HOST = "127.0.0.1"
 POLL_S = 0.02
@@ -326,21 +327,18 @@ class EmsconDevice:
         return (value - 32.0) / 1.8 if self.units[2] == 1 else value
 
 
-class EmsconEmulator:
+class EmsconEmulator(TcpServer):
     """The device served over TCP on 127.0.0.1 by one background thread; a context manager.
 
     ``port=0`` picks a free port (``.port``; ``.url`` is the driver URL). ``connections`` and ``packets_sent`` count
     accepted clients and packets sent. Keyword arguments go to ``EmsconDevice``.
     """
+    thread_name, label = "emscon-emulator", "emScon emulator"
+    poll_s = POLL_S
 
     def __init__(self, position_source: PositionSource | None = None, port: int = 0, **device_options) -> None:
+        super().__init__(HOST, port)
         self.device = EmsconDevice(position_source, **device_options)
-        self._requested_port = port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
-        self.connections = 0
         self.packets_sent = 0
 
     @property
@@ -350,57 +348,13 @@ class EmsconEmulator:
     def inject(self, *names: str) -> None:
         self.device.inject(*names)
 
-    def start(self) -> "EmsconEmulator":
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((HOST, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"emscon-emulator-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
     def stop(self, timeout_s: float = 3.0) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
-            if thread.is_alive():
-                raise RuntimeError(f"emScon emulator thread did not stop within {timeout_s} s")
-
-    def __enter__(self) -> "EmsconEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
+        super().stop(timeout_s)
 
     def _serve_client(self, conn: socket.socket) -> None:
         conn.settimeout(2.0)
         reader = P.PacketReader()
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(65536)
-            except OSError:
-                return
-            if not data:
-                return
+        for data in self._received(conn, 65536):
             reader.feed(data)
             try:
                 while (packet := reader.next_packet()) is not None:

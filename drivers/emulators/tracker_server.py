@@ -29,7 +29,6 @@ import argparse
 import math
 import os
 import random
-import select
 import signal
 import socket
 import sys
@@ -37,6 +36,8 @@ import threading
 from collections import deque
 from dataclasses import dataclass, fields, replace
 from typing import Callable, Mapping, Sequence
+
+from .line_server import TcpServer
 
 HOST = "127.0.0.1"
 POLL_S = 0.05
@@ -178,23 +179,20 @@ def _line(text: str) -> bytes:
     return text.encode("ascii") + b"\r\n"
 
 
-class TrackerEmulator:
+class TrackerEmulator(TcpServer):
     """The sample device served over TCP on 127.0.0.1 by one background thread; use as a context manager.
 
     ``port=0`` picks a free port (read it from ``.port``; ``.url`` is the driver URL). ``stop()`` joins the thread.
     ``connections`` and ``replies_sent`` count accepted clients and reply lines sent (for tests).
     Keyword arguments after ``port`` go to ``SampleDevice`` (``mode``, ``seed``, ``noise_mm``, ``std_mm``, ...).
     """
+    thread_name, label = "tracker-emulator", "tracker emulator"
+    poll_s = POLL_S
 
     def __init__(self, position_source: PositionSource | None = None,
                  faults: Faults | Mapping[str, float] | None = None, port: int = 0, **device_options) -> None:
+        super().__init__(HOST, port)
         self.device = SampleDevice(position_source, faults, **device_options)
-        self._requested_port = port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
-        self.connections = 0
         self.replies_sent = 0
 
     @property
@@ -207,64 +205,11 @@ class TrackerEmulator:
     def inject(self, *names: str) -> None:
         self.device.inject(*names)
 
-    def start(self) -> "TrackerEmulator":
-        """Bind, listen and start serving (idempotent)."""
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((HOST, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"tracker-emulator-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self, timeout_s: float = 2.0) -> None:
-        """Stop serving, close all sockets and join the thread (within about ``POLL_S``)."""
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
-            if thread.is_alive():
-                raise RuntimeError(f"tracker emulator thread did not stop within {timeout_s} s")
-
-    def __enter__(self) -> "TrackerEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
-
     def _serve_client(self, conn: socket.socket) -> None:
         conn.settimeout(1.0)
-        buf = b""
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(4096)
-            except OSError:
+        for line in self._lines(conn):
+            if not self._answer(conn, line):
                 return
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                if not self._answer(conn, line):
-                    return
 
     def _answer(self, conn: socket.socket, raw: bytes) -> bool:
         """Handle one request; ``False`` when the connection must end."""
