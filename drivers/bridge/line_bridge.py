@@ -21,17 +21,15 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import random
-import signal
 import socket
 import sys
-import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Mapping, Protocol, Sequence
 
-from drivers.emulators.line_server import TcpServer
+from drivers.emulators.faults import FaultDeck
+from drivers.emulators.line_server import TcpServer, wait_for_shutdown
 
 ERROR_WORDS = {"beam_broken": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE", "timeout": "TIMEOUT",
                "error": "DEVICE_ERROR"}
@@ -225,9 +223,7 @@ class LineBridge(TcpServer):
         super().__init__(host, port)
         self.backend = backend
         self.probabilities, self.delay_s = dict(probabilities or {}), delay_s
-        self._rng = random.Random(seed + 7919)
-        self._queued: deque[str] = deque()
-        self._lock = threading.Lock()
+        self._deck = FaultDeck(FAULT_ORDER, random.Random(seed + 7919))
         self.requests: deque[str] = deque(maxlen=1000)
         self.replies_sent = 0
 
@@ -236,11 +232,7 @@ class LineBridge(TcpServer):
         return f"tracker+socket://{self.host}:{self.port}"
 
     def inject(self, *faults: str) -> None:
-        bad = [f for f in faults if f not in FAULT_ORDER]
-        if bad:
-            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULT_ORDER)})")
-        with self._lock:
-            self._queued.extend(faults)
+        self._deck.inject(*faults)
 
     # -- the contract
     def respond(self, line: str) -> Reply:
@@ -292,11 +284,7 @@ class LineBridge(TcpServer):
         return Reply(_line(_join("OK", seq, *fields)), delay_s=self.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
-        with self._lock:
-            if self._queued:
-                return self._queued.popleft()
-            draws = [(name, self._rng.random()) for name in FAULT_ORDER]
-        return next((name for name, u in draws if u < self.probabilities.get(name, 0.0)), None)
+        return self._deck.draw(lambda name: self.probabilities.get(name, 0.0))
 
     # -- transport
     def stop(self, timeout_s: float = 2.0) -> None:
@@ -306,14 +294,9 @@ class LineBridge(TcpServer):
     def _serve_client(self, conn: socket.socket) -> None:
         for raw in self._lines(conn):
             reply = self.respond(raw.decode("ascii", errors="replace").strip())
-            if reply.disconnect or (reply.delay_s and self._stop.wait(reply.delay_s)):
+            if not self._deliver(conn, reply.data, reply.delay_s, reply.disconnect):
                 return
-            if reply.data:
-                try:
-                    conn.sendall(reply.data)
-                except OSError:
-                    return
-                self.replies_sent += 1
+            self.replies_sent += bool(reply.data)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -338,26 +321,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         backend = FaroSdkBackend(args.address)
     else:
         backend = SpatialAnalyzerBackend()
-    done = threading.Event()
     with LineBridge(backend, args.port, args.host) as bridge:
         if args.print_port:
             print(bridge.port, flush=True)
         print(f"line bridge ({args.backend}) on {args.host}:{bridge.port}", file=sys.stderr, flush=True)
-        if not args.ignore_stdin:
-            def watch() -> None:
-                try:
-                    while os.read(sys.stdin.fileno(), 4096):
-                        pass
-                except (OSError, ValueError):
-                    pass
-                done.set()
-            threading.Thread(target=watch, name="stdin-watch", daemon=True).start()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        try:
-            while not done.wait(0.2):
-                pass
-        except KeyboardInterrupt:
-            pass
+        wait_for_shutdown(watch_stdin=not args.ignore_stdin)
     return 0
 
 

@@ -2,8 +2,11 @@
 one-client-at-a-time server thread (``TcpServer``) that the tracker, emScon and bridge servers build on."""
 from __future__ import annotations
 
+import os
 import select
+import signal
 import socket
+import sys
 import threading
 from typing import Iterator
 
@@ -24,6 +27,29 @@ def close_quietly(sock: socket.socket | None) -> None:
     try:
         sock.close()
     except OSError:
+        pass
+
+
+def _watch_stdin(done: threading.Event) -> None:
+    """Set ``done`` at end of file on stdin (raw reads: no buffered-reader lock held at interpreter exit)."""
+    try:
+        while os.read(sys.stdin.fileno(), 4096):
+            pass
+    except (OSError, ValueError):
+        pass
+    done.set()
+
+
+def wait_for_shutdown(watch_stdin: bool = True) -> None:
+    """Block a server's command line until SIGTERM, Ctrl-C or (``watch_stdin``) end of file on stdin."""
+    done = threading.Event()
+    if watch_stdin:
+        threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    try:
+        while not done.wait(0.2):
+            pass
+    except KeyboardInterrupt:
         pass
 
 
@@ -113,3 +139,14 @@ class TcpServer:
             while b"\n" in buf:
                 line, buf = buf.split(b"\n", 1)
                 yield line
+
+    def _deliver(self, conn: socket.socket, data: bytes, delay_s: float = 0.0, disconnect: bool = False) -> bool:
+        """Send one reply after ``delay_s`` s (cut short by ``stop()``); ``False`` when the connection must end."""
+        if disconnect or (delay_s and self._stop.wait(delay_s)):
+            return False
+        try:
+            if data:
+                conn.sendall(data)
+        except OSError:
+            return False
+        return True

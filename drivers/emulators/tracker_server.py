@@ -27,9 +27,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import random
-import signal
 import socket
 import sys
 import threading
@@ -37,7 +35,8 @@ from collections import deque
 from dataclasses import dataclass, fields, replace
 from typing import Callable, Mapping, Sequence
 
-from .line_server import TcpServer
+from .faults import FaultDeck
+from .line_server import TcpServer, wait_for_shutdown
 
 HOST = "127.0.0.1"
 POLL_S = 0.05
@@ -97,11 +96,11 @@ class SampleDevice:
         if mode not in ("cartesian", "spherical"):
             raise ValueError(f"mode: expected cartesian or spherical, got {mode!r}")
         self.mode, self.noise_mm, self.std_mm, self.environment = mode, noise_mm, std_mm, environment
-        self._noise_rng, self._fault_rng = random.Random(seed), random.Random(seed + 7919)
+        self._noise_rng = random.Random(seed)
+        self._deck = FaultDeck(FAULT_ORDER, random.Random(seed + 7919))
         self._position = position_source or self._default_position
         self._lock = threading.Lock()
         self._faults = _faults(faults)
-        self._queued: deque[str] = deque()
         self.requests: deque[str] = deque(maxlen=1000)
 
     @property
@@ -115,11 +114,7 @@ class SampleDevice:
 
     def inject(self, *names: str) -> None:
         """Queue one-shot faults, consumed by the next ``MEAS`` requests in order (before any random draw)."""
-        bad = [n for n in names if n not in FAULT_ORDER]
-        if bad:
-            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULT_ORDER)})")
-        with self._lock:
-            self._queued.extend(names)
+        self._deck.inject(*names)
 
     def respond(self, line: str) -> Response:
         """The response to one request line (terminator already stripped)."""
@@ -147,12 +142,8 @@ class SampleDevice:
         return Response(data, delay_s=self._faults.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
-        with self._lock:
-            if self._queued:
-                return self._queued.popleft()
-            draws = [(name, self._fault_rng.random()) for name in FAULT_ORDER]
-            faults = self._faults
-        return next((name for name, u in draws if u < getattr(faults, name)), None)
+        faults = self._faults
+        return self._deck.draw(lambda name: getattr(faults, name))
 
     def _fields(self) -> list[str]:
         x, y, z = (float(v) for v in self._position())
@@ -214,16 +205,9 @@ class TrackerEmulator(TcpServer):
     def _answer(self, conn: socket.socket, raw: bytes) -> bool:
         """Handle one request; ``False`` when the connection must end."""
         response = self.device.respond(raw.decode("ascii", errors="replace").strip())
-        if response.disconnect:
+        if not self._deliver(conn, response.data, response.delay_s, response.disconnect):
             return False
-        if response.delay_s and self._stop.wait(response.delay_s):
-            return False
-        try:
-            if response.data:
-                conn.sendall(response.data)
-                self.replies_sent += 1
-        except OSError:
-            return False
+        self.replies_sent += bool(response.data)
         return True
 
 
@@ -242,32 +226,14 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _watch_stdin(done: threading.Event) -> None:
-    """Set ``done`` at end of file on stdin (raw reads: no buffered-reader lock held at interpreter exit)."""
-    try:
-        while os.read(sys.stdin.fileno(), 4096):
-            pass
-    except (OSError, ValueError):
-        pass
-    done.set()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     faults = {name: getattr(args, name) for name in FAULT_ORDER} | {"delay_s": args.delay_s}
-    done = threading.Event()
     with TrackerEmulator(faults=faults, port=args.port, mode=args.mode, seed=args.seed) as emulator:
         if args.print_port:
             print(emulator.port, flush=True)
         print(f"tracker emulator ({args.mode}) on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
-        if not args.ignore_stdin:
-            threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        try:
-            while not done.wait(0.2):
-                pass
-        except KeyboardInterrupt:
-            pass
+        wait_for_shutdown(watch_stdin=not args.ignore_stdin)
     return 0
 
 

@@ -11,8 +11,6 @@ import math
 import os
 import re
 import select
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -26,6 +24,7 @@ from drivers.emulators.tracker_server import DEFAULT_POINT_MM, Faults, SampleDev
 from drivers.registry import open_tracker as registry_open_tracker
 from drivers.tracker import (LineProfile, LineSensor, LineTracker, NoReply, Reply, SensorProfile, TrackerCodec,
                              average_readings, open_tracker, port_spec, spherical_to_xyz)
+from tests.drivers.helpers import served_port
 
 REPO = Path(__file__).resolve().parents[2]
 T = 0.2  # request timeout used throughout (s)
@@ -611,22 +610,11 @@ def test_sample_protocol_without_seq():
 
 
 def test_emulator_command_line_prints_port_and_stops_on_stdin_eof():
-    proc = subprocess.Popen([sys.executable, "-m", "drivers.emulators.tracker_server", "--port", "0", "--print-port",
-                             "--seed", "1"], cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    try:
-        assert select.select([proc.stdout], [], [], 10)[0], "emulator did not print its port"
-        port = int(proc.stdout.readline())
+    with served_port("drivers.emulators.tracker_server", "--seed", "1") as (proc, port):
         with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0}) as tracker:
             assert tracker.measure().xyz_mm == pytest.approx(DEFAULT_POINT_MM, abs=0.02)
         proc.stdin.close()
         assert proc.wait(5) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        proc.stdout.close()
-        proc.stderr.close()
 
 
 def test_documented_example_options_are_valid():
