@@ -6,8 +6,9 @@ declarative line protocol configured by the cell YAML's ``tracker.options`` (see
 ``drivers.emulators.tracker_server``, so ``options: {}`` works against the emulator.
 
 Layers: ``LineProfile`` (validated options, ``drivers.tracker_profile``), ``TrackerCodec`` (pure: command bytes,
-line -> ``Reply``; unit-tested on strings, ``drivers.tracker_codec``), ``LinePort`` (framing and timeouts over a pyserial port; maps transport failures to ``ConnectionLost``),
-``LineTracker`` (the ``Tracker`` protocol) and ``LineSensor`` (an optional ASCII weather station).
+line -> ``Reply``; unit-tested on strings, ``drivers.tracker_codec``), and here ``LinePort`` (framing and timeouts
+over a pyserial port; maps transport failures to ``ConnectionLost``), ``LineTracker`` (the ``Tracker`` protocol) and
+``LineSensor`` (an optional ASCII weather station).
 
 Units: positions leave this module in mm in the tracker frame; angles are converted to radians internally;
 environment values are ``temp_c`` (deg C), ``pressure_hpa`` (hPa), ``humidity_pct`` (% RH); times in s.
