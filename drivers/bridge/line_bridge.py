@@ -30,12 +30,11 @@ from typing import Mapping, Protocol, Sequence
 
 from drivers.emulators.faults import FaultDeck
 from drivers.emulators.line_server import TcpServer, wait_for_shutdown
+from drivers.emulators.tracker_server import FAULT_ORDER, encode_line, fault_response, join_with_seq
+from drivers.emulators.tracker_server import Response as Reply  # the sample protocol's reply (one owner)
 
 ERROR_WORDS = {"beam_broken": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE", "timeout": "TIMEOUT",
                "error": "DEVICE_ERROR"}
-FAULT_WORDS = {"beam_break": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE"}
-FAULT_ORDER = ("disconnect", "drop", "delay", "garbage", "beam_break", "no_target", "unstable")
-GARBAGE = b"\xa7#%!?@@ \x01garbage\r\n"
 POLL_S = 0.05
 
 
@@ -190,21 +189,6 @@ class SpatialAnalyzerBackend:
 
 # ------------------------------------------------------------------------------------------------------ protocol
 
-def _line(text: str) -> bytes:
-    return text.encode("ascii") + b"\r\n"
-
-
-def _join(word: str, seq: str | None, *rest: str) -> str:
-    return " ".join([word] + ([seq] if seq is not None else []) + list(rest))
-
-
-@dataclass(frozen=True)
-class Reply:
-    data: bytes = b""
-    delay_s: float = 0.0
-    disconnect: bool = False
-
-
 class LineBridge(TcpServer):
     """Serves the line protocol from ``backend`` over TCP (one client at a time, one background thread).
 
@@ -246,42 +230,37 @@ class LineBridge(TcpServer):
                 return self._measure(seq)
             if command == "INIT" and not args:
                 self.backend.open()
-                return Reply(_line("READY"))
+                return Reply(encode_line("READY"))
             if command == "ENV" and not args:
                 env = self.backend.environment()
                 if env is None:
-                    return Reply(_line("ERR - NO_ENVIRONMENT"))
-                return Reply(_line(f"ENV {env[0]:.2f} {env[1]:.2f} {env[2]:.1f}"))
+                    return Reply(encode_line("ERR - NO_ENVIRONMENT"))
+                return Reply(encode_line(f"ENV {env[0]:.2f} {env[1]:.2f} {env[2]:.1f}"))
             if command == "GOTO" and len(args) in (3, 4) and hasattr(self.backend, "goto"):
                 self.backend.goto(*(float(v) for v in args[-3:]))
-                return Reply(_line(_join("OK", seq)))
+                return Reply(encode_line(join_with_seq("OK", seq)))
             if command == "FIND" and len(args) <= 1 and hasattr(self.backend, "find"):
                 self.backend.find()
-                return Reply(_line(_join("OK", seq)))
+                return Reply(encode_line(join_with_seq("OK", seq)))
             if command == "STOP" and not args:
-                return Reply(_line("STOPPED"))
+                return Reply(encode_line("STOPPED"))
         except BackendError as exc:
-            return Reply(_line(_join("ERR", seq, ERROR_WORDS[exc.kind])))
+            return Reply(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[exc.kind])))
         except ValueError:
-            return Reply(_line("ERR - BAD_ARGUMENT"))
-        return Reply(_line("ERR - UNKNOWN_COMMAND"))
+            return Reply(encode_line("ERR - BAD_ARGUMENT"))
+        return Reply(encode_line("ERR - UNKNOWN_COMMAND"))
 
     def _measure(self, seq: str | None) -> Reply:
         fault = self._draw_fault()
-        if fault == "disconnect":
-            return Reply(disconnect=True)
-        if fault == "drop":
-            return Reply()
-        if fault == "garbage":
-            return Reply(GARBAGE)
-        if fault in FAULT_WORDS:
-            return Reply(_line(_join("ERR", seq, FAULT_WORDS[fault])))
+        forced = fault_response(fault, seq)
+        if forced is not None:
+            return forced
         try:
             m = self.backend.measure()
         except BackendError as exc:
-            return Reply(_line(_join("ERR", seq, ERROR_WORDS[exc.kind])))
+            return Reply(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[exc.kind])))
         fields = [f"{v:.5f}" for v in m.xyz_mm] + ([f"{v:.5f}" for v in m.std_mm] if m.std_mm else [])
-        return Reply(_line(_join("OK", seq, *fields)), delay_s=self.delay_s if fault == "delay" else 0.0)
+        return Reply(encode_line(join_with_seq("OK", seq, *fields)), delay_s=self.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
         return self._deck.draw(lambda name: self.probabilities.get(name, 0.0))

@@ -125,20 +125,15 @@ class SampleDevice:
             return self._measure(args[0] if args else None)
         simple = {"INIT": "READY", "STOP": "STOPPED", "ENV": self._environment_line()}
         if command in simple and not args:
-            return Response(_line(simple[command]))
-        return Response(_line("ERR - UNKNOWN_COMMAND"))
+            return Response(encode_line(simple[command]))
+        return Response(encode_line("ERR - UNKNOWN_COMMAND"))
 
     def _measure(self, seq: str | None) -> Response:
         fault = self._draw_fault()
-        if fault == "disconnect":
-            return Response(disconnect=True)
-        if fault == "drop":
-            return Response()
-        if fault == "garbage":
-            return Response(GARBAGE)
-        if fault in ERROR_WORDS:
-            return Response(_line(_join("ERR", seq, ERROR_WORDS[fault])))
-        data = _line(_join("OK", seq, *self._fields()))
+        forced = fault_response(fault, seq)
+        if forced is not None:
+            return forced
+        data = encode_line(join_with_seq("OK", seq, *self._fields()))
         return Response(data, delay_s=self._faults.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
@@ -162,11 +157,26 @@ class SampleDevice:
         return f"ENV {t:.2f} {p:.2f} {h:.1f}"
 
 
-def _join(word: str, seq: str | None, *rest: str) -> str:
+def fault_response(fault: str | None, seq: str | None) -> Response | None:
+    """The reply a ``MEAS`` fault forces instead of a reading; ``None`` for no fault or ``delay`` (reply, later)."""
+    if fault == "disconnect":
+        return Response(disconnect=True)
+    if fault == "drop":
+        return Response()
+    if fault == "garbage":
+        return Response(GARBAGE)
+    if fault in ERROR_WORDS:
+        return Response(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[fault])))
+    return None
+
+
+def join_with_seq(word: str, seq: str | None, *rest: str) -> str:
+    """``word [seq] rest...`` separated by spaces (the seq only when the request carried one)."""
     return " ".join([word] + ([seq] if seq is not None else []) + list(rest))
 
 
-def _line(text: str) -> bytes:
+def encode_line(text: str) -> bytes:
+    """One ASCII reply line with its ``\\r\\n`` terminator."""
     return text.encode("ascii") + b"\r\n"
 
 
