@@ -256,7 +256,7 @@ def _gear(kin, q, joint, rows, opt) -> Candidate:
     N, n = q.shape
     qj = q[rows, joint - 1]
     span = np.degrees(qj.max() - qj.min())
-    if span < 20.0:
+    if span < opt.gear_min_span_deg:
         return Candidate("gear_cyclic", (joint,), reason=f"J{joint} covers only {span:.0f} deg: a cyclic error "
                                                          "cannot be told from its zero offset")
     groups = []
@@ -266,7 +266,7 @@ def _gear(kin, q, joint, rows, opt) -> Candidate:
     return Candidate("gear_cyclic", (joint,), (Profile("harmonics", tuple(groups)),))
 
 
-def _backlash(kin, q, meta, rows) -> Candidate:
+def _backlash(kin, q, meta, rows, opt) -> Candidate:
     N, n = q.shape
     s = meta.get("approach")
     joints = tuple(range(1, n + 1))
@@ -276,7 +276,7 @@ def _backlash(kin, q, meta, rows) -> Candidate:
     groups, constant = [], []
     for j in joints:
         sj = s[rows, j - 1]
-        if min(np.sum(sj > 0), np.sum(sj < 0)) < max(5, 0.05 * len(rows)):
+        if min(np.sum(sj > 0), np.sum(sj < 0)) < max(opt.backlash_min_side, opt.backlash_min_side_fraction * len(rows)):
             constant.append(j)
             continue
         groups.append(_dq_group(f"J{j}", {j: 0.5 * s[:, j - 1:j]}, (f"b{j}",), n, N, (j,), limit=3e-3))
@@ -294,18 +294,18 @@ def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
     measured directly and decides which joints can carry it."""
     N, n = q.shape
     move, prev, qc = meta.get("move"), meta.get("prev_move"), meta.get("qc")
-    joints = tuple(j for j in range(1, n + 1) if np.std(move[rows, j - 1]) > np.radians(1.0))
+    joints = tuple(j for j in range(1, n + 1) if np.std(move[rows, j - 1]) > np.radians(opt.lag_min_move_std_deg))
     if not joints:
         return Candidate("readback_lag", tuple(range(1, n + 1)), reason="the joints hardly move between points")
     veto, direct = "", {}
     if qc is not None:
         qcm, qcp = moves_from_order(qc) if meta.get("move_cmd") is None else (meta["move_cmd"], meta["prev_cmd"])
         direct = direct_lag(q if meta.get("q_read") is None else meta["q_read"], qc, qcm, qcp)
-        sig = tuple(j for j in joints if j in direct and abs(direct[j]["t"]) >= 5.0
-                    and abs(direct[j]["lag_deg_per_deg"]) >= 2e-5)
+        sig = tuple(j for j in joints if j in direct and abs(direct[j]["t"]) >= opt.lag_direct_min_t
+                    and abs(direct[j]["lag_deg_per_deg"]) >= opt.lag_direct_min_deg_per_deg)
         if not sig:
             veto = ("commanded and read-back joints agree: no lag proportional to the move (direct comparison, "
-                    "|t| < 5 on every joint)")
+                    f"|t| < {opt.lag_direct_min_t:g} on every joint)")
         else:
             joints = sig
     kw = {"limit": 5e-3, "dq_limit": np.inf}          # judged on the lag itself (deg/deg), not on move x lag
@@ -323,12 +323,12 @@ def _time_profiles(meta, rows, opt) -> tuple[list[tuple[str, np.ndarray]], str]:
     if temp is not None:
         temp = np.asarray(temp, float)
         rise = temp - temp[rows].min()
-        if np.ptp(temp[rows]) >= 0.2:
+        if np.ptp(temp[rows]) >= opt.temp_min_span_c:
             out.append(("temperature", rise / np.max(np.abs(rise[rows]))))
     if t is not None:
         t = np.asarray(t, float)
         span = np.ptp(t[rows])
-        if span >= 900.0:
+        if span >= opt.time_min_span_s:
             t0 = t - t[rows].min()
             out.append(("linear in time", t0 / np.max(t0[rows])))
             for beta in opt.shape_grid:
@@ -353,7 +353,8 @@ def _thermal(kin, q, meta, J, layout, rows, opt) -> Candidate:
     if why:
         return Candidate("thermal_drift", joints, reason=why)
     lengths = [(c, f"{'da'[k - 1]}{i + 1}", (kin.d_mm if k == 1 else kin.a_mm)[i])
-               for c, i, k in layout.joint_cols if k in (1, 2) and abs((kin.d_mm if k == 1 else kin.a_mm)[i]) > 50.0]
+               for c, i, k in layout.joint_cols
+               if k in (1, 2) and abs((kin.d_mm if k == 1 else kin.a_mm)[i]) > opt.thermal_min_link_mm]
     uniform = sum(J[:, :, c] * L for c, _, L in lengths)
     single = [(c, name, L) for c, name, L in lengths if name != "d1"]
     bases = [Group("uniform growth", (), ("growth_all",), dp=uniform[:, :, None], limit=1e-3)]
@@ -394,7 +395,7 @@ def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
     return Candidate("registration_drift", (), tuple(out), info=info)
 
 
-def _coupling(kin, q) -> Candidate:
+def _coupling(kin, q, opt) -> Candidate:
     N, n = q.shape
     if n < 6:
         return Candidate("axis_coupling", (), reason="needs a 6-axis wrist")
@@ -404,7 +405,7 @@ def _coupling(kin, q) -> Candidate:
               _dq_group("e45", {5: q[:, 3:4]}, ("e45",), n, N, (4, 5), **kw))
     notes = ()
     off_axis = float(np.hypot(*kin.p_flange_smr_mm[:2]))
-    if off_axis < 20.0:
+    if off_axis < opt.coupling_min_off_axis_mm:
         notes = (f"SMR only {off_axis:.0f} mm off the J6 axis: J6 coupling is nearly invisible",)
     return Candidate("axis_coupling", (4, 5, 6), (Profile("wrist", groups),), notes=notes)
 
@@ -417,12 +418,13 @@ def build_candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, rows: np
     n = kin.n
     cands = [_compliance(kin, q_rad, meta, rows, options, False), _compliance(kin, q_rad, meta, rows, options, True)]
     cands += [_gear(kin, q_rad, j, rows, options) for j in range(1, n + 1)]
-    cands += [_backlash(kin, q_rad, meta, rows), _readback_lag(kin, q_rad, meta, rows, options), _thermal(kin, q_rad, meta, J, layout, rows, options),
-              _coupling(kin, q_rad), _registration(kin, q_rad, meta, p_model, rows, options)]
+    cands += [_backlash(kin, q_rad, meta, rows, options), _readback_lag(kin, q_rad, meta, rows, options), _thermal(kin, q_rad, meta, J, layout, rows, options),
+              _coupling(kin, q_rad, options), _registration(kin, q_rad, meta, p_model, rows, options)]
     return cands
 
 
-def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dict | None:
+def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3, ruled_out_ratio: float = 1.5
+               ) -> dict | None:
     """Tracker drift seen by reference nests: each nest's readings (minus their mean) fitted with a quadratic in
     time (or in measurement order without timestamps); pooled F test against a constant; the drift is the largest
     3-D excursion of the fitted trends. ``ruled_out`` when not detected and its upper bound (trend + 3 standard
@@ -464,7 +466,7 @@ def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dic
     if not detected:
         excursion = linear
     bound = linear + 2.0 * math.sqrt(3.0) * se
-    ruled_out = (not detected) and bound < 1.5 * floor_mm         # a range of 1.5 x floor is < 0.45 x floor RMS
+    ruled_out = (not detected) and bound < ruled_out_ratio * floor_mm   # a range of 1.5 x floor is < 0.45 x floor RMS
     basis = "time" if nests.t_s is not None else "measurement order"
     summary = (f"nests moved {excursion:.3f} mm over the run (p = {p_value:.2g}, by {basis})" if detected else
                f"nests stable within {bound:.3f} mm (drift {excursion:.3f} mm, p = {p_value:.2g}, by {basis})")

@@ -43,7 +43,8 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
         st = eng.fit(st.kin, [])
     if inp.baseline is None:
         geo_state = st
-    drift = nest_drift(inp.nests, inp.noise_floor_mm) if inp.nests is not None else None
+    drift = (nest_drift(inp.nests, inp.noise_floor_mm, opt.nest_alpha, opt.nest_ruled_out_ratio)
+             if inp.nests is not None else None)
     meta = dict(inp.meta(), nest_drift=drift, order=np.arange(len(inp.q_rad)) if inp.order is None else inp.order)
     cands = build_candidates(st.kin, inp.q_rad, meta, eng.fit_rows, st.J, st.pred, opt)
     sel = _Selector(eng, inp, opt)
@@ -53,7 +54,7 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
         stages[0]["refit_test_rms_mm"] = eng.test_rms(st)
     st, accepted, last_scores = _forward(eng, sel, st, cands, stages, Qgeo, opt)
     st, accepted, stages, dropped = _backward(eng, sel, st, accepted, stages, opt)
-    for _ in range(2):                  # what is left must pass again once the dropped effects are gone
+    for _ in range(opt.backward_repeats):     # what is left must pass again once the dropped effects are gone
         if not dropped or not accepted:
             break
         st, accepted, stages, more = _backward(eng, sel, st, accepted, stages, opt)

@@ -11,7 +11,8 @@ from ..kinematics import Kinematics
 
 @dataclass(frozen=True)
 class DiagnosisOptions:
-    """Thresholds. ``bic_threshold``: accept only ΔBIC < -threshold (10 = "very strong", Kass & Raftery)."""
+    """Every threshold of the diagnosis. ``bic_threshold``: accept only ΔBIC < -threshold (10 = "very strong",
+    Kass & Raftery)."""
     bic_threshold: float = 10.0
     cv_folds: int = 5
     cv_min_t: float = 2.0             # paired t of the per-point CV error decrease
@@ -35,6 +36,32 @@ class DiagnosisOptions:
     split_alpha: float = 1e-4         # reach-split consistency: parameters of near and far halves must agree ...
     split_min_ratio: float = 0.25     # ... to within this share of the effect's visible displacement
     seed: int = 0
+    # gates of the selection
+    overlap_min: float = 0.5          # visible subspaces whose smallest principal angle has a larger cosine overlap
+    cv_excess_min_share: float = 0.25  # CV excess over the floor counted as at least this share of the CV MSE
+    cv_param_inflation: float = 1.25  # floor inflation per parameter share (parameter error, K-1 of K folds)
+    outlier_max_fraction: float = 0.1  # more gross outliers than this share: none set aside (structure, not outliers)
+    backward_repeats: int = 2         # further backward passes once effects were dropped
+    # can the data reveal an effect (metadata checks of the candidates)
+    gear_min_span_deg: float = 20.0   # a joint covering less cannot show a cyclic error
+    backlash_min_side: int = 5        # approaches from each side needed on a joint, at least ...
+    backlash_min_side_fraction: float = 0.05   # ... and this share of the calibration rows
+    lag_min_move_std_deg: float = 1.0  # a joint whose moves vary less cannot show a read-back lag
+    lag_direct_min_t: float = 5.0     # commanded vs read-back joints: lag significant at this |t| ...
+    lag_direct_min_deg_per_deg: float = 2e-5   # ... and at least this large
+    temp_min_span_c: float = 0.2      # logged temperatures must span this much to profile a warm-up
+    time_min_span_s: float = 900.0    # timestamps must span this much to profile a drift
+    thermal_min_link_mm: float = 50.0  # links shorter than this get no thermal growth column
+    coupling_min_off_axis_mm: float = 20.0   # SMR closer to the J6 axis: note that J6 coupling is nearly invisible
+    nest_alpha: float = 1e-3          # reference nests: drift detected below this p value ...
+    nest_ruled_out_ratio: float = 1.5  # ... ruled out when its upper bound is below this x the noise floor
+    # where it lies and what is left over
+    region_min_points: int = 5        # regions (and each approach side) with fewer points are not tested
+    floor_f_alpha: float = 1e-3       # repeat floor: F test of the final scatter against the floor at this level
+    chi2_sigmas: float = 3.0          # specs floor: chi2/dof limit 1 + this x sqrt(2/dof)
+    scatter_excess_ratio: float = 1.12   # final CV RMS above this x the (inflated) floor counts as excess scatter
+    partial_share: float = 0.5        # accepted effects removing less of the excess: attribution is partial
+    floor_overestimate_ratio: float = 0.8   # final CV RMS below this x a repeat floor: the floor is overestimated
 
 
 @dataclass(frozen=True, eq=False)

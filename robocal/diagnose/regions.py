@@ -98,11 +98,11 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     alpha = options.region_alpha / max(m_tests, 1)
     chi_all = float(np.sum(w**2))
     for desc, kind, idx, extra in cands:
-        if len(idx) < 5:
+        if len(idx) < options.region_min_points:
             continue
         rms, floor, p = _region_stats(r_b, w, floor_pt, idx)
         rest = m - len(idx)
-        if rest >= 5:
+        if rest >= options.region_min_points:
             chi = float(np.sum(w[idx] ** 2))
             F = (chi / (3 * len(idx))) / max((chi_all - chi) / (3 * rest), 1e-300)
             out = np.setdiff1d(np.arange(m), idx)
@@ -126,7 +126,7 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     if approach is not None and Jq is not None:
         maps["approach"] = []
         for j in range(q_rad.shape[1]):
-            reg = _approach_region(j, approach[:, j], r_mm, cov_eff, Jq[:, :, j], stage)
+            reg = _approach_region(j, approach[:, j], r_mm, cov_eff, Jq[:, :, j], stage, options.region_min_points)
             if reg is not None:
                 regions.append(reg)
                 maps["approach"].append({"joint": j + 1, **reg.extra, "rms_mm": reg.rms_mm})
@@ -137,10 +137,10 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     return flagged[:options.max_regions], maps
 
 
-def _approach_region(j, s, r_mm, cov, jq, stage) -> Region | None:
+def _approach_region(j, s, r_mm, cov, jq, stage, min_points: int = 5) -> Region | None:
     """Difference of the residual along joint j's motion between + and - approaches (Welch t)."""
     plus, minus = s > 0, s < 0
-    if plus.sum() < 5 or minus.sum() < 5:
+    if plus.sum() < min_points or minus.sum() < min_points:
         return None
     u = jq / np.maximum(np.linalg.norm(jq, axis=1, keepdims=True), 1e-12)
     x = np.einsum("ni,ni->n", r_mm, u)
@@ -219,7 +219,7 @@ def _where_stages(inp, opt, eng, geo_state, st, stages):
     out_regions, maps = [], {}
     for name, state, stage in (("geometric", geo_state, stages[0]), ("final", st, stages[-1])):
         r, rows = _eval_set(eng, state, stage["_cv_w"])
-        inflate = 1.0 + 1.25 * stage["n_params"] / (3.0 * len(eng.fit_rows))    # parameter error, 4/5 folds
+        inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(eng.fit_rows))   # parameter error
         cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
         T = state.kin.T_tracker_base
         p_base = (state.pred[rows] - T[:3, 3]) @ T[:3, :3]
@@ -269,10 +269,11 @@ def _leftover(inp, opt, eng, st, stages, floor):
     along = sorted((n for n in tests if tests[n]["z"] >= z_thr), key=lambda n: -tests[n]["z"])
     notes = []
     if inp.noise_floor_dof:          # the floor is an estimate itself: F test of the two variances
-        chi_limit = float(stats.f.isf(0.001, max(dof, 1), 3 * inp.noise_floor_dof))
+        chi_limit = float(stats.f.isf(opt.floor_f_alpha, max(dof, 1), 3 * inp.noise_floor_dof))
     else:
-        chi_limit = 1.0 + 3.0 * math.sqrt(2.0 / max(dof, 1))
-    excess = stages[-1]["cv_rms_mm"] > 1.12 * floor * math.sqrt(1.0 + 1.25 * p_eff / (3.0 * len(rows)))
+        chi_limit = 1.0 + opt.chi2_sigmas * math.sqrt(2.0 / max(dof, 1))
+    inflation = math.sqrt(1.0 + opt.cv_param_inflation * p_eff / (3.0 * len(rows)))
+    excess = stages[-1]["cv_rms_mm"] > opt.scatter_excess_ratio * floor * inflation
     scatter = bool(chi2 > chi_limit and excess and not structured)
     unexplained = structured or scatter
     if scatter:
@@ -288,10 +289,10 @@ def _leftover(inp, opt, eng, st, stages, floor):
     final_cv = stages[-1]["cv_rms_mm"]
     if scatter and len(stages) > 1:
         share = (stages[0]["cv_rms_mm"] ** 2 - final_cv**2) / max(stages[0]["cv_rms_mm"] ** 2 - floor**2, 1e-300)
-        if share < 0.5:
+        if share < opt.partial_share:
             notes.append(f"the accepted effects remove only {100 * share:.0f} % of the excess over the floor and the rest "
                          "is unstructured scatter: treat the attribution as partial")
-    if inp.noise_floor_source == "repeats" and final_cv < 0.8 * floor:
+    if inp.noise_floor_source == "repeats" and final_cv < opt.floor_overestimate_ratio * floor:
         notes.append(f"the repeat scatter ({floor:.3f} mm) exceeds the final cross-validated residual "
                      f"({final_cv:.3f} mm): the repeated poses probably include approach-direction or drift effects, "
                      "so the floor is overestimated")

@@ -159,8 +159,8 @@ class _Selector:
         d = np.sum(e0**2, axis=1) - np.sum(e1**2, axis=1)
         t = float(np.mean(d) / max(np.std(d, ddof=1) / math.sqrt(len(d)), 1e-300))
         b, a = _rms(self.eng.to_mm(e0, self.rows)), _rms(self.eng.to_mm(e1, self.rows))
-        floor = self.inp.noise_floor_mm * math.sqrt(1.0 + 1.25 * A1.shape[1] / len(y))
-        excess = max(b**2 - floor**2, 0.25 * b**2)
+        floor = self.inp.noise_floor_mm * math.sqrt(1.0 + self.opt.cv_param_inflation * A1.shape[1] / len(y))
+        excess = max(b**2 - floor**2, self.opt.cv_excess_min_share * b**2)
         frac = (b**2 - a**2) / excess
         return {"cv_rms_before_mm": b, "cv_rms_after_mm": a, "cv_gain_t": t, "excess_explained": frac,
                 "cv_blocking": "time" if by_time else "pose", "cv_folds": len(folds),

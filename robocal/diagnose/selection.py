@@ -96,7 +96,8 @@ def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
                                 "adds ") + f"ΔBIC {dbic:+.1f} once {partner} is modelled")
                         rejected.append(sc)
                         continue
-            sc.shadowed = [r for r in rejected if r.cand.name != sc.cand.name and _overlap(r.U, sc.U) > 0.5]
+            sc.shadowed = [r for r in rejected
+                           if r.cand.name != sc.cand.name and _overlap(r.U, sc.U) > opt.overlap_min]
             return sc
         rejected.append(sc)
     return None
@@ -114,7 +115,7 @@ def _record(chosen: _Score, accepted: list, scores, step: int, opt) -> None:
     chosen.confusable = [_confusion_entry(chosen, o) for o in scores if o is not chosen
                          and o.delta_bic < -opt.bic_threshold and o.cand.name != chosen.cand.name
                          and o.delta_bic - chosen.delta_bic < opt.bic_threshold
-                         and _overlap(chosen.U, o.U) > 0.5 and not any(o is r for r in chosen.shadowed)]
+                         and _overlap(chosen.U, o.U) > opt.overlap_min and not any(o is r for r in chosen.shadowed)]
     chosen.confusable += [dict(_confusion_entry(chosen, o), rejected_by=o.rejected) for o in chosen.shadowed]
     chosen.steps.append(step)
     accepted.append(chosen)
@@ -126,7 +127,7 @@ def _outliers(eng: _Engine, st: _State, opt: DiagnosisOptions) -> np.ndarray:
     d = np.sqrt(np.sum(w**2, axis=1) / 3.0)
     s = 1.4826 * np.median(np.abs(w))
     bad = rows[d > opt.outlier_sigma * max(s, 1e-12)]
-    return bad if len(bad) < 0.1 * len(rows) else np.array([], int)
+    return bad if len(bad) < opt.outlier_max_fraction * len(rows) else np.array([], int)
 
 
 def _added_label(sc: _Score) -> str:
@@ -166,8 +167,8 @@ def _backward(eng, sel, st, accepted, stages, opt):
                                  "structure along the reach")
             proxies.append(sc)
     for sc in accepted:
-        if sc not in proxies and any(_overlap(p.U, sc.U) > 0.5 for p in proxies):
-            p = next(p for p in proxies if _overlap(p.U, sc.U) > 0.5)
+        if sc not in proxies and any(_overlap(p.U, sc.U) > opt.overlap_min for p in proxies):
+            p = next(p for p in proxies if _overlap(p.U, sc.U) > opt.overlap_min)
             sc.split_rejected = (f"it overlaps {p.cand.name}, which stands in for structure along the reach: the "
                                  "same structure, not an effect of the library")
             proxies.append(sc)
