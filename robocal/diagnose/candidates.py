@@ -262,7 +262,8 @@ def _gear(kin, q, joint, rows, opt) -> Candidate:
     groups = []
     for h in opt.harmonics:
         cols = np.stack([np.sin(h * q[:, joint - 1]), np.cos(h * q[:, joint - 1])], axis=1)
-        groups.append(_dq_group(f"h{h}", {joint: cols}, (f"sin{h}", f"cos{h}"), n, N, (joint,), limit=1.5e-3))
+        groups.append(_dq_group(f"h{h}", {joint: cols}, (f"sin{h}", f"cos{h}"), n, N, (joint,),
+                                limit=opt.gear_max_rad, dq_limit=opt.max_joint_deflection_rad))
     return Candidate("gear_cyclic", (joint,), (Profile("harmonics", tuple(groups)),))
 
 
@@ -279,7 +280,8 @@ def _backlash(kin, q, meta, rows, opt) -> Candidate:
         if min(np.sum(sj > 0), np.sum(sj < 0)) < max(opt.backlash_min_side, opt.backlash_min_side_fraction * len(rows)):
             constant.append(j)
             continue
-        groups.append(_dq_group(f"J{j}", {j: 0.5 * s[:, j - 1:j]}, (f"b{j}",), n, N, (j,), limit=3e-3))
+        groups.append(_dq_group(f"J{j}", {j: 0.5 * s[:, j - 1:j]}, (f"b{j}",), n, N, (j,), limit=opt.backlash_max_rad,
+                                dq_limit=opt.max_joint_deflection_rad))
     if not groups:
         return Candidate("backlash", joints, reason="approach directions never change (every joint is reached "
                                                     "from the same side)")
@@ -308,7 +310,7 @@ def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
                     f"|t| < {opt.lag_direct_min_t:g} on every joint)")
         else:
             joints = sig
-    kw = {"limit": 5e-3, "dq_limit": np.inf}          # judged on the lag itself (deg/deg), not on move x lag
+    kw = {"limit": opt.lag_max, "dq_limit": np.inf}          # judged on the lag itself (deg/deg), not on move x lag
     groups = [_dq_group(f"J{j}", {j: move[:, j - 1:j]}, (f"lag{j}",), n, N, (j,), **kw) for j in joints]
     groups += [_dq_group(f"J{j} memory", {j: prev[:, j - 1:j]}, (f"lag{j}_memory",), n, N, (j,), **kw)
                for j in joints]
@@ -357,10 +359,12 @@ def _thermal(kin, q, meta, J, layout, rows, opt) -> Candidate:
                if k in (1, 2) and abs((kin.d_mm if k == 1 else kin.a_mm)[i]) > opt.thermal_min_link_mm]
     uniform = sum(J[:, :, c] * L for c, _, L in lengths)
     single = [(c, name, L) for c, name, L in lengths if name != "d1"]
-    bases = [Group("uniform growth", (), ("growth_all",), dp=uniform[:, :, None], limit=1e-3)]
-    bases += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(J[:, :, c] * L)[:, :, None], limit=1e-3)
+    bases = [Group("uniform growth", (), ("growth_all",), dp=uniform[:, :, None], limit=opt.growth_max)]
+    bases += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(J[:, :, c] * L)[:, :, None],
+                    limit=opt.growth_max)
               for c, name, L in single]
-    bases += [_dq_group(f"zero J{j}", {j: np.ones((N, 1))}, (f"zero_drift{j}",), n, N, (j,), limit=2e-3)
+    bases += [_dq_group(f"zero J{j}", {j: np.ones((N, 1))}, (f"zero_drift{j}",), n, N, (j,),
+                         limit=opt.zero_drift_max_rad, dq_limit=opt.max_joint_deflection_rad)
               for j in joints]
     out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
     return Candidate("thermal_drift", joints, tuple(out))
@@ -388,7 +392,7 @@ def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
     centre = p_model[rows].mean(axis=0)
     screw = np.concatenate([np.broadcast_to(np.eye(3), (len(q), 3, 3)), -skew(p_model - centre)], axis=2)
     names = ("vx", "vy", "vz", "wx", "wy", "wz")
-    limit = np.array([1.0, 1.0, 1.0, 5e-4, 5e-4, 5e-4])
+    limit = np.array([opt.registration_max_mm] * 3 + [opt.registration_max_rad] * 3)
     bases = (Group("translation", (), names[:3], dp=screw[:, :, :3], limit=limit[:3]),
              Group("rotation", (), names[3:], dp=screw[:, :, 3:], limit=limit[3:]))
     out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
@@ -399,7 +403,7 @@ def _coupling(kin, q, opt) -> Candidate:
     N, n = q.shape
     if n < 6:
         return Candidate("axis_coupling", (), reason="needs a 6-axis wrist")
-    kw = {"limit": 0.02, "dq_limit": 0.02 * np.max(np.abs(q[:, 3:5]))}
+    kw = {"limit": opt.coupling_max, "dq_limit": opt.coupling_max * np.max(np.abs(q[:, 3:5]))}
     groups = (_dq_group("e56", {6: q[:, 4:5]}, ("e56",), n, N, (5, 6), **kw),
               _dq_group("e46", {6: q[:, 3:4]}, ("e46",), n, N, (4, 6), **kw),
               _dq_group("e45", {5: q[:, 3:4]}, ("e45",), n, N, (4, 5), **kw))

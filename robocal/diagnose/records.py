@@ -55,6 +55,16 @@ class DiagnosisOptions:
     coupling_min_off_axis_mm: float = 20.0   # SMR closer to the J6 axis: note that J6 coupling is nearly invisible
     nest_alpha: float = 1e-3          # reference nests: drift detected below this p value ...
     nest_ruled_out_ratio: float = 1.5  # ... ruled out when its upper bound is below this x the noise floor
+    # physical plausibility: largest credible |parameter| of each candidate
+    max_joint_deflection_rad: float = 2e-3   # implied joint deflection of gear, backlash and zero-drift terms
+    gear_max_rad: float = 1.5e-3      # amplitude of each harmonic term
+    backlash_max_rad: float = 3e-3    # full backlash width
+    lag_max: float = 5e-3             # read-back lag (rad per rad of move)
+    growth_max: float = 1e-3          # thermal growth (relative length)
+    zero_drift_max_rad: float = 2e-3  # thermal zero drift of a joint
+    registration_max_mm: float = 1.0  # registration drift: translation ...
+    registration_max_rad: float = 5e-4   # ... and rotation over the run
+    coupling_max: float = 0.02        # axis coupling (rad per rad)
     # where it lies and what is left over
     region_min_points: int = 5        # regions (and each approach side) with fewer points are not tested
     floor_f_alpha: float = 1e-3       # repeat floor: F test of the final scatter against the floor at this level

@@ -190,15 +190,7 @@ def _backward(eng, sel, st, accepted, stages, opt):
     for sc in (accepted if len(accepted) >= 2 else ()):
         if sc in dropped:
             continue
-        cols, th = _columns_of(eng, st, sc.groups)
-        mask = np.ones(A.shape[1], bool)
-        mask[cols] = False
-        Qo = _orth(A[:, mask])
-        d = A[:, cols] @ th
-        d = d - Qo @ (Qo.T @ d)
-        Xp = A[:, cols] - Qo @ (Qo.T @ A[:, cols])
-        r_k = _orth(Xp, 1e-3).shape[1] if np.any(Xp) else 0
-        sc.backward_delta_bic = sel.n * math.log(rss / (rss + float(d @ d))) + r_k * sel.lnn
+        sc.backward_delta_bic = _removal_bic(sel, eng, st, A, rss, sc.groups)
         if sc.backward_delta_bic > -opt.bic_threshold:
             dropped.append(sc)
     pruned = False
