@@ -141,19 +141,19 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
             ev["reason"] = c.veto
         if c.notes:
             ev["notes"] = list(c.notes)
-        after = _what_if(eng, st, sc) if sc.rank else final
+        after = _what_if(eng, st, sc, opt) if sc.rank else final
         rest.append((sc.delta_bic, Finding(c.name, sc.joints, False, final, after, ev)))
     return [f for _, f in sorted(rest, key=lambda x: x[0])], undiagnosable
 
 
-def _what_if(eng: _Engine, st: _State, sc: _Score) -> float:
+def _what_if(eng: _Engine, st: _State, sc: _Score, opt: DiagnosisOptions) -> float:
     """Test (or CV) RMS if the candidate's selected groups were added, from the linearised joint fit."""
     rows = eng.fit_rows
     A1 = eng.design(st, rows, sc.groups)
     y = eng.wflat(eng.resid(st), rows)
     beta = _lstsq_scaled(A1, y)
     if len(eng.test_rows) == 0:
-        e = eng.cv_errors(A1, y, eng.folds(False, None, 5, 0))
+        e = eng.cv_errors(A1, y, eng.folds(False, None, opt.cv_folds, opt.seed))
         return _rms(eng.to_mm(e, rows))
     T = eng.test_rows
     parts = [st.J[T][:, :, eng.cols]] + [eng.regressor(st.J, st.kin, g)[T] for g in list(st.groups) + list(sc.groups)]
