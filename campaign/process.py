@@ -27,6 +27,7 @@ from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
 from .interchange import Dataset
+from .prepare import prepare
 
 REPORT_FORMAT = "campaign-report/1"
 
@@ -98,6 +99,7 @@ def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     _check_dataset(ds, cfg)
     kin0 = nominal_kinematics(cfg)
     q = np.radians(ds.q_deg)
@@ -139,6 +141,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
                    "residual": cfg.calibration.residual},
         "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
+        "preparation": prep.report,
     }
     model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
     return Processed(report, model, result)
