@@ -758,7 +758,7 @@ def dataset_from_log(contents: Any) -> Dataset:
                 continue
             got = _optional([get(r) for r in rob], name, lambda k: where(idx[k]), src)
             if got is not None:
-                width = 3 if name.startswith("p") else None
+                width = 3 if name.endswith("_tracker_mm") else None
                 extra[name] = _with_nan(_spread(got, idx, len(recs)), robot, width)
         if extra["t_s"] is not None:
             t = np.asarray(extra["t_s"], dtype=np.float64)

@@ -3,7 +3,10 @@
 Seed 000's grid (box centre/size/step in the robot base frame) + a seeded random test set in the same
 box, one fixed SMR orientation and ONE robot configuration for every point (the IK branch of
 ``q_ref``), unreachable points reported and skipped, a serpentine motion order with each test point
-measured next to its nearest grid point, and repeated check poses through the run.
+measured next to its nearest grid point (or ``plan.order: random``: a seeded shuffle, so that approach
+directions and move sizes vary), repeated check poses through the run, and rounds of reference-nest
+readings (``plan.nests``; set ``nest``, no joints: the tracker aims at the nest) at the start, every
+``every_n_points`` points and at the end.
 """
 from __future__ import annotations
 
@@ -25,7 +28,8 @@ WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J
 
 @dataclass(frozen=True)
 class PlanPoint:
-    """One measurement: id, set (calib | test | check), commanded joints (deg), target SMR position (mm, base)."""
+    """One measurement: id, set (calib | test | check | nest), commanded joints (deg; empty for a nest), target SMR
+    position (mm, base; for a nest its approximate position)."""
     point_id: str
     set: str
     q_deg: tuple[float, ...]
@@ -54,7 +58,9 @@ class Plan:
         """Rough campaign duration: moves at the joint speed + settle + sampling per point."""
         if not self.points:
             return 0.0
-        q = np.array([p.q_deg for p in self.points])
+        q = np.array([p.q_deg for p in self.points if p.set != "nest"])
+        if len(q) == 0:
+            return 0.0
         moves = np.max(np.abs(np.diff(q, axis=0)), axis=1).sum() / joint_speed_deg_s
         return float(moves + len(self.points) * (settle_s + samples * sample_s))
 
@@ -141,8 +147,11 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
     order = _interleave(p_all, grid_ok, test_ok)
+    if pl.order == "random":
+        order = [order[i] for i in np.random.default_rng(pl.order_seed).permutation(len(order))]
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
     points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
+    points = with_nest_rounds(points, pl.nests)
     digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] for p in points]).encode()).hexdigest()
     return Plan(tuple(points), skipped, digest)
 
@@ -185,11 +194,38 @@ def _with_check_poses(points, q_grid, p_grid, grid_ids, cfg_check) -> list[PlanP
     return out
 
 
+def nest_point_id(nest_id: str, round_no: int) -> str:
+    """Plan/log id of round ``round_no`` (1-based) of nest ``nest_id``."""
+    return f"{nest_id}@{round_no:03d}"
+
+
+def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
+    """Insert a round of every nest (``NestsConfig``) at the start, after every ``every_n_points`` points and at
+    the end; nest points have set ``nest``, no joints and the nest's approximate base-frame position."""
+    if not nests.points or not points:
+        return points
+    out: list[PlanPoint] = []
+    rounds = 0
+
+    def one_round():
+        nonlocal rounds
+        rounds += 1
+        out.extend(PlanPoint(nest_point_id(n.id, rounds), "nest", (), tuple(n.p_base_mm)) for n in nests.points)
+    one_round()
+    for k, pt in enumerate(points):
+        out.append(pt)
+        if (k + 1) % nests.every_n_points == 0 and k + 1 < len(points):
+            one_round()
+    one_round()
+    return out
+
+
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
-    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order."""
-    n = len(plan.points[0].q_deg) if plan.points else 0
+    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order (nest rows: joints empty)."""
+    n = max((len(p.q_deg) for p in plan.points), default=0)
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
         for p in plan.points:
-            w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])
+            q = [f"{v:.6f}" for v in p.q_deg] if p.q_deg else [""] * n
+            w.writerow([p.point_id, p.set, *q, *(f"{v:.3f}" for v in p.p_base_mm)])

@@ -67,7 +67,9 @@ def render_parameters(console: Console, report: dict) -> None:
 
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
-                  f"{plan.count('check')} check-pose measurements, {len(plan.skipped)} skipped; "
+                  f"{plan.count('check')} check-pose measurements, "
+                  + (f"{plan.count('nest')} nest readings, " if plan.count("nest") else "")
+                  + f"{len(plan.skipped)} skipped; "
                   f"estimated duration {duration_s / 60:.1f} min")
     if plan.skipped:
         t = Table(title="Skipped points")

@@ -8,6 +8,10 @@ log cleanly ("abort"). The robot is always commanded to stop and released in ``f
 With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each further SMR in turn
 (``tracker.select_smr(k)``) at the same stop, and the record gains ``p2_tracker_mm`` / ``p3_tracker_mm``
 (+ ``cov2_mm2`` / ``cov3_mm2``); the tracker is aimed back at SMR 1 before the next move.
+Reference nests (plan points of set ``nest``): the robot does not move; the tracker aims at the nest
+(``tracker.select_nest(nest_id, p_tracker_mm_guess)``, or ``reacquire(guess)`` with the nest's last reading),
+the reading is logged as a :class:`NestRecord`, and a nest more than ``max_move_mm`` from its first reading
+pauses the run (tracker stand or nest disturbed).
 """
 from __future__ import annotations
 
@@ -18,9 +22,9 @@ import numpy as np
 
 from drivers.base import Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
 
-from .config import MeasurementConfig
+from .config import MeasurementConfig, NestsConfig
 from .plan import PlanPoint
-from .runlog import RunLog
+from .runlog import NestRecord, RunLog
 
 
 @dataclass(frozen=True)
@@ -50,13 +54,22 @@ class Runner:
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
-                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1) -> None:
+                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1,
+                 nests: NestsConfig | None = None) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
         if n_smrs > 1 and not callable(getattr(tracker, "select_smr", None)):
             raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
                               "driver cannot aim at another SMR (no select_smr)")
         self.n_smrs = n_smrs
+        self.nests = nests or NestsConfig()
+        if self.nests.points and not (callable(getattr(tracker, "select_nest", None))
+                                      or callable(getattr(tracker, "reacquire", None))):
+            raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the plan has reference nests but this tracker "
+                              "driver cannot aim at a fixed point (no select_nest or reacquire)")
+        self.nest_first: dict[str, np.ndarray] = {}     # first reading of each nest (tracker frame, mm)
+        self.nest_last: dict[str, np.ndarray] = {}
+        self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
 
@@ -64,10 +77,20 @@ class Runner:
         """Measure ``points`` in order; return how the run ended. The log is closed on every failure path,
         and on success unless ``close`` is False (a caller measuring in several passes)."""
         n = 0
+        self._remember_nests(getattr(log, "contents", None))
         try:
             for point in points:
+                if point.set == "nest":
+                    record = self.measure_nest(point, log)
+                    log.append_point(record)                  # durable before the bound check can pause
+                    n += 1
+                    if self.on_point:
+                        self.on_point(point, record)
+                    self._check_nest(record)
+                    continue
                 record = self.measure_point(point, log)
                 log.append_point(record)                      # flushed + fsynced before the next move
+                self.p_last = np.asarray(record["p_tracker_mm"], float)
                 n += 1
                 if self.on_point:
                     self.on_point(point, record)
@@ -123,6 +146,64 @@ class Runner:
         for k in range(2, self.n_smrs + 1):
             record.update(self._measure_smr(k, point, log))
         return record
+
+    def _remember_nests(self, contents) -> None:
+        """First/last nest readings of earlier sessions (resume), so the bound refers to the run's start."""
+        for rec in getattr(contents, "points", None) or []:
+            if rec.get("set") == "nest":
+                p = np.asarray(rec["p_tracker_mm"], float)
+                self.nest_first.setdefault(str(rec["nest_id"]), p)
+                self.nest_last[str(rec["nest_id"])] = p
+            elif rec.get("p_tracker_mm") is not None:
+                self.p_last = np.asarray(rec["p_tracker_mm"], float)
+
+    def _aim_at_nest(self, nest_id: str, point: PlanPoint) -> None:
+        guess = self.nest_last.get(nest_id)
+        if callable(getattr(self.tracker, "select_nest", None)):
+            self.tracker.select_nest(nest_id, None if guess is None else tuple(guess))
+        else:
+            if guess is None:
+                raise PointFailed(f"nest {nest_id}: no earlier reading to aim at; this tracker driver has no "
+                                  "select_nest (aim the tracker at the nest manually once, then resume)")
+            self.tracker.reacquire(tuple(guess))
+
+    def _aim_back(self) -> None:
+        """Back to the robot's SMR 1 after a nest reading."""
+        if callable(getattr(self.tracker, "select_smr", None)):
+            self.tracker.select_smr(1)
+        elif self.p_last is not None and callable(getattr(self.tracker, "reacquire", None)):
+            self.tracker.reacquire(tuple(self.p_last))
+
+    def measure_nest(self, point: PlanPoint, log: RunLog) -> dict:
+        """One reading of a reference nest (the robot stays where it is); returns the log record."""
+        nest_id = point.point_id.rsplit("@", 1)[0]
+        t_start = self.clock.now()
+        self._aim_at_nest(nest_id, point)
+        try:
+            mean, spread, readings, retries = self._measure_with_retries(point, log)
+        finally:
+            self._aim_back()
+        try:
+            env = dict(self.tracker.environment() or {})
+        except DriverError as exc:
+            env = {}
+            log.append_event({"type": "environment_fault", "point_id": point.point_id,
+                              "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        cov = self.covariance(mean)
+        rec = NestRecord(point.point_id, nest_id, tuple(mean), tuple(map(tuple, cov)), spread, len(readings),
+                         t_start, self.clock.now(), retries, tuple(point.p_base_mm), env or None)
+        return rec.to_dict()
+
+    def _check_nest(self, record: dict) -> None:
+        """Pause when the nest reads more than ``max_move_mm`` from its first reading."""
+        nest_id, p = record["nest_id"], np.asarray(record["p_tracker_mm"], float)
+        first = self.nest_first.setdefault(nest_id, p)
+        self.nest_last[nest_id] = p
+        moved = float(np.linalg.norm(p - first))
+        if moved > self.nests.max_move_mm:
+            raise PointFailed(f"nest {nest_id} moved {moved:.3f} mm since its first reading (bound "
+                              f"{self.nests.max_move_mm:g} mm, plan.nests.max_move_mm): tracker stand or nest "
+                              "disturbed; check them before resuming")
 
     def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""

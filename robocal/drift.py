@@ -113,8 +113,9 @@ def _unpack(x: np.ndarray, k: int, degree: int, rotation: bool) -> tuple[np.ndar
 def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_ids=(),
               max_degree: int = MAX_DEGREE) -> DriftModel:
     """Drift model from nest readings: times t_s (M,) s, nest index nest (M,) int in 0..K-1, readings
-    p_tracker_mm (M, 3) mm. Degree 0..max_degree by leave-one-round-out CV (the lowest degree within 2 % of the
-    best CV RMS); with fewer than 3 rounds the model is degree 0 (no drift)."""
+    p_tracker_mm (M, 3) mm. Degree 0..max_degree by leave-one-round-out CV over the interior rounds (robot points
+    always lie between the first and the last round, so interpolation is what counts; the lowest CV RMS wins,
+    ties to the lower degree); with fewer than 3 rounds the model is degree 0 (no drift)."""
     t = np.asarray(t_s, float)
     nest = np.asarray(nest, int)
     p = np.asarray(p_tracker_mm, float)
@@ -130,7 +131,7 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
     cv: dict[int, float] = {}
     for degree in range(0, max(top, 0) + 1):
         err = []
-        for r in range(n_rounds):
+        for r in range(1, n_rounds - 1):
             tr, te = rounds != r, rounds == r
             if len(np.unique(nest[tr])) < k:
                 continue
@@ -143,7 +144,7 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
             e = np.concatenate(err)
             cv[degree] = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
     best = min(cv.values()) if cv else 0.0
-    degree = min((d for d, v in cv.items() if v <= 1.02 * best), default=0)
+    degree = min((d for d, v in cv.items() if v <= best), default=0)
     if k == 0:
         return DriftModel(np.zeros((0, 3)), np.zeros((0, 3)), scale, False, cv, 0.0, tuple(nest_ids))
     x = _solve(nest, tau, p, p_mean, degree, rotation)
