@@ -54,6 +54,8 @@ def _nest_drift(ds: Dataset) -> tuple[DriftModel | None, dict]:
     nest = ds.mask("nest")
     if not nest.any():
         return None, {"nests": 0, "applied": False, "why": "no reference-nest readings in the data"}
+    if ds.t_s is None:
+        raise DataError(ds.source, "nest rows need 't_s' (drift is a function of time)")
     ids = np.array(ds.nest_id)[nest]
     names, index = np.unique(ids, return_inverse=True)
     t, p = ds.t_s[nest], ds.p_tracker_mm[nest]

@@ -161,3 +161,40 @@ def test_bad_phenomena_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, ca
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and str(csv) in err and where in err, err
     assert not out.exists()
+
+
+@pytest.mark.unit
+def test_plan_nest_rounds_and_random_order(tmp_path):
+    from campaign.cell import nominal_kinematics
+    from campaign.plan import build_plan
+
+    cfg = load_config(phenomena_config(tmp_path))
+    kin = nominal_kinematics(cfg)
+    plan = build_plan(cfg, kin)
+    sets = [p.set for p in plan.points]
+    assert sets[:3] == ["nest"] * 3 and sets[-3:] == ["nest"] * 3
+    robot_between = [len(list(g)) for k, g in __import__("itertools").groupby(sets, key=lambda s: s == "nest") if not k]
+    assert max(robot_between) == 15 and all(n <= 15 for n in robot_between)
+    assert all(p.q_deg == () for p in plan.points if p.set == "nest")
+    serp = build_plan(load_config(small_config(tmp_path)), kin)
+    order = [p.point_id for p in plan.points if p.set in ("calib", "test")]
+    assert sorted(order) == sorted(p.point_id for p in serp.points if p.set in ("calib", "test"))
+    assert order != [p.point_id for p in serp.points if p.set in ("calib", "test")]
+    again = build_plan(load_config(phenomena_config(tmp_path)), kin)
+    assert again.sha256 == plan.sha256                          # seeded
+
+
+@pytest.mark.system
+def test_paused_nest_run_resumes_and_completes(tmp_path, capsys):
+    cfg = phenomena_config(tmp_path, **{"simulation.tracker_drift_mm_per_h": [3.0, 0.0, 0.0],
+                                        "plan.nests": {"every_n_points": 15, "max_move_mm": 0.1, "points": NESTS}})
+    run = tmp_path / "run"
+    assert main(["run", str(cfg), "--out", str(run)]) == 1
+    n_paused = len(read_log(run).points)
+    # the mock cell restarts its clock (and so its drift) with the new process: the "disturbance" is gone
+    assert main(["run", str(cfg), "--resume", str(run)]) == 0
+    log = read_log(run)
+    ids = [p["point_id"] for p in log.points]
+    plan_ids = [r.split(",")[0] for r in (run / "plan.csv").read_text().splitlines()[1:]]
+    assert len(ids) > n_paused and len(set(ids)) == len(ids) and set(ids) == set(plan_ids)
+    assert [e["type"] for e in log.events].count("pause") == 1
