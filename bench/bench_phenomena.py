@@ -52,16 +52,17 @@ def campaign_config(tmp: Path, seed: int, calibration: dict | None) -> Path:
     d.pop("calibration", None)
     if calibration:
         d["calibration"] = calibration
-    path = tmp / f"cell-{seed}-{'default' if calibration is None else 'plain'}.yaml"
+    tag = "default" if calibration is None else "-".join(f"{k}-{v}" for k, v in calibration.items())
+    path = tmp / f"cell-{seed}-{tag}.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
     return path
 
 
-def without_features(csv_in: Path, csv_out: Path) -> None:
-    """The read-back joints only, no nest rows: what a CSV without the new columns holds."""
+def without_features(csv_in: Path, csv_out: Path, keep_commanded: bool = False) -> None:
+    """No nest rows, and the read-back joints only (or, with ``keep_commanded``, both sets kept)."""
     ds = read_csv(csv_in)
     robot = ~ds.mask("nest")
-    ds = replace(ds.subset(robot), qc_deg=None, nest_id=None)
+    ds = replace(ds.subset(robot), nest_id=None, **({} if keep_commanded else {"qc_deg": None}))
     write_csv(csv_out, ds)
 
 
@@ -104,6 +105,11 @@ def main() -> int:
             a = reprocess(csv, cfg_a, tmp / f"a-{seed}").report
             without_features(csv, tmp / f"plain-{seed}.csv")
             b = reprocess(tmp / f"plain-{seed}.csv", cfg_b, tmp / f"b-{seed}").report
+            # one feature off at a time: no nests (drift not compensated); read-back joints forced
+            without_features(csv, tmp / f"nonest-{seed}.csv", keep_commanded=True)
+            a_nodrift = reprocess(tmp / f"nonest-{seed}.csv", cfg_a, tmp / f"a1-{seed}").report
+            cfg_rb = load_config(campaign_config(tmp, seed, {"joints": "readback"}))
+            a_readback = reprocess(csv, cfg_rb, tmp / f"a2-{seed}").report
             floor = a["noise_floor_mm"]
             prep = a.get("preparation", {})
             drift = prep.get("drift", {})
@@ -113,16 +119,19 @@ def main() -> int:
             rows.append((seed, floor, a["noise_floor_source"], prep.get("joints", {}).get("used"),
                          drift.get("applied"), drift.get("max_nest_move_mm"), effects_taken(a),
                          stage_rms(a, "kinematic"), stage_rms(a, "elastic"), ra, a["method"].get("residual"),
-                         stage_rms(b, "kinematic"), rb, b["method"].get("residual"), b.get("noise_floor_mm")))
+                         stage_rms(b, "kinematic"), rb, b["method"].get("residual"), b.get("noise_floor_mm"),
+                         stage_rms(a_nodrift, "compensated"), stage_rms(a_readback, "compensated")))
     print("held-out test RMS (mm) and ratio to the noise floor; A = defaults, B = read-back joints, no effects, "
           "no drift")
-    for (seed, floor, src, joints, drift, move, eff, ka, ea, ra, la, kb, rb, lb, floor_b) in rows:
+    for (seed, floor, src, joints, drift, move, eff, ka, ea, ra, la, kb, rb, lb, floor_b, r_nd, r_rb) in rows:
         print(f"seed {seed}: floor {floor:.4f} mm ({src}); B's floor {floor_b:.4f} mm")
         print(f"  A: joints {joints}, nest drift {'compensated' if drift else 'not compensated'} (max nest move "
               f"{move:.3f} mm), effects: {eff}")
         print(f"     kinematic {ka:.4f}" + ("" if ea is None else f", elastic {ea:.4f}")
               + f", final ({la} layer) {ra:.4f} mm = {ra / floor:.2f} x floor")
         print(f"  B: kinematic {kb:.4f}, final ({lb} layer) {rb:.4f} mm = {rb / floor:.2f} x floor")
+        print(f"  defaults with one feature off: no nests {r_nd:.4f} mm = {r_nd / floor:.2f} x floor; read-back "
+              f"joints forced {r_rb:.4f} mm = {r_rb / floor:.2f} x floor")
     ra_all = np.array([r[9] / r[1] for r in rows])
     rb_all = np.array([r[12] / r[1] for r in rows])
     print(f"median ratio A {np.median(ra_all):.2f} (target <= 1.2: {'met' if ok_a else 'NOT met'} on every seed)")
