@@ -272,10 +272,12 @@ class CheckPosesConfig:
 
 @dataclass(frozen=True, slots=True)
 class NestConfig:
-    """One fixed reference nest: ``id`` (text) and its approximate position ``p_base_mm`` in the robot base frame."""
+    """One fixed reference nest: ``id`` (text), its approximate position ``p_base_mm`` in the robot base frame and,
+    optionally, ``p_tracker_mm`` in the tracker frame (where a tracker without ``select_nest`` first aims)."""
 
     id: str
     p_base_mm: Vec3
+    p_tracker_mm: Vec3 | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -965,7 +967,8 @@ def _nests(r: _Reader) -> NestsConfig:
     points: list[NestConfig] = []
     for i, item in enumerate(r.items("points", [], what="nests")):
         nr = where.reader(i, item, NestConfig)
-        nest = NestConfig(id=nr.string("id"), p_base_mm=nr.vector("p_base_mm", 3))
+        nest = NestConfig(id=nr.string("id"), p_base_mm=nr.vector("p_base_mm", 3),
+                          p_tracker_mm=nr.vector("p_tracker_mm", 3, None))
         if not _NAME_RE.match(nest.id):
             raise nr.error("id", f"expected letters, digits, '_', '.' or '-', got {_describe(nest.id)}")
         if any(n.id == nest.id for n in points):

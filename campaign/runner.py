@@ -9,7 +9,8 @@ With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each
 (``tracker.select_smr(k)``) at the same stop, and the record gains ``p2_tracker_mm`` / ``p3_tracker_mm``
 (+ ``cov2_mm2`` / ``cov3_mm2``); the tracker is aimed back at SMR 1 before the next move.
 Reference nests (plan points of set ``nest``): the robot does not move; the tracker aims at the nest
-(``tracker.select_nest(nest_id, p_tracker_mm_guess)``, or ``reacquire(guess)`` with the nest's last reading),
+(``tracker.select_nest(nest_id, p_tracker_mm_guess)``, or ``reacquire(guess)`` at the nest's last reading, the
+first time at its ``plan.nests`` ``p_tracker_mm``, required for such drivers),
 the reading is logged as a :class:`NestRecord`, and a nest more than ``max_move_mm`` from its first reading
 pauses the run (tracker stand or nest disturbed).
 """
@@ -63,10 +64,14 @@ class Runner:
                               "driver cannot aim at another SMR (no select_smr)")
         self.n_smrs = n_smrs
         self.nests = nests or NestsConfig()
-        if self.nests.points and not (callable(getattr(tracker, "select_nest", None))
-                                      or callable(getattr(tracker, "reacquire", None))):
-            raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the plan has reference nests but this tracker "
-                              "driver cannot aim at a fixed point (no select_nest or reacquire)")
+        if self.nests.points and not callable(getattr(tracker, "select_nest", None)):
+            if not callable(getattr(tracker, "reacquire", None)):
+                raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the plan has reference nests but this "
+                                  "tracker driver cannot aim at a fixed point (no select_nest or reacquire)")
+            blind = [n.id for n in self.nests.points if n.p_tracker_mm is None]
+            if blind:
+                raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: this tracker driver aims by position only "
+                                  f"(reacquire): give plan.nests p_tracker_mm for nest {blind[0]}")
         self.nest_first: dict[str, np.ndarray] = {}     # first reading of each nest (tracker frame, mm)
         self.nest_last: dict[str, np.ndarray] = {}
         self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
@@ -157,15 +162,19 @@ class Runner:
             elif rec.get("p_tracker_mm") is not None:
                 self.p_last = np.asarray(rec["p_tracker_mm"], float)
 
+    def _nest_guess(self, nest_id: str) -> np.ndarray | None:
+        """Where to aim (tracker frame, mm): the nest's last reading, else its configured ``p_tracker_mm``."""
+        if nest_id in self.nest_last:
+            return self.nest_last[nest_id]
+        given = next((n.p_tracker_mm for n in self.nests.points if n.id == nest_id), None)
+        return None if given is None else np.asarray(given, float)
+
     def _aim_at_nest(self, nest_id: str, point: PlanPoint) -> None:
-        guess = self.nest_last.get(nest_id)
+        guess = self._nest_guess(nest_id)
         if callable(getattr(self.tracker, "select_nest", None)):
-            self.tracker.select_nest(nest_id, None if guess is None else tuple(guess))
+            self.tracker.select_nest(nest_id, None if guess is None else tuple(float(v) for v in guess))
         else:
-            if guess is None:
-                raise PointFailed(f"nest {nest_id}: no earlier reading to aim at; this tracker driver has no "
-                                  "select_nest (aim the tracker at the nest manually once, then resume)")
-            self.tracker.reacquire(tuple(guess))
+            self.tracker.reacquire(tuple(float(v) for v in guess))
 
     def _aim_back(self) -> None:
         """Back to the robot's SMR 1 after a nest reading."""

@@ -176,10 +176,9 @@ def test_plan_nest_rounds_and_random_order(tmp_path):
     robot_between = [len(list(g)) for k, g in __import__("itertools").groupby(sets, key=lambda s: s == "nest") if not k]
     assert max(robot_between) == 15 and all(n <= 15 for n in robot_between)
     assert all(p.q_deg == () for p in plan.points if p.set == "nest")
-    serp = build_plan(load_config(small_config(tmp_path)), kin)
-    order = [p.point_id for p in plan.points if p.set in ("calib", "test")]
-    assert sorted(order) == sorted(p.point_id for p in serp.points if p.set in ("calib", "test"))
-    assert order != [p.point_id for p in serp.points if p.set in ("calib", "test")]
+    grid = np.array([p.p_base_mm for p in plan.points if p.set == "calib"])
+    step = np.median(np.linalg.norm(np.diff(grid, axis=0), axis=1))
+    assert step > 2 * cfg.plan.grid.step_mm                     # serpentine order would step to a neighbour
     again = build_plan(load_config(phenomena_config(tmp_path)), kin)
     assert again.sha256 == plan.sha256                          # seeded
 
@@ -198,3 +197,52 @@ def test_paused_nest_run_resumes_and_completes(tmp_path, capsys):
     plan_ids = [r.split(",")[0] for r in (run / "plan.csv").read_text().splitlines()[1:]]
     assert len(ids) > n_paused and len(set(ids)) == len(ids) and set(ids) == set(plan_ids)
     assert [e["type"] for e in log.events].count("pause") == 1
+
+
+class _AimByPosition:
+    """A tracker that can only aim at a position (reacquire), like a line-protocol tracker without nest support."""
+
+    def __init__(self, mock):
+        self.mock, self.aimed = mock, []
+
+    def __getattr__(self, name):
+        if name in ("select_nest",):
+            raise AttributeError(name)
+        return getattr(self.mock, name)
+
+    def reacquire(self, guess):
+        self.aimed.append(tuple(guess))
+        w = self.mock.world
+        near = [k for k in w.nests if np.linalg.norm(w.nest_tracker_mm(k) - np.asarray(guess)) < 5.0]
+        if not near:
+            from drivers.base import TargetNotFound
+            raise TargetNotFound(f"nothing within 5 mm of {guess}")
+        self.mock.select_nest(near[0])
+
+
+@pytest.mark.unit
+def test_nests_with_a_position_only_tracker(tmp_path):
+    from drivers.base import DriverError
+    from campaign.pipeline import mock_world
+    from campaign.plan import build_plan
+    from campaign.cell import nominal_kinematics
+    from campaign.runlog import RunLog
+    from campaign.runner import Runner
+    from drivers.mock import MockRobot, MockTracker
+
+    cfg = load_config(phenomena_config(tmp_path))
+    world = mock_world(cfg)
+    tracker = _AimByPosition(MockTracker(world))
+    args = (MockRobot(world), tracker, cfg.tracker.measurement, world.clock, lambda p: np.eye(3) * 1e-4)
+    with pytest.raises(DriverError, match="p_tracker_mm for nest N1"):
+        Runner(*args, nests=cfg.plan.nests)
+    T = world.cell.truth.T_tracker_base
+    guessed = [dict(n, p_tracker_mm=(T[:3, :3] @ n["p_base_mm"] + T[:3, 3] + 1.0).tolist()) for n in NESTS]
+    cfg = load_config(phenomena_config(tmp_path, **{"plan.nests": {"every_n_points": 15, "points": guessed}}))
+    runner = Runner(*args, nests=cfg.plan.nests)
+    plan = build_plan(cfg, nominal_kinematics(cfg))
+    log = RunLog.create(tmp_path / "run", {"config_sha256": "x"})
+    assert runner.execute(plan.points[:40], log).exit_status == "success"
+    nests = [r for r in read_log(tmp_path / "run").points if r["set"] == "nest"]
+    assert len(nests) >= 6 and len(tracker.aimed) == len(nests)
+    np.testing.assert_allclose(tracker.aimed[3], nests[0]["p_tracker_mm"])   # second round: at the last reading
