@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from robocal.noise import repeatability_sigma_mm
-from robocal.simulate import SimulatedCell
+from robocal.simulate import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
 from .base import BeamBroken, GarbageReply, MotionError, TargetNotFound, TrackerReading, TrackerTimeout
 
@@ -82,9 +82,7 @@ class MockWorld:
         if self.tracker_drift is None:
             return np.zeros(3)
         v, w, tau_s = self.tracker_drift
-        t = self.clock.now()
-        u = t / 3600.0 if tau_s <= 0 else tau_s / 3600.0 * (1.0 - np.exp(-t / tau_s))
-        return u * (np.asarray(v, float) + np.cross(np.asarray(w, float), p_tracker_mm))
+        return tracker_drift_mm(p_tracker_mm, self.clock.now(), v, w, tau_s)[0]
 
     def nest_tracker_mm(self, nest_id: str) -> np.ndarray:
         """True position (3,) mm of a nest in the tracker frame (undrifted)."""
@@ -119,8 +117,8 @@ class MockWorld:
             time.sleep(self.motion_time_s)
         self.q_deg = q_deg.copy()
         self.last_move_deg = delta
-        noise = self.readback_rng.normal(0.0, self.readback_noise_deg, len(delta)) if self.readback_noise_deg > 0 else 0.0
-        self.q_read_deg = q_deg + self.readback_lag * delta + noise
+        self.q_read_deg = readback_joints_deg(q_deg, delta, self.readback_lag, self.readback_noise_deg,
+                                              self.readback_rng)
         self.p_smr_tracker_mm = self._realise()
         cov = self.cell.tracker.covariance(self.p_smr_tracker_mm[None])[0]
         self.point_error_mm = np.linalg.cholesky(cov) @ self.rng.standard_normal(3)
