@@ -756,7 +756,10 @@ def dataset_from_log(contents: Any) -> Dataset:
             if name in ("t_s", "sigma_mm"):           # nest records have them too
                 extra[name] = _optional([get(r) for r in recs], name, where, src)
                 continue
-            got = _optional([get(r) for r in rob], name, lambda k: where(idx[k]), src)
+            values = [get(r) for r in rob]
+            if name == "temp_c" and None in values and all(r.get("temp_c") is None for r in rob):
+                continue    # tracker weather readings with gaps (a failed read): kept as env_temp_c with NaN
+            got = _optional(values, name, lambda k: where(idx[k]), src)
             if got is not None:
                 width = 3 if name.endswith("_tracker_mm") else None
                 extra[name] = _with_nan(_spread(got, idx, len(recs)), robot, width)

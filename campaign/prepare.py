@@ -65,7 +65,8 @@ def _nest_drift(ds: Dataset) -> tuple[DriftModel | None, dict]:
     t_end = np.array([float(np.max(ds.t_s))])
     report = {"nests": len(names), "readings": int(nest.sum()), "applied": model.degree > 0,
               "why": ("drift is significant: leave-one-round-out CV prefers degree "
-                      f"{model.degree}" if model.degree > 0 else
+                      f"{model.degree}{' with rotation' if model.rotation else ' (translation)'} over no drift"
+                      if model.degree > 0 else
                       "no drift model beats constant nest positions in leave-one-round-out CV"),
               "max_nest_move_mm": float(moved.max()),
               "translation_at_end_mm": model.translation_mm(t_end)[0].tolist() if model.degree else [0.0] * 3,

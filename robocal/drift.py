@@ -6,9 +6,9 @@ Nest k (fixed on the floor) read at time t in the tracker frame::
 
 with small-angle rotation coefficients w (rad) and translations v (mm) per power of tau, and drift 0 at t = 0
 (the start of the run, whose frame the registration then refers to). ``w x p_k0`` is linearised about the
-nests' mean readings, so the fit is one linear least-squares problem. The degree D (0 = no drift) is chosen by
-leave-one-round-out cross-validation over the nest rounds; rotation is identified only with three or more
-non-collinear nests. Pure numpy: positions in mm, times in s, no I/O.
+nests' mean readings, so the fit is one linear least-squares problem. The degree D (0 = no drift), and whether
+a rotation is part of it, are chosen by leave-one-round-out cross-validation over the nest rounds; rotation is
+a candidate only with three or more non-collinear nests. Pure numpy: positions in mm, times in s, no I/O.
 """
 from __future__ import annotations
 
@@ -25,7 +25,8 @@ MIN_SPREAD_MM = 50.0      # nests closer than this to a line do not determine a 
 @dataclass(frozen=True)
 class DriftModel:
     """A fitted drift. ``v_mm`` (D, 3) and ``w_rad`` (D, 3) coefficients of tau^1..tau^D; ``t_scale_s`` T;
-    ``rotation`` whether w was identified; ``cv_rms_mm`` {degree: leave-one-round-out RMS of nest readings};
+    ``rotation`` whether w was identified; ``cv_rms_mm`` {"D" or "D+rotation": leave-one-round-out RMS of the
+    nest readings};
     ``residual_rms_mm`` RMS of the nest readings after the model; ``nest_ids``, ``p_nest_tracker_mm`` (K, 3)
     the nests' positions at t = 0."""
     v_mm: np.ndarray
@@ -67,7 +68,7 @@ class DriftModel:
     def to_dict(self) -> dict:
         return {"degree": self.degree, "t_scale_s": self.t_scale_s, "rotation": self.rotation,
                 "v_mm": self.v_mm.tolist(), "w_rad": self.w_rad.tolist(),
-                "cv_rms_mm": {str(k): v for k, v in self.cv_rms_mm.items()},
+                "cv_rms_mm": dict(self.cv_rms_mm),
                 "residual_rms_mm": self.residual_rms_mm, "nest_ids": list(self.nest_ids)}
 
 
@@ -122,14 +123,15 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
     k = int(nest.max()) + 1 if len(nest) else 0
     p_mean = np.array([p[nest == j].mean(axis=0) for j in range(k)]) if k else np.zeros((0, 3))
     spread = np.linalg.svd(p_mean - p_mean.mean(axis=0), compute_uv=False) if k >= 3 else np.zeros(1)
-    rotation = bool(k >= 3 and len(spread) >= 2 and spread[1] > MIN_SPREAD_MM)
+    can_rotate = bool(k >= 3 and len(spread) >= 2 and spread[1] > MIN_SPREAD_MM)
     scale = float(max(np.ptp(t), 1.0)) if len(t) else 1.0
     tau = t / scale
     rounds = _rounds(nest, t) if len(t) else np.zeros(0, int)
     n_rounds = int(rounds.max()) + 1 if len(rounds) else 0
     top = min(max_degree, n_rounds - 2)
-    cv: dict[int, float] = {}
-    for degree in range(0, max(top, 0) + 1):
+    cv: dict = {}
+    candidates = [(d, r) for d in range(0, max(top, 0) + 1) for r in ((False, True) if can_rotate and d else (False,))]
+    for degree, rotation in candidates:
         err = []
         for r in range(1, n_rounds - 1):
             tr, te = rounds != r, rounds == r
@@ -142,9 +144,10 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
             err.append(p[te] - pred)
         if err:
             e = np.concatenate(err)
-            cv[degree] = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+            cv[(degree, rotation)] = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
     best = min(cv.values()) if cv else 0.0
-    degree = min((d for d, v in cv.items() if v <= best), default=0)
+    degree, rotation = min((c for c, v in cv.items() if v <= best), default=(0, False))   # ties: simplest
+    cv = {f"{d}{'+rotation' if r else ''}": v for (d, r), v in cv.items()}
     if k == 0:
         return DriftModel(np.zeros((0, 3)), np.zeros((0, 3)), scale, False, cv, 0.0, tuple(nest_ids))
     x = _solve(nest, tau, p, p_mean, degree, rotation)

@@ -246,3 +246,13 @@ def test_nests_with_a_position_only_tracker(tmp_path):
     nests = [r for r in read_log(tmp_path / "run").points if r["set"] == "nest"]
     assert len(nests) >= 6 and len(tracker.aimed) == len(nests)
     np.testing.assert_allclose(tracker.aimed[3], nests[0]["p_tracker_mm"])   # second round: at the last reading
+
+
+@pytest.mark.unit
+def test_a_failed_weather_read_does_not_block_the_export():
+    recs = [{"point_id": f"P{i}", "set": "calib", "q_cmd_deg": [i, 0.0], "q_read_deg": [i, 0.0],
+             "p_tracker_mm": [i, 0.0, 0.0], "t_end_s": float(i),
+             **({} if i == 1 else {"temperatures": {"temp_c": 20.0 + i}})} for i in range(3)]
+    ds = dataset_from_log(LogContents(start={}, points=recs, path="log.jsonl"))
+    assert ds.temp_c is None
+    np.testing.assert_array_equal(ds.env_temp_c, [20.0, np.nan, 22.0])

@@ -61,7 +61,7 @@ def test_drift_model_recovers_the_displacement_at_workspace_points(seed):
     curve = (lambda u: u) if seed % 2 == 0 else (lambda u: 0.6 * (1 - np.exp(-u / 0.4)))   # linear and settling
     t, k, p = _nest_readings(rng, v, w, curve=curve)
     model = fit_drift(t, k, p)
-    assert model.degree >= 1 and model.rotation
+    assert model.degree >= 1
     pts = rng.uniform([1000, 1000, -1500], [3000, 4000, -500], (50, 3))      # robot workspace, tracker frame
     tt = rng.uniform(0, 3600, 50)
     truth = curve(tt / 3600.0)[:, None] * (v + np.cross(w, pts))
@@ -89,3 +89,13 @@ def test_too_few_rounds_means_no_drift_model():
     rng = np.random.default_rng(5)
     t, k, p = _nest_readings(rng, [0.1, 0, 0], np.zeros(3), rounds=2)
     assert fit_drift(t, k, p).degree == 0
+
+
+@pytest.mark.unit
+def test_rotation_is_taken_when_the_nests_show_one():
+    rng = np.random.default_rng(21)
+    t, k, p = _nest_readings(rng, np.zeros(3), np.array([0.0, 0.0, 40e-6]))   # 40 urad/h about z
+    model = fit_drift(t, k, p)
+    assert model.degree >= 1 and model.rotation
+    np.testing.assert_allclose(model.rotation_rad(np.array([3600.0]))[0], [0, 0, 40e-6], atol=6e-6)
+    assert set(model.cv_rms_mm) >= {"0", "1", "1+rotation"}
