@@ -5,7 +5,7 @@ box, one fixed SMR orientation and ONE robot configuration for every point (the 
 ``q_ref``), unreachable points reported and skipped, a serpentine motion order with each test point
 measured next to its nearest grid point (or ``plan.order: random``: a seeded shuffle, so that approach
 directions and move sizes vary), repeated check poses through the run, and rounds of reference-nest
-readings (``plan.nests``; set ``nest``, no joints: the tracker aims at the nest) at the start, every
+readings (``plan.nests``; set ``nest``; the robot waits, the tracker aims at the nest) at the start, every
 ``every_n_points`` points and at the end.
 """
 from __future__ import annotations
@@ -28,8 +28,9 @@ WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J
 
 @dataclass(frozen=True)
 class PlanPoint:
-    """One measurement: id, set (calib | test | check | nest), commanded joints (deg; empty for a nest), target SMR
-    position (mm, base; for a nest its approximate position)."""
+    """One measurement: id, set (calib | test | check | nest), commanded joints (deg), target SMR position (mm, base).
+    A ``nest`` point is a tracker reading of a fixed nest: ``p_base_mm`` is the nest's approximate position and
+    ``q_deg`` where the robot waits meanwhile (the previous point's joints; the runner never moves for a nest)."""
     point_id: str
     set: str
     q_deg: tuple[float, ...]
@@ -201,7 +202,8 @@ def nest_point_id(nest_id: str, round_no: int) -> str:
 
 def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
     """Insert a round of every nest (``NestsConfig``) at the start, after every ``every_n_points`` points and at
-    the end; nest points have set ``nest``, no joints and the nest's approximate base-frame position."""
+    the end; nest points have set ``nest``, the nest's approximate base-frame position and, as joints, where the
+    robot waits (the previous point's; the first point's for the start round)."""
     if not nests.points or not points:
         return points
     out: list[PlanPoint] = []
@@ -210,7 +212,8 @@ def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
     def one_round():
         nonlocal rounds
         rounds += 1
-        out.extend(PlanPoint(nest_point_id(n.id, rounds), "nest", (), tuple(n.p_base_mm)) for n in nests.points)
+        q = out[-1].q_deg if out else points[0].q_deg
+        out.extend(PlanPoint(nest_point_id(n.id, rounds), "nest", q, tuple(n.p_base_mm)) for n in nests.points)
     one_round()
     for k, pt in enumerate(points):
         out.append(pt)
@@ -221,11 +224,11 @@ def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
 
 
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
-    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order (nest rows: joints empty)."""
-    n = max((len(p.q_deg) for p in plan.points), default=0)
+    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order (nest rows: where the robot waits,
+    the nest's approximate position)."""
+    n = len(plan.points[0].q_deg) if plan.points else 0
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
         for p in plan.points:
-            q = [f"{v:.6f}" for v in p.q_deg] if p.q_deg else [""] * n
-            w.writerow([p.point_id, p.set, *q, *(f"{v:.3f}" for v in p.p_base_mm)])
+            w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])

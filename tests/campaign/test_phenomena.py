@@ -175,7 +175,9 @@ def test_plan_nest_rounds_and_random_order(tmp_path):
     assert sets[:3] == ["nest"] * 3 and sets[-3:] == ["nest"] * 3
     robot_between = [len(list(g)) for k, g in __import__("itertools").groupby(sets, key=lambda s: s == "nest") if not k]
     assert max(robot_between) == 15 and all(n <= 15 for n in robot_between)
-    assert all(p.q_deg == () for p in plan.points if p.set == "nest")
+    waits = [(a.q_deg, b.q_deg) for a, b in zip(plan.points, plan.points[1:]) if b.set == "nest"]
+    assert all(qa == qb for qa, qb in waits)                    # the robot waits where it is
+    assert plan.points[0].q_deg == plan.points[3].q_deg
     grid = np.array([p.p_base_mm for p in plan.points if p.set == "calib"])
     step = np.median(np.linalg.norm(np.diff(grid, axis=0), axis=1))
     assert step > 2 * cfg.plan.grid.step_mm                     # serpentine order would step to a neighbour
