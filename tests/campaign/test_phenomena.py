@@ -258,3 +258,17 @@ def test_a_failed_weather_read_does_not_block_the_export():
     ds = dataset_from_log(LogContents(start={}, points=recs, path="log.jsonl"))
     assert ds.temp_c is None
     np.testing.assert_array_equal(ds.env_temp_c, [20.0, np.nan, 22.0])
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("nests, where", [
+    ({"points": [{"p_base_mm": [0, 0, 0]}]}, "plan.nests.points[0]: missing required key 'id'"),
+    ({"points": [NESTS[0], dict(NESTS[1], id="N1")]}, "plan.nests.points[1].id: duplicate nest id 'N1'"),
+    ({"points": [NESTS[0]], "max_move_mm": 0}, "plan.nests.max_move_mm"),
+    ({"points": [{"id": "N1", "p_base_mm": [0, 0]}]}, "plan.nests.points[0].p_base_mm"),
+])
+def test_bad_nest_config_is_one_line_exit_2(tmp_path, capsys, nests, where):
+    cfg = small_config(tmp_path, **{"plan.nests": nests})
+    assert main(["validate", str(cfg)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert where in err and "\n" not in err
