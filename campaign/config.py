@@ -338,7 +338,8 @@ class CalibrationConfig:
     the model when the data holds both commanded (``qc1..qcn``) and read-back
     (``q1..qn``) joints: ``auto`` takes the commanded ones when read-back minus
     command is significantly above the encoder noise or correlates with the
-    last move (campaign/prepare.py), else the read-back ones.
+    last move, unless a geometric fit with the read-back ones is clearly better
+    (campaign/prepare.py), else the read-back ones.
     """
 
     method: str

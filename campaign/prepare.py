@@ -11,8 +11,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robocal.drift import DriftModel, fit_drift
+from robocal.identify import CalibrationOptions, IdentificationError, calibrate
 from robocal.readback import ENCODER_NOISE_DEG, prefer_commanded, readback_statistics
+from robocal.stats import error_stats
 
+from .cell import measurement_covariance, nominal_kinematics
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset
@@ -28,8 +31,42 @@ class Prepared:
     report: dict
 
 
-def choose_joints(ds: Dataset, setting: str) -> tuple[np.ndarray, str, dict]:
-    """(q_deg (N, n) of the robot rows, set name, report) for ``calibration.joints`` = auto|commanded|readback."""
+FIT_MARGIN = 0.9    # the read-back set overrides the statistics only when it fits >= 10 % better
+
+
+def _fit_rms(cfg: CampaignConfig, q_deg: np.ndarray, p_mm: np.ndarray) -> float | None:
+    """RMS (mm) of a plain geometric LM fit of the calib rows with these joints (same model for both sets)."""
+    try:
+        res = calibrate(nominal_kinematics(cfg), np.radians(q_deg), p_mm, measurement_covariance(cfg, p_mm),
+                        CalibrationOptions(method="lm", weights="none"))
+    except (IdentificationError, np.linalg.LinAlgError, ValueError):
+        return None
+    return error_stats(res.residual_tracker_mm).rms_mm
+
+
+def _confirm_by_fit(cfg: CampaignConfig | None, ds: Dataset, robot: np.ndarray) -> tuple[bool, str, dict]:
+    """(keep commanded, why, figures): the statistics said the sets differ; which one do the measurements follow?
+    The same geometric model is fitted to the calib rows with each set; the read-back set wins only when its
+    RMS is clearly (>= 10 %) lower."""
+    cal = ds.mask("calib")
+    if cfg is None or cal.sum() < 10:
+        return True, "", {}
+    p = ds.p_tracker_mm[cal]
+    rms_cmd, rms_read = _fit_rms(cfg, ds.qc_deg[cal], p), _fit_rms(cfg, ds.q_deg[cal], p)
+    figs = {"geometric_fit_rms_commanded_mm": rms_cmd, "geometric_fit_rms_readback_mm": rms_read}
+    if rms_cmd is None or rms_read is None:
+        return True, "", figs
+    if rms_read < FIT_MARGIN * rms_cmd:
+        return False, (f"but the measurements follow the read-back joints (geometric fit RMS {rms_read:.4f} mm "
+                       f"vs {rms_cmd:.4f} mm with the commanded ones)"), figs
+    return True, f"; geometric fit RMS {rms_cmd:.4f} mm commanded vs {rms_read:.4f} mm read-back", figs
+
+
+def choose_joints(ds: Dataset, setting: str, cfg: CampaignConfig | None = None) -> tuple[np.ndarray, str, dict]:
+    """(q_deg (N, n) of the robot rows, set name, report) for ``calibration.joints`` = auto|commanded|readback.
+    ``auto``: the read-back statistics decide (robocal.readback.prefer_commanded); when they say the sets differ,
+    a geometric fit with each set confirms it (with ``cfg``; the read-back set wins only if it fits clearly
+    better)."""
     robot = ds.mask("nest") == False  # noqa: E712
     if ds.qc_deg is None:
         if setting == "commanded":
@@ -40,12 +77,16 @@ def choose_joints(ds: Dataset, setting: str) -> tuple[np.ndarray, str, dict]:
     q_read, q_cmd = ds.q_deg[robot], ds.qc_deg[robot]
     s = readback_statistics(q_read, q_cmd)
     commanded, why = prefer_commanded(s)
+    figs: dict = {}
+    if setting == "auto" and commanded:
+        commanded, more, figs = _confirm_by_fit(cfg, ds, robot)
+        why = f"{why}{more}" if commanded else f"{why}, {more}"
     if setting != "auto":
         commanded = setting == "commanded"
         why = f"calibration.joints: {setting} (the automatic rule says: {why})"
     used = "commanded" if commanded else "readback"
     report = {"used": used, "setting": setting, "why": why, "encoder_noise_deg": ENCODER_NOISE_DEG,
-              "readback_minus_command": s.to_dict()}
+              "readback_minus_command": s.to_dict(), **figs}
     return (q_cmd if commanded else q_read), used, report
 
 
@@ -77,7 +118,7 @@ def _nest_drift(ds: Dataset) -> tuple[DriftModel | None, dict]:
 
 def prepare(ds: Dataset, cfg: CampaignConfig) -> Prepared:
     """Joint set and nest drift of ``ds`` (see module doc) for the calibration of ``cfg``."""
-    q, used, joints_report = choose_joints(ds, cfg.calibration.joints)
+    q, used, joints_report = choose_joints(ds, cfg.calibration.joints, cfg)
     model, drift_report = _nest_drift(ds)
     robot = ~ds.mask("nest")
     out = ds.subset(robot) if not robot.all() else ds

@@ -79,6 +79,20 @@ def test_auto_picks_commanded_joints_and_compensates_the_nest_drift(lag_run):
 
 
 @pytest.mark.system
+def test_auto_keeps_readback_joints_when_the_robot_stood_there(lag_run):
+    """Swap the sets: the robot really stood at the read-back joints and the commands lagged. The statistics
+    alone would take the commanded set; the geometric fit of each set must overrule them."""
+    from dataclasses import replace
+    cfg_path, run = lag_run
+    ds = read_csv(run / "data.csv")
+    swapped = replace(ds, q_deg=ds.qc_deg, qc_deg=ds.q_deg)
+    prep = prepare(swapped, load_config(cfg_path))
+    rep = prep.report["joints"]
+    assert prep.joints == "readback" and "follow the read-back joints" in rep["why"]
+    assert rep["geometric_fit_rms_readback_mm"] < 0.9 * rep["geometric_fit_rms_commanded_mm"]
+
+
+@pytest.mark.system
 def test_reprocess_reports_the_choice(lag_run, tmp_path):
     cfg, run = lag_run
     assert main(["reprocess", str(run / "data.csv"), "--config", str(cfg), "--out", str(tmp_path / "rp")]) == 0
