@@ -169,12 +169,16 @@ class Runner:
         given = next((n.p_tracker_mm for n in self.nests.points if n.id == nest_id), None)
         return None if given is None else np.asarray(given, float)
 
-    def _aim_at_nest(self, nest_id: str, point: PlanPoint) -> None:
+    def _aim_at_nest(self, nest_id: str) -> None:
+        """Aim the tracker at the nest; a failed search pauses the run (PointFailed) with the reason."""
         guess = self._nest_guess(nest_id)
-        if callable(getattr(self.tracker, "select_nest", None)):
-            self.tracker.select_nest(nest_id, None if guess is None else tuple(float(v) for v in guess))
-        else:
-            self.tracker.reacquire(tuple(float(v) for v in guess))
+        try:
+            if callable(getattr(self.tracker, "select_nest", None)):
+                self.tracker.select_nest(nest_id, None if guess is None else tuple(float(v) for v in guess))
+            else:
+                self.tracker.reacquire(tuple(float(v) for v in guess))
+        except TrackerError as exc:
+            raise PointFailed(f"nest {nest_id}: tracker cannot find it ({' '.join(str(exc).split())})") from None
 
     def _aim_back(self) -> None:
         """Back to the robot's SMR 1 after a nest reading."""
@@ -187,7 +191,7 @@ class Runner:
         """One reading of a reference nest (the robot stays where it is); returns the log record."""
         nest_id = point.point_id.rsplit("@", 1)[0]
         t_start = self.clock.now()
-        self._aim_at_nest(nest_id, point)
+        self._aim_at_nest(nest_id)
         try:
             mean, spread, readings, retries = self._measure_with_retries(point, log)
         finally:
