@@ -504,7 +504,8 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
     col = table.column(layout.index("nest_id"))
     for i, (nid, s) in enumerate(zip(col, sets)):
         if (s == "nest") != bool(nid):
-            what = "nest row without a nest id" if s == "nest" else f"nest_id {_show(nid)} on a {s} row (only nest rows have one)"
+            what = ("nest row without a nest id" if s == "nest"
+                    else f"nest_id {_show(nid)} on a {s} row (only nest rows have one)")
             raise DataError(src, what, line=table.line_nos[i], column=f"'{layout.shown[layout.index('nest_id')]}'")
     return tuple(col)
 
@@ -515,7 +516,8 @@ def _blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, n
     nest_rows = [i for i, s in enumerate(sets) if s == "nest"]
     nullable_on_nest = [f"q{k}" for k in range(1, layout.n_joints + 1)]
     nullable_on_nest += [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc
-    nullable_on_nest += [c for k in layout.smr for c in _SMR[k]] + [s for s in ("temp_c", "payload_kg") if s in layout.scalars]
+    nullable_on_nest += [c for k in layout.smr for c in _SMR[k]]
+    nullable_on_nest += [s for s in ("temp_c", "payload_kg") if s in layout.scalars]
     out: dict[str, np.ndarray] = {}
     for name, rows in [(c, nest_rows) for c in nullable_on_nest] + [(e, None) for e in layout.env]:
         pos = layout.index(name)
@@ -585,6 +587,9 @@ def _check_writable(ds: Dataset, src: str, numbers: np.ndarray, blank_ok: np.nda
     for i, pid in enumerate(ds.point_id):
         if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid):
             raise DataError(src, f"row {i + 1}: point_id {pid!r} cannot be written to CSV")
+    for i, nid in enumerate(ds.nest_id or ()):
+        if nid != nid.strip() or _BAD_ID_CHARS & set(nid):
+            raise DataError(src, f"row {i + 1}: nest_id {nid!r} cannot be written to CSV")
     bad = ~np.isfinite(numbers)
     if blank_ok is not None:
         bad &= ~(blank_ok & np.isnan(numbers))

@@ -69,7 +69,8 @@ class MockWorld:
         self.moves = 0
         self.stopped = False
         self.readback_rng = np.random.default_rng(seed + 104729)       # own stream: enabling lag changes nothing else
-        self.readback_lag = np.zeros(n) if readback_lag_deg_per_deg is None else np.asarray(readback_lag_deg_per_deg, float)
+        self.readback_lag = np.zeros(n) if readback_lag_deg_per_deg is None else np.asarray(readback_lag_deg_per_deg,
+                                                                                             float)
         self.readback_noise_deg = float(readback_noise_deg)
         self.last_move_deg = np.zeros(n)
         self.q_read_deg = self.q_deg.copy()
