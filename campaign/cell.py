@@ -36,6 +36,22 @@ def measurement_covariance(cfg: CampaignConfig, p_tracker_mm: np.ndarray) -> np.
     return tracker_uncertainty(cfg).covariance(p_tracker_mm) + s**2 * np.eye(3)
 
 
+def device_measurement_covariance(cfg: CampaignConfig, device_cov_mm2: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) mm^2: the covariance the tracker reported + robot repeatability (isotropic), in place of the
+    spec model when the device reports its own."""
+    s = repeatability_sigma_mm(cfg.robot.repeatability_mm)
+    return np.asarray(device_cov_mm2, float) + s**2 * np.eye(3)
+
+
+def weights_covariance(cfg: CampaignConfig, ds) -> tuple[np.ndarray, str]:
+    """(N, 3, 3) mm^2 calibration weights and their source: "device" when every row carries the covariance the
+    tracker reported (``ds.cov_mm2``, already including the robot repeatability), else "spec" (the config's model)."""
+    cov = getattr(ds, "cov_mm2", None)
+    if cov is not None:
+        return np.asarray(cov, float), "device"
+    return measurement_covariance(cfg, ds.p_tracker_mm), "spec"
+
+
 def calibration_options(cfg: CampaignConfig) -> CalibrationOptions:
     c = cfg.calibration
     return CalibrationOptions(method=c.method, weights=c.weights, k0=c.k0, k1=c.k1, ridge_mu=c.ridge_mu)

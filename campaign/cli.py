@@ -20,7 +20,7 @@ from rich.console import Console
 
 from campaign.config import load_config
 from campaign.errors import CampaignError, ConfigError, DataError
-from drivers.base import DriverError
+from drivers.base import DriverConfigError, DriverError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -233,6 +233,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(f"error: {exc}", EXIT_BAD_INPUT)
     except CampaignError as exc:
         return _fail(f"error: {exc}", EXIT_FAILED)
+    except DriverConfigError as exc:
+        return _fail(f"error: {exc}", EXIT_BAD_INPUT)
     except DriverError as exc:
         return _fail(f"error: {exc}", EXIT_FAILED)
     except KeyboardInterrupt:

@@ -63,7 +63,7 @@ __all__ = [
 
 ROBOT_SCHEMES = frozenset({"mock", "abb-rws", "ur-rtde"})
 TRACKER_SCHEMES = frozenset(
-    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop"}
+    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop", "emscon"}
 )
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")

@@ -116,6 +116,7 @@ class Dataset:
     env_temp_c: np.ndarray | None = None
     env_pressure_hpa: np.ndarray | None = None
     env_humidity_pct: np.ndarray | None = None
+    cov_mm2: np.ndarray | None = None  # (N, 3, 3) mm^2 from the tracker's own statistics (logs only), or None
 
     def __post_init__(self) -> None:
         put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
@@ -137,6 +138,8 @@ class Dataset:
         for name in (*_SCALARS, "sigma_mm", *_ENV):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows,)))
+        if self.cov_mm2 is not None:
+            put("cov_mm2", _float_array(self.cov_mm2, "cov_mm2", (n_rows, 3, 3)))
         if self.qc_deg is not None:
             put("qc_deg", _float_array(self.qc_deg, "qc_deg", self.q_deg.shape))
         self._check_nests(put)
@@ -782,6 +785,9 @@ def dataset_from_log(contents: Any) -> Dataset:
         if not all(robot):
             extra["nest_id"] = tuple("" if r else str(rec.get("nest_id")) for r, rec in zip(robot, recs))
         q_all = _with_nan(_spread(q, idx, len(recs)), robot, n_joints)
+        device = [r.get("cov_mm2") if r.get("cov_source") == "device" else None for r in rob]
+        if all(v is not None for v in device):             # all robot rows or none; nest rows: their logged cov
+            extra["cov_mm2"] = [r.get("cov_mm2") or [[math.nan] * 3] * 3 for r in recs]
         return Dataset(tuple(ids), tuple(sets), q_all, p, source=src, **extra)
     except DataError:
         raise

@@ -17,7 +17,7 @@ from drivers.base import SystemClock
 from drivers.mock import MockWorld
 from drivers.registry import open_robot, open_tracker
 
-from .cell import measurement_covariance, nominal_kinematics, simulated_cell
+from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
 from .errors import CampaignError
 from .interchange import dataset_from_log, read_csv, write_csv
@@ -25,6 +25,7 @@ from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
+from .tracker_quality import SmrPredictor
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm), nests=cfg.plan.nests)
+        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
-            runner.on_point = lambda point, record: advance()
+            runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
+                                                     advance())
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
@@ -94,6 +98,8 @@ def verify(run_dir: Path, console: Console | None = None):
                                       "software_version": software_version()})
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
+        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
         def measure(points):
             got = []
@@ -105,6 +111,16 @@ def verify(run_dir: Path, console: Console | None = None):
         if not log.closed:
             log.close(result.exit_status, result.reason)
     return result
+
+
+def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
+    """Where to aim the tracker after a beam break: nominal model + registration from the point ``records`` measured
+    so far (a resumed or verified run's), else the config's rough tracker position."""
+    predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+    for record in records:
+        if record.get("q_read_deg") is not None and record.get("p_tracker_mm") is not None:
+            predictor.observe(record["q_read_deg"], record["p_tracker_mm"])
+    return predictor
 
 
 def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):

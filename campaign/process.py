@@ -23,6 +23,7 @@ from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
 from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
@@ -105,7 +106,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
-    cov = measurement_covariance(cfg, p)
+    cov, cov_source = weights_covariance(cfg, ds)
     try:
         result = calibrate(kin0, q[cal], p[cal], cov[cal], calibration_options(cfg))
     except IdentificationError as exc:
@@ -139,7 +140,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "rejected_points": calib_ids[result.point_weights == 0].tolist(),
         "T_tracker_base": result.kinematics.T_tracker_base.tolist(),
         "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
-                   "residual": cfg.calibration.residual},
+                   "residual": cfg.calibration.residual, "measurement_covariance": cov_source},
         "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
         "preparation": prep.report,
     }

@@ -21,11 +21,12 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from drivers.base import Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
+from drivers.base import BeamBroken, Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
 
 from .config import MeasurementConfig, NestsConfig
 from .plan import PlanPoint
 from .runlog import NestRecord, RunLog
+from .tracker_quality import check_device_stability, device_covariance
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,8 @@ class Runner:
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
                  on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1,
+                 predict_p_tracker_mm: Callable[[np.ndarray], np.ndarray] | None = None,
+                 covariance_from_device: Callable[[np.ndarray], np.ndarray] | None = None,
                  nests: NestsConfig | None = None) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
@@ -63,9 +66,14 @@ class Runner:
             raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
                               "driver cannot aim at another SMR (no select_smr)")
         self.n_smrs = n_smrs
+        # after a beam break: aim the tracker at predict_p_tracker_mm(q_read_deg) (mm, tracker frame) and search;
+        # covariance_from_device(device cov (3, 3)) -> the logged covariance when the tracker reports its own
+        self.predict_p_tracker_mm, self.covariance_from_device = predict_p_tracker_mm, covariance_from_device
+        self.q_read: np.ndarray | None = None
+        self._smr = 1
         self.nests = nests or NestsConfig()
         if self.nests.points and not callable(getattr(tracker, "select_nest", None)):
-            if not callable(getattr(tracker, "reacquire", None)):
+            if not (callable(getattr(tracker, "reacquire", None)) and getattr(tracker, "can_reacquire", True)):
                 raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the plan has reference nests but this "
                                   "tracker driver cannot aim at a fixed point (no select_nest or reacquire)")
             blind = [n.id for n in self.nests.points if n.p_tracker_mm is None]
@@ -131,6 +139,7 @@ class Runner:
         self.robot.move_joints(point.q_deg)
         self.clock.sleep(self.m.settle_s)
         q_read = np.asarray(self.robot.read_joints(), float)
+        self.q_read = q_read
         approach = self._approach(q_cmd)
         mean, spread, readings, retries = self._measure_with_retries(point, log)
         try:
@@ -139,15 +148,22 @@ class Runner:
             env = {}
             log.append_event({"type": "environment_fault", "point_id": point.point_id,
                               "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        dev_cov = device_covariance(readings)
+        use_dev = dev_cov is not None and self.covariance_from_device is not None
         record = {
             "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
-            "p_tracker_mm": mean.tolist(), "cov_mm2": self.covariance(mean).tolist(), "spread_mm": spread,
+            "p_tracker_mm": mean.tolist(),
+            "cov_mm2": (self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)).tolist(),
+            "cov_source": "device" if use_dev else "spec", "spread_mm": spread,
             "n_samples": len(readings), "t_start_s": t_start, "t_end_s": self.clock.now(),
             "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
             "p_target_base_mm": list(point.p_base_mm),
         }
         if env:
             record["temperatures"] = env
+        if dev_cov is not None:
+            record["device_std_mm"] = np.sqrt(np.diag(dev_cov)).tolist()
+            record["device_cov_mm2"] = dev_cov.tolist()
         for k in range(2, self.n_smrs + 1):
             record.update(self._measure_smr(k, point, log))
         return record
@@ -181,17 +197,23 @@ class Runner:
             raise PointFailed(f"nest {nest_id}: tracker cannot find it ({' '.join(str(exc).split())})") from None
 
     def _aim_back(self) -> None:
-        """Back to the robot's SMR 1 after a nest reading."""
+        """Back to the robot's SMR 1 after a nest reading (its predicted position, else its last reading)."""
+        self._smr = 1
         if callable(getattr(self.tracker, "select_smr", None)):
             self.tracker.select_smr(1)
-        elif self.p_last is not None and callable(getattr(self.tracker, "reacquire", None)):
-            self.tracker.reacquire(tuple(self.p_last))
+            return
+        p = self.p_last
+        if self.predict_p_tracker_mm is not None and self.q_read is not None:
+            p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
+        if p is not None and callable(getattr(self.tracker, "reacquire", None)):
+            self.tracker.reacquire(tuple(float(v) for v in p))
 
     def measure_nest(self, point: PlanPoint, log: RunLog) -> dict:
         """One reading of a reference nest (the robot stays where it is); returns the log record."""
         nest_id = point.point_id.rsplit("@", 1)[0]
         t_start = self.clock.now()
         self._aim_at_nest(nest_id)
+        self._smr = 0                                   # a beam break now must not search at the robot's SMR
         try:
             mean, spread, readings, retries = self._measure_with_retries(point, log)
         finally:
@@ -221,9 +243,11 @@ class Runner:
     def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
         self.tracker.select_smr(k)
+        self._smr = k
         try:
             mean, spread, _, retries = self._measure_with_retries(point, log)
         finally:
+            self._smr = 1
             self.tracker.select_smr(1)
         return {f"p{k}_tracker_mm": mean.tolist(), f"cov{k}_mm2": self.covariance(mean).tolist(),
                 f"spread{k}_mm": spread, f"retries{k}": retries}
@@ -248,17 +272,56 @@ class Runner:
                 while len(readings) < self.m.samples:
                     readings.append(self.tracker.measure())
                 mean, spread = average_samples(readings, self.m.stability_mm)
+                check_device_stability(readings, self.m.stability_mm)
+                self._log_tracker_steps(point, log)
                 return mean, spread, readings, faults
             except TrackerError as exc:
                 faults += 1
                 if isinstance(exc, Unstable):
                     readings = []
-                log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
-                                  "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
-                if faults > self.m.retries:
-                    raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
-                                      f"{faults} failed readings, retry limit {self.m.retries}") from None
+                self._fault(point, log, exc, faults)
+                if isinstance(exc, BeamBroken):
+                    faults = self._reacquire(point, log, faults)
+                else:
+                    self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+
+    def _fault(self, point: PlanPoint, log: RunLog, exc: TrackerError, faults: int) -> None:
+        """Log a failed reading (and the driver's recovery steps); PointFailed once the retry limit is spent."""
+        self._log_tracker_steps(point, log)
+        log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
+                          "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        if faults > self.m.retries:
+            raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
+                              f"{faults} failed readings, retry limit {self.m.retries}") from None
+
+    def _reacquire(self, point: PlanPoint, log: RunLog, faults: int) -> int:
+        """After a beam break: aim at the predicted SMR position and search (each step logged); every failed
+        search uses one of the point's retries (then PointFailed names it). Returns the updated fault count."""
+        reacquire = getattr(self.tracker, "reacquire", None)
+        if not callable(reacquire) or not getattr(self.tracker, "can_reacquire", True) \
+                or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
+            self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+            return faults
+        p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
+        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "predicted",
+                          "p_tracker_mm": [round(float(v), 3) for v in p], "t_s": self.clock.now()})
+        while True:                                 # search again until found or the point's retries are spent
+            try:
+                reacquire(p.tolist())
+                break
+            except TrackerError as exc:
+                faults += 1
+                self._fault(point, log, exc, faults)
                 self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+        self._log_tracker_steps(point, log)
+        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "found", "t_s": self.clock.now()})
+        return faults
+
+    def _log_tracker_steps(self, point: PlanPoint, log: RunLog) -> None:
+        """The driver's own recovery steps (reconnect, initialise, aim, search), if it reports them."""
+        drain = getattr(self.tracker, "drain_events", None)
+        for step in (drain() if callable(drain) else ()):
+            log.append_event({"type": "tracker_step", "point_id": point.point_id, **step, "t_s": self.clock.now()})
 
 
 def pending(points: Iterable[PlanPoint], done_ids: set[str]) -> list[PlanPoint]:

@@ -15,6 +15,10 @@ class DriverError(Exception):
     """Base of all driver failures; ``str()`` is one line naming the device."""
 
 
+class DriverConfigError(DriverError):
+    """Bad driver URL or options (input error: the CLI exits with 2)."""
+
+
 class ConnectionLost(DriverError):
     """The link to the device dropped or timed out."""
 
@@ -143,5 +147,8 @@ class Tracker(Protocol):
     # def identity(self) -> Mapping[str, str]: vendor, model, serial, firmware
     # def reacquire(self, p_tracker_mm_guess: Sequence[float]) -> None: aim at a predicted SMR position and
     #     search (GoPosition + FindReflector or the protocol's equivalent) after a beam break; raises TrackerError
+    # can_reacquire: bool (attribute/property): False when ``reacquire`` exists but the device cannot aim or search
+    # def drain_events(self) -> list[dict]: the driver's own recovery steps since the last call ({"step": ..., ...}:
+    #     reconnect, initialize, go_position, find_reflector, ...), written to the run log by the runner
     # TrackerReading.extra may carry the device's own statistics: "std_x_mm", "std_y_mm", "std_z_mm",
     #     "cov_xy_mm2", "cov_xz_mm2", "cov_yz_mm2" and environment values "temp_c", "pressure_hpa", "humidity_pct"

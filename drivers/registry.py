@@ -1,4 +1,4 @@
-"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ...
+"""Choose drivers by URL: ``mock://``, ``abb-rws://host``, ``ur-rtde://host``, ``tracker+socket://host:port``, ``emscon://host``, ...
 
 Real drivers are imported lazily so that a cell only needs the libraries of the drivers it uses.
 """
@@ -8,14 +8,14 @@ import importlib
 from typing import Any, Mapping
 from urllib.parse import urlsplit
 
-from .base import DriverError, Robot, Tracker
+from .base import DriverConfigError, DriverError, Robot, Tracker
 
 # scheme -> "module:factory"; factories take (url, options, **context)
 ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_rws:open_robot",
                  "ur-rtde": "drivers.ur:open_robot"}
 TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
                    "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
-                   "tracker+loop": "drivers.tracker:open_tracker"}
+                   "tracker+loop": "drivers.tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
 
 
 def _factory(table: Mapping[str, str], url: str, what: str):
@@ -35,5 +35,9 @@ def open_robot(url: str, options: Mapping[str, Any] | None = None, **context) ->
 
 
 def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) -> Tracker:
-    """Tracker driver for ``url`` (not yet connected)."""
-    return _factory(TRACKER_DRIVERS, url, "tracker")(url, dict(options or {}), **context)
+    """Tracker driver for ``url`` (not yet connected); bad options or url -> ``DriverConfigError``."""
+    factory = _factory(TRACKER_DRIVERS, url, "tracker")
+    try:
+        return factory(url, dict(options or {}), **context)
+    except ValueError as exc:                      # option validation of the line-protocol driver
+        raise DriverConfigError(f"tracker url {url!r}: {exc}") from None

@@ -2,8 +2,7 @@
 
 One transport for TCP (``tracker+socket://host:port``), native serial (``tracker+serial:///dev/ttyUSB0?baudrate=115200``),
 RFC 2217 serial-over-LAN (``tracker+rfc2217://host:port``) and the in-memory loopback (``tracker+loop://``), and one
-declarative line protocol configured by the cell YAML's ``tracker.options`` (see ``docs/drivers_tracker.md`` and
-``/work/shared/docs/trackers.md`` §8). The built-in default profile speaks the sample protocol of
+declarative line protocol configured by the cell YAML's ``tracker.options`` (see ``docs/drivers_tracker.md``). The built-in default profile speaks the sample protocol of
 ``drivers.emulators.tracker_server``, so ``options: {}`` works against the emulator.
 
 Layers: ``LineProfile`` (validated options), ``TrackerCodec`` (pure: command bytes, line -> ``Reply``; unit-tested on
@@ -77,6 +76,10 @@ DEFAULT_OPTIONS: dict[str, Any] = {
     "environment": "ENV",
     "environment_regex": r"^ENV (?P<temp_c>{num}) (?P<pressure_hpa>{num}) (?P<humidity_pct>{num})$",
     "stop": None,
+    "goto": None,                     # optional: aim at a point, e.g. "GOTO {seq} {x} {y} {z}" (length unit, tracker frame)
+    "find": None,                     # optional: search for the SMR where the tracker points, e.g. "FIND {seq}"
+    "ack_regex": r"^OK (?P<seq>\d+)$",  # reply to goto / find
+    "reacquire_timeout_s": 30.0,      # per goto / find request
     "timeout_s": 2.0,
     "retries": 0,
     "flush": True,
@@ -292,6 +295,10 @@ class LineProfile:
     stop: str | None
     timeout_s: float
     retries: int
+    goto: str | None
+    find: str | None
+    ack_regex: re.Pattern[str]
+    reacquire_timeout_s: float
     flush: bool
     serial: Mapping[str, Any]
     sensor: "SensorProfile | None"
@@ -316,6 +323,9 @@ class LineProfile:
             errors=_error_patterns(opts), ignore=_ignore_patterns(opts),
             environment=_template(opts, "environment", enc), environment_regex=env_regex,
             stop=_template(opts, "stop", enc), timeout_s=timeout_s, retries=_integer(opts, "retries"),
+            goto=_goto_template(opts, enc), find=_template(opts, "find", enc),
+            ack_regex=_regex("ack_regex", opts["ack_regex"]),
+            reacquire_timeout_s=_number(opts, "reacquire_timeout_s"),
             flush=_flag(opts, "flush"), serial=_serial_settings(opts), sensor=SensorProfile.from_options(opts, enc))
         profile._check_pairs()
         return profile
@@ -334,6 +344,22 @@ class LineProfile:
         if self.environment and self.environment_regex is not None:
             groups |= set(self.environment_regex.groupindex)
         return {ENV_GROUPS[g][0] for g in groups if g in ENV_GROUPS}
+
+
+def _goto_template(opts: Mapping[str, Any], encoding: str) -> str | None:
+    """The goto template: ``{seq}`` (optional) and ``{x}``, ``{y}``, ``{z}`` (format specs allowed on x, y, z)."""
+    value = _string(opts, "goto", optional=True)
+    if value is None:
+        return None
+    try:
+        filled = value.format(seq="{seq}", x=1.0, y=2.0, z=3.0)
+        filled.format(seq=0).encode(encoding)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise _bad("goto", f"bad template {value!r} ({type(exc).__name__}: {exc}); placeholders: {{seq}}, {{x}}, "
+                           "{y}, {z}") from None
+    if filled == value.format(seq="{seq}", x=4.0, y=5.0, z=6.0):
+        raise _bad("goto", f"template {value!r} has no {{x}}, {{y}}, {{z}} placeholders")
+    return value
 
 
 def uses_seq(template: str) -> bool:
@@ -735,6 +761,26 @@ class LineTracker:
         if self._sensor:
             env.update(self._sensor.read())
         return env
+
+    @property
+    def can_reacquire(self) -> bool:
+        """Whether the profile has a ``goto`` or ``find`` command (the runner reacquires only then)."""
+        return bool(self.profile.goto or self.profile.find)
+
+    def reacquire(self, p_tracker_mm_guess: Sequence[float]) -> None:
+        """Aim at the predicted SMR position (``goto``, mm converted to the length unit) and search (``find``);
+        each request awaits ``ack_regex`` within ``reacquire_timeout_s``. ``TargetNotFound`` if either fails."""
+        p = self.profile
+        if not self.can_reacquire:
+            raise TrackerError(f"{self.url}: no goto/find commands configured; cannot reacquire")
+        try:
+            if p.goto:
+                x, y, z = (float(v) / p.length_to_mm for v in p_tracker_mm_guess)
+                self._request(p.goto.format(seq="{seq}", x=x, y=y, z=z), p.ack_regex, p.reacquire_timeout_s)
+            if p.find:
+                self._request(p.find, p.ack_regex, p.reacquire_timeout_s)
+        except TrackerError as exc:
+            raise TargetNotFound(f"{self.url}: reflector not found near the predicted position: {exc}") from None
 
     def close(self) -> None:
         """Send the stop command (best effort, no reply awaited) and close; idempotent, never raises."""

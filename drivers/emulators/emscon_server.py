@@ -1,0 +1,513 @@
+"""Leica emScon laser-tracker emulator (binary C structs over TCP), written from the public header ``ES_C_API_Def.h``.
+
+Serves one client at a time on 127.0.0.1. Implements the commands a stationary single-point client uses:
+GetSystemStatus, Initialize, SetUnits (all length, temperature and pressure units), SetCoordinateSystemType (RHR),
+SetMeasurementMode (stationary), SetStationaryModeParams, SetSystemSettings / GetSystemSettings,
+SetEnvironmentParams / GetEnvironmentParams, SetReflector / GetReflector / GetReflectors, SetStatisticMode
+(extended -> ``SingleMeasResult2T`` with covariances), StartMeasurement (command reply, then the result packet),
+GoPosition, FindReflector, ClearCommandQueue; anything else is answered with ``ES_RS_NotImplemented``.
+Settings commands are followed by the matching ``SystemStatusChangeT`` as a tracker server sends them.
+
+The SMR position comes from ``position_source()`` (mm, tracker frame: the simulated cell); each StartMeasurement
+adds Gaussian noise drawn from a spherical model (range and transverse sigma a + b * distance) and reports that
+model's std devs and covariances, plus the temperature, pressure and humidity used (weather station, or the manual
+values when the weather monitor is set to "not connected").
+
+Tracking model (what reacquisition has to deal with): while the beam is intact the tracker follows the SMR. A beam
+break leaves the tracker pointing where the SMR was at the previous measurement (the beam was lost during the robot
+move); FindReflector finds the SMR only if the tracker points within ``search_radius_mm`` of it, so a client must
+GoPosition to a predicted position first.
+
+Faults (one-shot with ``inject(name)``, consumed by the next StartMeasurement; or per-measurement probabilities):
+``beam_break`` (status change MeasStatus_NotReady + unsolicited ``ErrorResponseT`` with
+ES_RS_MeasurementStatusNotReady; measurements fail until a FindReflector succeeds), ``lost_reflector`` (the same, but
+FindReflector never succeeds), ``late`` (the result packet is sent ``late_s`` later), ``garbage`` (junk bytes
+instead of the reply), ``disconnect`` (the server closes the connection), ``not_initialised`` (the tracker loses its
+initialisation: ES_RS_TrackerNotInitialized until Initialize), ``warm_up`` (one ES_RS_SensorNotWarmedUp reply).
+
+Run standalone: ``python -m drivers.emulators.emscon_server --port PORT [--cell CONFIG [--robot-url URL]]`` (port 0:
+any free port, printed on the first stdout line with ``--print-port``); it serves until killed, interrupted or its
+stdin is closed (``--ignore-stdin`` to disable that).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import random
+import select
+import signal
+import socket
+import sys
+import threading
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+from drivers import emscon_protocol as P
+
+HOST = "127.0.0.1"
+POLL_S = 0.02
+DEFAULT_POINT_MM = (2500.0, -400.0, 300.0)
+FAULTS = ("beam_break", "lost_reflector", "late", "garbage", "disconnect", "not_initialised", "warm_up")
+GARBAGE = b"\x7f\xff\xff\x7fGARBAGE\x00\x01\x02\x03garbage-garbage"
+LENGTH_PER_MM = {0: 1e-3, 1: 1.0, 2: 1e3, 3: 1 / 304.8, 4: 1 / 914.4, 5: 1 / 25.4}
+PRESSURE_PER_MBAR = {0: 1.0, 1: 1.0, 2: 0.1, 3: 0.750062, 4: 0.0145038, 5: 0.401865, 6: 0.0295300}
+REFLECTORS = ((1, 5, 19.05, "RRR 1.5in"), (2, 6, 6.35, "RRR 0.5in"), (3, 11, 11.1125, "RRR 7/8in"),
+              (4, 2, 0.0, "CatsEye"))
+STATUS_AFTER = {P.C_SET_UNITS: 6, P.C_SET_REFLECTOR: 7, P.C_SET_SYSTEM_SETTINGS: 8, P.C_SET_COORDINATE_SYSTEM_TYPE: 12,
+                P.C_SET_MEASUREMENT_MODE: 17, P.C_SET_STATIONARY_MODE_PARAMS: 18, P.C_SET_STATISTIC_MODE: 24,
+                P.C_SET_ENVIRONMENT_PARAMS: 2}
+
+PositionSource = Callable[[], Sequence[float]]
+
+
+@dataclass(frozen=True)
+class Out:
+    """Send ``data`` after ``delay_s`` s; ``disconnect``: close the connection instead."""
+    data: bytes = b""
+    delay_s: float = 0.0
+    disconnect: bool = False
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """1-sigma noise of one stationary measurement: range and transverse ``a_um + b_um_per_m * distance``."""
+    range_a_um: float = 2.0
+    range_b_um_per_m: float = 0.5
+    transverse_a_um: float = 3.0
+    transverse_b_um_per_m: float = 1.0
+
+    def covariance_mm2(self, p_mm: Sequence[float]) -> list[list[float]]:
+        """(3, 3) covariance in mm^2 at ``p_mm`` (tracker frame): diag(t, t, r)^2 rotated onto the line of sight."""
+        r_m = math.sqrt(sum(c * c for c in p_mm)) / 1000.0
+        s_r = (self.range_a_um + self.range_b_um_per_m * r_m) * 1e-3
+        s_t = (self.transverse_a_um + self.transverse_b_um_per_m * r_m) * 1e-3
+        u = [c / (r_m * 1000.0) for c in p_mm] if r_m > 0 else [0.0, 0.0, 1.0]
+        return [[s_t ** 2 * ((i == j) - u[i] * u[j]) + s_r ** 2 * u[i] * u[j] for j in range(3)] for i in range(3)]
+
+
+def _cholesky3(c: list[list[float]]) -> list[list[float]]:
+    L = [[0.0] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i + 1):
+            s = c[i][j] - sum(L[i][k] * L[j][k] for k in range(j))
+            L[i][j] = math.sqrt(max(s, 0.0)) if i == j else (s / L[j][j] if L[j][j] > 0 else 0.0)
+    return L
+
+
+class EmsconDevice:
+    """The emScon server without I/O: ``respond(packet) -> [Out]``. Fault settings are thread-safe."""
+
+    def __init__(self, position_source: PositionSource | None = None, *, seed: int = 0,
+                 noise: NoiseModel | None = None, environment: tuple[float, float, float] = (20.5, 1008.0, 42.0),
+                 initialised: bool = False, init_time_s: float = 0.02, search_radius_mm: float = 60.0,
+                 late_s: float = 1.0, meas_time_scale: float = 0.0,
+                 fault_probabilities: Mapping[str, float] | None = None, serial: int = 754321) -> None:
+        self._position = position_source or (lambda: DEFAULT_POINT_MM)
+        self.noise = noise or NoiseModel()
+        self.station_env = tuple(environment)
+        self.manual_env = (20.0, 1013.25, 50.0)
+        self.initialised, self.init_time_s = initialised, init_time_s
+        self.search_radius_mm, self.late_s, self.meas_time_scale = search_radius_mm, late_s, meas_time_scale
+        self.serial = serial
+        self._rng, self._fault_rng = random.Random(seed), random.Random(seed + 7919)
+        self._lock = threading.Lock()
+        self._queued: deque[str] = deque()
+        bad = set(fault_probabilities or {}) - set(FAULTS)
+        if bad:
+            raise ValueError(f"unknown faults {sorted(bad)} (expected {', '.join(FAULTS)})")
+        self.fault_probabilities = dict(fault_probabilities or {})
+        self.units = (P.LU_MILLIMETER, P.AU_DEGREE, P.TU_CELSIUS, P.PU_MBAR, P.HU_RH)
+        self.settings = [P.WMS_READ_AND_CALCULATE, 0, 0, 1, 1, 0, 0, 1, 1]
+        self.coord_type, self.meas_mode, self.meas_time_ms, self.use_adm = P.CS_RHR, P.MM_STATIONARY, 1000, 1
+        self.statistic_mode, self.reflector_id = P.SM_STANDARD, 1
+        self.beam_ok, self.reflector_lost = True, False
+        self.aim_mm: tuple[float, float, float] | None = None     # where the tracker points when the beam is broken
+        self.last_true_mm: tuple[float, float, float] | None = None
+        self.commands: deque[int] = deque(maxlen=10000)
+        self.last_truth: dict | None = None                       # the last measurement's truth (for tests)
+
+    # -- fault control
+    def inject(self, *names: str) -> None:
+        bad = [n for n in names if n not in FAULTS]
+        if bad:
+            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULTS)})")
+        with self._lock:
+            self._queued.extend(names)
+
+    def _draw_fault(self) -> str | None:
+        with self._lock:
+            if self._queued:
+                return self._queued.popleft()
+            probs = dict(self.fault_probabilities)
+        draws = [(name, self._fault_rng.random()) for name in FAULTS]
+        return next((n for n, u in draws if u < probs.get(n, 0.0)), None)
+
+    # -- dispatch
+    def respond(self, packet: bytes) -> list[Out]:
+        """Replies to one whole command packet."""
+        try:
+            command, params = P.decode_command(packet)
+        except P.FramingError:
+            return [Out(P.encode_reply(P.COMMAND_CT.unpack_from(packet)[2], P.RS_WRONG_PARAMETER))]
+        self.commands.append(command)
+        handler = self._handlers().get(command)
+        if handler is None:
+            return [Out(P.encode_reply(command, P.RS_NOT_IMPLEMENTED))]
+        return handler(*params)
+
+    def _handlers(self) -> dict[int, Callable[..., list[Out]]]:
+        return {P.C_GET_SYSTEM_STATUS: self._get_system_status, P.C_INITIALIZE: self._initialize,
+                P.C_SET_UNITS: self._set_units, P.C_SET_COORDINATE_SYSTEM_TYPE: self._set_coord,
+                P.C_SET_MEASUREMENT_MODE: self._set_mode, P.C_SET_STATIONARY_MODE_PARAMS: self._set_stationary,
+                P.C_SET_SYSTEM_SETTINGS: self._set_settings, P.C_GET_SYSTEM_SETTINGS: self._get_settings,
+                P.C_SET_ENVIRONMENT_PARAMS: self._set_env, P.C_GET_ENVIRONMENT_PARAMS: self._get_env,
+                P.C_SET_REFLECTOR: self._set_reflector, P.C_GET_REFLECTOR: self._get_reflector,
+                P.C_GET_REFLECTORS: self._get_reflectors, P.C_SET_STATISTIC_MODE: self._set_statistic,
+                P.C_START_MEASUREMENT: self._start_measurement, P.C_GO_POSITION: self._go_position,
+                P.C_FIND_REFLECTOR: self._find_reflector, P.C_CLEAR_COMMAND_QUEUE: self._ok(P.C_CLEAR_COMMAND_QUEUE),
+                P.C_STOP_MEASUREMENT: self._ok(P.C_STOP_MEASUREMENT)}
+
+    def _ok(self, command: int) -> Callable[..., list[Out]]:
+        return lambda *_: [Out(P.encode_reply(command, P.RS_ALL_OK))]
+
+    def _changed(self, command: int, status: int = P.RS_ALL_OK) -> list[Out]:
+        out = [Out(P.encode_reply(command, status))]
+        if status == P.RS_ALL_OK and command in STATUS_AFTER:
+            out.append(Out(P.encode_status_change(STATUS_AFTER[command])))
+        return out
+
+    # -- commands
+    def _get_system_status(self) -> list[Out]:
+        tps = P.TPS_INITIALIZED if self.initialised else 4           # ES_TPS_CompensationSet
+        return [Out(P.encode_reply(P.C_GET_SYSTEM_STATUS, P.RS_ALL_OK, P.RS_ALL_OK, tps, 3, 2, 3, 8, 500,
+                                   self.settings[0], 0, self.serial))]
+
+    def _initialize(self) -> list[Out]:
+        self.initialised, self.beam_ok, self.aim_mm = True, not self.reflector_lost, None
+        return [Out(P.encode_reply(P.C_INITIALIZE, P.RS_ALL_OK), delay_s=self.init_time_s)]
+
+    def _set_units(self, length, angle, temp, pressure, humidity) -> list[Out]:
+        if length not in LENGTH_PER_MM or angle not in (0, 1, 2) or temp not in (0, 1) \
+                or pressure not in PRESSURE_PER_MBAR or humidity != P.HU_RH:
+            return [Out(P.encode_reply(P.C_SET_UNITS, P.RS_WRONG_PARAMETER))]
+        self.units = (length, angle, temp, pressure, humidity)
+        return self._changed(P.C_SET_UNITS)
+
+    def _set_coord(self, kind) -> list[Out]:
+        if kind != P.CS_RHR:
+            return [Out(P.encode_reply(P.C_SET_COORDINATE_SYSTEM_TYPE, P.RS_NOT_IMPLEMENTED))]
+        self.coord_type = kind
+        return self._changed(P.C_SET_COORDINATE_SYSTEM_TYPE)
+
+    def _set_mode(self, mode) -> list[Out]:
+        if mode != P.MM_STATIONARY:
+            return [Out(P.encode_reply(P.C_SET_MEASUREMENT_MODE, P.RS_NOT_IMPLEMENTED))]
+        self.meas_mode = mode
+        return self._changed(P.C_SET_MEASUREMENT_MODE)
+
+    def _set_stationary(self, meas_time_ms, use_adm) -> list[Out]:
+        if not 0 < meas_time_ms <= 100000:
+            return [Out(P.encode_reply(P.C_SET_STATIONARY_MODE_PARAMS, P.RS_WRONG_PARAMETER))]
+        self.meas_time_ms, self.use_adm = meas_time_ms, use_adm
+        return self._changed(P.C_SET_STATIONARY_MODE_PARAMS)
+
+    def _set_settings(self, *values) -> list[Out]:
+        if values[0] not in (P.WMS_NOT_CONNECTED, P.WMS_READ_ONLY, P.WMS_READ_AND_CALCULATE):
+            return [Out(P.encode_reply(P.C_SET_SYSTEM_SETTINGS, P.RS_WRONG_PARAMETER))]
+        self.settings = list(values[:7]) + self.settings[7:]            # bHasNivel, bHasVideoCamera are read-only
+        return self._changed(P.C_SET_SYSTEM_SETTINGS)
+
+    def _get_settings(self) -> list[Out]:
+        return [Out(P.encode_reply(P.C_GET_SYSTEM_SETTINGS, P.RS_ALL_OK, *self.settings))]
+
+    def _set_env(self, temperature, pressure, humidity) -> list[Out]:
+        t_c = self._temp_to_c(temperature)
+        p_mbar = pressure / PRESSURE_PER_MBAR[self.units[3]]
+        if not (-10 <= t_c <= 50 and 500 <= p_mbar <= 1200 and 0 <= humidity <= 100):
+            return [Out(P.encode_reply(P.C_SET_ENVIRONMENT_PARAMS, P.RS_METEO_DATA_OUT_OF_RANGE))]
+        self.manual_env = (t_c, p_mbar, humidity)
+        return self._changed(P.C_SET_ENVIRONMENT_PARAMS)
+
+    def _get_env(self) -> list[Out]:
+        return [Out(P.encode_reply(P.C_GET_ENVIRONMENT_PARAMS, P.RS_ALL_OK, *self._env_in_units()))]
+
+    def _set_reflector(self, reflector_id) -> list[Out]:
+        if reflector_id not in [r[0] for r in REFLECTORS]:
+            return [Out(P.encode_reply(P.C_SET_REFLECTOR, P.RS_WRONG_PARAMETER))]
+        self.reflector_id = reflector_id
+        return self._changed(P.C_SET_REFLECTOR)
+
+    def _get_reflector(self) -> list[Out]:
+        return [Out(P.encode_reply(P.C_GET_REFLECTOR, P.RS_ALL_OK, self.reflector_id))]
+
+    def _get_reflectors(self) -> list[Out]:
+        k = LENGTH_PER_MM[self.units[0]]
+        return [Out(P.encode_reply(P.C_GET_REFLECTORS, P.RS_ALL_OK, len(REFLECTORS), rid, ttype, offset_mm * k,
+                                   name.encode("utf-16-le"))) for rid, ttype, offset_mm, name in REFLECTORS]
+
+    def _set_statistic(self, stationary, continuous) -> list[Out]:
+        if stationary not in (P.SM_STANDARD, P.SM_EXTENDED) or continuous not in (P.SM_STANDARD, P.SM_EXTENDED):
+            return [Out(P.encode_reply(P.C_SET_STATISTIC_MODE, P.RS_WRONG_PARAMETER))]
+        self.statistic_mode = stationary
+        return self._changed(P.C_SET_STATISTIC_MODE)
+
+    def _go_position(self, x, y, z, use_adm) -> list[Out]:
+        if not self.initialised:
+            return [Out(P.encode_reply(P.C_GO_POSITION, P.RS_TRACKER_NOT_INITIALIZED))]
+        k = LENGTH_PER_MM[self.units[0]]
+        self.aim_mm = (x / k, y / k, z / k)
+        return [Out(P.encode_reply(P.C_GO_POSITION, P.RS_ALL_OK))]
+
+    def _find_reflector(self, approx_distance) -> list[Out]:
+        if not self.initialised:
+            return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_TRACKER_NOT_INITIALIZED))]
+        true = self._true()
+        if self.beam_ok or (not self.reflector_lost and self.aim_mm is not None
+                            and math.dist(self.aim_mm, true) <= self.search_radius_mm):
+            self.beam_ok, self.aim_mm = True, None
+            return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_ALL_OK)),
+                    Out(P.encode_status_change(P.SSC_MEAS_STATUS_READY))]
+        return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+
+    def _start_measurement(self) -> list[Out]:
+        if not self.initialised:
+            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_TRACKER_NOT_INITIALIZED))]
+        fault = self._draw_fault()
+        if fault == "disconnect":
+            return [Out(disconnect=True)]
+        if fault == "garbage":
+            return [Out(GARBAGE)]
+        if fault == "warm_up":
+            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_SENSOR_NOT_WARMED_UP))]
+        if fault == "not_initialised":
+            self.initialised = False
+            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_TRACKER_NOT_INITIALIZED))]
+        if fault in ("beam_break", "lost_reflector"):
+            self.beam_ok, self.reflector_lost = False, fault == "lost_reflector"
+            self.aim_mm = self.last_true_mm or (0.0, 0.0, 1000.0)
+            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_ALL_OK)),
+                    Out(P.encode_status_change(P.SSC_MEAS_STATUS_NOT_READY)),
+                    Out(P.encode_error(P.C_START_MEASUREMENT, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+        if not self.beam_ok:
+            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+        delay = self.meas_time_ms / 1000.0 * self.meas_time_scale + (self.late_s if fault == "late" else 0.0)
+        return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_ALL_OK)), Out(self._result(), delay_s=delay)]
+
+    # -- measurement
+    def _true(self) -> tuple[float, float, float]:
+        return tuple(float(v) for v in self._position())
+
+    def _result(self) -> bytes:
+        true = self._true()
+        self.last_true_mm = true
+        cov = self.noise.covariance_mm2(true)
+        L = _cholesky3(cov)
+        z = [self._rng.gauss(0.0, 1.0) for _ in range(3)]
+        meas = [true[i] + sum(L[i][k] * z[k] for k in range(3)) for i in range(3)]
+        env_c = self._env_used()
+        self.last_truth = {"true_mm": true, "measured_mm": tuple(meas), "cov_mm2": cov, "environment": env_c}
+        k = LENGTH_PER_MM[self.units[0]]
+        std = [math.sqrt(cov[i][i]) * k for i in range(3)]
+        covar = [cov[0][1] * k * k, cov[0][2] * k * k, cov[1][2] * k * k]
+        return P.encode_meas_result([v * k for v in meas], std, covar, self._env_in_units(),
+                                    extended=self.statistic_mode == P.SM_EXTENDED)
+
+    def _env_used(self) -> tuple[float, float, float]:
+        return self.manual_env if self.settings[0] == P.WMS_NOT_CONNECTED else self.station_env
+
+    def _env_in_units(self) -> tuple[float, float, float]:
+        t_c, p_mbar, h = self._env_used()
+        t = t_c * 1.8 + 32.0 if self.units[2] == 1 else t_c
+        return (t, p_mbar * PRESSURE_PER_MBAR[self.units[3]], h)
+
+    def _temp_to_c(self, value: float) -> float:
+        return (value - 32.0) / 1.8 if self.units[2] == 1 else value
+
+
+class EmsconEmulator:
+    """The device served over TCP on 127.0.0.1 by one background thread; a context manager.
+
+    ``port=0`` picks a free port (``.port``; ``.url`` is the driver URL). ``connections`` and ``packets_sent`` count
+    accepted clients and packets sent. Keyword arguments go to ``EmsconDevice``.
+    """
+
+    def __init__(self, position_source: PositionSource | None = None, port: int = 0, **device_options) -> None:
+        self.device = EmsconDevice(position_source, **device_options)
+        self._requested_port = port
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._listener: socket.socket | None = None
+        self.port = 0
+        self.connections = 0
+        self.packets_sent = 0
+
+    @property
+    def url(self) -> str:
+        return f"emscon://{HOST}:{self.port}"
+
+    def inject(self, *names: str) -> None:
+        self.device.inject(*names)
+
+    def start(self) -> "EmsconEmulator":
+        if self._thread is not None:
+            return self
+        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((HOST, self._requested_port))
+        listener.listen(1)
+        self._listener, self.port = listener, listener.getsockname()[1]
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name=f"emscon-emulator-{self.port}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 3.0) -> None:
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout_s)
+            if thread.is_alive():
+                raise RuntimeError(f"emScon emulator thread did not stop within {timeout_s} s")
+
+    def __enter__(self) -> "EmsconEmulator":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _serve(self) -> None:
+        listener = self._listener
+        try:
+            while not self._stop.is_set():
+                if select.select([listener], [], [], POLL_S)[0]:
+                    conn, _ = listener.accept()
+                    self.connections += 1
+                    with conn:
+                        self._serve_client(conn)
+        finally:
+            listener.close()
+
+    def _serve_client(self, conn: socket.socket) -> None:
+        conn.settimeout(2.0)
+        reader = P.PacketReader()
+        while not self._stop.is_set():
+            if not select.select([conn], [], [], POLL_S)[0]:
+                continue
+            try:
+                data = conn.recv(65536)
+            except OSError:
+                return
+            if not data:
+                return
+            reader.feed(data)
+            try:
+                while (packet := reader.next_packet()) is not None:
+                    if not self._answer(conn, packet):
+                        return
+            except P.FramingError:
+                return                               # a client out of step: drop it, as a server would
+
+    def _answer(self, conn: socket.socket, packet: bytes) -> bool:
+        for out in self.device.respond(packet):
+            if out.disconnect:
+                return False
+            if out.delay_s and self._stop.wait(out.delay_s):
+                return False
+            try:
+                conn.sendall(out.data)
+                self.packets_sent += 1
+            except OSError:
+                return False
+        return True
+
+
+# ------------------------------------------------------------------------------------------------- command line
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m drivers.emulators.emscon_server",
+                                description="Leica emScon laser-tracker emulator on 127.0.0.1.")
+    p.add_argument("--port", type=int, default=P.DEFAULT_PORT, help="TCP port (0: any free port; default 700)")
+    p.add_argument("--print-port", action="store_true", help="print the bound port as the first stdout line")
+    p.add_argument("--cell", help="campaign config: measure its simulated cell (mock world) instead of a fixed point")
+    p.add_argument("--robot-url", help="with --cell: follow this robot's read-back joints (a driver URL)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--initialised", action="store_true", help="start initialised (default: Initialize needed)")
+    p.add_argument("--meas-time-scale", type=float, default=0.0,
+                   help="real seconds per second of the configured measurement time (0: answer at once)")
+    p.add_argument("--late-s", type=float, default=1.0, help="delay of a late result (s)")
+    p.add_argument("--faults", default="", help="per-measurement probabilities, e.g. beam_break=0.05,garbage=0.01")
+    p.add_argument("--ignore-stdin", action="store_true", help="keep serving when stdin is closed")
+    return p
+
+
+def _fault_probabilities(text: str) -> dict[str, float]:
+    out = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        name, _, value = item.partition("=")
+        out[name] = float(value)
+        if name not in FAULTS or not 0.0 <= out[name] <= 1.0:
+            raise SystemExit(f"--faults: {item!r}: expected NAME=P with NAME in {', '.join(FAULTS)} and P in [0, 1]")
+    return out
+
+
+def cell_position_source(config_path: str, robot_url: str | None = None) -> tuple[PositionSource, Callable[[], None]]:
+    """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
+    function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
+    released by the close function), else it stays at the plan's q_ref."""
+    from campaign.config import load_config
+    from campaign.pipeline import mock_world
+    from drivers.mock import MockTracker
+    from drivers.registry import open_robot
+
+    cfg = load_config(config_path)
+    world = mock_world(cfg)
+    world.faults = {}
+    robot = None
+    if robot_url:
+        robot = open_robot(robot_url, cfg.robot.options, n_joints=len(cfg.robot.joints))
+        robot.connect()
+    follower = MockTracker(world, "mock://tracker", robot)
+
+    def position() -> tuple[float, float, float]:
+        if follower.robot is not None:
+            follower._follow()
+        return tuple(float(v) for v in world.p_smr_tracker_mm + world.point_error_mm)
+    return position, (robot.close if robot is not None else (lambda: None))
+
+
+def _watch_stdin(done: threading.Event) -> None:
+    try:
+        while os.read(sys.stdin.fileno(), 4096):
+            pass
+    except (OSError, ValueError):
+        pass
+    done.set()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    source, release = cell_position_source(args.cell, args.robot_url) if args.cell else (None, lambda: None)
+    done = threading.Event()
+    with EmsconEmulator(source, port=args.port, seed=args.seed, initialised=args.initialised,
+                        meas_time_scale=args.meas_time_scale, late_s=args.late_s,
+                        fault_probabilities=_fault_probabilities(args.faults)) as emulator:
+        if args.print_port:
+            print(emulator.port, flush=True)
+        print(f"emScon emulator on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
+        if not args.ignore_stdin:
+            threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
+        signal.signal(signal.SIGTERM, lambda *_: done.set())
+        try:
+            while not done.wait(0.2):
+                pass
+        except KeyboardInterrupt:
+            pass
+        finally:
+            release()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
