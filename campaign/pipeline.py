@@ -58,7 +58,8 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
-            runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
+            runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record["q_read_deg"],
+                                                                                          record["p_tracker_mm"]),
                                                      advance())
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
