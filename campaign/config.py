@@ -68,7 +68,10 @@ TRACKER_SCHEMES = frozenset(
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "gpr", "none")
+RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
+OUTLIER_SCREENS = ("local", "none")
+MODEL_EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
+                      "axis_coupling")
 JOINT_SETS = ("auto", "commanded", "readback")
 PLAN_ORDERS = ("serpentine", "random")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
@@ -322,9 +325,17 @@ class PlanConfig:
 class CalibrationConfig:
     """Identification settings (the whole section is optional).
 
-    Defaults: ``method`` robust_ridge, ``weights`` igg3, ``k0`` 1.5 < ``k1`` 2.5
+    Defaults: ``method`` lm, ``weights`` igg3 (robust_ridge only), ``k0`` 1.5 < ``k1`` 2.5
     (IGG-III thresholds, in units of sigma), ``ridge_mu`` 1e-6 (>= 0),
-    ``residual`` idw, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1).
+    ``residual`` auto, ``idw_power`` 2.0 (> 0), ``idw_k_nearest`` 8 (int >= 1),
+    ``outliers`` local, ``effects`` auto, ``cv_folds`` 5 (int >= 2).
+
+    ``outliers``: ``local`` excludes a point only as a measurement fault (residual isolated against its
+    neighbours in joint space and in the workspace, tracker statistics, repeats); ``none`` keeps all.
+    ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
+    ``none``, or a list of effect specs (``name`` in ``MODEL_EFFECT_NAMES``, optional ``params`` with the
+    factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
+    ``residual`` ``auto`` chooses none / idw / gpr by k-fold CV and keeps a layer only on a significant gain.
 
     ``residual`` (one of ``RESIDUAL_MODELS``) is the layer fitted on top of
     the kinematic model: ``idw`` inverse distance weighting over positions
@@ -351,6 +362,9 @@ class CalibrationConfig:
     idw_power: float
     idw_k_nearest: int
     joints: str = "auto"
+    outliers: str = "local"
+    effects: str | tuple["EffectSpec", ...] = "auto"
+    cv_folds: int = 5
 
 
 @dataclass(frozen=True, slots=True)
@@ -1031,16 +1045,35 @@ def _calibration(r: _Reader) -> CalibrationConfig:
     if k1 <= k0:
         raise r.error("k1", f"expected a number > k0 = {_fmt(k0)}, got {_fmt(k1)}")
     return CalibrationConfig(
-        method=r.choice("method", CALIBRATION_METHODS, "robust_ridge"),
+        method=r.choice("method", CALIBRATION_METHODS, "lm"),
         weights=r.choice("weights", WEIGHT_FUNCTIONS, "igg3"),
         k0=k0,
         k1=k1,
         ridge_mu=r.number("ridge_mu", 1e-6, lo=0.0),
-        residual=r.choice("residual", RESIDUAL_MODELS, "idw"),
+        residual=r.choice("residual", RESIDUAL_MODELS, "auto"),
         idw_power=r.number("idw_power", 2.0, positive=True),
         idw_k_nearest=r.integer("idw_k_nearest", 8, lo=1),
         joints=r.choice("joints", JOINT_SETS, "auto"),
+        outliers=r.choice("outliers", OUTLIER_SCREENS, "local"),
+        effects=_model_effects(r),
+        cv_folds=r.integer("cv_folds", 5, lo=2, hi=20),
     )
+
+
+def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
+    """``calibration.effects``: ``auto`` | ``none`` | a list of effect specs of the robot model."""
+    value = r.data.get("effects", "auto")
+    if value is None or isinstance(value, str):
+        return r.choice("effects", ("auto", "none"), "auto")
+    specs = _effects(r)
+    where = r.child_list("effects")
+    for i, spec in enumerate(specs):
+        if spec.name not in MODEL_EFFECT_NAMES:
+            raise ConfigError(r.file, where.key_path(i) + ".name", f"effect {spec.name!r} is not a robot effect "
+                              f"(expected one of: {', '.join(MODEL_EFFECT_NAMES)})")
+        if spec.scale != 1.0:
+            raise ConfigError(r.file, where.key_path(i) + ".scale", "scale applies to simulated effects only")
+    return specs
 
 
 def _correction(r: _Reader) -> CorrectionConfig:

@@ -97,7 +97,7 @@ def _is_float(x: str) -> bool:
 def model_pose_fn(model: CalibratedModel, T_flange_tool: np.ndarray):
     """AP(q): calibrated tool pose in the base frame (kinematic layer + the residual layer's position)."""
     def ap(q):
-        T = fk(model.kinematics, q) @ T_flange_tool
+        T = model.flange_pose(q) @ T_flange_tool
         if model.residual is not None:
             T[:, :3, 3] += model.residual_base(q, T[:, :3, 3])
         return T

@@ -1,24 +1,30 @@
 """Calibrate and evaluate a dataset (live run or interchange CSV): seed 000's two stages, judged on the test set.
 
 Stages (seed 000 Table 3): ``nominal`` (nominal model, closed-form registration on the calibration points),
-``kinematic`` (registration + identification) and ``compensated`` (kinematic + the residual layer of
-``calibration.residual``: IDW, or GPR of seed 003, whose predictive standard deviation per test point is
-reported as ``stages.compensated.test_pred_std_mm``).
+``kinematic`` (registration + geometric identification after the measurement-fault screen, ``geometric_fit``),
+``elastic`` (geometry + the physical effects taken, when any: ``calibration.effects``) and ``compensated`` (the
+final model: + the residual layer that k-fold CV supports under ``calibration.residual: auto``, or the configured
+IDW / GPR layer; equal to the previous stage without a layer). A GPR layer's predictive standard deviation per
+test point is reported as ``stages.compensated.test_pred_std_mm``.
 Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated poses) give the noise floor.
 """
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from robocal.frames import transform_points
-from robocal.gp import GPRResidual, fit_gpr_layer
+from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
+from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import smr_tracker
-from robocal.model import CalibratedModel, fit_idw_layer
+from robocal.kinematics import ParamLayout, smr_tracker
+from robocal.layers import LayerChoice, choose_layer, fit_layer
+from robocal.model import CalibratedModel
+from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
+from robocal.screen import ScreenResult, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
@@ -65,21 +71,22 @@ def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
 
 
-def _predict(kin_or_model, q, payload=None) -> np.ndarray:
-    """Predicted SMR positions (N, 3) mm in the tracker frame of a kinematic model or a calibrated model."""
+def _predict(kin_or_model, q, payload=None, meta=None) -> np.ndarray:
+    """Predicted SMR positions (N, 3) mm in the tracker frame of a kinematic model or a calibrated model
+    (``meta``: per-row metadata of its physical effects)."""
     if isinstance(kin_or_model, CalibratedModel) and getattr(kin_or_model.residual, "uses_payload", False):
-        p_kin = kin_or_model.kinematic_smr_base(q)                  # per-row payloads as GPR inputs
+        p_kin = kin_or_model.kinematic_smr_base(q, meta)           # per-row payloads as GPR inputs
         return transform_points(kin_or_model.kinematics.T_tracker_base,
                                 p_kin + kin_or_model.residual.predict(q, p_kin, payload))
     if isinstance(kin_or_model, CalibratedModel):
-        return kin_or_model.smr_tracker(q)
+        return kin_or_model.smr_tracker(q, meta)
     return smr_tracker(kin_or_model, q)
 
 
-def _stage(kin_or_model, q, p, payload=None) -> dict:
+def _stage(kin_or_model, q, p, payload=None, meta=None) -> dict:
     if len(q) == 0:
         return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
-    return error_stats(p - _predict(kin_or_model, q, payload)).to_dict()
+    return error_stats(p - _predict(kin_or_model, q, payload, meta)).to_dict()
 
 
 def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
@@ -98,38 +105,183 @@ def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
             "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}
 
 
+def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
+    """The single place where a dataset is prepared before any fit: joint-set choice (commanded / read-back)
+    and tracker-drift compensation from the reference nests (campaign/prepare.py)."""
+    return prepare(ds, cfg).dataset
+
+
+def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray) -> dict:
+    """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
+    signs of every joint (from the full measurement order), time since the start (s)."""
+    n = len(rows)
+    pay = ds.payload_kg[rows] if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
+    approach = ds.approach_sign()[rows] if len(ds) > 1 else None
+    return {"payload_kg": np.asarray(pay, float), "approach": approach,
+            "t_s": None if ds.t_s is None else np.asarray(ds.t_s[rows], float)}
+
+
+@dataclass(frozen=True, eq=False)
+class GeometricFit:
+    """The geometric-only calibration of the calib rows ``rows`` (indices into the dataset): ``result`` with
+    ``point_weights`` 0 on excluded points and residuals of every calib row; ``screen`` the fault screening."""
+    result: CalibrationResult
+    screen: ScreenResult | None
+    rows: np.ndarray
+
+    @property
+    def keep(self) -> np.ndarray:
+        return np.asarray(self.result.point_weights) > 0
+
+
+def _calibrate(kin0, q, p, cov, options, source):
+    try:
+        return calibrate(kin0, q, p, cov, options)
+    except IdentificationError as exc:
+        raise DataError(source, f"calibration failed: {exc}") from None
+
+
+def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
+    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
+    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
+    kin0 = nominal_kinematics(cfg)
+    rows = np.flatnonzero(ds.mask("calib"))
+    q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
+    cov = weights_covariance(cfg, ds)[0][rows]
+    options = calibration_options(cfg)
+    result = _calibrate(kin0, q, p, cov, options, ds.source)
+    keep = np.ones(len(rows), bool)
+    sc = None
+    if cfg.calibration.outliers == "local":
+        sigma = None if ds.sigma_mm is None else ds.sigma_mm[rows]
+        groups = repeat_groups(ds.q_deg[rows])
+        for _ in range(4):
+            sc = screen(q, p, p - smr_tracker(result.kinematics, q), sigma, groups)
+            new_keep = sc.keep
+            if np.array_equal(new_keep, keep):
+                break
+            keep = new_keep
+            if keep.sum() < 10:
+                raise DataError(ds.source, "the fault screen left fewer than 10 calibration points")
+            result = _calibrate(kin0, q[keep], p[keep], cov[keep], options, ds.source)
+    w = np.zeros(len(rows))
+    w[keep] = result.point_weights
+    result = replace(result, point_weights=w, residual_tracker_mm=p - smr_tracker(result.kinematics, q))
+    return GeometricFit(result, sc, rows)
+
+
+def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
+    """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
+    measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
+    _check_dataset(ds, cfg)
+    return _geometric(_prepare(ds, cfg), cfg).result
+
+
+def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
+    """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
+    spec = cfg.calibration.effects
+    if spec == "none":
+        return [], None
+    if spec != "auto":
+        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
+                                           for k, v in s.params.items())) for s in spec], None
+    kin = geo.result.kinematics
+    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
+    sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
+    return list(sel.taken), sel
+
+
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     _check_dataset(ds, cfg)
     kin0 = nominal_kinematics(cfg)
+    geo = _geometric(ds, cfg)
+    result = geo.result
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
-    cov, cov_source = weights_covariance(cfg, ds)
-    try:
-        result = calibrate(kin0, q[cal], p[cal], cov[cal], calibration_options(cfg))
-    except IdentificationError as exc:
-        raise DataError(ds.source, f"calibration failed: {exc}") from None
-    nominal = register(kin0, q[cal], p[cal])
-    payload = _varying_payload(ds, cal) if cfg.calibration.residual == "gpr" else None
-    pay_cal = None if payload is None else payload[cal]
-    layer = fit_residual_layer(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal)
-    model = CalibratedModel(result.kinematics, layer)
+    kept_rows = geo.rows[geo.keep]
+    qk, pk = q[kept_rows], p[kept_rows]
+    cov_all, cov_source = weights_covariance(cfg, ds)
+    covk = cov_all[kept_rows]
+    meta_all = _effect_meta(ds, cfg, np.arange(len(ds)))
+    sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
+    meta_k = sub(meta_all, kept_rows)
+    payload_model = float(cfg.tool.payload_kg or 0.0)
+    choices, selection = _model_effects(ds, cfg, geo, qk, pk, covk, meta_k)
+    model_geo = CalibratedModel(result.kinematics, None, None, (), payload_model)
+    model_el, elastic = model_geo, None
+    final_screen = geo.screen
+    if choices:
+        cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified])
+
+        def fit_el(rows):
+            try:
+                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows],
+                                         sub(meta_all, rows), choices, calibration_options(cfg))
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
+        elastic = fit_el(kept_rows)
+        model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
+        if cfg.calibration.outliers == "local":
+            # screen again against the model with its effects: structure the geometry alone could not fit is no
+            # reason to exclude a point (and a fault hidden by that structure shows now)
+            rc = geo.rows
+            final_screen = screen(q[rc], p[rc], p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)),
+                                  None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
+            robust_rejected = ~geo.keep
+            robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
+            new_keep = final_screen.keep & ~robust_rejected
+            if new_keep.sum() < 10:
+                final_screen = geo.screen
+            elif not np.array_equal(new_keep, geo.keep):
+                kept_rows = rc[new_keep]
+                qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
+                elastic = fit_el(kept_rows)
+                model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
+    payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
+    pay_k = None if payload is None else payload[kept_rows]
+    c = cfg.calibration
+    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest)
+    if c.residual == "auto":
+        choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
+    elif c.residual == "none":
+        choice = LayerChoice("none", None, {}, c.cv_folds)
+    else:
+        choice = choose_layer(model_el, qk, pk, candidates=(c.residual,), folds=c.cv_folds, **lay_kw)
+        choice = LayerChoice(c.residual, fit_layer(c.residual, model_el, qk, pk, **lay_kw), choice.cv, c.cv_folds)
+    layer = choice.layer
+    if isinstance(layer, GPRResidual) and layer.uses_payload:
+        layer = layer.with_payload(cfg.tool.payload_kg)
+    model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
+                            model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stages = {name: {"test": _stage(m, q[test], p[test], rows(test)), "calib": _stage(m, q[cal], p[cal], rows(cal))}
-              for name, m in (("nominal", nominal), ("kinematic", result.kinematics), ("compensated", model))}
+    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    if elastic is not None:
+        stage_models.append(("elastic", model_el))
+    stage_models.append(("compensated", model))
+    stages = {name: {"test": _stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
+                     "calib": _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal))}
+              for name, m in stage_models}
     if isinstance(model.residual, GPRResidual):
         stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
                                                               np.array(ds.point_id)[test].tolist())
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     eval_rows = test if test.any() else cal
     specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
-    calib_ids = np.array(ds.point_id)[cal]
+    calib_ids = np.array(ds.point_id)[geo.rows]
+    excluded = [] if final_screen is None else [
+        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
+    rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
+                          key=calib_ids.tolist().index)
+    listed = {e["point_id"] for e in excluded}
+    excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+                 for pid in rejected_ids if pid not in listed]
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
-              "rejected": int(np.sum(result.point_weights == 0))},
+              "rejected": len(rejected_ids)},
         "stages": stages,
         "noise_floor_mm": repeats if repeats is not None else specs,
         "noise_floor_source": "repeats" if repeats is not None else "specs",
@@ -137,49 +289,90 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
         "condition_number": result.condition_number, "observability": result.observability,
         "sigma0": result.sigma0, "iterations": result.iterations, "converged": result.converged,
-        "rejected_points": calib_ids[result.point_weights == 0].tolist(),
-        "T_tracker_base": result.kinematics.T_tracker_base.tolist(),
-        "method": {"estimator": cfg.calibration.method, "weights": cfg.calibration.weights,
-                   "residual": cfg.calibration.residual, "measurement_covariance": cov_source},
-        "residual_cv": residual_cv(cfg, result.kinematics, q[cal], p[cal], result.point_weights, pay_cal),
+        "rejected_points": rejected_ids,
+        "excluded_points": excluded,
+        "structure_note": None if final_screen is None else final_screen.structure_note(),
+        "T_tracker_base": model.kinematics.T_tracker_base.tolist(),
+        "method": {"estimator": c.method, "weights": c.weights if c.method == "robust_ridge" else None,
+                   "outliers": c.outliers, "effects": c.effects if isinstance(c.effects, str) else "list",
+                   "residual": choice.kind, "residual_config": c.residual, "measurement_covariance": cov_source},
+        "effects": _effects_report(selection, elastic),
+        "residual_choice": choice.to_dict(),
+        "residual_cv": _residual_cv_summary(choice),
         "preparation": prep.report,
     }
-    model = CalibratedModel(model.kinematics, model.residual, {"config": cfg.name, "source": ds.source})
+    if ds.p2_tracker_mm is not None:
+        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        if "p_flange_smr_mm" in report["multi_smr"]:
+            model = replace(model, meta={**(model.meta or {}),
+                                         "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
     return Processed(report, model, result)
 
 
+def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
+    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
+    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
+    clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
+    offsets0 = cfg.tool.smrs_mm
+    if len(offsets0) < len(clouds):
+        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
+                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
+    P = np.stack(clouds)
+    q = np.radians(ds.q_deg)
+    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
+    try:
+        res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
+                                  calibration_options(cfg))
+    except (IdentificationError, np.linalg.LinAlgError) as exc:
+        raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
+    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
+           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
+           "test": {}}
+    if test.any():
+        pred = res.predict_tracker(q[test])
+        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
+        if len(clouds) == 3:
+            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
+            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
+                                               "max": float(a.max()), "n": int(len(a))}
+    return out
+
+
+def _effects_report(selection, elastic) -> dict:
+    out = {"selection": None if selection is None else selection.to_dict(), "fitted": [], "unidentifiable": []}
+    if elastic is not None:
+        out["fitted"] = [fe.to_dict() for fe in elastic.effects]
+        out["unidentifiable"] = [u.to_dict() for u in elastic.unidentifiable]
+        out["sigma0"] = elastic.sigma0
+        out["notes"] = [f"{fe.choice.label}.{n}: negative compliance {v:.3g} rad/(N*m) ({-v / s:.1f} std below zero): "
+                        "not physical; check the link masses, payload and joint directions"
+                        for fe in elastic.effects if fe.unit == "rad/(N*m)"
+                        for n, v, s in zip(fe.param_names, fe.values, fe.std) if np.isfinite(s) and v < -3 * s]
+        out["condition_number"] = elastic.condition_number
+    return out
+
+
+def _residual_cv_summary(choice: LayerChoice) -> dict | None:
+    """The CV figure of the chosen (else the best) candidate layer against none (earlier report key)."""
+    cands = {k: v for k, v in choice.cv.items() if k != "none"}
+    if not cands:
+        return None
+    kind = choice.kind if choice.kind in cands else min(cands, key=lambda k: cands[k]["cv_rms_mm"])
+    a, b = choice.cv["none"]["cv_rms_mm"], cands[kind]["cv_rms_mm"]
+    return {"folds": choice.folds, "layer": kind, "rms_without_mm": a, "rms_with_mm": b, "gain": 1.0 - b / a,
+            "t": cands[kind]["t"], "significant": cands[kind]["significant"]}
+
+
 def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
-    """The configured residual layer (IDW or GPR) fitted on calibration points, or None."""
+    """The configured residual layer (IDW or GPR) fitted on calibration points of a geometric model, or None."""
     c = cfg.calibration
-    if c.residual == "idw":
-        return fit_idw_layer(kin, q, p, c.idw_power, c.idw_k_nearest, weights)
-    if c.residual == "gpr":
-        layer = fit_gpr_layer(kin, q, p, weights, payload)
-        return layer.with_payload(cfg.tool.payload_kg) if layer.uses_payload else layer
-    return None
-
-
-def residual_cv(cfg: CampaignConfig, kin, q, p, weights, payload=None, folds: int = 5, seed: int = 0) -> dict | None:
-    """Does the residual layer predict anything? k-fold cross-validation over the calibration points (kinematics
-    fixed): RMS of the held-out residual without and with the layer. A negative gain means the layer only
-    interpolates noise (e.g. purely geometric errors, or a pose set too sparse for the structure)."""
-    if cfg.calibration.residual == "none":
+    keep = np.ones(len(q), bool) if weights is None else np.asarray(weights) > 0
+    if c.residual not in ("idw", "gpr"):
         return None
-    idx = np.flatnonzero(np.asarray(weights) > 0)
-    if len(idx) < 4 * folds:
-        return None
-    fold = np.random.default_rng(seed).permutation(len(idx)) % folds
-    r0 = p - smr_tracker(kin, q)
-    without, with_ = [], []
-    for k in range(folds):
-        tr, te = idx[fold != k], idx[fold == k]
-        pay = (lambda rows: None) if payload is None else (lambda rows: payload[rows])  # noqa: E731
-        layer = fit_residual_layer(cfg, kin, q[tr], p[tr], None, pay(tr))
-        without.append(r0[te])
-        with_.append(p[te] - _predict(CalibratedModel(kin, layer), q[te], pay(te)))
-    a = error_stats(np.concatenate(without)).rms_mm
-    b = error_stats(np.concatenate(with_)).rms_mm
-    return {"folds": folds, "rms_without_mm": a, "rms_with_mm": b, "gain": 1.0 - b / a}
+    model = CalibratedModel(kin)
+    layer = fit_layer(c.residual, model, q[keep], p[keep], None, None if payload is None else payload[keep],
+                      c.idw_power, c.idw_k_nearest)
+    return layer.with_payload(cfg.tool.payload_kg) if getattr(layer, "uses_payload", False) else layer
 
 
 def _parameters(result: CalibrationResult) -> list[dict]:

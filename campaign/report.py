@@ -7,7 +7,7 @@ from rich.table import Table
 from .plan import Plan
 
 STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
-                ("compensated", "kinematic + residual compensation"))
+                ("elastic", "kinematic + physical effects"), ("compensated", "final model (+ residual layer, if any)"))
 
 
 def _mm(v) -> str:
@@ -21,12 +21,15 @@ def render_stages(console: Console, report: dict) -> None:
         t.add_column(col, justify="left" if col == "stage" else "right")
     floor = report["noise_floor_mm"]
     for key, label in STAGE_LABELS:
+        if key not in report["stages"]:
+            continue
         s = report["stages"][key]["test"]
         ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
         t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
     console.print(t)
+    render_choices(console, report)
     cv = report.get("residual_cv")
-    if cv:
+    if cv and "residual_choice" not in report:
         verdict = ("it predicts structure" if cv["gain"] > 0.02 else
                    "no structured residual above the noise: the layer mostly interpolates noise")
         console.print(f"residual layer ({report['method']['residual']}): {cv['folds']}-fold CV on the calibration "
@@ -49,6 +52,47 @@ def render_preparation(console: Console, prep: dict | None) -> None:
         console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
                       f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
                       f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
+
+
+def render_choices(console: Console, report: dict) -> None:
+    """Which effects and which residual layer the data supported (CV figures), and the excluded points."""
+    sel = (report.get("effects") or {}).get("selection")
+    if sel:
+        tried = {}
+        for t in sel["trials"]:
+            tried.setdefault(t["effect"], t)
+            if t["taken"]:
+                tried[t["effect"]] = t
+        figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
+        console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
+                      f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
+    for fe in (report.get("effects") or {}).get("fitted", []):
+        vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
+                                                                 if "stiffness_Nm_per_rad" in p else "")
+                         for n, p in fe["params"].items())
+        console.print(f"  {fe['name']}: {vals}")
+    for note in (report.get("effects") or {}).get("notes", []):
+        console.print(f"  note: {note}")
+    ch = report.get("residual_choice")
+    if ch and ch.get("candidates"):
+        figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
+                         for k, v in ch["candidates"].items())
+        console.print(f"residual layer by {ch['folds']}-fold CV on the calibration points (RMS mm): {figs} -> "
+                      f"{ch['chosen']}")
+    for e in report.get("excluded_points") or []:
+        console.print(f"excluded {e['point_id']}: {e['reason']}")
+    if report.get("structure_note"):
+        console.print(report["structure_note"])
+    multi = report.get("multi_smr")
+    if multi and "skipped" not in multi:
+        figs = ", ".join(f"{k} RMS {v['rms_mm']:.4f}" for k, v in multi["test"].items())
+        console.print(f"{multi['n_smr']}-SMR calibration (one offset per SMR), test set: {figs} mm")
+        o = multi.get("orientation_error_arcsec")
+        if o:
+            console.print(f"flange orientation error on the test set: mean {o['mean']:.1f}, RMS {o['rms']:.1f}, "
+                          f"max {o['max']:.1f} arcsec")
+    elif multi:
+        console.print(f"multi-SMR calibration skipped: {multi['skipped']}")
 
 
 def render_parameters(console: Console, report: dict) -> None:

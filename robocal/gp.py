@@ -77,6 +77,53 @@ def neg_log_marginal_likelihood(log_theta: np.ndarray, X: np.ndarray, y: np.ndar
     return float(L), g
 
 
+def nlml_shared(log_theta: np.ndarray, X: np.ndarray, Y: np.ndarray, jitter: float = 0.0):
+    """Sum over the k columns of Y (m, k) of the negative log marginal likelihood with one shared set of
+    hyperparameters (the columns standardised by the caller), and its gradient: one Cholesky per evaluation
+    for all outputs. Same formulas as ``neg_log_marginal_likelihood`` with W = A A^T - k H^-1, A = H^-1 Y."""
+    sf, sn, lam = unpack(log_theta)
+    m, k = Y.shape
+    K = se_ard(X, X, lam, sf)
+    H = K + (sn**2 + jitter) * np.eye(m)
+    try:
+        c = cho_factor(H, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.inf, np.zeros_like(log_theta)
+    A = cho_solve(c, Y, check_finite=False)
+    L = 0.5 * np.sum(Y * A) + k * np.sum(np.log(np.diag(c[0]))) + 0.5 * m * k * LOG_2PI
+    W = A @ A.T - k * cho_solve(c, np.eye(m), check_finite=False)
+    M = W * K
+    r = M.sum(axis=1)
+    quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)
+    g = np.empty(len(log_theta))
+    g[0] = -np.sum(M)
+    g[1] = -sn**2 * np.trace(W)
+    g[2:] = -quad / lam**2
+    return float(L), g
+
+
+def fit_shared_hyperparameters(X: np.ndarray, Y: np.ndarray, *, log_theta0: np.ndarray | None = None,
+                               n_restarts: int = 0, seed: int = 0, max_iter: int = 150) -> np.ndarray:
+    """Shared log-hyperparameters (log sigma_f, log sigma_n, log lambda) of standardised outputs Y (m, k),
+    by L-BFGS-B on ``nlml_shared`` from a heuristic (or given) start plus ``n_restarts`` seeded starts."""
+    Xc = X - X.mean(axis=0)
+    s_x = np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
+    start = np.log(np.concatenate([[1.0, 0.3], s_x])) if log_theta0 is None else np.asarray(log_theta0, float)
+    bounds = [(np.log(1e-3), np.log(1e2)), (np.log(1e-4), np.log(10.0))]
+    bounds += [(np.log(1e-2 * s), np.log(1e3 * s)) for s in s_x]
+    lo, hi = np.array(bounds).T
+    rng = np.random.default_rng(seed)
+    starts = [np.clip(start, lo, hi)] + [np.clip(start + rng.normal(0.0, 1.0, start.shape), lo, hi)
+                                         for _ in range(n_restarts)]
+    best = None
+    for t0 in starts:
+        res = minimize(nlml_shared, t0, args=(Xc, Y, JITTER), jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": max_iter})
+        if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+            best = res
+    return best.x if best is not None else starts[0]
+
+
 # ---------------------------------------------------------------- one-output GP
 @dataclass(frozen=True, eq=False)
 class GaussianProcess:
@@ -104,6 +151,23 @@ class GaussianProcess:
         L = np.linalg.cholesky(H)
         put("_chol", L)
         put("_alpha", cho_solve((L, True), self.y - self.y_mean, check_finite=False))
+
+    @classmethod
+    def from_factor(cls, X, y, sigma_f, sigma_n, length, y_mean, x_centre, chol) -> "GaussianProcess":
+        """A GP whose Cholesky factor of K + (sigma_n^2 + jitter) I is already known (shared by outputs that differ
+        only by scale): no O(m^3) work here."""
+        gp = object.__new__(cls)
+        put = lambda k, v: object.__setattr__(gp, k, v)  # noqa: E731
+        put("X", np.atleast_2d(np.asarray(X, float)))
+        put("y", np.asarray(y, float).ravel())
+        put("sigma_f", float(sigma_f))
+        put("sigma_n", float(sigma_n))
+        put("length", np.asarray(length, float).ravel())
+        put("y_mean", float(y_mean))
+        put("x_centre", np.asarray(x_centre, float))
+        put("_chol", chol)
+        put("_alpha", cho_solve((chol, True), gp.y - gp.y_mean, check_finite=False))
+        return gp
 
     def _jitter(self) -> float:
         return JITTER * max(float(np.var(self.y)), 1e-30)
@@ -147,6 +211,30 @@ class GaussianProcess:
         sf, sn, lam = unpack(best.x if best is not None else starts[0])
         return cls(X, y, sf, sn, lam, y_mean, x_centre)
 
+    @classmethod
+    def fit_subset(cls, X: np.ndarray, y: np.ndarray, *, hyper_points: int = 250, n_restarts: int = 1, seed: int = 0,
+                   max_iter: int = 150, log_theta0: np.ndarray | None = None) -> "GaussianProcess":
+        """Fast fit for many points: hyperparameters by marginal likelihood on a seeded random subset of at most
+        ``hyper_points`` points (O(h^3) per evaluation instead of O(m^3)), then the exact GP on all m points with
+        those hyperparameters (one O(m^3) Cholesky)."""
+        X = np.atleast_2d(np.asarray(X, float))
+        y = np.asarray(y, float).ravel()
+        if len(y) <= hyper_points:
+            return cls.fit(X, y, n_restarts=n_restarts, seed=seed, max_iter=max_iter, log_theta0=log_theta0)
+        sub = np.sort(np.random.default_rng(seed).choice(len(y), hyper_points, replace=False))
+        h = cls.fit(X[sub], y[sub], n_restarts=n_restarts, seed=seed, max_iter=max_iter, log_theta0=log_theta0)
+        return cls(X, y, h.sigma_f, h.sigma_n, h.length, float(y.mean()), X.mean(axis=0))
+
+    def kfold_errors(self, fold: np.ndarray) -> np.ndarray:
+        """Held-out prediction errors y - mean (m,) of every training point when its fold is left out, with
+        the hyperparameters fixed (closed form: e_I = [H^-1]_II^-1 alpha_I, no refit)."""
+        Hinv = cho_solve((self._chol, True), np.eye(len(self.y)), check_finite=False)
+        e = np.empty(len(self.y))
+        for k in np.unique(fold):
+            idx = np.flatnonzero(fold == k)
+            e[idx] = np.linalg.solve(Hinv[np.ix_(idx, idx)], self._alpha[idx])
+        return e
+
     def predict(self, Xs: np.ndarray, return_var: bool = False, include_noise: bool = True):
         """Predictive mean (N,) (eq. 7) and optionally variance (N,) (eq. 8; without sigma_n^2 if
         ``include_noise`` is False)."""
@@ -180,6 +268,54 @@ class MultiOutputGP:
         Y = np.asarray(Y, float).reshape(len(X), -1)
         return cls(tuple(GaussianProcess.fit(X, Y[:, j], n_restarts=n_restarts, seed=seed + j)
                          for j in range(Y.shape[1])))
+
+    @classmethod
+    def fit_subset(cls, X: np.ndarray, Y: np.ndarray, *, hyper_points: int = 300, n_restarts: int = 1,
+                   seed: int = 0, max_iter: int = 150, log_theta0: np.ndarray | None = None) -> "MultiOutputGP":
+        """Fast fit: every output standardised, one shared set of hyperparameters (length scales and
+        signal-to-noise ratio) by marginal likelihood on a seeded random subset of at most ``hyper_points``
+        points, then the exact GP of every output on all points with sigma_f, sigma_n scaled back by the
+        output's standard deviation. ``log_theta0`` (standardised units) warm-starts the search."""
+        X = np.atleast_2d(np.asarray(X, float))
+        Y = np.asarray(Y, float).reshape(len(X), -1)
+        mu, sd = Y.mean(axis=0), np.maximum(Y.std(axis=0), 1e-12)
+        Z = (Y - mu) / sd
+        sub = np.arange(len(X)) if len(X) <= hyper_points else \
+            np.sort(np.random.default_rng(seed).choice(len(X), hyper_points, replace=False))
+        t = fit_shared_hyperparameters(X[sub], Z[sub], log_theta0=log_theta0, n_restarts=n_restarts, seed=seed,
+                                       max_iter=max_iter)
+        sf, sn, lam = unpack(t)
+        centre = X.mean(axis=0)
+        Xc = X - centre
+        L0 = np.linalg.cholesky(se_ard(Xc, Xc, lam, sf) + (sn**2 + JITTER) * np.eye(len(X)))   # standardised units
+        return cls(tuple(GaussianProcess.from_factor(X, Y[:, j], sf * sd[j], sn * sd[j], lam, float(mu[j]), centre,
+                                                     sd[j] * L0) for j in range(Y.shape[1])))
+
+    @property
+    def shared_log_theta(self) -> np.ndarray:
+        """Standardised shared log-hyperparameters of a ``fit_subset`` model (of the first output)."""
+        g = self.models[0]
+        sd = max(float(g.y.std()), 1e-12)
+        return np.log(np.concatenate([[g.sigma_f / sd, g.sigma_n / sd], g.length]))
+
+    def cv_errors(self, fold: np.ndarray, *, hyper_points: int = 300, max_iter: int = 40, seed: int = 0) -> np.ndarray:
+        """Honest k-fold held-out errors (m, k) of a ``fit_subset`` model: per fold, the shared hyperparameters are
+        re-fitted on the training folds only (warm-started from this model's, one start), then the exact GPs of
+        the training folds predict the held-out fold."""
+        X = self.models[0].X
+        Y = np.stack([g.y for g in self.models], axis=1)
+        err = np.empty_like(Y)
+        for k in np.unique(fold):
+            tr, te = fold != k, fold == k
+            gk = MultiOutputGP.fit_subset(X[tr], Y[tr], hyper_points=hyper_points, n_restarts=0, seed=seed,
+                                          max_iter=max_iter, log_theta0=self.shared_log_theta)
+            err[te] = Y[te] - gk.predict(X[te])
+        return err
+
+    def kfold_errors(self, fold: np.ndarray) -> np.ndarray:
+        """Held-out errors (m, k) of every output with the hyperparameters fixed (``GaussianProcess.kfold_errors``;
+        optimistic when the hyperparameters were fitted on the held-out points too: see ``cv_errors``)."""
+        return np.stack([g.kfold_errors(fold) for g in self.models], axis=1)
 
     def predict(self, Xs: np.ndarray) -> np.ndarray:
         """Predictive means (N, k)."""
@@ -251,7 +387,7 @@ class GPRResidual:
 
 
 def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weights: np.ndarray | None = None,
-                  payload_kg=None, n_restarts: int = 3, seed: int = 0) -> GPRResidual:
+                  payload_kg=None, n_restarts: int = 3, seed: int = 0, fast: bool = False) -> GPRResidual:
     """GPR layer from calibration points (mirror of ``fit_idw_layer``): residuals measured - model rotated
     into the base frame. Points with zero robust weight are left out. ``payload_kg`` (N,) makes the payload
     an input (pass it only when it varies across the points)."""
@@ -261,7 +397,10 @@ def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, 
     R = kin.T_tracker_base[:3, :3]
     p_meas_base = (np.asarray(p_tracker_mm, float)[keep] - kin.T_tracker_base[:3, 3]) @ R
     pay = None if payload_kg is None else np.broadcast_to(np.asarray(payload_kg, float), (len(q_rad),))[keep]
-    gp = MultiOutputGP.fit(gp_inputs(q, pay), p_meas_base - p_kin, n_restarts=n_restarts, seed=seed)
+    if fast:
+        gp = MultiOutputGP.fit_subset(gp_inputs(q, pay), p_meas_base - p_kin, seed=seed)
+    else:
+        gp = MultiOutputGP.fit(gp_inputs(q, pay), p_meas_base - p_kin, n_restarts=n_restarts, seed=seed)
     return GPRResidual(gp, pay is not None, None)
 
 

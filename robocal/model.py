@@ -8,12 +8,13 @@ SMR really is for given joint angles, and is what target correction and evaluati
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from .frames import transform_points
 from .kinematics import Kinematics, fk
+from .elastic import FittedEffect, elastic_flange
 from .gp import GPRResidual
 from .residual import IDWResidual
 
@@ -26,14 +27,29 @@ class CalibratedModel:
     kinematics: Kinematics
     residual: Any = None
     meta: dict | None = None
+    effects: tuple[FittedEffect, ...] = ()     # physical effects of the elasto-geometric model
+    payload_kg: float | None = None            # payload assumed by the effects when a point gives none
 
-    def flange_pose(self, q_rad: np.ndarray) -> np.ndarray:
-        """T_base_flange (N, 4, 4) of the kinematic layer (the residual layer corrects position only)."""
-        return fk(self.kinematics, np.atleast_2d(q_rad))
+    def effect_meta(self, n: int, meta: Mapping | None = None) -> dict:
+        """Per-point metadata of the effects: the given ``meta`` (payload_kg, approach, t_s, temp_c), the
+        model's payload where none is given. Unknown approach or time count as zero (mean backlash, cold)."""
+        out = dict(meta or {})
+        if out.get("payload_kg") is None and self.payload_kg is not None:
+            out["payload_kg"] = np.full(n, float(self.payload_kg))
+        return out
 
-    def kinematic_smr_base(self, q_rad: np.ndarray) -> np.ndarray:
-        """SMR position (N, 3) mm, base frame, kinematic layer only."""
-        return transform_points(self.flange_pose(q_rad), self.kinematics.p_flange_smr_mm)
+    def flange_pose(self, q_rad: np.ndarray, meta: Mapping | None = None) -> np.ndarray:
+        """T_base_flange (N, 4, 4) of the kinematic layer with its physical effects (the residual layer
+        corrects position only)."""
+        q = np.atleast_2d(q_rad)
+        if not self.effects:
+            return fk(self.kinematics, q)
+        pairs = [(fe.choice.build(self.kinematics.n), fe.values) for fe in self.effects]
+        return elastic_flange(self.kinematics, q, self.effect_meta(len(q), meta), pairs)
+
+    def kinematic_smr_base(self, q_rad: np.ndarray, meta: Mapping | None = None) -> np.ndarray:
+        """SMR position (N, 3) mm, base frame, kinematic layer (geometry + effects) only."""
+        return transform_points(self.flange_pose(q_rad, meta), self.kinematics.p_flange_smr_mm)
 
     def residual_base(self, q_rad: np.ndarray, p_kin_base_mm: np.ndarray | None = None) -> np.ndarray:
         """Predicted residual error (N, 3) mm in the base frame (zeros without a residual layer)."""
@@ -43,22 +59,24 @@ class CalibratedModel:
         p = self.kinematic_smr_base(q) if p_kin_base_mm is None else p_kin_base_mm
         return self.residual.predict(q, p)
 
-    def smr_base(self, q_rad: np.ndarray) -> np.ndarray:
+    def smr_base(self, q_rad: np.ndarray, meta: Mapping | None = None) -> np.ndarray:
         """AP(theta): predicted actual SMR position (N, 3) mm in the base frame."""
-        p = self.kinematic_smr_base(q_rad)
+        p = self.kinematic_smr_base(q_rad, meta)
         return p + self.residual_base(q_rad, p)
 
-    def smr_tracker(self, q_rad: np.ndarray) -> np.ndarray:
+    def smr_tracker(self, q_rad: np.ndarray, meta: Mapping | None = None) -> np.ndarray:
         """Predicted actual SMR position (N, 3) mm in the tracker frame."""
-        return transform_points(self.kinematics.T_tracker_base, self.smr_base(q_rad))
+        return transform_points(self.kinematics.T_tracker_base, self.smr_base(q_rad, meta))
 
     def without_residual(self) -> "CalibratedModel":
-        return CalibratedModel(self.kinematics, None, self.meta)
+        return CalibratedModel(self.kinematics, None, self.meta, self.effects, self.payload_kg)
 
     def to_dict(self) -> dict:
         return {"format": FORMAT,
-                "units": {"length": "mm", "angle": "deg (in keys *_deg)", "frames": "T_tracker_base: base in tracker"},
+                "units": {"length": "mm", "angle": "deg (in keys *_deg)", "frames": "T_tracker_base: base in tracker",
+                          "effects": "per parameter (compliance rad/(N*m) with stiffness N*m/rad)"},
                 "kinematics": self.kinematics.to_dict(),
+                "effects": [fe.to_dict() for fe in self.effects], "payload_kg": self.payload_kg,
                 "residual": None if self.residual is None else self.residual.to_dict(),
                 "meta": self.meta or {}}
 
@@ -72,7 +90,10 @@ class CalibratedModel:
             if res.get("kind") not in RESIDUAL_KINDS:
                 raise ValueError(f"unknown residual layer kind {res.get('kind')!r}")
             layer = RESIDUAL_KINDS[res["kind"]].from_dict(res)
-        return cls(Kinematics.from_dict(d["kinematics"]), layer, d.get("meta") or {})
+        kin = Kinematics.from_dict(d["kinematics"])
+        effects = tuple(FittedEffect.from_dict(e, kin.n) for e in d.get("effects") or [])
+        pay = d.get("payload_kg")
+        return cls(kin, layer, d.get("meta") or {}, effects, None if pay is None else float(pay))
 
 
 def fit_idw_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, power: float = 2.0,

@@ -24,3 +24,39 @@ def error_stats(err_mm: np.ndarray) -> ErrorStats:
     if len(e) == 0:
         return ErrorStats(float("nan"), float("nan"), float("nan"), 0)
     return ErrorStats(float(e.max()), float(e.mean()), float(np.sqrt(np.mean(e**2))), int(len(e)))
+
+
+# significance of a cross-validated gain: per-point squared errors of two models on the same held-out points
+SIGNIFICANT_T = 3.0          # one-sided paired t (p ~ 1e-3 under the null)
+SIGNIFICANT_GAIN = 0.02      # and at least 2 % lower CV RMS
+
+
+@dataclass(frozen=True)
+class PairedGain:
+    """CV RMS (mm) of a base and a candidate model on the same held-out points, the relative RMS gain
+    1 - rms_cand / rms_base, and the paired t statistic of the per-point squared-error differences."""
+    rms_base_mm: float
+    rms_cand_mm: float
+    gain: float
+    t: float
+    n: int
+
+    @property
+    def significant(self) -> bool:
+        return self.t > SIGNIFICANT_T and self.gain > SIGNIFICANT_GAIN
+
+    def to_dict(self) -> dict:
+        return {"rms_base_mm": self.rms_base_mm, "rms_cand_mm": self.rms_cand_mm, "gain": self.gain, "t": self.t,
+                "n": self.n, "significant": self.significant}
+
+
+def paired_gain(se_base_mm2: np.ndarray, se_cand_mm2: np.ndarray) -> PairedGain:
+    """Paired test on per-point squared errors (N,) mm^2 of two models at the same held-out points:
+    t = mean(d) / (std(d) / sqrt(N)), d = se_base - se_cand (positive when the candidate is better)."""
+    a, b = np.asarray(se_base_mm2, float), np.asarray(se_cand_mm2, float)
+    d = a - b
+    n = len(d)
+    sd = float(np.std(d, ddof=1)) if n > 1 else 0.0
+    t = float(np.mean(d) / (sd / np.sqrt(n))) if sd > 0 else 0.0
+    ra, rb = float(np.sqrt(np.mean(a))), float(np.sqrt(np.mean(b)))
+    return PairedGain(ra, rb, 1.0 - rb / ra if ra > 0 else 0.0, t, n)

@@ -120,7 +120,9 @@ def test_minimal_config_takes_documented_defaults(tmp_path: Path) -> None:
     assert cfg.tracker.model == "" and cfg.tracker.uncertainty.coverage_k == 2.0
     assert cfg.tracker.measurement.samples == 5 and cfg.tracker.measurement.retries == 3
     assert cfg.plan.check_poses.count == 0 and cfg.plan.test.count == 50
-    assert cfg.calibration.method == "robust_ridge" and cfg.calibration.weights == "igg3"
+    assert cfg.calibration.method == "lm" and cfg.calibration.weights == "igg3"
+    assert cfg.calibration.outliers == "local" and cfg.calibration.effects == "auto"
+    assert cfg.calibration.residual == "auto" and cfg.calibration.cv_folds == 5
     assert cfg.simulation.effects == () and cfg.simulation.faults.beam_break_probability == 0.0
     assert cfg.simulation.p_flange_smr_mm == cfg.tool.p_flange_smr_mm
     assert cfg.simulation.T_tracker_base[0] == (1.0, 0.0, 0.0, -4000.0)
