@@ -4,14 +4,17 @@ Subcommands register themselves with :func:`command`; each handler receives
 the parsed ``argparse.Namespace`` and returns the exit code. Operator-facing
 errors are printed as one red line on stderr, never as a traceback:
 
-* ``ConfigError`` / ``DataError`` -> exit 2 (same as a command-line usage error)
-* any other ``CampaignError`` (e.g. ``RunAborted``) -> exit 1
-* Ctrl-C -> exit 130
+* ``ConfigError`` / ``DataError`` / ``PlausibilityError`` -> exit 2 (same as a command-line usage error)
+* any other ``CampaignError`` (e.g. ``RunAborted``) or ``DriverError`` -> exit 1
+* ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
+* Ctrl-C, SIGTERM, SIGHUP -> exit 130
+* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +22,7 @@ from pathlib import Path
 from rich.console import Console
 
 from campaign.config import load_config
+from campaign.plausibility import forced
 from campaign.errors import CampaignError, ConfigError, DataError
 from drivers.base import DriverConfigError, DriverError
 
@@ -86,6 +90,7 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
     parser.add_argument("--out", metavar="RUN_DIR", type=Path, help="run directory (default: output.dir/NAME-TIMESTAMP)")
     parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
+    _force_argument(parser)
 
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
@@ -95,14 +100,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     out = _stdout()
-    result = run_campaign(cfg, args.out, args.resume, out)
+    with forced(args.force):
+        result = run_campaign(cfg, args.out, args.resume, out)
     o = result.outcome
     if o.exit_status != "success":
-        hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}" if o.exit_status != "abort" else ""
+        hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
         _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
+    print_plausibility(out, result.processed.report.get("plausibility"))
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
     return EXIT_OK
@@ -116,13 +123,13 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
 def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.cell import nominal_kinematics
+    from campaign.eta import estimate_duration_s
     from campaign.plan import build_plan, write_plan_csv
     from campaign.report import render_plan
 
     cfg = load_config(args.config)
     plan = build_plan(cfg, nominal_kinematics(cfg))
-    m = cfg.tracker.measurement
-    render_plan(_stdout(), plan, plan.estimated_duration_s(cfg.robot.max_joint_speed_deg_s, m.settle_s, m.samples))
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, nominal_kinematics(cfg)))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -132,6 +139,7 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", metavar="RUN_DIR_OR_CSV", type=Path, help="a run directory or an interchange CSV")
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise, options)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where report.json and model.json go")
+    _force_argument(parser)
 
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
@@ -142,10 +150,12 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
-    processed = reprocess(args.source, cfg, args.out)
+    with forced(args.force):
+        processed = reprocess(args.source, cfg, args.out)
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
+    print_plausibility(out, processed.report.get("plausibility"))
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
     return EXIT_OK
 
@@ -156,26 +166,51 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--targets", required=True, type=Path,
                         help="CSV target_id,x,y,z[,qw,qx,qy,qz] in mm in the robot base frame (a path: one row per point)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where the corrected targets go")
+    parser.add_argument("--format", action="append", choices=("rapid", "ur", "csv"), metavar="FORMAT",
+                        help="write-back format: rapid, ur or csv (repeatable; default: the configured "
+                             "controller's format and csv)")
+    _force_argument(parser)
 
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_targets_csv, write_corrected
+    from campaign.correction import correct_targets, read_rejected, read_targets_csv, recorded_identity, write_corrected
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
+    from campaign.correction import check_model_fits
+
     cfg = load_config(args.config)
     model = load_model(args.model)
+    with forced(args.force):
+        check_model_fits(cfg, model, str(args.model))
     targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets)
-    paths = write_corrected(cfg, accepted, rejected, args.out)
+    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
+    try:
+        paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))
+    finally:
+        _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]
-    out.print(f"{len(accepted)} targets corrected (predicted residual max {max(res, default=0):.2e} mm), "
-              f"{len(rejected)} rejected; wrote {', '.join(p.name for p in paths)} in {args.out}", markup=False)
-    for r in rejected[:20]:
-        out.print(f"  rejected {r.target_id}: {r.reason}", markup=False)
+    out.print(f"{len(targets.ids) - len(read_rejected(args.out))} of {len(targets.ids)} targets corrected "
+              f"(predicted residual max {max(res, default=0):.2e} mm); wrote {', '.join(p.name for p in paths)} "
+              f"in {args.out}", markup=False)
     return EXIT_OK
+
+
+def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
+    """Summary of the rejected targets (all of them are in rejected.csv with their reason)."""
+    from campaign.correction import read_rejected
+
+    rows = read_rejected(out_dir)
+    if not rows:
+        return
+    out.print(f"{len(rows)} of {n_targets} targets rejected (never written; reasons in {out_dir}/rejected.csv):",
+              markup=False)
+    for target_id, reason in rows[:10]:
+        out.print(f"  {target_id}: {reason}", markup=False)
+    if len(rows) > 10:
+        out.print(f"  ... and {len(rows) - 10} more", markup=False)
 
 
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:
@@ -190,18 +225,39 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
     result = verify(args.run_dir, _stdout())
     rep = result.report
-    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {rep['noise_floor_mm']:.3f} mm)")
-    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+    floor = rep["noise_floor_mm"]
+    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {floor:.3f} mm); "
+                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
+    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
-    for name, s in rep["stages"].items():
-        t.add_row(name, f"{s['max_mm']:.3f}", f"{s['mean_mm']:.3f}", f"{s['rms_mm']:.3f}",
-                  f"{s['rms_mm'] / rep['noise_floor_mm']:.2f}")
+    fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
+    for p in rep["passes"]:
+        c = p["corrected"]
+        t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
+                  fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
     _stdout().print(t)
+    for p in rep["passes"]:
+        for why, count in p["held"].items():
+            _stdout().print(f"{p['stage']}: {count} held: {why}", markup=False)
     _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
         _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _force_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force", action="store_true",
+                        help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
+                             "implausible deltas); the report says they were overridden")
+
+
+def print_plausibility(out: Console, plaus: dict | None) -> None:
+    """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
+    from campaign.plausibility import plausibility_lines
+
+    for line, style in plausibility_lines(plaus):
+        out.print(line, style=style, markup=False)
 
 
 # --------------------------------------------------------------------------- entry point
@@ -227,18 +283,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    try:
-        return args.func(args)
-    except (ConfigError, DataError) as exc:
-        return _fail(f"error: {exc}", EXIT_BAD_INPUT)
-    except CampaignError as exc:
-        return _fail(f"error: {exc}", EXIT_FAILED)
-    except DriverConfigError as exc:
-        return _fail(f"error: {exc}", EXIT_BAD_INPUT)
-    except DriverError as exc:
-        return _fail(f"error: {exc}", EXIT_FAILED)
-    except KeyboardInterrupt:
-        return _fail("interrupted", EXIT_INTERRUPTED)
+    from campaign.boundary import guarded
+
+    argv_text = list(argv) if argv is not None else sys.argv[1:]
+    return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
+
+
+def _run_dir_hint(args: argparse.Namespace) -> Path | None:
+    """The run directory a crash report should go to, if the command names one."""
+    for name in ("resume", "run_dir", "out"):
+        value = getattr(args, name, None)
+        if isinstance(value, Path) and value.is_dir():
+            return value
+    return None
 
 
 def _fail(message: str, code: int) -> int:

@@ -13,14 +13,16 @@ from pathlib import Path
 from campaign.cli import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
+MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
+
 
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if not 1 <= value <= MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"expected an integer in [1, {MAX_SEEDS}], got {text!r}")
     return value
 
 
@@ -34,6 +36,8 @@ def _arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulate campaigns with withheld effects and check the diagnosis finds them")
     parser.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
                         help="self-check: seeds per effect (default 5; 2N controls and 2N two-effect cases)")
+    parser.add_argument("--force", action="store_true",
+                        help="override failed plausibility checks (the report says they were overridden)")
 
 
 @command("diagnose", "diagnose the sim-to-real gap: where it lies, which effect causes it, how far it shrinks",
@@ -49,9 +53,14 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from campaign.diagnose import diagnose_source, render, write_json, write_plots
 
     cfg = load_config(args.config)
-    result = diagnose_source(args.source, cfg)
+    from campaign.cli import print_plausibility
+    from campaign.plausibility import forced
+
+    with forced(args.force):
+        result = diagnose_source(args.source, cfg)
     out = _stdout()
     render(out, result.report)
+    print_plausibility(out, result.report.get("plausibility"))
     if args.json:
         write_json(args.json, result.report)
         out.print(f"wrote {args.json}", markup=False)

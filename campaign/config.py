@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
+from campaign.yaml_limits import load_limited, read_limited
 
 __all__ = [
     "CALIBRATION_METHODS",
@@ -55,6 +56,7 @@ __all__ = [
     "SimulationConfig",
     "TestSetConfig",
     "ToolConfig",
+    "BoxConfig",
     "TrackerConfig",
     "TrackerUncertainty",
     "load_config",
@@ -149,6 +151,10 @@ class RobotConfig:
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
+    Motion caps the driver enforces before any command is sent: ``max_tcp_speed_mm_s`` (default 250, at most
+    ``datasheet_max_tcp_speed_mm_s``, the manufacturer's maximum TCP speed, when given) and
+    ``max_joint_speed_pct`` (default 100, percent of the rated joint speed). ``first_pass_speed_pct``
+    (default none): before measuring, traverse the whole plan once with both caps scaled to this percentage.
     """
 
     model: str
@@ -159,6 +165,10 @@ class RobotConfig:
     repeatability_mm: float
     max_joint_speed_deg_s: float
     options: Mapping[str, Any]
+    max_tcp_speed_mm_s: float = 250.0
+    max_joint_speed_pct: float = 100.0
+    datasheet_max_tcp_speed_mm_s: float | None = None
+    first_pass_speed_pct: float | None = None
 
     @property
     def n_joints(self) -> int:
@@ -174,7 +184,8 @@ class ToolConfig:
     A multi-SMR tool (seed 003) adds ``p_flange_smr2_mm`` and
     ``p_flange_smr3_mm`` (default ``None``; the third only with the second;
     centres at least ``smr_diameter_mm`` apart): every point then also logs
-    the second and third SMR.
+    the second and third SMR. ``payload_cog_flange_mm`` (default origin): centre of gravity of the payload
+    in the flange frame (mm), sent to the controller with ``payload_kg``.
     """
 
     p_flange_smr_mm: Vec3
@@ -182,6 +193,7 @@ class ToolConfig:
     payload_kg: float
     p_flange_smr2_mm: Vec3 | None = None
     p_flange_smr3_mm: Vec3 | None = None
+    payload_cog_flange_mm: Vec3 = (0.0, 0.0, 0.0)
 
     @property
     def smrs_mm(self) -> tuple[Vec3, ...]:
@@ -211,7 +223,8 @@ class MeasurementConfig:
 
     Defaults: ``samples`` 5 readings averaged (int >= 1), ``stability_mm`` 0.02
     max spread, ``settle_s`` 0.5 after the robot is in position, ``timeout_s``
-    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses.
+    5.0 per reading, ``retries`` 3 per point (int >= 0) before the run pauses, ``reading_time_s`` 1.5
+    (time one stationary tracker reading takes; duration estimates).
     """
 
     samples: int
@@ -219,6 +232,7 @@ class MeasurementConfig:
     settle_s: float
     timeout_s: float
     retries: int
+    reading_time_s: float = 1.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -309,6 +323,8 @@ class PlanConfig:
     ``order`` ``serpentine`` (default: grid order, each test point next to its
     nearest grid point) or ``random`` (calib and test points shuffled with
     ``order_seed``, default 0).
+    ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
+    (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     """
 
     grid: GridConfig
@@ -319,6 +335,22 @@ class PlanConfig:
     nests: NestsConfig = NestsConfig()
     order: str = "serpentine"
     order_seed: int = 0
+    keep_out: tuple["BoxConfig", ...] = ()
+    envelope: "BoxConfig | None" = None
+    clearance_mm: float = 25.0
+
+
+@dataclass(frozen=True, slots=True)
+class BoxConfig:
+    """An axis-aligned box in the robot base frame (mm): ``min_mm`` < ``max_mm`` per axis; ``name`` for messages.
+
+    ``plan.keep_out`` boxes must never be entered, ``plan.envelope`` never left, by the flange origin or any
+    SMR centre (with ``plan.clearance_mm``, default 25) anywhere along the joint-interpolated path.
+    """
+
+    name: str
+    min_mm: Vec3
+    max_mm: Vec3
 
 
 @dataclass(frozen=True, slots=True)
@@ -504,7 +536,7 @@ def load_config(path: str | Path) -> CampaignConfig:
     """
     file = str(path)
     try:
-        data = Path(path).read_bytes()
+        data = read_limited(path)
     except FileNotFoundError:
         raise ConfigError(file, "", "file not found") from None
     except IsADirectoryError:
@@ -525,8 +557,12 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
         raise ConfigError(file, "", "empty config file (expected a mapping of sections)")
     if not isinstance(doc, dict):
         raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
-    return _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
-                     sha256=hashlib.sha256(data).hexdigest())
+    cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
+                    sha256=hashlib.sha256(data).hexdigest())
+    from campaign.config_checks import check_config  # cross-key checks: drivers, sizes, Hayati, effects
+
+    check_config(cfg)
+    return cfg
 
 
 class _StrictSafeLoader(yaml.SafeLoader):
@@ -551,7 +587,7 @@ class _StrictSafeLoader(yaml.SafeLoader):
 def _parse_yaml(text: str, file: str) -> Any:
     """Safe-load YAML text; syntax errors become one-line ``ConfigError``s."""
     try:
-        return yaml.load(text, Loader=_StrictSafeLoader)  # noqa: S506 - a SafeLoader subclass
+        return load_limited(text, _StrictSafeLoader, file)  # size and alias-expansion limits
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "syntax error"
@@ -872,6 +908,9 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    from campaign.config_checks import check_joint_count  # before the plan's checks use the joints
+
+    check_joint_count(len(joints), r.file)
     return RobotConfig(
         model=model,
         url=url,
@@ -881,7 +920,23 @@ def _robot(r: _Reader) -> RobotConfig:
         repeatability_mm=r.number("repeatability_mm", 0.05, lo=0.0),
         max_joint_speed_deg_s=r.number("max_joint_speed_deg_s", 30.0, positive=True),
         options=r.mapping("options", {}),
+        **_motion_caps(r),
     )
+
+
+def _motion_caps(r: _Reader) -> dict[str, Any]:
+    """Speed caps: the TCP cap must not exceed the datasheet maximum (mm/s) when one is given."""
+    given = r.data.get("datasheet_max_tcp_speed_mm_s") is not None
+    datasheet = r.number("datasheet_max_tcp_speed_mm_s", positive=True) if given else None
+    tcp = r.number("max_tcp_speed_mm_s", 250.0, positive=True)
+    if datasheet is not None and tcp > datasheet:
+        raise r.error("max_tcp_speed_mm_s", f"{_fmt(tcp)} mm/s exceeds the robot's datasheet maximum "
+                                            f"datasheet_max_tcp_speed_mm_s = {_fmt(datasheet)} mm/s")
+    first = r.data.get("first_pass_speed_pct")
+    return {"max_tcp_speed_mm_s": tcp, "datasheet_max_tcp_speed_mm_s": datasheet,
+            "max_joint_speed_pct": r.number("max_joint_speed_pct", 100.0, positive=True, hi=100.0),
+            "first_pass_speed_pct": None if first is None else r.number("first_pass_speed_pct", positive=True,
+                                                                        hi=100.0)}
 
 
 def _joint(r: _Reader) -> JointConfig:
@@ -906,6 +961,7 @@ def _tool(r: _Reader) -> ToolConfig:
         payload_kg=r.number("payload_kg", 0.0, lo=0.0),
         p_flange_smr2_mm=r.vector("p_flange_smr2_mm", 3, None),
         p_flange_smr3_mm=r.vector("p_flange_smr3_mm", 3, None),
+        payload_cog_flange_mm=r.vector("payload_cog_flange_mm", 3, [0.0, 0.0, 0.0]),
     )
     _check_smrs(tool, r)
     return tool
@@ -953,6 +1009,7 @@ def _measurement(r: _Reader) -> MeasurementConfig:
         settle_s=r.number("settle_s", 0.5, lo=0.0),
         timeout_s=r.number("timeout_s", 5.0, positive=True),
         retries=r.integer("retries", 3, lo=0),
+        reading_time_s=r.number("reading_time_s", 1.5, positive=True),
     )
 
 
@@ -973,7 +1030,25 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         nests=_nests(r.section("nests", NestsConfig, required=False)),
         order=r.choice("order", PLAN_ORDERS, "serpentine"),
         order_seed=r.integer("order_seed", 0, lo=0),
+        keep_out=_keep_out(r),
+        envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
+        clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
     )
+
+
+def _keep_out(r: _Reader) -> tuple[BoxConfig, ...]:
+    """``plan.keep_out``: a list of boxes ``{name, min_mm, max_mm}`` (base frame, mm)."""
+    where = r.child_list("keep_out")
+    return tuple(_box(where.reader(i, item, BoxConfig), f"keep_out[{i}]")
+                 for i, item in enumerate(r.items("keep_out", [], what="boxes")))
+
+
+def _box(r: _Reader, default_name: str) -> BoxConfig:
+    lo, hi = r.vector("min_mm", 3), r.vector("max_mm", 3)
+    for k, axis in enumerate("xyz"):
+        if hi[k] <= lo[k]:
+            raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
+    return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
 
 
 def _nests(r: _Reader) -> NestsConfig:

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from robocal.correct import Correction, correct, correct_ensemble, matrix_to_quat, tool_transform
+from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
 from robocal.frames import transform_points
 from robocal.ik import branch_signature, solve_ik, solve_on_branch
 from robocal.kinematics import fk
@@ -108,8 +109,32 @@ def run_correction(cfg: CampaignConfig, ap, T_target: np.ndarray, q_start: np.nd
     c, kin = cfg.correction, nominal_kinematics(cfg)
     kw = dict(error=c.error, threshold=c.threshold_mm, max_iter=c.max_iterations)
     if c.generator == "ensemble":
-        return correct_ensemble(T_target, q_start, ap, kin, T_tool, generators=ENSEMBLE, **kw)
+        return smallest_converged(ensemble_generators(c.error), q_start, c.threshold_mm,
+                                  lambda g: correct(T_target, q_start, ap, kin, T_tool, generator=g, **kw))
     return correct(T_target, q_start, ap, kin, T_tool, generator=c.generator, **kw)
+
+
+def smallest_converged(generators, q_start: np.ndarray, threshold: float, run) -> Correction:
+    """Seed 001 §3 ensemble with a safety-minded tie-break: per target, among the generators that reached the
+    threshold the one with the smallest joint change (the bound is on joint changes), else the smallest error."""
+    results = [run(g) for g in generators]
+    errors = np.stack([r.error for r in results])                                   # (G, N)
+    change = np.stack([np.max(np.abs(r.q_rad - q_start), axis=1) for r in results])  # (G, N) rad
+    converged = errors < threshold
+    key = np.where(converged, change, np.inf)
+    best = np.where(converged.any(axis=0), np.argmin(key, axis=0), np.argmin(errors, axis=0))
+    cols = np.arange(errors.shape[1])
+    pick = lambda attr: np.stack([getattr(r, attr) for r in results])[best, cols]  # noqa: E731
+    return Correction(pick("q_rad"), pick("pos_err_mm"), pick("rot_err_rad"), pick("error"), pick("iterations"),
+                      np.array([generators[b] for b in best], dtype=object))
+
+
+def ensemble_generators(error: str) -> tuple[str, ...]:
+    """Generators of the ensemble. With a position-only error the tool orientation is neither measured nor
+    judged, so ``fixed`` (eq. 15: keep the target orientation, update the position) comes first and wins ties:
+    the other generators also chase the model's orientation error, which near the wrist singularity turns into
+    large J4/J6 changes that the correction bound then rejects (issue 12: 18/50 and 55/94 points held)."""
+    return (("fixed",) + ENSEMBLE) if error == "position" else ENSEMBLE
 
 
 def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
@@ -121,9 +146,50 @@ def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     return np.column_stack([quad, cfx]).astype(int)
 
 
+class AbsAccRobot(DataError):
+    """The measured robot runs ABB Absolute Accuracy: corrected Cartesian targets would be corrected twice."""
+
+
+def absacc_guard(identity: dict | None, *, allow: bool = False, where: str = "model") -> str | None:
+    """Refuse (``AbsAccRobot``, exit 2) or, with ``allow``, warn when the controller identity recorded for the run
+    (``absacc: yes``, read by the ABB driver from the controller's options) says Absolute Accuracy is active. The
+    controller applies its own compensation to every Cartesian target, so robtargets corrected here would be
+    corrected twice; joint targets (``MoveAbsJ``) are not affected. Returns the warning text, or None."""
+    if not identity or str(identity.get("absacc", "")).strip().lower() not in ("yes", "true", "1", "on"):
+        return None
+    robot = f"{identity.get('model', 'robot')} (serial {identity.get('serial', '?')})"
+    message = (f"{robot} has ABB Absolute Accuracy active: the controller compensates Cartesian targets itself, so "
+               "targets corrected with this model would be corrected twice")
+    if not allow:
+        raise AbsAccRobot(where, message + "; deactivate AbsAcc for the corrected program or use the joint targets")
+    warnings.warn(message + "; use the joint targets (MoveAbsJ) only", stacklevel=2)
+    return message
+
+
+def recorded_identity(model: CalibratedModel, model_path: str | Path | None = None) -> dict | None:
+    """The robot identity recorded for a model: ``model.meta["robot_identity"]``, else the start record of the run
+    log beside ``model_path`` (``robot_identity`` or ``identity``); None when nothing was recorded."""
+    meta = model.meta or {}
+    if isinstance(meta.get("robot_identity"), dict):
+        return meta["robot_identity"]
+    if model_path is None:
+        return None
+    log_path = Path(model_path).parent / "log.jsonl"
+    try:
+        from .runlog import read_log
+        start = read_log(log_path).start or {}
+    except Exception:                                # noqa: BLE001 - no readable log: nothing recorded
+        return None
+    found = start.get("robot_identity") or start.get("identity")
+    return found if isinstance(found, dict) else None
+
+
 def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Targets,
-                    T_tool: np.ndarray | None = None) -> tuple[list[CorrectedTarget], list[Rejected]]:
-    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason."""
+                    T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
+                    allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
+    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
+    An Absolute Accuracy robot (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
+    absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     kin = nominal_kinematics(cfg)
     T_tool = tool_transform(cfg.tool.p_flange_smr_mm) if T_tool is None else T_tool
     R_flange = targets.R_base @ T_tool[:3, :3].T
@@ -166,23 +232,111 @@ def _limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 
-def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path) -> list[Path]:
-    """Every write-back form: RAPID module, UR JSON + URScript, CSV; rejected targets in their own CSV."""
+FORMATS = {"rapid": ("CalTargets.mod",), "ur": ("targets_ur.json", "targets_ur.script"), "csv": ("targets.csv",)}
+
+
+def controller_formats(cfg: CampaignConfig) -> tuple[str, ...]:
+    """Write-back formats that fit the configured controller: the robot url's driver, else the robot model's
+    vendor (a mock cell of an ABB or UR arm); the CSV always."""
+    import re
+
+    scheme = cfg.robot.url.split("://", 1)[0]
+    model = cfg.robot.model.lower()
+    if scheme == "abb-rws" or (scheme == "mock" and ("abb" in model or re.search(r"\birb", model))):
+        return ("rapid", "csv")
+    if scheme == "ur-rtde" or (scheme == "mock" and ("universal robots" in model or re.match(r"ur\d", model))):
+        return ("ur", "csv")
+    return ("csv",)
+
+
+def _format_rejections(accepted, formats) -> tuple[list, list[Rejected]]:
+    """Targets a chosen format cannot hold (RAPID: ids over 80 characters or not ISO 8859-1) -> rejected."""
+    if "rapid" not in formats:
+        return list(accepted), []
+    from .writeback import _rapid_string
+
+    ok, bad = [], []
+    for t in accepted:
+        try:
+            _rapid_string(t.target_id)
+            ok.append(t)
+        except ValueError as exc:
+            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {' '.join(str(exc).split())}"))
+    return ok, bad
+
+
+def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path,
+                    formats: tuple[str, ...] | None = None) -> list[Path]:
+    """The write-back files of ``formats`` (default: those of the configured controller, see
+    ``controller_formats``) and ``rejected.csv``. Every file is rendered in memory first, so a target no format
+    can hold writes nothing; ``CampaignError`` when no target is left to write (rejected.csv is still written)."""
+    from .errors import CampaignError
+    from .fsutil import atomic_write
+    from .writeback import render_rapid_module, render_targets_csv, render_ur_json, render_urscript
+
+    formats = controller_formats(cfg) if not formats else tuple(formats)
+    accepted, unfit = _format_rejections(accepted, formats)
+    rejected = list(rejected) + unfit
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lo, hi = _limits_deg(cfg)
-    paths = [out / "CalTargets.mod", out / "targets_ur.json", out / "targets_ur.script", out / "targets.csv",
-             out / "rejected.csv"]
     limits = dict(q_min_deg=lo, q_max_deg=hi)
-    write_rapid_module(paths[0], accepted, **limits)
-    write_ur_json(paths[1], accepted, **limits)
-    write_urscript(paths[2], accepted, **limits)
-    write_targets_csv(paths[3], accepted, **limits)
-    write_rejected_csv(paths[4], rejected)
-    return paths
+    rejected_path = write_rejected_csv(out / "rejected.csv", rejected)
+    if not accepted:
+        first = f"; first reason: {rejected[0].target_id}: {rejected[0].reason}" if rejected else ""
+        raise CampaignError(f"{out}: nothing to write: all {len(rejected)} targets rejected (reasons in "
+                            f"{rejected_path}){first}")
+    renderers = {"CalTargets.mod": render_rapid_module, "targets_ur.json": render_ur_json,
+                 "targets_ur.script": render_urscript, "targets.csv": render_targets_csv}
+    texts = {}
+    for fmt in formats:
+        for name in FORMATS[fmt]:
+            try:
+                texts[name] = renderers[name](accepted, **limits)
+            except ValueError as exc:
+                raise CampaignError(f"{out / name}: not written: {' '.join(str(exc).split())}") from None
+    paths = [atomic_write(out / name, text.encode("utf-8")) for name, text in texts.items()]
+    return paths + [rejected_path]
 
 
 # ---------------------------------------------------------------- closed-loop verification
+UNCORRECTED = "uncorrected (planned joints)"
+POOLED = "after correction (all passes pooled)"
+
+
+def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray, hi: np.ndarray,
+                 limit_deg: float) -> list[str | None]:
+    """Per point: None when the corrected joints q (N, n) rad may be commanded, else why it is held at q0."""
+    step = np.abs(q - q0)
+    out: list[str | None] = []
+    for i in range(len(q)):
+        over = np.flatnonzero(step[i] > limit_rad)
+        outside = np.flatnonzero((q[i] < lo) | (q[i] > hi))
+        if len(outside):
+            out.append(f"corrected joint {outside[0] + 1} outside its limits")
+        elif len(over):
+            out.append(f"correction of joint {over[0] + 1} > max_joint_correction_deg {limit_deg:g}")
+        else:
+            out.append(None)
+    return out
+
+
+def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str | None]) -> dict:
+    """One verify pass: counts of corrected and held points, held reasons, stats over all and corrected points."""
+    reasons: dict[str, int] = {}
+    for h in held:
+        if h is not None:
+            reasons[h] = reasons.get(h, 0) + 1
+    return {"stage": stage, "n_corrected": int(safe.sum()), "n_held": int((~safe).sum()), "held": reasons,
+            "all": error_stats(err).to_dict(), "corrected": error_stats(err[safe]).to_dict() if safe.any() else None}
+
+
+def atomic_write_json(path: Path, data: dict) -> Path:
+    from .fsutil import atomic_write
+
+    return atomic_write(path, json.dumps(data, indent=1, allow_nan=False).encode())
+
+
 @dataclass(frozen=True)
 class VerifyResult:
     report: dict
@@ -204,7 +358,9 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     target_tracker = transform_points(T_tb, p_d)
     before = np.array([p["p_tracker_mm"] for p in test_points]) - target_tracker
     floor = float(np.sqrt(np.mean(np.trace(measurement_covariance(cfg, target_tracker), axis1=1, axis2=2))))
-    rows = {"nominal (no correction)": error_stats(before).to_dict()}
+    rows = {UNCORRECTED: error_stats(before).to_dict()}
+    passes = [{"stage": UNCORRECTED, "n_corrected": 0, "n_held": len(ids), "held": {},
+               "all": rows[UNCORRECTED], "corrected": None}]
     R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
@@ -214,9 +370,11 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     lo, hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
     p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
     stage, status, reason = "model-corrected", "success", ""
-    corrected = []                                        # every measurement of the corrected points
+    corrected, corrected_only = [], []                    # every measurement; those of corrected points
+    safe = np.ones(len(ids), bool)
     for k in range(cfg.correction.closed_loop_iterations + 1):
-        safe = np.all((np.abs(q - q0) <= limit) & (q >= lo) & (q <= hi), axis=1)
+        held = held_reasons(q, q0, limit, lo, hi, cfg.correction.max_joint_correction_deg)
+        safe = np.array([h is None for h in held])
         q = np.where(safe[:, None], q, q0)                # an unsafe correction is never commanded
         points = [PlanPoint(f"{i}.v{k}", "verify", tuple(np.degrees(qq)), tuple(pd)) for i, qq, pd in zip(ids, q, p_d)]
         p_meas, status, reason = measure_fn(points)
@@ -224,23 +382,57 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
             break
         err = p_meas - target_tracker
         rows[stage] = error_stats(err).to_dict()
+        passes.append(pass_summary(stage, err, safe, held))
         corrected.append(err)
+        corrected_only.append(err[safe])
         if k == cfg.correction.closed_loop_iterations:
             break
         sigma = np.sqrt(np.trace(measurement_covariance(cfg, p_meas), axis1=1, axis2=2))
         significant = np.linalg.norm(err, axis=1) > cfg.correction.significance * sigma
         err_base = err @ T_tb[:3, :3]                     # rotate into the base frame
-        p_pseudo = np.where(significant[:, None], p_pseudo - err_base, p_pseudo)
+        p_cmd = (fk(kin, q) @ T_tool)[:, :3, 3]           # nominal position of what was commanded (held: q0)
+        p_pseudo = np.where(significant[:, None], p_cmd - err_base, p_pseudo)
         R_flange = np.broadcast_to(R_d[0] @ T_tool[:3, :3].T, (len(ids), 3, 3))
         q = np.where(significant[:, None],
                      solve_ik(kin, p_pseudo, R_flange, q, point_mm=T_tool[:3, 3]).q_rad, q)
         stage = f"closed loop {k + 1}"
     if corrected:
-        rows["after correction (all passes pooled)"] = error_stats(np.concatenate(corrected)).to_dict()
-    report = {"format": "campaign-verify/1", "run": str(run_dir), "n": len(ids), "noise_floor_mm": floor,
+        pooled = np.concatenate(corrected_only)
+        rows[POOLED] = error_stats(np.concatenate(corrected)).to_dict()
+        passes.append({"stage": POOLED, "n_corrected": int(len(pooled)),
+                       "n_held": int(sum(len(e) for e in corrected) - len(pooled)), "held": {},
+                       "all": rows[POOLED], "corrected": error_stats(pooled).to_dict() if len(pooled) else None})
+    report = {"format": "campaign-verify/2", "run": str(run_dir), "n": len(ids), "noise_floor_mm": floor,
               "n_uncorrected": int(np.sum(~safe)) if corrected else None,
-              "stages": rows, "exit_status": status, "reason": reason,
+              "stages": rows, "passes": passes, "exit_status": status, "reason": reason,
+              "definitions": {UNCORRECTED: "the test points commanded at their planned (nominal-IK) joints, "
+                                           "measured against the targets through the calibrated registration",
+                              "held": "points commanded at their planned joints in a corrected pass because the "
+                                      "correction would exceed a bound (reason per point count)",
+                              "corrected": "figures over the points whose correction was commanded"},
               "created_utc": datetime.now(timezone.utc).isoformat()}
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "verify.json").write_text(json.dumps(report, indent=1))
+    atomic_write_json(out_dir / "verify.json", report)
     return VerifyResult(report, out_dir, status, reason)
+
+
+def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:
+    """(target_id, reason) rows of OUT_DIR/rejected.csv (empty when the file is absent)."""
+    try:
+        with open(Path(out_dir) / "rejected.csv", newline="", encoding="utf-8") as fh:
+            return [(row[0], row[1] if len(row) > 1 else "") for row in list(csv.reader(fh))[1:] if row]
+    except OSError:
+        return []
+
+
+def check_model_fits(cfg: CampaignConfig, model: CalibratedModel, source: str) -> None:
+    """The model must describe the config's robot: same joint count and convention (DataError otherwise)."""
+    kin, n = model.kinematics, len(cfg.robot.joints)
+    if kin.n != n:
+        raise DataError(source, f"the model has {kin.n} joints but the config's robot has {n}: not a model of this robot")
+    if kin.convention != cfg.robot.convention:
+        raise DataError(source, f"the model uses {kin.convention!r} parameters but the config {cfg.robot.convention!r}: "
+                                "not a model of this robot")
+    from .plausibility import Plausibility, check_deltas
+
+    check_deltas(nominal_kinematics(cfg), kin, source, Plausibility())   # a model of another robot: exit 2

@@ -33,6 +33,7 @@ from .cell import measurement_covariance, nominal_kinematics, tracker_uncertaint
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset, dataset_from_log, read_csv
+from .plausibility import check_dataset
 from .process import noise_floor_from_repeats, repeat_groups
 
 REPORT_FORMAT = "campaign-diagnosis/1"
@@ -91,7 +92,10 @@ def diagnosis_input(ds: Dataset, cfg: CampaignConfig) -> tuple[DiagnosisInput, d
 def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions = DiagnosisOptions()
                      ) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract."""
+    _check(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     inp, info = diagnosis_input(ds, cfg)
+    info["plausibility"] = plaus.to_dict()
     try:
         d = diagnose(inp, options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:

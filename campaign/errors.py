@@ -92,3 +92,32 @@ class RunAborted(CampaignError):
 
     def __reduce__(self):
         return (type(self), (self.reason,))
+
+
+class PlausibilityError(CampaignError):
+    """The data do not fit the configured robot (wrong robot, wrong unit, impossible deltas): exit 2.
+
+    ``str()`` is ``"{source}: {message} (override with --force)"``.
+    """
+
+    def __init__(self, source: str, message: str) -> None:
+        self.source = str(source)
+        self.message = _one_line(message)
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return f"{self.source}: {self.message} (override with --force)"
+
+    def __reduce__(self):
+        return (type(self), (self.source, self.message))
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP received: handled like Ctrl-C (robot stopped, log closed ``abort`` with the reason)."""
+
+    def __init__(self, signal_name: str) -> None:
+        self.signal_name = signal_name
+        super().__init__(signal_name)
+
+    def __str__(self) -> str:
+        return f"terminated by {self.signal_name}"

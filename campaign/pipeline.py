@@ -1,6 +1,7 @@
 """The whole campaign in one place: config -> plan -> drivers -> durable log -> calibration -> report."""
 from __future__ import annotations
 
+import logging
 import shutil
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from drivers.base import SystemClock
 from drivers.mock import MockWorld
@@ -19,13 +20,20 @@ from drivers.registry import open_robot, open_tracker
 
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
-from .errors import CampaignError
+from .errors import CampaignError, ConfigError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
 from .process import Processed, process, write_outputs
+from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
+from .eta import RunEta, point_times_s
+from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
+from .traceability import device_identity, identification, identity_changes, run_logging
+
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -46,35 +54,60 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                  console: Console | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    if resume is not None:
+        check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
+    kin = nominal_kinematics(cfg)
+    plan = build_plan(cfg, kin)
+    if not plan.points:
+        raise ConfigError(cfg.source_path, "plan", f"no reachable point to measure ({len(plan.skipped)} skipped"
+                          + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
+    if resume is not None:
+        check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     clock = world.clock if world else SystemClock()
     with ExitStack() as stack:
+        logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
         robot, tracker = _open_devices(cfg, world, stack)
-        log, run_dir = open_log(cfg, plan, run_dir, resume)
-        todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm), nests=cfg.plan.nests)
+        _safety(runner, cfg, kin, first_pass=resume is None)
+        times = point_times_s(plan.points, cfg, kin)
+        identity = device_identity(robot, tracker)
+        log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
+        stack.push(lambda *exc: _close_on_error(log, exc[1]))    # the runner closes it from execute on
+        logging_.to_file(run_dir)
+        for change in identity_changes(log.contents.start, identity) if resume else ():
+            logger.warning("resuming on different hardware: %s", change)   # also in the devices event
+        todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
+        logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
+                    "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
+        left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
+        eta = RunEta(times[0][left], times[1][left])
         runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-        with _progress(console, len(plan.points), len(plan.points) - len(todo)) as advance:
+        with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record["q_read_deg"],
                                                                                           record["p_tracker_mm"]),
-                                                     advance())
+                                                     advance(record))
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
-    dataset = dataset_from_log(read_log(run_dir))
+    contents = read_log(run_dir)
+    dataset = dataset_from_log(contents)
     write_csv(run_dir / "data.csv", dataset)
     processed = process(dataset, cfg)
+    processed.report.update(identification(contents))
     write_outputs(processed, run_dir)
     return RunResult(run_dir, outcome, processed)
 
 
 def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file."""
-    dataset = dataset_from_log(read_log(source)) if source.is_dir() else read_csv(source)
+    contents = read_log(source) if source.is_dir() else None
+    dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
     processed = process(dataset, cfg)
+    if contents is not None:
+        processed.report.update(identification(contents))      # the hardware the log was measured with
     write_outputs(processed, out_dir)
     return processed
 
@@ -94,11 +127,14 @@ def verify(run_dir: Path, console: Console | None = None):
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     with ExitStack() as stack:
+        logging_ = stack.enter_context(run_logging(console))
         robot, tracker = _open_devices(cfg, world, stack)
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
-                                      "software_version": software_version()})
+                                      "software_version": software_version()} | device_identity(robot, tracker))
+        logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
+        _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
         runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
@@ -112,6 +148,24 @@ def verify(run_dir: Path, console: Console | None = None):
         if not log.closed:
             log.close(result.exit_status, result.reason)
     return result
+
+
+def _close_on_error(log: RunLog, exc: BaseException | None) -> bool:
+    """Close a log left open by an exception raised outside the runner (stop record with the reason)."""
+    if exc is not None and not log.closed:
+        status = "fail" if isinstance(exc, Exception) else "abort"
+        try:
+            log.close(status, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        except Exception:
+            pass
+    return False
+
+
+def _safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
+    """Speed caps, payload, swept-path guard and the optional reduced-speed first pass of a runner."""
+    runner.limits, runner.payload, runner.guard = motion_limits(cfg), payload(cfg), PathGuard.from_config(cfg, kin)
+    if first_pass and cfg.robot.first_pass_speed_pct is not None:
+        runner.first_pass_limits = motion_limits(cfg, cfg.robot.first_pass_speed_pct)
 
 
 def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
@@ -157,7 +211,8 @@ def mock_phenomena(cfg: CampaignConfig) -> dict:
             "nests": {n.id: n.p_base_mm for n in cfg.plan.nests.points}}
 
 
-def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None) -> tuple[RunLog, Path]:
+def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None,
+             identity: dict | None = None) -> tuple[RunLog, Path]:
     """A new run directory with its log, config copy and plan CSV; or the resumed one after checking that
     neither the config nor the plan changed."""
     if resume is not None:
@@ -172,9 +227,13 @@ def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path
         run_dir = Path(cfg.output.dir) / f"{cfg.name}-{stamp}"
     run_dir = Path(run_dir)
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
-                                              datetime.now(timezone.utc).isoformat()))
-    shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
-    write_plan_csv(plan, run_dir / "plan.csv")
+                                              datetime.now(timezone.utc).isoformat()) | (identity or {}))
+    try:
+        shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
+        write_plan_csv(plan, run_dir / "plan.csv")
+    except BaseException as exc:                            # the log never stays open without a stop record
+        _close_on_error(log, exc)
+        raise
     return log, run_dir
 
 
@@ -183,17 +242,24 @@ def _scheme(url: str) -> str:
 
 
 class _progress:
-    """A rich progress bar with ETA on terminals; silent otherwise. Yields an ``advance()`` callable."""
+    """A rich progress bar with the run's ETA (tracker reading time and measured move times) on terminals;
+    silent otherwise. Yields an ``advance(record)`` callable."""
 
-    def __init__(self, console: Console, total: int, done: int):
-        self.bar = Progress(TextColumn("measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                            console=console, disable=not console.is_terminal)
-        self.total, self.done = total, done
+    def __init__(self, console: Console, total: int, done: int, eta: RunEta | None = None):
+        self.bar = Progress(TextColumn("measuring"), BarColumn(), MofNCompleteColumn(),
+                            TextColumn("{task.fields[eta]}"), console=console, disable=not console.is_terminal)
+        self.total, self.done, self.eta = total, done, eta
 
     def __enter__(self):
         self.bar.start()
-        task = self.bar.add_task("points", total=self.total, completed=self.done)
-        return lambda: self.bar.advance(task)
+        text = self.eta.text() if self.eta else ""
+        task = self.bar.add_task("points", total=self.total, completed=self.done, eta=text)
+
+        def advance(record=None):
+            if self.eta is not None and record is not None:
+                self.eta.observe(record)
+            self.bar.update(task, advance=1, eta=self.eta.text() if self.eta else "")
+        return advance
 
     def __exit__(self, *exc):
         self.bar.stop()

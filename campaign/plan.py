@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,19 +22,23 @@ from robocal.ik import solve_ik, solve_on_branch, wrist_angle_rad
 from robocal.kinematics import Kinematics
 
 from .config import CampaignConfig
+from .errors import ConfigError
+from .motion_safety import PathGuard, UnsafeMotion, plan_route
 
 WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
 
 
 @dataclass(frozen=True)
 class PlanPoint:
-    """One measurement: id, set (calib | test | check | nest), commanded joints (deg), target SMR position (mm, base).
-    A ``nest`` point is a tracker reading of a fixed nest: ``p_base_mm`` is the nest's approximate position and
-    ``q_deg`` where the robot waits meanwhile (the previous point's joints; the runner never moves for a nest)."""
+    """One measurement: id, set (calib | test | check | nest), commanded joints (deg), target SMR position (mm, base),
+    and the via poses (deg) the robot passes on its way there (keep-out boxes; usually none). A ``nest`` point is a
+    tracker reading of a fixed nest: ``p_base_mm`` is the nest's approximate position and ``q_deg`` where the robot
+    waits meanwhile (the previous point's joints; the runner never moves for a nest)."""
     point_id: str
     set: str
     q_deg: tuple[float, ...]
     p_base_mm: tuple[float, float, float]
+    via_deg: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -55,8 +59,9 @@ class Plan:
         return sum(p.set == set_name for p in self.points)
 
     def estimated_duration_s(self, joint_speed_deg_s: float, settle_s: float, samples: int,
-                             sample_s: float = 0.1) -> float:
-        """Rough campaign duration: moves at the joint speed + settle + sampling per point."""
+                             sample_s: float = 1.5) -> float:
+        """Rough campaign duration: moves at the joint speed + settle + sampling per point (``sample_s`` per
+        stationary reading). ``campaign.eta.estimate_duration_s`` adds the speed caps and via poses."""
         if not self.points:
             return 0.0
         q = np.array([p.q_deg for p in self.points if p.set != "nest"])
@@ -144,6 +149,12 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
                         f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
     ok &= ~near
+    guard = PathGuard.from_config(cfg, kin)
+    if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
+        why = guard.pose_reasons(np.degrees(q_all[ok]))
+        blocked = np.flatnonzero(ok)[[w is not None for w in why]]
+        skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), w) for i, w in zip(np.flatnonzero(ok), why) if w]
+        ok[blocked] = False
     skipped = tuple(skipped)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
@@ -153,8 +164,21 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
     points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
     points = with_nest_rounds(points, pl.nests)
-    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] for p in points]).encode()).hexdigest()
+    if guard is not None:
+        points = _with_vias(cfg, guard, points)
+    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
+                                        for p in points]).encode()).hexdigest()
     return Plan(tuple(points), skipped, digest)
+
+
+def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -> list[PlanPoint]:
+    """Via poses where the swept path between consecutive points is blocked, or a point visited a little later;
+    ConfigError naming the pair of points when neither works."""
+    try:
+        order, vias = plan_route(guard, np.array([p.q_deg for p in points]), [p.point_id for p in points])
+    except UnsafeMotion as exc:
+        raise ConfigError(cfg.source_path, "plan.keep_out", str(exc)) from None
+    return [replace(points[i], via_deg=v) if v else points[i] for i, v in zip(order, vias)]
 
 
 def _interleave(p, grid_ok, test_ok) -> list[int]:
@@ -224,11 +248,14 @@ def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
 
 
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
-    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order (nest rows: where the robot waits,
-    the nest's approximate position)."""
+    """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
+    (id ``POINT.viaK``, no position) before the point they lead to; nest rows: where the
+    robot waits, the nest's approximate position."""
     n = len(plan.points[0].q_deg) if plan.points else 0
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
         for p in plan.points:
+            for k, via in enumerate(p.via_deg):              # via poses (keep-out): passed through, not measured
+                w.writerow([f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""])
             w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])

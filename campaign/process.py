@@ -33,6 +33,7 @@ from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import atomic_write
+from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 from .prepare import prepare
 
@@ -173,8 +174,10 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
 def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
+    ds = _prepare(ds, cfg)                                  # joint set, nest drift: rows with joints only
     _check_dataset(ds, cfg)
-    return _geometric(_prepare(ds, cfg), cfg).result
+    ds, _ = check_dataset(ds, cfg)
+    return _geometric(ds, cfg).result
 
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
@@ -195,9 +198,11 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     _check_dataset(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
     kin0 = nominal_kinematics(cfg)
     geo = _geometric(ds, cfg)
     result = geo.result
+    plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
@@ -298,6 +303,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
                    "residual": choice.kind, "residual_config": c.residual, "measurement_covariance": cov_source},
         "effects": _effects_report(selection, elastic),
         "residual_choice": choice.to_dict(),
+        "plausibility": plaus.to_dict(),
         "residual_cv": _residual_cv_summary(choice),
         "preparation": prep.report,
     }

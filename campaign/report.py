@@ -39,6 +39,16 @@ def render_stages(console: Console, report: dict) -> None:
     console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
                   f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
+    render_identity(console, report)
+
+
+def render_identity(console: Console, report: dict) -> None:
+    """One line naming the hardware the data was measured with (when the report carries it)."""
+    r, t = report.get("robot_identity"), report.get("tracker_identity")
+    if r and t:
+        console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
+                      f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
+                      f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
 
 
 def render_preparation(console: Console, prep: dict | None) -> None:
@@ -109,11 +119,16 @@ def render_parameters(console: Console, report: dict) -> None:
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
 
 
+def _vias(plan: Plan) -> str:
+    n = sum(len(p.via_deg) for p in plan.points)
+    return f", {n} via poses around keep-out boxes" if n else ""
+
+
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
                   f"{plan.count('check')} check-pose measurements, "
                   + (f"{plan.count('nest')} nest readings, " if plan.count("nest") else "")
-                  + f"{len(plan.skipped)} skipped; "
+                  + f"{len(plan.skipped)} skipped{_vias(plan)}; "
                   f"estimated duration {duration_s / 60:.1f} min")
     if plan.skipped:
         t = Table(title="Skipped points")

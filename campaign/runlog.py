@@ -36,8 +36,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import threading
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -291,6 +293,22 @@ def _write_all(fd: int, payload: bytes) -> None:
         view = view[n:]
 
 
+@contextmanager
+def _signals_deferred():
+    """Block SIGINT, SIGTERM and SIGHUP in this thread for the duration (main thread, POSIX); a signal that
+    arrives meanwhile is delivered when the block ends, so its handler never interrupts a record half-written
+    or half-counted."""
+    sigs = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _lock(fd: int, path: Path) -> None:
     """Take an exclusive non-blocking flock on ``fd`` (no-op without fcntl)."""
     if fcntl is None:  # pragma: no cover
@@ -504,15 +522,16 @@ class RunLog:
                 line = encode_record(kind, self._seq, data)
             except (TypeError, ValueError) as exc:
                 raise RunLogError(str(self.path), f"record not storable: {exc}") from None
-            try:
-                _write_all(self._fd, line)
-                os.fsync(self._fd)
-            except BaseException:
-                self._recover()
-                raise
-            self._size += len(line)
-            seq = self._seq
-            self._seq += 1
+            with _signals_deferred():          # Ctrl-C/SIGTERM/SIGHUP land after the record, never inside it
+                try:
+                    _write_all(self._fd, line)
+                    os.fsync(self._fd)
+                except BaseException:
+                    self._recover()
+                    raise
+                self._size += len(line)
+                seq = self._seq
+                self._seq += 1
         return seq
 
     def _recover(self) -> None:

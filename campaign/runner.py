@@ -4,7 +4,13 @@ Per point: move (fine) -> settle -> read back joints -> N tracker samples -> sta
 fsync -> only then the next move. Tracker faults are retried within limits; when retries are exhausted
 the run *pauses* (log closed with exit_status "paused" and the reason) instead of losing or faking the
 point, and ``campaign run CONFIG --resume RUN_DIR`` continues it. Ctrl-C stops the robot and closes the
-log cleanly ("abort"). The robot is always commanded to stop and released in ``finally``.
+log cleanly ("abort"). One ``finally`` in ``execute`` commands the robot to stop exactly once and closes the
+log with the exit status and reason whatever happened (driver, log, I/O or programming errors alike; the
+last are re-raised after the log is closed).
+Before the first move the robot driver receives the motion caps (``set_motion_limits``; a driver that cannot
+enforce them is refused) and the payload, and the speed override is read; all are logged in a ``devices``
+event with the robot and tracker identification. With a ``PathGuard`` every move, via poses included, is
+checked along its swept path first, and the first move is routed from wherever the robot stands.
 With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each further SMR in turn
 (``tracker.select_smr(k)``) at the same stop, and the record gains ``p2_tracker_mm`` / ``p3_tracker_mm``
 (+ ``cov2_mm2`` / ``cov3_mm2``); the tracker is aimed back at SMR 1 before the next move.
@@ -16,17 +22,24 @@ pauses the run (tracker stand or nest disturbed).
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from drivers.base import BeamBroken, Clock, DriverError, Robot, Tracker, TrackerError, TrackerReading, Unstable
+from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
+                          TrackerReading, Unstable)
 
 from .config import MeasurementConfig, NestsConfig
+from .motion_safety import PathGuard, UnsafeMotion
 from .plan import PlanPoint
-from .runlog import NestRecord, RunLog
+from .runlog import NestRecord, RunLog, RunLogError
 from .tracker_quality import check_device_stability, device_covariance
+from .traceability import device_identity, environment_from_readings
+
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -85,13 +98,26 @@ class Runner:
         self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
+        self.limits: MotionLimits | None = None           # caps sent to the driver before the first move
+        self.payload: Payload | None = None
+        self.guard: PathGuard | None = None
+        self.first_pass_limits: MotionLimits | None = None  # reduced-speed traverse of the plan before measuring
+        self.q_at: np.ndarray | None = None               # last commanded pose (deg)
+        self._poses: np.ndarray | None = None
+        self._stopped = False
 
     def execute(self, points: Iterable[PlanPoint], log: RunLog, close: bool = True) -> RunOutcome:
         """Measure ``points`` in order; return how the run ended. The log is closed on every failure path,
         and on success unless ``close`` is False (a caller measuring in several passes)."""
         n = 0
+        status, reason, self._stopped = "fail", "internal error", False
         self._remember_nests(getattr(log, "contents", None))
         try:
+            points = list(points)
+            self._poses = np.array([p.q_deg for p in points], float) if points else None
+            self._prepare(log)
+            if self.first_pass_limits is not None and points:
+                self._first_pass(points, log)
             for point in points:
                 if point.set == "nest":
                     record = self.measure_nest(point, log)
@@ -107,40 +133,117 @@ class Runner:
                 n += 1
                 if self.on_point:
                     self.on_point(point, record)
+            status, reason = "success", "all planned points measured"
         except PointFailed as exc:
             self._safe_stop()
-            log.append_event({"type": "pause", "reason": str(exc), "t_s": self.clock.now()})
-            log.close("paused", str(exc))
-            return RunOutcome("paused", str(exc), n)
-        except KeyboardInterrupt:
+            status, reason = "paused", str(exc)
+            self._event(log, {"type": "pause", "reason": reason})
+        except KeyboardInterrupt as exc:                     # Ctrl-C, or a signal raised as a subclass with a reason
             self._safe_stop()
-            log.close("abort", "interrupted by the operator (Ctrl-C)")
-            return RunOutcome("abort", "interrupted by the operator (Ctrl-C)", n)
-        except DriverError as exc:
+            status = "abort"
+            reason = _one_line(exc) if type(exc) is not KeyboardInterrupt and str(exc) else \
+                "interrupted by the operator (Ctrl-C)"
+        except (DriverError, UnsafeMotion) as exc:
             self._safe_stop()
-            reason = " ".join(str(exc).split())
-            log.append_event({"type": "fault", "device": "robot", "reason": reason, "t_s": self.clock.now()})
-            log.close("fail", reason)
-            return RunOutcome("fail", reason, n)
-        if close:
-            log.close("success", "all planned points measured")
-        return RunOutcome("success", "all planned points measured", n)
+            status, reason = "fail", _one_line(exc)
+            self._event(log, {"type": "fault", "device": "robot", "reason": reason})
+        except (OSError, RunLogError) as exc:               # the log or the disk failed: stop, keep what is on disk
+            self._safe_stop()
+            status, reason = "fail", f"{type(exc).__name__}: {_one_line(exc)}"
+        except BaseException as exc:                         # a bug or a signal: stop, close, then re-raise
+            self._safe_stop()
+            status = "fail" if isinstance(exc, Exception) else "abort"
+            reason = f"{type(exc).__name__}: {_one_line(exc)}"
+            raise
+        finally:
+            if status != "success" or close:
+                self._safe_stop()
+                (logger.info if status == "success" else logger.warning)("run %s: %s (%d points measured now)",
+                                                                          status, reason, n)
+                try:
+                    log.close(status, reason)
+                except Exception:                            # a broken log: a resume drops its torn tail
+                    pass
+        return RunOutcome(status, reason, n)
 
     def _safe_stop(self) -> None:
+        """Command the robot to stop, once per ``execute``; best effort on an already failing device."""
+        if self._stopped:
+            return
+        self._stopped = True
         try:
             self.robot.stop()
         except Exception:  # stop is best effort on an already failing device
             pass
 
+    def _event(self, log: RunLog, data: dict) -> None:
+        """Append an event on a failure path (never masks the failure being handled)."""
+        try:
+            log.append_event({**data, "t_s": self.clock.now()})
+        except Exception:
+            pass
+
+    def _prepare(self, log: RunLog) -> None:
+        """Caps and payload to the driver before the first move; speed override and identities logged."""
+        robot, url = self.robot, getattr(self.robot, "url", "robot")
+        info: dict = {"type": "devices", **device_identity(robot, self.tracker)}
+        if self.limits is not None:
+            if not callable(getattr(robot, "set_motion_limits", None)):
+                raise UnsafeMotion(f"{url}: this robot driver cannot enforce the speed caps (no set_motion_limits); "
+                                   "refusing to move")
+            robot.set_motion_limits(self.limits)
+            info["motion_limits"] = {"max_tcp_speed_mm_s": self.limits.max_tcp_speed_mm_s,
+                                     "max_joint_speed_pct": self.limits.max_joint_speed_pct}
+        if self.payload is not None:
+            if callable(getattr(robot, "set_payload", None)):
+                robot.set_payload(self.payload)
+            elif self.payload.mass_kg > 0:
+                raise UnsafeMotion(f"{url}: this robot driver cannot send the payload "
+                                   f"({self.payload.mass_kg:g} kg) to the controller; refusing to move")
+            info["payload"] = {"mass_kg": self.payload.mass_kg, "cog_flange_mm": list(self.payload.cog_flange_mm)}
+        override = robot.speed_override_pct() if callable(getattr(robot, "speed_override_pct", None)) else None
+        info["speed_override_pct"] = override
+        log.append_event({**info, "t_s": self.clock.now()})
+        rid = info["robot_identity"]
+        logger.info("robot %s %s serial %s software %s; caps %s; payload %s; speed override %s %%", rid["vendor"],
+                    rid["model"], rid["serial"], rid["software_version"], info.get("motion_limits"),
+                    info.get("payload"), override)
+
+    def _first_pass(self, points: list[PlanPoint], log: RunLog) -> None:
+        """Traverse every planned move (vias included) at the reduced caps without measuring, then restore."""
+        lim = self.first_pass_limits
+        self.robot.set_motion_limits(lim)
+        log.append_event({"type": "first_pass", "state": "start", "max_tcp_speed_mm_s": lim.max_tcp_speed_mm_s,
+                          "max_joint_speed_pct": lim.max_joint_speed_pct, "t_s": self.clock.now()})
+        for point in points:
+            self._move_to(point)
+        log.append_event({"type": "first_pass", "state": "done", "t_s": self.clock.now()})
+        self.robot.set_motion_limits(self.limits if self.limits is not None else MotionLimits())
+
+    def _move_to(self, point: PlanPoint) -> None:
+        """Move through the point's via poses to it; with a guard every leg is checked (and routed) first."""
+        targets = [tuple(v) for v in point.via_deg] + [tuple(point.q_deg)]
+        if self.guard is not None:
+            prev = self.q_at if self.q_at is not None else np.asarray(self.robot.read_joints(), float)
+            legs = []
+            for q in targets:
+                legs += self.guard.route(prev, q, self._poses) + [q]
+                prev = np.asarray(q, float)
+            targets = legs
+        for q in targets:
+            self.robot.move_joints(q)
+            self.q_at = np.asarray(q, float)
+
     def measure_point(self, point: PlanPoint, log: RunLog) -> dict:
         """Move, settle and measure one point; returns the log record."""
         q_cmd = np.asarray(point.q_deg, float)
         t_start = self.clock.now()
-        self.robot.move_joints(point.q_deg)
+        self._move_to(point)
         self.clock.sleep(self.m.settle_s)
         q_read = np.asarray(self.robot.read_joints(), float)
         self.q_read = q_read
         approach = self._approach(q_cmd)
+        t_measure = self.clock.now()                        # in position and settled: the readings start
         mean, spread, readings, retries = self._measure_with_retries(point, log)
         try:
             env = dict(self.tracker.environment() or {})
@@ -148,6 +251,8 @@ class Runner:
             env = {}
             log.append_event({"type": "environment_fault", "point_id": point.point_id,
                               "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        env = {**environment_from_readings(readings), **env}
+        joint_temp = self._joint_temperatures(point, log)
         dev_cov = device_covariance(readings)
         use_dev = dev_cov is not None and self.covariance_from_device is not None
         record = {
@@ -155,12 +260,17 @@ class Runner:
             "p_tracker_mm": mean.tolist(),
             "cov_mm2": (self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)).tolist(),
             "cov_source": "device" if use_dev else "spec", "spread_mm": spread,
-            "n_samples": len(readings), "t_start_s": t_start, "t_end_s": self.clock.now(),
+            "n_samples": len(readings), "t_start_s": t_start, "t_measure_s": t_measure, "t_end_s": self.clock.now(),
             "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
             "p_target_base_mm": list(point.p_base_mm),
         }
         if env:
             record["temperatures"] = env
+        if joint_temp is not None:
+            record["joint_temp_c"] = joint_temp
+        if self.payload is not None:
+            record["payload_kg"] = self.payload.mass_kg
+            record["payload_cog_flange_mm"] = list(self.payload.cog_flange_mm)
         if dev_cov is not None:
             record["device_std_mm"] = np.sqrt(np.diag(dev_cov)).tolist()
             record["device_cov_mm2"] = dev_cov.tolist()
@@ -239,6 +349,19 @@ class Runner:
             raise PointFailed(f"nest {nest_id} moved {moved:.3f} mm since its first reading (bound "
                               f"{self.nests.max_move_mm:g} mm, plan.nests.max_move_mm): tracker stand or nest "
                               "disturbed; check them before resuming")
+
+    def _joint_temperatures(self, point: PlanPoint, log: RunLog) -> list[float] | None:
+        """Joint (motor) temperatures in deg C where the driver offers ``joint_temperatures_c()``."""
+        read = getattr(self.robot, "joint_temperatures_c", None)
+        if not callable(read):
+            return None
+        try:
+            values = read()
+        except DriverError as exc:                          # never costs the point
+            log.append_event({"type": "joint_temperature_fault", "point_id": point.point_id,
+                              "reason": _one_line(exc), "t_s": self.clock.now()})
+            return None
+        return None if values is None else [float(v) for v in values]
 
     def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
@@ -322,6 +445,10 @@ class Runner:
         drain = getattr(self.tracker, "drain_events", None)
         for step in (drain() if callable(drain) else ()):
             log.append_event({"type": "tracker_step", "point_id": point.point_id, **step, "t_s": self.clock.now()})
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 def pending(points: Iterable[PlanPoint], done_ids: set[str]) -> list[PlanPoint]:

@@ -1438,10 +1438,10 @@ def _csv_float(x: float) -> str:
     return repr(float(x))
 
 
-def _csv_header(n: int) -> list[str]:
+def _csv_header(n: int, with_std: bool = True) -> list[str]:
     return (["target_id"] + [f"q{j}" for j in range(1, n + 1)] + [f"q{j}_nominal" for j in range(1, n + 1)]
             + ["x_cmd", "y_cmd", "z_cmd", "qw", "qx", "qy", "qz", "cf1", "cf4", "cf6", "cfx",
-               "predicted_residual_mm", "predicted_rot_err_deg", "predicted_std_mm"])
+               "predicted_residual_mm", "predicted_rot_err_deg"] + (["predicted_std_mm"] if with_std else []))
 
 
 def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
@@ -1450,12 +1450,14 @@ def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequenc
     items = _require_writable(targets, q_min_deg, q_max_deg)
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(_csv_header(len(q_min_deg)))
+    with_std = any(not math.isnan(float(t.predicted_std_mm)) for t in items)   # no all-nan column
+    writer.writerow(_csv_header(len(q_min_deg), with_std))
     for t in items:
         writer.writerow([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
                          *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
                          *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_residual_mm),
-                         _csv_float(t.predicted_rot_err_deg), _csv_float(t.predicted_std_mm)])
+                         _csv_float(t.predicted_rot_err_deg)]
+                        + ([_csv_float(t.predicted_std_mm)] if with_std else []))
     return buf.getvalue()
 
 
@@ -1466,7 +1468,7 @@ def write_targets_csv(path: str | os.PathLike, targets: Iterable[CorrectedTarget
     Columns ``target_id, q1..qn`` (corrected, deg), ``q1_nominal..qn_nominal``
     (deg), ``x_cmd, y_cmd, z_cmd`` (mm, base), ``qw, qx, qy, qz``, ``cf1, cf4,
     cf6, cfx``, ``predicted_residual_mm``, ``predicted_rot_err_deg``,
-    ``predicted_std_mm`` (``nan`` when not applicable).  Floats are written exactly (``repr``), so
+    ``predicted_std_mm`` (only when some target has one: GPR layer).  Floats are written exactly (``repr``), so
     :func:`read_targets_csv` gives back identical values.  ValueError, writing
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
     """
@@ -1482,7 +1484,8 @@ def read_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]:
         raise ValueError(f"{path}: empty file")
     header = rows[0]
     n = sum(1 for h in header if re.fullmatch(r"q[0-9]+", h))
-    if n == 0 or header != _csv_header(n):
+    with_std = header[-1:] == ["predicted_std_mm"]
+    if n == 0 or header != _csv_header(n, with_std):
         raise ValueError(f"{path}: not a targets CSV header: {','.join(header)}")
     out = []
     for k, row in enumerate(rows[1:], 2):
@@ -1491,7 +1494,8 @@ def read_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]:
         try:
             nums = [float(v) for v in row[1:2 * n + 8]]
             conf = tuple(int(v) for v in row[2 * n + 8:2 * n + 12])
-            res, rot, std = float(row[-3]), float(row[-2]), float(row[-1])
+            res, rot = float(row[2 * n + 12]), float(row[2 * n + 13])
+            std = float(row[2 * n + 14]) if with_std else math.nan
         except ValueError as e:
             raise ValueError(f"{path}: line {k}: {e}") from None
         out.append(CorrectedTarget(row[0], tuple(nums[n:2 * n]), tuple(nums[:n]), tuple(nums[2 * n:2 * n + 3]),

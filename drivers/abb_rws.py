@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import random
 import re
 import stat
 import time
@@ -24,14 +25,16 @@ from urllib.parse import urlsplit
 
 import httpx
 
-from .base import DriverError, MotionError, RobotError, RobotNotReady
-from .rws_client import (E_RESOURCE_HELD, Credentials, RetryPolicy, Routes, RwsError, RwsSession, Timeouts,
-                         first)
+from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
+from .rws_client import (E_MASTER_REJECT, E_RESOURCE_HELD, Credentials, RetryPolicy, Routes, RwsError, RwsSession,
+                         Timeouts, first)
 
 log = logging.getLogger(__name__)
 
 DEFAULT_USER, DEFAULT_PASSWORD = "Default User", "robotics"   # ABB's documented factory account
-CALSERVER_VERSION = 1                                          # cal_version expected in CalServer.mod
+CALSERVER_VERSION = 2                                          # cal_version expected in CalServer.mod
+ENTRY_ROUTINE = "cal_run"                                      # CalServer's entry procedure (no main of its own)
+_CACHED = ("cal_speed", "cal_settle_s", "cal_vmax", "cal_override", "cal_tool", "cal_epoch")
 UNUSED_AXIS = 9e9
 KIND_PING, KIND_MOVEABSJ, KIND_MOVEL = 0, 1, 2
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
@@ -128,12 +131,14 @@ class RwsOptions:
     upload_module: bool = False
     module_file: str | None = None            # default: the packaged drivers/rapid/CalServer.mod
     remote_dir: str = "$HOME"
-    start_rapid: bool = False                 # start a stopped CalServer at connect (PP to main + start)
+    start_rapid: bool = False                 # start a stopped CalServer at connect (PP per ``entry`` + start)
+    entry: str = "routine"                    # routine: PP to cal_run, restored to main at close; main: PP to main
     motors_on: bool = False                   # switch motors on at connect (AUTO only)
-    speed: tuple[float, float, float, float] = (200.0, 100.0, 5000.0, 1000.0)   # speeddata mm/s, deg/s, mm/s, deg/s
+    speed: tuple[float, float, float, float] = (200.0, 100.0, 200.0, 1000.0)    # speeddata mm/s, deg/s, mm/s, deg/s
     settle_s: float = 0.5
-    poll_s: float = 0.2
+    poll_s: float = 0.25
     health_s: float = 1.0
+    max_poll_rate_hz: float = 3.0             # requests/s ceiling of the polls while waiting for CalServer
     timeouts: Timeouts = field(default_factory=Timeouts)
     retry: RetryPolicy = field(default_factory=RetryPolicy)
     credentials: CredentialOptions = field(default_factory=CredentialOptions)
@@ -148,8 +153,8 @@ class _OptionReader:
     """Reads one mapping level with key-path errors."""
 
     _SCALARS = {"task": str, "module": str, "mechunit": str, "remote_dir": str, "module_file": str,
-                "upload_module": bool, "start_rapid": bool, "motors_on": bool}
-    _POSITIVE = {"settle_s": True, "poll_s": False, "health_s": False}
+                "upload_module": bool, "start_rapid": bool, "motors_on": bool, "entry": str}
+    _POSITIVE = {"settle_s": True, "poll_s": False, "health_s": False, "max_poll_rate_hz": False}
     _NESTED = {"timeouts", "retry", "credentials"}
 
     def __init__(self, data: Mapping[str, Any], where: str) -> None:
@@ -163,6 +168,8 @@ class _OptionReader:
         self._unknown(known)
         kw: dict[str, Any] = {k: self._typed(k, t) for k, t in self._SCALARS.items() if k in self.data}
         kw.update({k: self._number(k, allow_zero=z) for k, z in self._POSITIVE.items() if k in self.data})
+        if kw.get("entry", "routine") not in ("routine", "main"):
+            raise self._err("entry", "expected routine or main")
         kw.update(self._transport_keys())
         if "n_joints" in self.data:
             kw["n_joints"] = self._int("n_joints", 1, 6)
@@ -319,6 +326,13 @@ class AbbRwsRobot:
         self._written: dict[str, str] = {}
         self._elog_mark: int | None = None
         self._suspect = False
+        self._limits = MotionLimits()             # safe default until the runner sets the campaign's caps
+        self._payload: Payload | None = None
+        self._explicit = False                    # True once the controller refused implicit mastership
+        self._restore_pp = False                  # we moved the PP to cal_run: put it back to main at close
+        self._identity: dict[str, str] | None = None
+        self._capped_warned = False
+        self._epoch = random.SystemRandom().randint(1, 999_999)   # marks this session's cached arguments
 
     @property
     def _routes(self) -> Routes:
@@ -372,8 +386,87 @@ class AbbRwsRobot:
             log.warning("%s: RAPID stop request failed: %s", self.url, exc)
 
     def close(self) -> None:
-        """Log out and close the HTTP client; idempotent, never raises."""
+        """Put the program pointer back to main if we moved it, log out and close; idempotent, never raises."""
+        if self._restore_pp and self.session.client is not None:
+            self._restore_pp = False
+            try:
+                if self._exec_state() == "running":
+                    self._rapid_stop_and_wait()
+                self._reset_pp()
+                log.info("%s: RAPID stopped and the program pointer restored to main", self.url)
+            except Exception as exc:                               # noqa: BLE001 - close never raises
+                log.warning("%s: could not restore the program pointer to main: %s", self.url, exc)
         self.session.close()
+
+    # -- optional capabilities (drivers/base.py)
+
+    def set_motion_limits(self, limits: MotionLimits) -> None:
+        """Enforce the caps on every later command: ``cal_speed`` is clamped here (TCP and linear external axes
+        to ``max_tcp_speed_mm_s``), and RAPID applies ``VelSet max_joint_speed_pct, max_tcp_speed_mm_s`` plus
+        its own clamp before moving."""
+        tcp, pct = float(limits.max_tcp_speed_mm_s), float(limits.max_joint_speed_pct)
+        if not (math.isfinite(tcp) and tcp > 0 and math.isfinite(pct) and 0 < pct <= 100):
+            raise RobotError(f"{self.url}: motion limits need a positive TCP speed (mm/s) and 0 < joint % <= 100, "
+                             f"got {tcp} mm/s, {pct} %")
+        self._limits = MotionLimits(tcp, pct)
+        self._capped_warned = False
+        self._epoch = random.SystemRandom().randint(1, 999_999)   # marks this session's cached arguments
+        if self.session.client is not None and self.session.routes is not None:
+            self._write_values(self._motion_arguments())
+
+    def set_payload(self, payload: Payload) -> None:
+        """Load data of ``cal_tool`` (tool0's frame): mass (kg) and centre of gravity (mm, flange frame); written
+        now if connected and with every later request. A mass of 0 becomes RAPID's minimum 0.001 kg."""
+        mass = float(payload.mass_kg)
+        cog = tuple(float(v) for v in payload.cog_flange_mm)
+        if not (math.isfinite(mass) and mass >= 0 and len(cog) == 3 and all(math.isfinite(v) for v in cog)):
+            raise RobotError(f"{self.url}: payload needs a mass >= 0 kg and a finite CoG (mm), got {payload}")
+        self._payload = Payload(mass, cog)
+        if self.session.client is not None and self.session.routes is not None:
+            self._write_values({"cal_tool": self._tool_literal()})
+
+    def speed_override_pct(self) -> float | None:
+        """The controller's speed ratio (%) from the panel, or None if it cannot be read."""
+        try:
+            path, params = self._routes.speedratio()
+            return float(first(self.session.get(path, params), "speedratio", "speedratio"))
+        except (DriverError, ValueError) as exc:
+            log.info("%s: speed ratio not readable: %s", self.url, exc)
+            return None
+
+    def identity(self) -> dict[str, str]:
+        """vendor, model (robot type), controller_type (IRC5 / OmniCore), serial, software_version (RobotWare),
+        controller_name and absacc (``yes`` if the Absolute Accuracy option is installed, ``no``, ``unknown``)."""
+        if self._identity is None:
+            self._identity = self._read_identity()
+        return dict(self._identity)
+
+    def _read_identity(self) -> dict[str, str]:
+        system = self._first_item(("/rw/system", {}))
+        ident = self._first_item(self._routes.identity())
+        robot = self._first_item(self._routes.robottype())
+        try:
+            path, params = self._routes.system_options()
+            options = [str(i.get("option", "")) for i in self.session.get(path, params)]
+            absacc = "yes" if any("absolute accuracy" in o.lower() for o in options) else "no"
+        except DriverError as exc:
+            log.info("%s: system options not readable: %s", self.url, exc)
+            absacc = "unknown"
+        return {"vendor": "ABB", "model": str(robot.get("robot-type", "unknown")),
+                "controller_type": "IRC5" if self.session.version == 1 else "OmniCore",
+                "serial": str(ident.get("ctrl-id", "unknown")),
+                "software_version": f"RobotWare {system.get('rwversion', 'unknown')}",
+                "controller_name": str(ident.get("ctrl-name") or system.get("name", "unknown")),
+                "rws_version": f"{self.session.version}.0", "absacc": absacc}
+
+    def _first_item(self, route: tuple[str, dict]) -> dict:
+        """First item of a GET, or {} when the resource is missing or refused (identity is best effort)."""
+        try:
+            items = self.session.get(*route)
+        except RwsError as exc:
+            log.info("%s: %s not readable: %s", self.url, route[0], exc)
+            return {}
+        return items[0] if items else {}
 
     def __enter__(self) -> "AbbRwsRobot":
         self.connect()
@@ -402,9 +495,11 @@ class AbbRwsRobot:
         if was_running:
             self._rapid_stop_and_wait()
         try:
-            self._load(remote, reset_pp=name.lower() == self.opts.module.lower())
+            self._load(remote, reset_pp=False)
             if name.lower() not in {m.lower() for m in self._modules()}:
                 raise RobotError(f"{self.url}: module {name} is not listed in {self.opts.task} after loading")
+            if was_running and name.lower() == self.opts.module.lower():
+                self._set_entry_pp()
         except DriverError:
             if was_running:
                 self._restart_quietly()
@@ -429,6 +524,13 @@ class AbbRwsRobot:
         self._check_motors()
         self._check_mastership()
         self._elog_mark = self._newest_elog()
+        ident = self.identity()
+        log.info("%s: %s %s, serial %s, %s", self.url, ident["controller_type"], ident["model"], ident["serial"],
+                 ident["software_version"])
+        if ident["absacc"] == "yes":
+            log.warning("%s: Absolute Accuracy is installed: joint moves are unaffected, but Cartesian targets "
+                        "corrected by this campaign must not be written back (the controller would correct them "
+                        "twice)", self.url)
         if self.opts.upload_module:
             self._install_calserver()
         else:
@@ -437,6 +539,7 @@ class AbbRwsRobot:
         self._check_version()
         self._sync_seq()
         self._ping()
+        self._write_values(self._motion_arguments())     # cached from here on: a move writes 3 symbols
 
     def _check_opmode(self) -> None:
         mode = self._opmode()
@@ -465,7 +568,7 @@ class AbbRwsRobot:
             item = items[0] if items else {}
             holder = str(item.get("mastership", "nomaster")).lower()
             mine = str(item.get("mastershipheldbyme", "false")).lower() == "true"
-            if holder not in ("nomaster", "") and not mine:
+            if holder not in ("nomaster", "", "internal") and not mine:     # internal: RAPID itself while it runs
                 who = item.get("application") or item.get("location") or holder
                 raise RobotNotReady(f"{self.url}: {domain} mastership is held by another client ({who}); "
                                     "release write access in RobotStudio / close the FlexPendant editor")
@@ -480,9 +583,9 @@ class AbbRwsRobot:
         if state == "running":
             return
         if not self.opts.start_rapid:
-            raise RobotNotReady(f"{self.url}: RAPID execution is {state} (set the PP to main and start "
-                                "CalServer, or set options.start_rapid: true)")
-        self._reset_pp()
+            raise RobotNotReady(f"{self.url}: RAPID execution is {state} (set the PP to routine {ENTRY_ROUTINE} "
+                                "and start, or set options.start_rapid: true)")
+        self._set_entry_pp()
         self._rapid_start()
 
     def _check_version(self) -> None:
@@ -506,7 +609,19 @@ class AbbRwsRobot:
         try:
             self._command(KIND_PING, {}, "ping", move_s=0.0)
         except MotionError as exc:
-            raise RobotNotReady(f"{self.url}: CalServer does not answer ({exc})") from exc
+            raise RobotNotReady(f"{self.url}: CalServer does not answer ({exc}){self._pp_hint()}") from exc
+
+    def _pp_hint(self) -> str:
+        """Where the program pointer is, for a CalServer that does not answer (best effort)."""
+        try:
+            item = self._first_item(self._routes.pcp(self.opts.task))
+        except DriverError:
+            return ""
+        module, routine = item.get("modulemame") or item.get("modulename"), item.get("routinename")
+        if not module or str(routine).lower() == ENTRY_ROUTINE:
+            return ""
+        return (f"; the program pointer is in {module}/{routine}: run {ENTRY_ROUTINE} (PP to routine, or call "
+                f"'{ENTRY_ROUTINE};' from main)")
 
     def _install_calserver(self) -> None:
         """Upload and verify CalServer, stop RAPID, load it with PP to main, and start RAPID."""
@@ -518,8 +633,9 @@ class AbbRwsRobot:
             raise RobotNotReady(f"{self.url}: read-back of {remote} differs from the uploaded module")
         if self._exec_state() == "running":
             self._rapid_stop_and_wait()
-        self._load(remote, reset_pp=True)
+        self._load(remote, reset_pp=False)
         self._check_module()
+        self._set_entry_pp()
         self._rapid_start()
         log.info("%s: %s uploaded to %s, loaded into %s and started", self.url, self.opts.module, remote,
                  self.opts.task)
@@ -544,44 +660,109 @@ class AbbRwsRobot:
             raise
 
     def _write_request(self, kind: int, args: Mapping[str, str], seq: int) -> None:
-        """Arguments first (only speed/settle are cached: a stale kind or target is never safe), then the trigger."""
+        """Arguments first (only speed, settle, caps and tool are cached: a stale kind or target is never safe),
+        then the trigger. The speed is clamped to the motion limits here, before anything is sent."""
         values = dict(args, cal_kind=str(kind))
         if kind != KIND_PING:
-            values.update(cal_speed="[" + ",".join(fmt_num(v) for v in self.opts.speed) + "]",
-                          cal_settle_s=fmt_num(self.opts.settle_s))
-        for name, literal in values.items():
-            self._write(name, literal, cache=name in ("cal_speed", "cal_settle_s"))
-        self._write("cal_req_seq", str(seq), cache=False)
+            self._check_epoch()
+            values.update(self._motion_arguments())
+        values["cal_req_seq"] = str(seq)
+        self._write_values(values)
+
+    def _check_epoch(self) -> None:
+        """A reloaded CalServer has its PERS initial values again (speed, caps, tool): if ``cal_epoch`` is not this
+        session's mark, forget what was cached so every argument is written again before the trigger."""
+        if self._written and int(parse_num(self._read("cal_epoch"))) != self._epoch:
+            log.warning("%s: %s was reloaded since the last request; writing every argument again", self.url,
+                        self.opts.module)
+            self._written.clear()
+
+    def _motion_arguments(self) -> dict[str, str]:
+        """The cached arguments of a motion request: capped speed, settle time, caps and tool (RAPID literals)."""
+        return {"cal_speed": "[" + ",".join(fmt_num(v) for v in self._speeddata()) + "]",
+                "cal_settle_s": fmt_num(self.opts.settle_s), "cal_vmax": fmt_num(self._limits.max_tcp_speed_mm_s),
+                "cal_override": fmt_num(min(100.0, self._limits.max_joint_speed_pct)), "cal_tool": self._tool_literal(),
+                "cal_epoch": str(self._epoch)}
+
+    def _speeddata(self) -> tuple[float, float, float, float]:
+        """``options.speed`` with v_tcp and v_leax clamped to the TCP speed cap (mm/s)."""
+        v_tcp, v_ori, v_leax, v_reax = self.opts.speed
+        cap = self._limits.max_tcp_speed_mm_s
+        if max(v_tcp, v_leax) > cap and not self._capped_warned:
+            self._capped_warned = True
+            log.warning("%s: options.speed %g mm/s is above the %g mm/s cap; moving at the cap", self.url,
+                        max(v_tcp, v_leax), cap)
+        return min(v_tcp, cap), v_ori, min(v_leax, cap), v_reax
+
+    def _tool_literal(self) -> str:
+        """``cal_tool``: tool0's frame with the payload's loaddata (kg, mm); RAPID's minimum mass without one."""
+        mass, cog = (0.0, (0.0, 0.0, 0.001)) if self._payload is None else \
+            (self._payload.mass_kg, self._payload.cog_flange_mm)
+        load = f"[{fmt_num(max(mass, 0.001))},[{','.join(fmt_num(v) for v in cog)}],[1,0,0,0],0,0,0]"
+        return f"[TRUE,[[0,0,0],[1,0,0,0]],{load}]"
+
+    def _write_values(self, values: Mapping[str, str]) -> None:
+        """Write CalServer symbols in order; implicit mastership first, and for the rest of the session explicit
+        edit mastership (requested with retries, released after the block) once the controller refuses implicit."""
+        if not self._explicit:
+            try:
+                for name, literal in values.items():
+                    self._write(name, literal, cache=name in _CACHED)
+                return
+            except _MasterRejected:
+                self._explicit = True
+                log.warning("%s: implicit mastership refused (403 E_MASTER_REJECT); using explicit edit "
+                            "mastership for writes", self.url)
+        with self._edit_mastership():
+            for name, literal in values.items():
+                self._write(name, literal, cache=name in _CACHED)
 
     def _await_done(self, seq: int, what: str, move_s: float) -> None:
-        """Poll done/err (every ``poll_s``), ack until seen, and the controller health every ``health_s``."""
+        """Poll ``cal_state`` = [ack, done, err] and every ``health_s`` the RAPID execution state, never faster than
+        ``max_poll_rate_hz`` requests per second (at least ``poll_s`` between polls)."""
         ack_deadline = Deadline(self.opts.timeouts.ack_s)
         deadline = Deadline(self.opts.timeouts.ack_s + move_s)
         health = Deadline(self.opts.health_s)
+        pacer = _Pacer(self.opts.max_poll_rate_hz, self._sleep)
         acked = False
         while True:
-            if int(parse_num(self._read("cal_done_seq"))) == seq:
+            ack, done, err = self._read_state()
+            pacer.count()
+            if done == seq:
                 return
-            if int(parse_num(self._read("cal_err_seq"))) == seq:
+            if err == seq:
                 self._raise_rejected(seq, what)
-            acked = acked or int(parse_num(self._read("cal_ack_seq"))) >= seq
+            acked = acked or ack >= seq
             if health.expired():
-                self._check_health(seq, what)
+                pacer.count(self._check_health(seq, what))
                 health = Deadline(self.opts.health_s)
             if not acked and (ack_deadline.expired() or deadline.expired()):
                 self._fail(seq, what, f"CalServer did not acknowledge within {self.opts.timeouts.ack_s:g} s")
             if deadline.expired():
                 self._fail(seq, what, f"not done within {deadline.seconds:g} s")
-            self._sleep(self.opts.poll_s)
+            pacer.wait(self.opts.poll_s)
 
-    def _check_health(self, seq: int, what: str) -> None:
-        """Motors must be on and RAPID running while a request is open."""
+    def _read_state(self) -> tuple[int, int, int]:
+        """(ack, done, err) request numbers from ``cal_state`` in one request."""
+        text = self._read("cal_state").strip()
+        try:
+            values = [int(float(v)) for v in text.strip("[]").split(",")]
+        except ValueError:
+            values = []
+        if len(values) != 3:
+            raise DriverError(f"{self.url}: cal_state is not [ack,done,err]: {text[:40]!r}")
+        return values[0], values[1], values[2]
+
+    def _check_health(self, seq: int, what: str) -> int:
+        """RAPID must run (it stops when the motors go off); returns the number of requests made."""
+        state = self._exec_state()
+        if state == "running":
+            return 1
         ctrl = self._ctrlstate()
         if ctrl != "motoron":
             self._fail(seq, what, f"motors went off (ctrlstate={ctrl})")
-        state = self._exec_state()
-        if state != "running":
-            self._fail(seq, what, f"RAPID execution {state}")
+        self._fail(seq, what, f"RAPID execution {state}")
+        return 2
 
     def _fail(self, seq: int, what: str, reason: str) -> None:
         """Stop RAPID (best effort) and raise MotionError with the reason and new elog errors."""
@@ -608,13 +789,41 @@ class AbbRwsRobot:
 
     @contextmanager
     def _edit_mastership(self) -> Iterator[None]:
-        """Hold the RAPID-edit mastership (``rapid`` on 1.0, ``edit`` on 2.0) for the block; always release."""
+        """Hold the RAPID-edit mastership (``rapid`` on 1.0, ``edit`` on 2.0) for the block; always release.
+        A request refused because another client holds it is retried with backoff (``retry`` options)."""
         domain = self._routes.edit_domain
-        self._mastership(domain, "request")
+        delay = self.opts.retry.backoff_s
+        for attempt in range(self.opts.retry.retries + 1):
+            try:
+                self._mastership(domain, "request")
+                break
+            except RobotNotReady:
+                if attempt == self.opts.retry.retries:
+                    raise
+                log.info("%s: %s mastership held elsewhere; retry %d/%d in %.2f s", self.url, domain, attempt + 1,
+                         self.opts.retry.retries, delay)
+                self._sleep(delay)
+                delay = min(delay * 2, self.opts.retry.backoff_max_s)
         try:
             yield
         finally:
             self._mastership(domain, "release", quiet=True)
+
+    def _set_entry_pp(self) -> None:
+        """RAPID stopped: PP to routine ``cal_run`` (restored to main at close) or, with ``entry: main``, PP to
+        the task's main (which must call ``cal_run``)."""
+        with self._edit_mastership():
+            if self.opts.entry == "main":
+                self._post_resetpp()
+                return
+            path, params = self._routes.pp_to_routine(self.opts.task)
+            try:
+                self.session.post(path, params, {"module": self.opts.module, "routine": ENTRY_ROUTINE,
+                                                 "userlevel": "false"})
+            except RwsError as exc:
+                raise RobotNotReady(f"{self.url}: cannot set the program pointer to {self.opts.module}/"
+                                    f"{ENTRY_ROUTINE} ({exc})") from exc
+            self._restore_pp = True
 
     def _load(self, remote: str, *, reset_pp: bool) -> None:
         """``loadmod`` (replace) under edit mastership, optionally followed by PP to main."""
@@ -681,11 +890,13 @@ class AbbRwsRobot:
         """Write a CalServer symbol (skipped if this session already wrote the same literal)."""
         if cache and self._written.get(name) == literal:
             return
-        path, params = self._routes.set_symbol(self.opts.task, self.opts.module, name)
+        path, params = self._routes.set_symbol(self.opts.task, self.opts.module, name, implicit=not self._explicit)
         try:
             self.session.post(path, params, {"value": literal})
         except RwsError as exc:
             self._written.pop(name, None)
+            if exc.code == E_MASTER_REJECT and not self._explicit:
+                raise _MasterRejected(str(exc)) from exc
             if exc.code == E_RESOURCE_HELD:
                 raise RobotNotReady(f"{self.url}: cannot write {name}: RAPID mastership held by another client") \
                     from exc
@@ -746,6 +957,25 @@ class AbbRwsRobot:
 # --------------------------------------------------------------------------- helpers and factory
 
 
+class _MasterRejected(RobotError):
+    """A write refused for lack of mastership (403 E_MASTER_REJECT): switch to explicit mastership."""
+
+
+class _Pacer:
+    """Keeps a polling loop at or under ``rate_hz`` requests per second: ``count`` the requests made, then
+    ``wait`` sleeps at least ``min_s`` and long enough for the requests since the previous wait."""
+
+    def __init__(self, rate_hz: float, sleep: Callable[[float], None]) -> None:
+        self.rate_hz, self._sleep, self._n = rate_hz, sleep, 0
+
+    def count(self, n: int = 1) -> None:
+        self._n += n
+
+    def wait(self, min_s: float) -> None:
+        self._sleep(max(min_s, self._n / self.rate_hz))
+        self._n = 0
+
+
 def _newer(seq: int, mark: int | None) -> bool:
     """uint16 sequence comparison with wrap-around."""
     return mark is None or 0 < (seq - mark) % 65536 < 32768
@@ -801,3 +1031,19 @@ def open_robot(url: str, options: Mapping[str, Any], **context: Any) -> AbbRwsRo
         opts = replace(opts, n_joints=int(context["n_joints"]))
     credentials = load_credentials(opts.credentials, context.get("environ"))
     return AbbRwsRobot(url, opts, credentials, transport=context.get("transport"))
+
+
+def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> None:
+    """What ``open_robot`` checks, without credentials or a connection: the url's host and the options."""
+    parts = urlsplit(url)
+    try:
+        parts.port
+    except ValueError as exc:
+        raise DriverError(f"{url}: {exc}") from None
+    if parts.scheme != "abb-rws" or not parts.hostname:
+        raise DriverError(f"{url}: expected abb-rws://host[:port]")
+    opts = RwsOptions.from_mapping(options or {})
+    n = context.get("n_joints")
+    if n is not None and "n_joints" not in (options or {}) and not 1 <= int(n) <= 6:
+        raise DriverError(f"{url}: an ABB robot has 1 to 6 robot axes, the config has {n} joints")
+    del opts

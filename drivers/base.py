@@ -127,6 +127,7 @@ class Robot(Protocol):
     # def set_payload(self, payload: Payload) -> None: send the load data to the controller
     # def identity(self) -> Mapping[str, str]: vendor, model, controller_type, serial, software_version
     # def speed_override_pct(self) -> float | None: the controller's speed override, if readable
+    # def joint_temperatures_c(self) -> Sequence[float] | None: joint (motor) temperatures, logged per point
 
 
 @runtime_checkable

@@ -422,3 +422,9 @@ class EmsconTracker:
 def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context: Any) -> EmsconTracker:
     """Registry factory: an ``EmsconTracker`` for ``url`` (not yet connected); context ``clock`` stamps readings."""
     return EmsconTracker(url, EmsconSettings.from_options(options), clock=context.get("clock"))
+
+
+def validate_options(url: str, options: Mapping[str, Any] | None = None, **context: Any) -> None:
+    """What ``open_tracker`` checks, without connecting: the url (host[:port]) and the options."""
+    parse_url(url)
+    EmsconSettings.from_options(options)

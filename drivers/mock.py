@@ -12,11 +12,15 @@ Real-cell phenomena (all off by default, seeded): read-back lag (``readback_lag_
 the commanded joints but reports ``q_cmd + lag * last move + N(0, readback_noise_deg)``), tracker-registration
 drift (``tracker_drift``: every reading, SMR or nest, is displaced by ``u(t) (v + w x p)`` in the tracker frame)
 and fixed reference nests (``nests``: id -> position in the base frame; ``MockTracker.select_nest`` aims at one).
+Motion caps: ``MockRobot`` takes ``set_motion_limits`` like a real driver, times every joint move so that no
+joint exceeds its share of the rated speed and neither the flange nor any SMR exceeds the TCP cap, and its
+command layer refuses (``MotionError``) any move that would be faster; accepted commands are recorded in
+``MockRobot.commands`` with their peak speeds. It also reports mock identity, payload and speed override.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -24,7 +28,22 @@ import numpy as np
 from robocal.noise import repeatability_sigma_mm
 from robocal.simulate import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
-from .base import BeamBroken, GarbageReply, MotionError, TargetNotFound, TrackerReading, TrackerTimeout
+from robocal.sweep import move_durations_s, peak_speed_per_unit_s
+
+from .base import (BeamBroken, GarbageReply, MotionError, MotionLimits, Payload, TargetNotFound, TrackerReading,
+                   TrackerTimeout)
+
+MOCK_SOFTWARE_VERSION = "mock-1"
+
+
+@dataclass(frozen=True)
+class MotionCommand:
+    """One move that reached the mock controller: duration (s), peak flange/SMR speed (mm/s), joint speed (%)."""
+    q_from_deg: tuple[float, ...]
+    q_to_deg: tuple[float, ...]
+    duration_s: float
+    peak_tcp_mm_s: float
+    joint_speed_pct: float
 
 
 class VirtualClock:
@@ -110,10 +129,11 @@ class MockWorld:
         self.p_extra_tracker_mm = p
         self.extra_error_mm = np.einsum("kij,kj->ki", np.linalg.cholesky(cov), self.rng.standard_normal(p.shape))
 
-    def move(self, q_deg: np.ndarray) -> None:
+    def move(self, q_deg: np.ndarray, duration_s: float | None = None) -> None:
+        """Go to q_deg in ``duration_s`` of virtual time (default: at the rated joint speed)."""
         delta = q_deg - self.q_deg
         self.approach = np.where(np.abs(delta) > 1e-9, np.sign(delta), self.approach)
-        self.clock.sleep(float(np.max(np.abs(delta))) / self.joint_speed_deg_s)
+        self.clock.sleep(float(np.max(np.abs(delta))) / self.joint_speed_deg_s if duration_s is None else duration_s)
         if self.motion_time_s > 0:
             time.sleep(self.motion_time_s)
         self.q_deg = q_deg.copy()
@@ -134,11 +154,60 @@ class MockWorld:
 class MockRobot:
     """A robot that moves instantly (or after ``motion_time_s``) inside its joint limits."""
 
-    def __init__(self, world: MockWorld, url: str = "mock://robot") -> None:
+    def __init__(self, world: MockWorld, url: str = "mock://robot", speed_override_pct: float = 100.0) -> None:
         self.world, self.url = world, url
         self.n_joints = world.cell.truth.n
         kin = world.cell.truth
         self.q_min_deg, self.q_max_deg = np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad)
+        self.limits = MotionLimits()
+        self.payload = Payload(world.payload_kg)
+        self.override_pct = float(speed_override_pct)
+        self.commands: list[MotionCommand] = []
+        self.p_points_mm = np.vstack([np.zeros(3), kin.p_flange_smr_mm] +
+                                     [c.truth.p_flange_smr_mm[None] for c in world.extra_cells])
+
+    def set_motion_limits(self, limits: MotionLimits) -> None:
+        """Caps for every later move (TCP mm/s > 0, joint percent in (0, 100])."""
+        if not (limits.max_tcp_speed_mm_s > 0 and 0 < limits.max_joint_speed_pct <= 100):
+            raise MotionError(f"{self.url}: invalid motion limits {limits}")
+        self.limits = limits
+
+    def set_payload(self, payload: Payload) -> None:
+        if payload.mass_kg < 0:
+            raise MotionError(f"{self.url}: negative payload {payload.mass_kg} kg")
+        self.payload = payload
+
+    def identity(self) -> Mapping[str, str]:
+        return {"vendor": "mock", "model": "simulated robot", "controller_type": "mock controller",
+                "serial": "MOCK-R-0001", "software_version": MOCK_SOFTWARE_VERSION}
+
+    def speed_override_pct(self) -> float:
+        return self.override_pct
+
+    def move_duration_s(self, q_from_deg: np.ndarray, q_to_deg: np.ndarray) -> float:
+        """The shortest move time (s) within the caps, at the rated joint speed x the joint percentage."""
+        lim = self.limits
+        return float(move_durations_s(self.world.cell.truth, np.radians(q_from_deg), np.radians(q_to_deg),
+                                      self.p_points_mm, np.radians(self.world.joint_speed_deg_s)
+                                      * lim.max_joint_speed_pct / 100.0, lim.max_tcp_speed_mm_s)[0])
+
+    def command_move(self, q_deg: np.ndarray, duration_s: float) -> None:
+        """The controller's command layer: refuses a move faster than the caps, else executes and records it."""
+        q_from = self.world.q_deg
+        span = float(np.max(np.abs(q_deg - q_from), initial=0.0))
+        if span == 0.0:
+            duration_s = max(duration_s, 0.0)
+        elif not duration_s > 0:
+            raise MotionError(f"{self.url}: refused a move of {span:.3f} deg in {duration_s} s")
+        peak = float(peak_speed_per_unit_s(self.world.cell.truth, np.radians(q_from), np.radians(q_deg),
+                                           self.p_points_mm)[0]) / duration_s if span else 0.0
+        pct = 100.0 * span / duration_s / self.world.joint_speed_deg_s if span else 0.0
+        lim = self.limits
+        if peak > lim.max_tcp_speed_mm_s * (1 + 1e-9) or pct > lim.max_joint_speed_pct * (1 + 1e-9):
+            raise MotionError(f"{self.url}: refused a move at {peak:.0f} mm/s, {pct:.0f} % joint speed "
+                              f"(caps {lim.max_tcp_speed_mm_s:g} mm/s, {lim.max_joint_speed_pct:g} %)")
+        self.commands.append(MotionCommand(tuple(q_from), tuple(q_deg), duration_s, peak, pct))
+        self.world.move(q_deg, duration_s)
 
     def connect(self) -> None:
         self.world.stopped = False
@@ -152,7 +221,7 @@ class MockRobot:
             j = bad[0]
             raise MotionError(f"{self.url}: joint {j + 1} target {q[j]:.3f} deg outside "
                               f"[{self.q_min_deg[j]:.1f}, {self.q_max_deg[j]:.1f}]")
-        self.world.move(q)
+        self.command_move(q, self.move_duration_s(self.world.q_deg, q))
 
     def read_joints(self) -> tuple[float, ...]:
         """The read-back joints (deg): the commanded ones, plus the simulated read-back lag and noise."""
@@ -229,6 +298,10 @@ class MockTracker:
 
     def environment(self) -> Mapping[str, float]:
         return {}
+
+    def identity(self) -> Mapping[str, str]:
+        return {"vendor": "mock", "model": "simulated laser tracker", "serial": "MOCK-T-0001",
+                "firmware": MOCK_SOFTWARE_VERSION}
 
     def close(self) -> None:
         pass

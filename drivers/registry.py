@@ -41,3 +41,28 @@ def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) 
         return factory(url, dict(options or {}), **context)
     except ValueError as exc:                      # option validation of the line-protocol driver
         raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
+
+
+def check_options(kind: str, url: str, options: Mapping[str, Any] | None = None, **context) -> str | None:
+    """Validate a driver's url and options as its factory would, without opening a connection.
+
+    ``kind`` is ``robot`` or ``tracker``. Returns None when both are accepted, else ``"url: message"`` or
+    ``"options: message"`` (which of the two the driver refused). The driver module declares the check as
+    ``validate_options(url, options, **context)``; a driver without one is only checked for its scheme."""
+    table = ROBOT_DRIVERS if kind == "robot" else TRACKER_DRIVERS
+    scheme = urlsplit(url).scheme
+    if scheme not in table:
+        return f"url: unknown driver {scheme!r} (expected one of: {', '.join(sorted(table))})"
+    module_name = table[scheme].split(":")[0]
+    try:
+        check = getattr(importlib.import_module(module_name), "validate_options", None)
+    except ImportError as exc:
+        return f"url: driver {scheme!r} is not available ({exc})"
+    if check is None:
+        return None
+    for where, opts in (("url", {}), ("options", dict(options or {}))):
+        try:
+            check(url, opts, **context)
+        except (DriverError, ValueError, TypeError) as exc:
+            return f"{where}: {' '.join(str(exc).split())}"
+    return None

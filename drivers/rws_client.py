@@ -33,13 +33,14 @@ HAL_JSON_V2 = "application/hal+json;v=2.0"
 FORM_V2 = "application/x-www-form-urlencoded;v=2.0"
 FILE_V2 = "text/plain;v=2.0"
 
-# The RobotWare return codes the driver reacts to or reports (full table: shared/docs/rws_retcodes.tsv).
+# The RobotWare return codes the driver reacts to or reports (names as in ABB's RWS return-code list).
 RETCODE_NAMES = {
     294912: "S_OK", -1073445879: "E_INVALIDARG", -1073445867: "E_UAS_REJECT", -1073445866: "E_UNRESOLVED_URL",
     -1073445862: "E_RESOURCE_HELD", -1073445860: "E_MODE_REJECT", -1073445859: "E_MASTER_REJECT",
     -1073445881: "E_REJECT", -1073445872: "E_RESOURCE_ALREADY_HELD", -1073442816: "E_NO_SUCH_SYMBOL",
     -1073442814: "E_INVALID_PROGRAMFILE", -1073442813: "E_MOD_AMBNAME", -1073442809: "E_EXEC_STATE",
-    -1073442803: "E_RAPID_SYNTAX_ERROR", -1073442783: "E_NO_PP", -1073438716: "E_INVALID_PATH",
+    -1073442803: "E_RAPID_SYNTAX_ERROR", -1073442802: "E_RAPID_SEMANTIC_ERROR", -1073442801: "E_ILLEGAL_ENTRYPOINT",
+    -1073442783: "E_NO_PP", -1073438716: "E_INVALID_PATH",
     -1073438713: "E_DIR_NOT_EXIST", -1073438708: "E_FILE_NOT_FOUND", -1073414146: "E_FAIL",
 }
 E_RESOURCE_HELD = -1073445862
@@ -152,11 +153,34 @@ class Routes:
             return f"/rw/rapid/symbol/data/RAPID/{task}/{module}/{name}", {}
         return f"/rw/rapid/symbol/RAPID/{task}/{module}/{name}/data", {}
 
-    def set_symbol(self, task: str, module: str, name: str) -> tuple[str, dict]:
-        """Write a RAPID symbol (1.0: implicit when nobody holds RAPID mastership; 2.0: ``mastership=implicit``)."""
+    def set_symbol(self, task: str, module: str, name: str, *, implicit: bool = True) -> tuple[str, dict]:
+        """Write a RAPID symbol (1.0: implicit when nobody holds RAPID mastership; 2.0: ``mastership=implicit``
+        unless ``implicit`` is False, i.e. the caller holds edit mastership explicitly)."""
         if self.version == 1:
             return f"/rw/rapid/symbol/data/RAPID/{task}/{module}/{name}", {"action": "set"}
-        return f"/rw/rapid/symbol/RAPID/{task}/{module}/{name}/data", {"mastership": "implicit"}
+        return f"/rw/rapid/symbol/RAPID/{task}/{module}/{name}/data", {"mastership": "implicit"} if implicit else {}
+
+    def pp_to_routine(self, task: str) -> tuple[str, dict]:
+        """Set the program pointer to a routine (form ``module``, ``routine``, ``userlevel``)."""
+        if self.version == 1:
+            return f"/rw/rapid/tasks/{task}/pcp", {"action": "set-pp-routine"}
+        return f"/rw/rapid/tasks/{task}/pcp/routine", {}
+
+    def pcp(self, task: str) -> tuple[str, dict]:
+        """Where the program pointer is (``modulemame``/``routinename``)."""
+        return f"/rw/rapid/tasks/{task}/pcp", {}
+
+    def speedratio(self) -> tuple[str, dict]:
+        return "/rw/panel/speedratio", {}
+
+    def identity(self) -> tuple[str, dict]:
+        return "/ctrl/identity", {}
+
+    def robottype(self) -> tuple[str, dict]:
+        return "/rw/system/robottype", {}
+
+    def system_options(self) -> tuple[str, dict]:
+        return "/rw/system/options", {}
 
     def jointtarget(self, mechunit: str) -> tuple[str, dict]:
         return f"/rw/motionsystem/mechunits/{mechunit}/jointtarget", {}

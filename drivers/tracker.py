@@ -889,3 +889,9 @@ def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context: 
     profile = LineProfile.from_options(options)
     port_spec(url, profile.serial)
     return LineTracker(url, profile, clock=context.get("clock"))
+
+
+def validate_options(url: str, options: Mapping[str, Any] | None = None, **context: Any) -> None:
+    """What ``open_tracker`` checks, without opening anything: the options and the url (host:port, device)."""
+    profile = LineProfile.from_options(options)
+    port_spec(url, profile.serial)

@@ -3,7 +3,7 @@
 Everything on the wire is big-endian. A packet is ``uint16 size`` (header included) + ``uint8 type`` +
 payload. Variable names map to wire types through the tables below; they follow the types the ur_rtde
 library decodes with (it uses its own name -> type table, not the types the server answers), see
-``/work/shared/docs/ur_rtde.md`` section 5.
+``docs/drivers_ur.md``.
 """
 from __future__ import annotations
 

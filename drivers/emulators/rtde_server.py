@@ -18,7 +18,17 @@ fixed ports (the library cannot be pointed elsewhere):
 
 The emulated arm is a nominal UR10 (DH, metres/radians inside): ``movej`` moves all joints on a
 synchronised trapezoidal profile whose leading axis respects the commanded speed and acceleration and
-ends exactly on the target; ``actual_TCP_pose`` is the DH forward kinematics with the active TCP.
+ends exactly on the target; ``actual_TCP_pose`` is the DH forward kinematics with the active TCP. The script
+emulation also runs ``setPayload`` (command 17; a [0, 0, 0] CoG keeps the current one, as the real script does)
+and records every movej speed and the highest TCP speed reached (``STATE``).
+
+Dashboard: ``power on`` (-> IDLE), ``brake release`` (-> RUNNING), ``unlock protective stop`` (refused with UR's
+message until ``--unlock-delay`` s, default 5, after the stop), ``close safety popup``, ``is in remote control``
+(``--no-remote-control``), serial number, model and PolyScope version. A protective stop halts the arm and ends
+the script program (ur_rtde's ``reuploadScript`` starts it again once unlocked).
+
+Standstill noise (``--q-noise-rad``, ``--qd-noise-rad-s``, ``--ring-rad``, ``--seed``): white noise on
+``actual_q`` / ``actual_qd`` and a decaying ~7 Hz oscillation after each move, to test settle detection.
 
 A line-oriented back door on an extra port (``--control-port``, default ephemeral) injects state and
 faults for tests: ``STATE``, ``SETQ``, ``MODE``, ``SAFETY``, ``DROP``, ``FREEZE``, ``HANG`` (the control
@@ -61,7 +71,7 @@ JOINT_RUNNING_MODE = 253
 
 # command ids of ur_rtde's control script (rtde.h RobotCommand::Type)
 CMD_NO_CMD, CMD_MOVEJ, CMD_MOVEL_FK = 0, 1, 4
-CMD_SET_TCP, CMD_PROTECTIVE_STOP, CMD_STOPL, CMD_STOPJ = 29, 31, 33, 34
+CMD_SET_PAYLOAD, CMD_SET_TCP, CMD_PROTECTIVE_STOP, CMD_STOPL, CMD_STOPJ = 17, 29, 31, 33, 34
 CMD_GET_TCP_OFFSET, CMD_FK_DEFAULT, CMD_FK_ARGS, CMD_IS_STEADY, CMD_STOP_SCRIPT = 40, 43, 44, 47, 255
 ASYNC_RUNNING_BIT = 1 << 15
 
@@ -170,6 +180,34 @@ class Braking:
 # --------------------------------------------------------------------------------------------- controller
 
 @dataclass
+class JointNoise:
+    """Measurement noise on ``actual_q`` / ``actual_qd`` at standstill (rad, rad/s): white noise of std ``q_rad`` and
+    ``qd_rad_s`` plus a decaying oscillation after each move (amplitude ``ring_rad``, ``ring_hz``, time constant
+    ``ring_tau_s``) like a servo settling. Seeded; zero by default."""
+    q_rad: float = 0.0
+    qd_rad_s: float = 0.0
+    ring_rad: float = 0.0
+    ring_hz: float = 7.0
+    ring_tau_s: float = 0.15
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+
+    def sample(self, t_since_stop_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(dq, dqd) for one sample, ``t_since_stop_s`` after the last motion ended."""
+        dq = self.rng.normal(0.0, self.q_rad, 6) if self.q_rad else np.zeros(6)
+        dqd = self.rng.normal(0.0, self.qd_rad_s, 6) if self.qd_rad_s else np.zeros(6)
+        if self.ring_rad and t_since_stop_s >= 0:
+            w, decay = 2 * np.pi * self.ring_hz, np.exp(-t_since_stop_s / self.ring_tau_s)
+            weights = np.array([1.0, 1.0, 0.8, 0.5, 0.5, 0.3])
+            dq = dq + weights * self.ring_rad * decay * np.cos(w * t_since_stop_s)
+            dqd = dqd - weights * self.ring_rad * decay * (w * np.sin(w * t_since_stop_s)
+                                                           + np.cos(w * t_since_stop_s) / self.ring_tau_s)
+        return dq, dqd
+
+
+@dataclass
 class ScriptState:
     """The emulated rtde_control script: register offsets, command handshake, pending completion."""
     int_offset: int = 0
@@ -192,8 +230,17 @@ class Controller:
     """Emulated controller state: joints (rad), modes, registers, the control-script emulation. Thread-safe."""
 
     def __init__(self, version: Sequence[int], q0: Sequence[float], robot_mode: int = RUNNING,
-                 safety_mode: int = NORMAL) -> None:
+                 safety_mode: int = NORMAL, noise: "JointNoise | None" = None, unlock_delay_s: float = 5.0,
+                 remote_control: bool = True) -> None:
         self.lock = threading.RLock()
+        self.noise = noise or JointNoise()
+        self.unlock_delay_s, self.remote_control = unlock_delay_s, remote_control
+        self.pstop_at: float | None = None
+        self.payload_kg, self.payload_cog = 0.0, [0.0, 0.0, 0.0]
+        self.movej_speeds: list[float] = []          # the v argument of every movej the script ran (rad/s)
+        self.max_tcp_speed = 0.0                     # highest TCP speed seen while moving (m/s)
+        self._last_tcp: tuple[float, np.ndarray] | None = None
+        self.motion_end = -1e9                       # controller time the last motion ended (s)
         self.version = tuple(version)
         self.t_start = time.monotonic()
         self.q = np.asarray(q0, float)
@@ -245,10 +292,12 @@ class Controller:
             return {n: live[n] if n in live else self._register_value(n) for n in names}
 
     def _live_values(self) -> dict[str, Any]:
-        q, qd = self.q.tolist(), self.qd.tolist()
+        now = self.now()
+        dq, dqd = self.noise.sample(now - self.motion_end) if self.motion is None else (0.0, 0.0)
+        q, qd = (self.q + dq).tolist(), (self.qd + dqd).tolist()
         pose = self.tcp_pose()
-        return {"timestamp": self.now(), "actual_q": q, "target_q": self.target_q.tolist(), "actual_qd": qd,
-                "target_qd": qd, "actual_TCP_pose": pose, "target_TCP_pose": pose, "robot_mode": self.robot_mode,
+        return {"timestamp": now, "actual_q": q, "target_q": self.target_q.tolist(), "actual_qd": qd,
+                "target_qd": self.qd.tolist(), "payload": self.payload_kg, "payload_cog": list(self.payload_cog), "actual_TCP_pose": pose, "target_TCP_pose": pose, "robot_mode": self.robot_mode,
                 "safety_mode": self.safety_mode, "safety_status": self.safety_mode,
                 "safety_status_bits": self.safety_status_bits(), "robot_status_bits": self.robot_status_bits(),
                 "runtime_state": RUNTIME_PLAYING if self.playing else RUNTIME_STOPPED,
@@ -310,10 +359,16 @@ class Controller:
 
     def _advance_motion(self, now: float) -> None:
         if self.motion is None:
+            self._last_tcp = None
             return
         self.q, self.qd = self.motion.at(now - self.motion_t0)
+        p = np.asarray(self.tcp_pose()[:3])
+        if self._last_tcp is not None and now > self._last_tcp[0]:
+            speed = float(np.linalg.norm(p - self._last_tcp[1])) / (now - self._last_tcp[0])
+            self.max_tcp_speed = max(self.max_tcp_speed, speed)
+        self._last_tcp = (now, p)
         if now - self.motion_t0 >= self.motion.duration:
-            self.motion = None
+            self.motion, self.motion_end = None, now
             if self.script is not None and self.script.async_running:
                 self._async_progress(self.script, -1)
 
@@ -337,10 +392,26 @@ class Controller:
                 self.on_fault(fault.kind)
 
     def protective_stop(self) -> None:
-        """Protective stop: the arm halts where it is, the program pauses in place (register handshake stalls)."""
+        """Protective stop: the arm halts where it is and the script program ends (an external script cannot be
+        resumed: ur_rtde's ``reuploadScript`` starts it again once the stop is unlocked)."""
         with self.lock:
             self.safety_mode = PROTECTIVE_STOP
-            self.motion, self.qd = None, np.zeros(6)
+            self.motion, self.qd, self.motion_end = None, np.zeros(6), self.now()
+            self.pstop_at = self.now()
+            if self.script is not None:
+                self.log.append("program stopped: protective stop")
+            self.script = None
+
+    def unlock_protective_stop(self) -> str:
+        """Dashboard ``unlock protective stop``: refused until ``unlock_delay_s`` after the stop (UR: 5 s)."""
+        with self.lock:
+            if self.safety_mode != PROTECTIVE_STOP:
+                return "Protective stop releasing"
+            if self.pstop_at is not None and self.now() - self.pstop_at < self.unlock_delay_s:
+                return ("Cannot unlock protective stop until 5s after occurrence. Always inspect cause of "
+                        "protective stop before unlocking")
+            self.safety_mode = NORMAL
+            return "Protective stop releasing"
 
     def _start_motion(self, motion: JointMove | Braking, target: np.ndarray) -> None:
         self.motion, self.motion_t0, self.target_q = motion, self.now(), target
@@ -381,6 +452,7 @@ class Controller:
         if cmd in (CMD_MOVEJ, CMD_MOVEL_FK):
             d = self._args(s, 8)
             target = np.asarray(d[:6], float)
+            self.movej_speeds.append(float(d[6]))
             if s.async_running:
                 self._async_progress(s, -1)          # a new move kills the running async move
             self._start_motion(JointMove(self.q, target, d[6], d[7]), target)
@@ -395,7 +467,12 @@ class Controller:
         return self._execute_query(cmd, s)
 
     def _execute_query(self, cmd: int, s: ScriptState) -> None:
-        if cmd == CMD_SET_TCP:
+        if cmd == CMD_SET_PAYLOAD:
+            mass, *cog = self._args(s, 4)
+            self.payload_kg = float(mass)
+            if any(cog):                             # the script keeps the current CoG for [0, 0, 0]
+                self.payload_cog = [float(v) for v in cog]
+        elif cmd == CMD_SET_TCP:
             self.tcp = list(self._args(s, 6))
         elif cmd in (CMD_GET_TCP_OFFSET, CMD_FK_DEFAULT, CMD_FK_ARGS):
             result = {CMD_GET_TCP_OFFSET: lambda: list(self.tcp), CMD_FK_DEFAULT: self.tcp_pose,
@@ -420,7 +497,8 @@ class Controller:
             return {"q": self.q.tolist(), "qd": self.qd.tolist(), "robot_mode": self.robot_mode,
                     "safety_mode": self.safety_mode, "playing": self.playing, "program": self.program_name,
                     "out_int_0": self.out_int[0], "in_int_0": self.in_int[0], "moving": self.motion is not None,
-                    "tcp_pose": self.tcp_pose()}
+                    "tcp_pose": self.tcp_pose(), "payload_kg": self.payload_kg, "payload_cog": self.payload_cog,
+                    "movej_speeds": self.movej_speeds[-200:], "max_tcp_speed_mm_s": 1000.0 * self.max_tcp_speed}
 
 
 # --------------------------------------------------------------------------------------------- sessions
@@ -716,7 +794,8 @@ class Emulator:
             c.log.append(f"dashboard {line}")
         version = ".".join(str(v) for v in c.version)
         fixed = {"polyscopeversion": f"URSoftware {version} (Jan 01 2024)", "get serial number": "20185500000",
-                 "get robot model": "UR10", "is in remote control": "true", "quit": "Disconnected",
+                 "get robot model": "UR10", "is in remote control": "true" if c.remote_control else "false",
+                 "quit": "Disconnected",
                  "close popup": "closing popup", "close safety popup": "closing safety popup",
                  "get loaded program": f"Loaded program: {c.program_name or '<unnamed>'}",
                  "isprogramsaved": f"true {c.program_name or '<unnamed>'}", "restart safety": "Restarting safety",
@@ -759,8 +838,7 @@ class Emulator:
                 c.robot_mode = RUNNING if c.robot_mode in (4, 5, 7) else c.robot_mode
                 return "Brake releasing"
             if cmd == "unlock protective stop":
-                c.safety_mode = NORMAL if c.safety_mode == PROTECTIVE_STOP else c.safety_mode
-                return "Protective stop releasing"
+                return c.unlock_protective_stop()
         return None
 
     def control_reply(self, line: str) -> str:
@@ -851,6 +929,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p.add_argument("--robot-mode", type=int, default=RUNNING)
     p.add_argument("--safety-mode", type=int, default=NORMAL)
     p.add_argument("--max-rate", type=float, default=500.0, help="cap of the RTDE output rate (Hz)")
+    p.add_argument("--q-noise-rad", type=float, default=0.0, help="white noise std on actual_q at standstill (rad)")
+    p.add_argument("--qd-noise-rad-s", type=float, default=0.0, help="white noise std on actual_qd (rad/s)")
+    p.add_argument("--ring-rad", type=float, default=0.0, help="post-move oscillation amplitude (rad), decays")
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--unlock-delay", type=float, default=5.0,
+                   help="protective stop cannot be unlocked before this many seconds (UR: 5)")
+    p.add_argument("--no-remote-control", action="store_true", help="dashboard answers 'is in remote control' false")
     p.add_argument("--verbose", action="store_true", help="log protocol events to stderr")
     return p.parse_args(argv)
 
@@ -858,7 +943,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     version = [int(v) for v in args.version.split(".")]
-    controller = Controller(version, args.q0, args.robot_mode, args.safety_mode)
+    noise = JointNoise(args.q_noise_rad, args.qd_noise_rad_s, args.ring_rad, seed=args.seed)
+    controller = Controller(version, args.q0, args.robot_mode, args.safety_mode, noise, args.unlock_delay,
+                            not args.no_remote_control)
     emulator = Emulator(args.host, controller, control_port=args.control_port, max_rate_hz=args.max_rate,
                         verbose=args.verbose)
     if args.print_ports:

@@ -1,6 +1,7 @@
 """Localhost emulator of an ABB controller's Robot Web Services: RWS 1.0 (IRC5) or RWS 2.0 (OmniCore).
 
-It implements what ``drivers.abb_rws`` and ``abb_robot_client.rws.RWS`` use, following ``shared/docs/rws.md``:
+It implements what ``drivers.abb_rws`` and public RWS clients (``abb_robot_client.rws.RWS`` for RWS 1.0, the RWS 2.0
+client ``RWS2`` of the Mesh-ch fork of abb_robot_client) use:
 
 - authentication: real Digest (RFC 7616 / 2617, MD5, ``qop="auth"``, realm ``validusers@robapi.abb``, fresh nonce
   per challenge, stale nonces rejected) on 1.0; Basic on 2.0 (Digest rejected);
@@ -9,20 +10,31 @@ It implements what ``drivers.abb_rws`` and ``abb_robot_client.rws.RWS`` use, fol
   and the session's mastership;
 - representations: 1.0 ``?json=1`` (``_embedded._state``, ``Content-Type: application/json`` exactly) or XHTML;
   2.0 HAL (``state[]`` / ``_embedded.resources[]``) requiring ``Accept: …;v=2.0`` (else 406) and ``;v=2.0``
-  request bodies (else 415); error envelopes with the RobotWare return codes of ``rws_retcodes.tsv``;
-- controller model: operating mode, controller state, RAPID execution state and cycle, program pointer,
-  mastership per domain and session, a task ``T_ROB1`` whose modules are parsed from uploaded ``.mod`` text
-  (module-level ``PERS``/``VAR``/``CONST`` declarations become typed RAPID symbols), a file service (``$HOME``,
-  ``$TEMP``, ``$RAMDISK``), the ROB_1 joint and Cartesian state, speed ratio and an event log;
-- rules: motors on only in AUTO; start only in AUTO with motors on, stopped, PP set (2.0: caller holds no edit
-  mastership); resetpp/loadmod only when stopped and with edit mastership; foreign mastership -> 403
-  ``-1073445862``; missing mastership -> 403 ``-1073445859``; bad literal -> 400 ``-1073445879``; unknown symbol ->
-  1.0 400 ``-1073414146`` / 2.0 404 ``-1073442816``; missing load file -> 400 ``-1073438708``;
-- a thread that plays ``CalServer.mod`` while RAPID runs and the module is loaded: resync on PP-to-main, ack,
-  move the simulated robot at ``joint_speed_deg_s`` (interrupted if RAPID stops or motors go off), call the
-  ``move_hook`` (plug the campaign's mock world in here), dwell ``cal_settle_s``, set ``cal_reached`` and done;
+  request bodies (else 415); error envelopes with RobotWare return codes;
+- controller model: operating mode, controller state, RAPID execution state and cycle, the program pointer
+  (module, routine), mastership per domain and session (``internal`` for motion while RAPID runs), a task ``T_ROB1``
+  whose modules are parsed from uploaded ``.mod`` text (module-level ``PERS``/``VAR``/``CONST`` declarations
+  become typed RAPID symbols, procedures and what ``main`` calls are recorded), a production program
+  ``MainModule`` (its ``main`` calls ``cal_run`` or not: ``customer_program``), a file service (``$HOME``,
+  ``$TEMP``, ``$RAMDISK``), the ROB_1 joint and Cartesian state (also as the task's ``motion/jointtarget`` and
+  ``motion/robtarget`` read by RW7 clients), speed ratio, identity (``/ctrl/identity``, robot type, system
+  options with or without ``Absolute Accuracy``) and an event log;
+- rules: motors on only in AUTO; start only in AUTO with motors on, stopped, PP set, program linked (2.0: caller
+  holds no edit mastership); resetpp / PP to routine / loadmod only when stopped and with edit mastership;
+  a second ``main`` (or main calling an unknown procedure) loads but does not link, as on a controller: elog
+  "Link error" and start / PP moves answer 400 ``-1073442802``; PP to a routine with parameters -> 400
+  ``-1073442801``; foreign mastership -> 403 ``-1073445862``; missing mastership (and, with
+  ``implicit_mastership=False``, writes with ``mastership=implicit``) -> 403 ``-1073445859``; bad literal -> 400
+  ``-1073445879``; unknown symbol -> 1.0 400 ``-1073414146`` / 2.0 404 ``-1073442816``; missing load file -> 400
+  ``-1073438708``;
+- a thread that plays ``CalServer.mod`` while RAPID runs cal_run (PP at cal_run, or at a main calling it):
+  resync on a PP move, ack, ``cal_limit`` (clamp the speed to ``cal_vmax``, VelSet override; recorded with the
+  ``cal_tool`` load in ``executed``), move the simulated robot at ``joint_speed_deg_s`` x override (interrupted if
+  RAPID stops or motors go off), call the ``move_hook`` (plug the campaign's mock world in here), dwell
+  ``cal_settle_s``, set ``cal_reached`` and done; ``cal_state`` mirrors [ack, done, err];
 - fault injection: 503 storms, 401 (session expiry) on the next requests, motors off / RAPID stop / RAPID-side
-  error / hang on the next move, manual mode, foreign mastership, extra elog entries.
+  error / hang on the next move, manual mode, foreign mastership (optionally released after N refusals), extra
+  elog entries.
 
 Not implemented: subscriptions / WebSockets, IO signals, RMMP, configuration, XHTML on RWS 2.0 beyond the basics.
 
@@ -64,7 +76,7 @@ log = logging.getLogger(__name__)
 
 REALM = "validusers@robapi.abb"
 S_OK = 294912
-E = {  # return codes used here -> description (shared/docs/rws_retcodes.tsv)
+E = {  # RobotWare return codes used here -> description
     -1073445879: "An argument specified by the client is not valid for this type of operation.",
     -1073445866: "The URL used to initialize the helper does not resolve to a valid object.",
     -1073445862: "Requested resource is held by someone else.",
@@ -74,6 +86,8 @@ E = {  # return codes used here -> description (shared/docs/rws_retcodes.tsv)
     -1073442814: "The given file was not recognized as a program file.",
     -1073442813: "Ambiguous module name.",
     -1073442809: "Operation is illegal in current execution state.",
+    -1073442802: "Operation not allowed due to semantic error(s).",
+    -1073442801: "Given routine is not a legal entrypoint.",
     -1073442783: "No program pointer is available.",
     -1073438716: "Invalid path.",
     -1073438713: "The directory does not exist.",
@@ -87,6 +101,8 @@ NO_SUCH_SYMBOL, INVALID_PROGRAMFILE, MOD_AMBNAME, EXEC_STATE, NO_PP = (
     -1073442816, -1073442814, -1073442813, -1073442809, -1073442783)
 INVALID_PATH, DIR_NOT_EXIST, FILE_NOT_FOUND, INVALID_STATE, E_FAIL = (
     -1073438716, -1073438713, -1073438708, -1073435887, -1073414146)
+RAPID_SEMANTIC_ERROR, ILLEGAL_ENTRYPOINT = -1073442802, -1073442801
+ENTRY = "cal_run"      # CalServer's entry routine
 
 TASK = "T_ROB1"
 VOLUMES = ("HOME", "TEMP", "RAMDISK")
@@ -140,7 +156,9 @@ N, S, B = "num", "string", "bool"
 SHAPES: dict[str, Any] = {
     "num": N, "dnum": N, "bool": B, "string": S, "speeddata": [N] * 4, "pos": [N] * 3, "orient": [N] * 4,
     "confdata": [N] * 4, "robjoint": [N] * 6, "extjoint": [N] * 6, "jointtarget": [[N] * 6, [N] * 6],
-    "robtarget": [[N] * 3, [N] * 4, [N] * 4, [N] * 6],
+    "robtarget": [[N] * 3, [N] * 4, [N] * 4, [N] * 6], "pose": [[N] * 3, [N] * 4],
+    "loaddata": [N, [N] * 3, [N] * 4, N, N, N],
+    "tooldata": [B, [[N] * 3, [N] * 4], [N, [N] * 3, [N] * 4, N, N, N]],
 }
 
 
@@ -186,6 +204,14 @@ class Module:
     text: str
     symbols: dict[str, Symbol]
     has_main: bool
+    routines: dict[str, str] = field(default_factory=dict)   # lower-case PROC name -> its parameter text
+    main_calls: frozenset[str] = frozenset()                  # lower-case procedures main calls without arguments
+
+    def calls(self, routine: str, callee: str) -> bool:
+        """Whether PROC ``routine`` of this module calls ``callee`` (a procedure call statement)."""
+        code = _strip_comments(self.text)
+        m = re.search(rf"^\s*(?:LOCAL\s+)?PROC\s+{routine}\s*\(.*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
+        return bool(m and re.search(rf"^\s*{callee}\s*;", m.group(0), re.I | re.M))
 
 
 _ROUTINE = re.compile(r"^\s*(?:LOCAL\s+)?(PROC|FUNC|TRAP)\b.*?^\s*END(?:PROC|FUNC|TRAP)\b", re.I | re.M | re.S)
@@ -215,12 +241,29 @@ def parse_module(text: str) -> Module:
     if not head or not re.search(r"^\s*ENDMODULE\b", code, re.I | re.M):
         raise RapidSyntaxError("not a RAPID module (MODULE name ... ENDMODULE)")
     has_main = bool(re.search(r"^\s*PROC\s+main\s*\(\s*\)", code, re.I | re.M))
+    routines = {name.lower(): params.strip() for name, params in
+                re.findall(r"^\s*(?:LOCAL\s+)?PROC\s+(\w+)\s*\(([^)]*)\)", code, re.I | re.M)}
     data = _ROUTINE.sub("", code)
     symbols = {}
     for storage, dtype, name, dims, init in _DECL.findall(data):
         value = _initial_value(dtype, init, bool(dims), name)
         symbols[name.lower()] = Symbol(head.group(1), name, storage.upper(), dtype.lower(), value, bool(dims))
-    return Module(head.group(1), text, symbols, has_main)
+    main = re.search(r"^\s*PROC\s+main\s*\(\s*\).*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
+    calls = frozenset(c.lower() for c in re.findall(r"^\s*(\w+)\s*;", main.group(0), re.M)) if main else frozenset()
+    return Module(head.group(1), text, symbols, has_main, routines, calls - RAPID_KEYWORDS)
+
+
+RAPID_KEYWORDS = frozenset({"stop", "exit", "return", "break", "endproc", "endwhile", "endif", "endfor", "endtest",
+                            "else", "retry", "trynext"})
+
+# The production program a cell runs: its main either calls CalServer's entry routine (the documented one-line
+# integration) or not (the driver then sets the PP to cal_run and restores it to main when it is done).
+CUSTOMER_PROGRAMS = {
+    "calls": "MODULE MainModule\n    PROC main()\n        ! production program; campaigns run CalServer\n"
+             "        cal_run;\n    ENDPROC\nENDMODULE\n",
+    "plain": "MODULE MainModule\n    PERS num cycle_count:=0;\n    PROC main()\n        ! production cycle\n"
+             "        cycle_count:=cycle_count+1;\n        WaitTime 1;\n    ENDPROC\nENDMODULE\n",
+}
 
 
 def _initial_value(dtype: str, init: str, array: bool, name: str) -> str:
@@ -327,7 +370,9 @@ class RwsEmulator:
                  joint_limits_deg: Sequence[tuple[float, float]] = DEFAULT_LIMITS_DEG,
                  move_hook: Callable[[tuple[float, ...]], Sequence[float] | None] | None = None,
                  robtarget_hook: Callable[[tuple[float, ...], tuple[float, ...], tuple[int, ...]],
-                                          Sequence[float] | None] | None = None) -> None:
+                                          Sequence[float] | None] | None = None,
+                 customer_program: str | None = "auto", implicit_mastership: bool = True,
+                 serial: str = "6700-104512", robot_type: str = "IRB 6700-150/3.20", absacc: bool = False) -> None:
         if version not in (1, 2):
             raise ValueError("version must be 1 or 2")
         if not ipaddress.ip_address(host).is_loopback:
@@ -350,7 +395,14 @@ class RwsEmulator:
         self.calserver_alive = True    # False: RAPID runs but the loop never takes requests (stuck elsewhere)
         # controller model
         self.opmode, self.ctrlstate, self.speedratio = "AUTO", "motoron", 100
-        self.execution, self.cycle, self.pp_set, self._fresh_start = "stopped", "forever", False, True
+        self.execution, self.cycle, self._fresh_start = "stopped", "forever", True
+        self.pp: tuple[str, str] | None = None       # (module, routine) of the program pointer
+        self.implicit_mastership = implicit_mastership
+        self.serial, self.robot_type = serial, robot_type
+        self.system_options = ["RobotWare Base", "English", "PC Interface" if version == 1 else "Robot Web Services",
+                               "Multitasking"] + (["Absolute Accuracy"] if absacc else [])
+        self.executed: list[dict] = []    # per served motion request: what the simulated RAPID did (speeds, load)
+        self._foreign_refusals: dict[str, int] = {}
         self.mastership: dict[str, _Holder] = {}
         self.modules: dict[str, Module] = {}
         self.files: dict[str, bytes] = {}
@@ -361,16 +413,22 @@ class RwsEmulator:
         self.moves: list[tuple[str, tuple[float, ...]]] = []
         self.requests: list[tuple[str, str, str, int]] = []   # method, path, query, status
         self.counts = {"logouts": 0, "sessions": 0, "auth_failures": 0}
+        if customer_program == "auto":
+            customer_program = "calls" if preload_calserver else "plain"
+        if customer_program is not None:
+            self._install(parse_module(CUSTOMER_PROGRAMS[customer_program]))
         if preload_calserver:
             self._install(parse_module(calserver_text()))
-            self.pp_set = True
+        main = next((m.name for m in self.modules.values() if m.has_main), None)
+        self.pp = (main, "main") if main else ("CalServer", ENTRY) if preload_calserver else None
         self.add_elog(1, 10011, "Motors ON state")
-        if rapid_running and preload_calserver:
+        if rapid_running and preload_calserver and self._pp_reaches_calserver():
             self.execution = "running"
             self.add_elog(1, 10151, "Program started")
         self._server: ThreadingHTTPServer | None = None
         self._threads: list[threading.Thread] = []
         self._tmpdir: tempfile.TemporaryDirectory | None = None
+        self.cert_path: str | None = None
 
     # -- lifecycle
 
@@ -426,6 +484,7 @@ class RwsEmulator:
     def _ssl_context(self) -> ssl.SSLContext:
         self._tmpdir = tempfile.TemporaryDirectory(prefix="rws-emulator-")
         cert, key = _self_signed_cert(Path(self._tmpdir.name), self.host)
+        self.cert_path = cert                   # the self-signed certificate (PEM), for clients that verify
         ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
         ctx.load_cert_chain(cert, key)
         return ctx
@@ -481,10 +540,14 @@ class RwsEmulator:
                 self._stop_program(1, 10125, "Program stopped", "stopped by operator")
         self._wake.set()
 
-    def hold_mastership(self, domain: str, application: str = "RobotStudio", location: str = "local") -> None:
-        """A foreign client (RobotStudio, FlexPendant editor) takes mastership of ``domain``."""
+    def hold_mastership(self, domain: str, application: str = "RobotStudio", location: str = "local",
+                        release_after: int | None = None) -> None:
+        """A foreign client (RobotStudio, FlexPendant editor) takes mastership of ``domain``; with
+        ``release_after`` it lets go after refusing that many mastership requests (a short edit)."""
         with self._lock:
             self.mastership[_domain_key(domain)] = _Holder(None, application, location)
+            if release_after is not None:
+                self._foreign_refusals[_domain_key(domain)] = release_after
 
     def release_foreign_mastership(self, domain: str) -> None:
         with self._lock:
@@ -665,9 +728,12 @@ class RwsEmulator:
             ("GET", r"/rw/panel/opmode", self._get_opmode), ("GET", r"/rw/panel/speedratio", self._get_speedratio),
             ("POST", r"/rw/panel/speedratio", self._set_speedratio), ("GET", r"/rw/rapid/execution", self._get_exec),
             ("GET", r"/rw/rapid/tasks", self._get_tasks), ("GET", r"/rw/mastership/(\w+)", self._get_mastership),
+            ("GET", r"/rw/motionsystem/mechunits", self._get_mechunits),
             ("GET", r"/rw/motionsystem/mechunits/(\w+)/jointtarget", self._get_jointtarget),
             ("GET", r"/rw/motionsystem/mechunits/(\w+)/robtarget", self._get_robtarget),
-            ("GET", r"/rw/elog/(\d+)", self._get_elog), ("GET", r"/ctrl/(\$?\w+)", self._get_ctrl_var),
+            ("GET", r"/rw/elog/(\d+)", self._get_elog), ("GET", r"/ctrl/identity", self._get_identity),
+            ("GET", r"/rw/system/robottype", self._get_robottype), ("GET", r"/rw/system/options", self._get_options),
+            ("GET", r"/rw/rapid/tasks/(\w+)/pcp", self._get_pcp), ("GET", r"/ctrl/(\$?\w+)", self._get_ctrl_var),
             ("GET", r"/fileservice/(.+)", self._get_file), ("PUT", r"/fileservice/(.+)", self._put_file),
             ("DELETE", r"/fileservice/(.+)", self._delete_file), ("HEAD", r"/fileservice/(.+)", self._head_file),
         ]
@@ -677,6 +743,8 @@ class RwsEmulator:
                 ("POST", r"/rw/panel/ctrlstate", self._post1_ctrl),
                 ("POST", r"/rw/rapid/execution", self._post1_exec), ("GET", r"/rw/rapid/modules", self._get_modules1),
                 ("POST", r"/rw/rapid/tasks/(\w+)", self._post1_task),
+                ("POST", r"/rw/rapid/tasks/(\w+)/pcp", self._post1_pcp),
+                ("GET", r"/rw/rapid/tasks/(\w+)/motion", self._get_task_motion1),
                 ("GET", r"/rw/rapid/symbol/data/RAPID/(\w+)/(\w+)(?:/(\w+))?", self._get_symbol),
                 ("POST", r"/rw/rapid/symbol/data/RAPID/(\w+)/(\w+)(?:/(\w+))?", self._post1_symbol),
                 ("POST", r"/rw/mastership(?:/(\w+))?", self._post1_mastership),
@@ -686,6 +754,8 @@ class RwsEmulator:
             ("POST", r"/rw/rapid/execution/(start|stop|resetpp)", self._post2_exec),
             ("GET", r"/rw/rapid/tasks/(\w+)/modules", self._get_modules2),
             ("POST", r"/rw/rapid/tasks/(\w+)/(loadmod|unloadmod)", self._post2_task),
+            ("POST", r"/rw/rapid/tasks/(\w+)/pcp/routine", self._post2_pcp),
+            ("GET", r"/rw/rapid/tasks/(\w+)/motion/(jointtarget|robtarget)", self._get_task_motion2),
             ("GET", r"/rw/rapid/symbol/RAPID/(\w+)/(\w+)(?:/(\w+))?/data", self._get_symbol),
             ("POST", r"/rw/rapid/symbol/RAPID/(\w+)/(\w+)(?:/(\w+))?/data", self._post2_symbol),
             ("POST", r"/rw/mastership(?:/(\w+))?/(request|release)", self._post2_mastership),
@@ -802,8 +872,9 @@ class RwsEmulator:
         if self.ctrlstate != "motoron" or self.execution == "running":
             raise _Reject(400, EXEC_STATE, f"ctrlstate {self.ctrlstate}, execution {self.execution}")
         self._require_edit(s, for_start=True)
-        if not self.pp_set:
-            raise _Reject(400, NO_PP, "set the PP to main")
+        self._require_linked()
+        if self.pp is None:
+            raise _Reject(400, NO_PP, "set the PP to main or to a routine")
         self.execution, self.cycle = "running", form.get("cycle", "forever")
         self.add_elog(1, 10151, "Program started")
 
@@ -814,11 +885,70 @@ class RwsEmulator:
     def _resetpp(self, req: Request, s: _Session) -> None:
         if self.execution == "running":
             raise _Reject(400, EXEC_STATE, "RAPID is running")
-        self._require_edit(s, explicit=self.version == 2)
-        if not any(m.has_main for m in self.modules.values()):
+        self._require_edit(s, explicit=self.version == 2, implicit=self._implicit(req))
+        self._require_linked()
+        main = next((m.name for m in self.modules.values() if m.has_main), None)
+        if main is None:
             raise _Reject(400, NO_PP, "no main routine")
-        self.pp_set, self._fresh_start = True, True
+        self.pp, self._fresh_start = (main, "main"), True
         self.add_elog(1, 10002, "Program pointer has been reset")
+
+    def _post1_pcp(self, req: Request, s: _Session, task: str) -> Response:
+        if req.q("action") != "set-pp-routine":
+            raise _Reject(400, INVALIDARG, f"action {req.q('action')}")
+        return self._post2_pcp(req, s, task)
+
+    def _post2_pcp(self, req: Request, s: _Session, task: str) -> Response:
+        """PP to routine (``module`` and ``routine`` both required): stopped, edit mastership, no link error,
+        a procedure without parameters."""
+        if task != TASK:
+            raise _Reject(400 if self.version == 1 else 404, E_FAIL, "unknown task")
+        if self.execution == "running":
+            raise _Reject(400, EXEC_STATE, "RAPID is running")
+        self._require_edit(s, explicit=True, implicit=self._implicit(req))
+        self._require_linked()
+        form = req.form()
+        module = self.modules.get(form.get("module", "").lower())
+        routine = form.get("routine", "")
+        if module is None or not routine:
+            raise _Reject(400, INVALIDARG, "module and routine are required")
+        if routine.lower() not in module.routines or module.routines[routine.lower()]:
+            raise _Reject(400, ILLEGAL_ENTRYPOINT, f"{module.name}/{routine}")
+        self.pp, self._fresh_start = (module.name, routine), True
+        self.add_elog(1, 10006, "Program pointer moved to routine", f"{module.name}/{routine}")
+        return Response(204)
+
+    def _implicit(self, req: Request) -> bool:
+        """RWS 2.0 ``?mastership=implicit`` accepted (unless the controller is set to refuse implicit mastership)."""
+        return self.version == 2 and req.q("mastership") == "implicit" and self.implicit_mastership
+
+    def _get_mechunits(self, req: Request, s: _Session) -> Response:
+        return self._ok(req, [{"_type": "ms-mechunit-li", "_title": "ROB_1", "mode": "Activated"}], collection=True)
+
+    def _get_pcp(self, req: Request, s: _Session, task: str) -> Response:
+        module, routine = self.pp or ("", "")
+        item = {"_type": "pcp-info", "_title": "progpointer", "beginposition": "1,1" if self.pp else "",
+                "endposition": "1,1" if self.pp else "", "modulemame": module, "routinename": routine,
+                "execlevel": "Normal"}
+        return self._ok(req, [item])
+
+    def link_error(self) -> str:
+        """What keeps the task's program from linking (empty if it links): two ``main`` procedures, or main calling
+        a procedure that no module defines."""
+        mains = [m.name for m in self.modules.values() if m.has_main]
+        if len(mains) > 1:
+            return f"Ambiguous name main (modules {', '.join(mains)})"
+        defined = {r for m in self.modules.values() for r in m.routines}
+        for m in self.modules.values():
+            unknown = sorted(m.main_calls - defined)
+            if unknown:
+                return f"Reference to unknown procedure {unknown[0]} in {m.name}"
+        return ""
+
+    def _require_linked(self) -> None:
+        error = self.link_error()
+        if error:
+            raise _Reject(400, RAPID_SEMANTIC_ERROR, error)
 
     def _stop_program(self, msgtype: int, code: int, title: str, desc: str = "") -> None:
         self.execution = "stopped"
@@ -830,6 +960,8 @@ class RwsEmulator:
         key = self._domain(domain)
         holder = self.mastership.get(key)
         item = {"_type": "msh-resource", "_title": domain, "mastership": "nomaster", "mastershipheldbyme": "FALSE"}
+        if holder is None and key == "motion" and self.execution == "running":
+            item["mastership"] = "internal"          # RAPID itself holds motion while it runs
         if holder is not None:
             mine = holder.session == s.sid
             item.update(mastership="remote" if holder.session else holder.location,
@@ -851,6 +983,7 @@ class RwsEmulator:
             for key in keys:
                 holder = self.mastership.get(key)
                 if holder is not None and holder.session != s.sid:
+                    self._count_foreign_refusal(key)
                     raise _Reject(403, RESOURCE_HELD, f"{key} held by {holder.application}")
             for key in keys:
                 self.mastership[key] = _Holder(s.sid, "RWS", "remote")
@@ -859,6 +992,14 @@ class RwsEmulator:
                 if self.mastership.get(key) and self.mastership[key].session == s.sid:
                     del self.mastership[key]
         return Response(204)
+
+    def _count_foreign_refusal(self, key: str) -> None:
+        left = self._foreign_refusals.get(key)
+        if left is not None:
+            self._foreign_refusals[key] = left - 1
+            if left - 1 <= 0:
+                self._foreign_refusals.pop(key)
+                self.mastership.pop(key, None)
 
     def _domain(self, domain: str) -> str:
         valid = ("rapid", "motion", "cfg") if self.version == 1 else ("edit", "motion")
@@ -916,7 +1057,7 @@ class RwsEmulator:
             raise _Reject(400 if self.version == 1 else 404, E_FAIL, "unknown task")
         if self.execution == "running":
             raise _Reject(400 if self.version == 1 else 403, EXEC_STATE, "Operation not allowed for current PGM state")
-        self._require_edit(s, explicit=True, implicit=req.q("mastership") == "implicit")
+        self._require_edit(s, explicit=True, implicit=self._implicit(req))
         form = req.form()
         if verb == "unloadmod":
             return self._unload(form.get("module", ""))
@@ -934,20 +1075,22 @@ class RwsEmulator:
         if module.name.lower() in self.modules and not replace:
             raise _Reject(400, MOD_AMBNAME, module.name)
         self._install(module)
+        error = self.link_error()
+        if error:                                  # loaded, but the program does not link (as on a controller)
+            self.add_elog(3, 40192, "Link error", error)
         return Response(204)
 
     def _install(self, module: Module) -> None:
-        old = self.modules.get(module.name.lower())
         self.modules[module.name.lower()] = module
-        if module.has_main or (old is not None and old.has_main):
-            self.pp_set = False
+        if module.has_main or (self.pp is not None and self.pp[0].lower() == module.name.lower()):
+            self.pp = None
 
     def _unload(self, name: str) -> Response:
         module = self.modules.pop(name.lower(), None)
         if module is None:
             raise _Reject(400, NO_SUCH_SYMBOL if self.version == 1 else MOD_AMBNAME, name)
-        if module.has_main:
-            self.pp_set = False
+        if module.has_main or (self.pp is not None and self.pp[0].lower() == module.name.lower()):
+            self.pp = None
         return Response(204)
 
     def _find_symbol(self, task: str, first: str, second: str | None) -> Symbol:
@@ -979,7 +1122,11 @@ class RwsEmulator:
 
     def _post2_symbol(self, req: Request, s: _Session, task: str, first: str, second: str | None) -> Response:
         sym = self._find_symbol(task, first, second)
-        return self._write_symbol(req, s, sym, implicit=req.q("mastership") == "implicit")
+        if req.q("mastership") == "implicit" and not self.implicit_mastership:
+            holder = self.mastership.get("edit")
+            if holder is None or holder.session != s.sid:
+                raise _Reject(403, MASTER_REJECT, "implicit mastership refused; request edit mastership")
+        return self._write_symbol(req, s, sym, implicit=req.q("mastership") == "implicit" and self.implicit_mastership)
 
     def _write_symbol(self, req: Request, s: _Session, sym: Symbol, *, implicit: bool) -> Response:
         if self.opmode != "AUTO":
@@ -1034,6 +1181,31 @@ class RwsEmulator:
         if self.version == 2:
             item["_links"] = {"self": {"href": f"0/{e['seqnum']}?lang=en"}}
         return item
+
+    def _get_identity(self, req: Request, s: _Session) -> Response:
+        return self._ok(req, [{"_type": "ctrl-identity-info", "_title": "identity", "ctrl-name": "RWS-EMULATOR",
+                               "ctrl-type": "Virtual Controller", "ctrl-id": self.serial,
+                               "mac-address": "00-00-00-00-00-00"}])
+
+    def _get_robottype(self, req: Request, s: _Session) -> Response:
+        return self._ok(req, [{"_type": "sys-robottype", "_title": "robottype", "robot-type": self.robot_type}])
+
+    def _get_options(self, req: Request, s: _Session) -> Response:
+        return self._ok(req, [{"_type": "sys-option-li", "_title": str(i), "option": o}
+                              for i, o in enumerate(self.system_options)], collection=True)
+
+    def _get_task_motion1(self, req: Request, s: _Session, task: str) -> Response:
+        resource = req.q("resource") or ""
+        if resource not in ("jointtarget", "robtarget"):
+            raise _Reject(400, INVALIDARG, "resource")
+        return self._get_task_motion2(req, s, task, resource)
+
+    def _get_task_motion2(self, req: Request, s: _Session, task: str, resource: str) -> Response:
+        """The motion task's current jointtarget / robtarget (what RW7 clients read)."""
+        if task != TASK:
+            raise _Reject(400 if self.version == 1 else 404, E_FAIL, "unknown task")
+        return self._get_jointtarget(req, s, "ROB_1") if resource == "jointtarget" else \
+            self._get_robtarget(req, s, "ROB_1")
 
     def _get_ctrl_var(self, req: Request, s: _Session, name: str) -> Response:
         return self._ok(req, [{"_type": "ctrl-var", "_title": name, "_value": f"{name.strip('$')}",
@@ -1098,7 +1270,25 @@ class RwsEmulator:
 
     def _serving(self) -> bool:
         module = self.modules.get("calserver")
-        return self.execution == "running" and self.ctrlstate == "motoron" and module is not None
+        return self.execution == "running" and self.ctrlstate == "motoron" and module is not None and \
+            self._pp_reaches_calserver()
+
+    def _pp_reaches_calserver(self) -> bool:
+        """The program runs CalServer's loop: PP set to cal_run, or to a main that calls it."""
+        if self.pp is None:
+            return False
+        module, routine = self.pp
+        if routine.lower() == ENTRY:
+            return True
+        owner = self.modules.get(module.lower())
+        return routine.lower() == "main" and owner is not None and ENTRY in owner.main_calls
+
+    def _publish(self) -> None:
+        """What cal_publish does: cal_state := [ack, done, err]."""
+        syms = self.modules["calserver"].symbols
+        if "cal_state" in syms:
+            values = [parse_literal(syms[n].value) for n in ("cal_ack_seq", "cal_done_seq", "cal_err_seq")]
+            syms["cal_state"].value = render(values)
 
     def _take_request(self) -> tuple | None:
         """Under the lock: resync after PP reset; if req != ack, ack it and snapshot the arguments."""
@@ -1110,22 +1300,38 @@ class RwsEmulator:
             if self._fresh_start:
                 syms["cal_ack_seq"].value = syms["cal_done_seq"].value = syms["cal_req_seq"].value
                 self._fresh_start = False
+                self._publish()
             if num("cal_req_seq") == num("cal_ack_seq"):
                 return None
             seq = num("cal_req_seq")
             syms["cal_ack_seq"].value = render(seq)
+            self._publish()
             fault = self._faults.pop(0) if self._faults and num("cal_kind") in (1.0, 2.0) else None
+            limits = self._limits(syms, num("cal_speed")) if int(num("cal_kind")) in (1, 2) else None
             return (seq, int(num("cal_kind")), parse_literal(syms["cal_target"].value),
-                    parse_literal(syms["cal_ptarget"].value), num("cal_speed"), num("cal_settle_s"), fault)
+                    parse_literal(syms["cal_ptarget"].value), limits, num("cal_settle_s"), fault)
 
-    def _serve(self, seq: float, kind: int, target: list, ptarget: list, speed: list, settle_s: float,
+    def _limits(self, syms: dict[str, Symbol], speed: list) -> dict:
+        """What cal_limit does (clamp the speed to cal_vmax, VelSet) and the load in cal_tool; recorded."""
+        get = lambda n, d: parse_literal(syms[n].value) if n in syms else d  # noqa: E731
+        vmax, override = get("cal_vmax", 1e9), get("cal_override", 100.0)
+        vmax = vmax if vmax > 0 else 1.0
+        override = min(100.0, max(1.0, override))
+        tool = get("cal_tool", None)
+        record = {"v_tcp_programmed": speed[0], "v_leax_programmed": speed[2], "vmax": vmax, "override": override,
+                  "v_tcp": min(speed[0], vmax) * override / 100.0, "v_leax": min(speed[2], vmax),
+                  "load_kg": tool[2][0] if tool else None, "cog_mm": tuple(tool[2][1]) if tool else None}
+        self.executed.append(record)
+        return record
+
+    def _serve(self, seq: float, kind: int, target: list, ptarget: list, limits: dict | None, settle_s: float,
                fault: _Fault | None) -> None:
         if fault is not None and self._apply_fault(seq, fault):
             return
         if kind == 0:
             return self._set_done(seq)
         if kind == 1:
-            reached = self._move_joints(tuple(target[0][:6]))
+            reached = self._move_joints(tuple(target[0][:6]), limits["override"] / 100.0)
         elif kind == 2:
             reached = self._move_linear(tuple(ptarget[0]), tuple(ptarget[1]), tuple(int(c) for c in ptarget[2]))
         else:
@@ -1156,15 +1362,18 @@ class RwsEmulator:
             syms["cal_err_msg"].value = render(message[:80])
             self.add_elog(2, 80002, "CalServer request rejected", message)
             syms["cal_err_seq"].value = render(seq)
+            self._publish()
 
     def _set_done(self, seq: float) -> None:
         with self._lock:
             syms = self.modules["calserver"].symbols
             syms["cal_reached"].value = render([list(map(float, self.joints)), [UNUSED] * 6])
             syms["cal_done_seq"].value = render(seq)
+            self._publish()
 
-    def _move_joints(self, q: tuple[float, ...]) -> tuple[float, ...] | None:
-        """Interpolate to ``q`` (deg) at ``joint_speed_deg_s``; None if limits, a hook fault or a stop intervene."""
+    def _move_joints(self, q: tuple[float, ...], override: float = 1.0) -> tuple[float, ...] | None:
+        """Interpolate to ``q`` (deg) at ``joint_speed_deg_s`` times the VelSet override; None if limits, a hook
+        fault or a stop intervene."""
         for i, (v, (lo, hi)) in enumerate(zip(q, self.joint_limits)):
             if not lo <= v <= hi:
                 with self._lock:
@@ -1172,7 +1381,7 @@ class RwsEmulator:
                 return None
         with self._lock:
             start = list(self.joints)
-        duration = max(abs(a - b) for a, b in zip(q, start)) / self.joint_speed_deg_s
+        duration = max(abs(a - b) for a, b in zip(q, start)) / (self.joint_speed_deg_s * override)
         steps = max(1, int(duration / 0.01))
         for k in range(1, steps + 1):
             if not self._dwell(duration / steps):

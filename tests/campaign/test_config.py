@@ -133,18 +133,19 @@ def test_effects_and_options_are_frozen_mappings(tmp_path: Path) -> None:
     data = reference_dict()
     data["simulation"]["effects"] = [
         "backlash",
-        {"name": "gear_cyclic", "scale": 0.5, "params": {"harmonics": [1, 2], "axis": {"j": 3}}},
+        {"name": "gear_cyclic", "scale": 0.5, "params": {"harmonics": [1, 2], "joint": 3}},
     ]
-    data["robot"]["options"] = {"timeout_s": 2.5, "user": "Default User"}
+    data["robot"]["url"] = "abb-rws://192.168.125.1"      # driver options are checked by the driver (issue 12)
+    data["robot"]["options"] = {"task": "T_ROB1", "credentials": {"use_default": True}}
     path = tmp_path / "fx.yaml"
     path.write_text(yaml.safe_dump(data), encoding="utf-8")
     cfg = load_config(path)
     assert cfg.simulation.effects[0] == EffectSpec("backlash", 1.0, FrozenMap())
     gear = cfg.simulation.effects[1]
-    assert gear.scale == 0.5 and gear.params["harmonics"] == (1, 2) and gear.params["axis"]["j"] == 3
-    assert cfg.robot.options["user"] == "Default User"
+    assert gear.scale == 0.5 and gear.params["harmonics"] == (1, 2) and gear.params["joint"] == 3
+    assert cfg.robot.options["credentials"]["use_default"] is True
     hash(cfg)
-    assert cfg.to_dict()["simulation"]["effects"][1]["params"] == {"harmonics": [1, 2], "axis": {"j": 3}}
+    assert cfg.to_dict()["simulation"]["effects"][1]["params"] == {"harmonics": [1, 2], "joint": 3}
 
 
 def test_parse_config_from_bytes() -> None:

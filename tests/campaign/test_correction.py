@@ -22,7 +22,7 @@ def test_correct_cli_writes_checked_files_and_rejects_unsafe_targets(run_dir, tm
     targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1100,300,800\nC,700,-500,1200\nFAR,3000,0,1000\n")
     out = tmp_path / "out"
     assert main(["correct", "--config", CONFIG, "--model", str(run_dir / "model.json"), "--targets", str(targets),
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--format", "rapid", "--format", "ur", "--format", "csv"]) == 0
     text = (out / "CalTargets.mod").read_text()
     assert check_rapid_syntax(text) == []
     values = parse_rapid_module(text)
@@ -48,10 +48,14 @@ def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
     floor, stages = report["noise_floor_mm"], report["stages"]
     ratios = {k: v["rms_mm"] / floor for k, v in stages.items()}
     print("verify RMS / floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
-    assert ratios["nominal (no correction)"] > 10
+    assert ratios["uncorrected (planned joints)"] > 10
     assert ratios["model-corrected"] <= 1.2
     assert ratios["after correction (all passes pooled)"] <= 1.2
     assert all(r <= 1.3 for k, r in ratios.items() if k.startswith("closed loop"))
+    for p in report["passes"][1:]:                  # every pass says what it measured
+        assert p["n_corrected"] + p["n_held"] == (report["n"] if p["stage"] != "after correction (all passes pooled)"
+                                                  else p["n_corrected"] + p["n_held"])
+        assert p["n_held"] == sum(p["held"].values()) or p["stage"].startswith("after")
 
 
 def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path):
@@ -63,7 +67,7 @@ def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path
     targets.write_text("target_id,x,y,z\nA,900,0,1000\nB,1000,200,900\n")
     out = tmp_path / "out"
     assert main(["correct", "--config", str(cfg), "--model", str(run / "model.json"), "--targets", str(targets),
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--format", "ur", "--format", "csv"]) == 0
     rows = (out / "targets.csv").read_text().splitlines()
     assert rows[0].endswith("predicted_std_mm") and len(rows) == 3
     stds = [float(r.split(",")[-1]) for r in rows[1:]]

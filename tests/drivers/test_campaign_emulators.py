@@ -18,9 +18,11 @@ from drivers.emulators.rws_server import RwsEmulator
 from drivers.emulators.tracker_server import TrackerEmulator
 from tests.campaign.helpers import small_config
 
+pytestmark = pytest.mark.system
+
 SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 8, "plan.check_poses": {"count": 0, "every_n_points": 50},
          "tracker.measurement.samples": 2, "tracker.measurement.settle_s": 0.0, "calibration.residual": "none"}
-RWS_OPTIONS = {"credentials": {"use_default": True}, "settle_s": 0.01, "poll_s": 0.005}
+RWS_OPTIONS = {"credentials": {"use_default": True}, "settle_s": 0.01, "poll_s": 0.005, "max_poll_rate_hz": 500}
 
 
 def _finished(run, min_points=20):
@@ -43,7 +45,10 @@ def test_campaign_against_rws_emulator(tmp_path, version):
     assert emu.counts["logouts"] >= 1                 # the session was closed in finally
 
 
-def test_campaign_against_ur_emulator_with_the_real_library(tmp_path):
+def test_campaign_against_ur_emulator_with_the_real_library(tmp_path, monkeypatch):
+    from drivers.base import MotionLimits
+    from drivers.ur import URRobot
+    monkeypatch.setattr(URRobot, "DEFAULT_LIMITS", MotionLimits(5000.0, 100.0))   # caps that do not bind here
     emu = start_emulator()
     try:
         cfg = small_config(tmp_path, "ur10", **dict(SMALL, **{"plan.grid.step_mm": 300}), **{

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from drivers.base import ConnectionLost, DriverError, MotionError, Robot, RobotError, RobotNotReady
+from drivers.base import (ConnectionLost, DriverError, MotionError, MotionLimits, Payload, Robot, RobotError,
+                          RobotNotReady)
 from drivers.emulators import rtde_protocol as proto
 from drivers.emulators.rtde_server import JointMove, start_emulator
 from drivers.registry import open_robot
@@ -28,6 +29,7 @@ from robocal.kinematics import fk
 from tests.cells import ur10
 
 pytest.importorskip("rtde_control")
+pytestmark = pytest.mark.system
 
 FAST = {"speed_rad_s": 3.0, "acceleration_rad_s2": 10.0, "settle_hold_s": 0.1, "stale_after_s": 0.3,
         "connect_timeout_s": 15.0, "move_timeout_s": 6.0, "call_timeout_s": 3.0}
@@ -62,7 +64,10 @@ def emulator():
 
 
 def _robot(emu, **options) -> URRobot:
-    return open_robot(f"ur-rtde://{emu.host}", {**FAST, **options})
+    """A driver with caps that do not bind (the cap tests set their own)."""
+    rb = open_robot(f"ur-rtde://{emu.host}", {**FAST, **options})
+    rb.set_motion_limits(MotionLimits(max_tcp_speed_mm_s=1e5, max_joint_speed_pct=100.0))
+    return rb
 
 
 @pytest.fixture
@@ -197,7 +202,7 @@ def test_preflight_failure_raises_robot_not_ready(args, reason):
 def test_unreachable_controller_is_connection_lost():
     rb = open_robot("ur-rtde://127.254.254.254", {**FAST, "connect_timeout_s": 10.0})
     t0 = time.monotonic()
-    with pytest.raises(ConnectionLost, match="Could not connect|got no data"):
+    with pytest.raises(ConnectionLost, match="Could not connect|got no data|Timeout connecting"):
         rb.connect()
     assert time.monotonic() - t0 < 10.0 and not rb.worker_alive
     rb.close()
@@ -253,8 +258,10 @@ def test_protective_stop_during_move_is_motion_error_and_recoverable(robot, emul
     deadline = time.monotonic() + 2.0
     while robot.read_status()["safety_mode"] != 1 and time.monotonic() < deadline:
         time.sleep(0.01)
-    robot.move_joints(HOME_DEG)
+    robot.move_joints(HOME_DEG)                                    # same session: the script is re-uploaded
     assert np.allclose(robot.read_joints(), HOME_DEG, atol=1e-3)
+    log = emulator.log()["log"]
+    assert "program stopped: protective stop" in log and log.count("program rtde_control") == 2
 
 
 def test_stop_from_another_thread_interrupts_the_move(emulator):
@@ -340,3 +347,92 @@ def test_joint_move_profile_respects_limits_and_ends_on_target():
     q_end, qd_end = move.at(move.duration + 1e-3)
     assert np.array_equal(q_end, q1) and not qd_end.any()
     assert math.isclose(move.duration, 2 * 0.5 + (1.2 - 0.5) / 1.0)
+
+
+# ------------------------------------------------------------------------------------------- issue 13
+
+E_SERIES = ("--version", "5.11.1.108318")
+
+
+def test_dashboard_powers_on_and_identifies_the_robot():
+    """Power on and brake release through ur_rtde's DashboardClient; serial, PolyScope version and the
+    remote-control state come from the Dashboard server."""
+    for emu in _emulator(*E_SERIES, "--robot-mode", "3"):
+        rb = _robot(emu, power_on=True)
+        try:
+            rb.connect()
+            ident = rb.identity()
+            assert ident == {"vendor": "Universal Robots", "model": "UR10", "controller_type": "e-Series",
+                             "serial": "20185500000", "software_version": "PolyScope 5.11.1.108318",
+                             "remote_control": "true"}
+            assert rb.speed_override_pct() == 100.0
+            rb.move_joints([3, -88, 88, -90, -90, 0])
+        finally:
+            rb.close()
+        log = emu.log()["log"]
+        for line in ("dashboard power on", "dashboard brake release", "dashboard get serial number",
+                     "dashboard is in remote control", "dashboard PolyscopeVersion"):
+            assert line in log, line
+        assert log.index("dashboard brake release") < log.index("program rtde_control")
+
+
+def test_cb3_identity_and_local_control_refused(robot):
+    ident = robot.identity()
+    assert ident["controller_type"] == "CB3" and ident["serial"].startswith("unknown")
+    assert ident["remote_control"] == "n/a" and ident["software_version"] == "PolyScope 3.15.7.106331"
+    for emu in _emulator(*E_SERIES, "--no-remote-control"):
+        with pytest.raises(RobotNotReady, match="Remote Control"):
+            _robot(emu).connect()
+
+
+def test_protective_stop_unlocked_by_the_driver_without_restarting(emulator):
+    """With unlock_protective_stop the next move unlocks through the Dashboard (retrying while the controller's
+    unlock delay runs), closes the safety popup, re-uploads the control script and moves."""
+    for emu in _emulator("--unlock-delay", "0.6"):
+        rb = _robot(emu, unlock_protective_stop=True)
+        try:
+            rb.connect()
+            emu.command("ARM pstop 0.1")
+            with pytest.raises(MotionError, match="PROTECTIVE_STOP"):
+                rb.move_joints([90, -40, 40, -60, -120, 90])
+            rb.move_joints(HOME_DEG)
+            assert np.allclose(rb.read_joints(), HOME_DEG, atol=1e-3) and rb.worker_alive
+        finally:
+            rb.close()
+        log = emu.log()["log"]
+        assert "dashboard unlock protective stop" in log and "dashboard close safety popup" in log
+        assert log.count("program rtde_control") == 2
+
+
+def test_settle_with_realistic_joint_noise():
+    """Encoder noise on actual_q, differentiation noise on actual_qd (10x the per-sample threshold) and a
+    decaying servo oscillation: every move settles, in position, and never before the oscillation has died."""
+    for emu in _emulator("--q-noise-rad", "2e-5", "--qd-noise-rad-s", "1e-3", "--ring-rad", "3e-4", "--seed", "7"):
+        rb = _robot(emu, settle_hold_s=0.25)
+        try:
+            rb.connect()
+            for target in ([10, -80, 80, -95, -85, 5], [-20, -100, 100, -80, -90, 30], HOME_DEG):
+                rb.move_joints(target)
+                assert np.allclose(rb.last_settled_deg, target, atol=FAST.get("in_position_tol_deg", 0.01))
+        finally:
+            rb.close()
+
+
+def test_speed_cap_and_payload_reach_the_controller():
+    """No moveJ above the caps reaches the control script, the emulated TCP never moves faster than the cap,
+    and setPayload carries mass and CoG."""
+    for emu in _emulator():
+        rb = open_robot(f"ur-rtde://{emu.host}", FAST)
+        try:
+            rb.set_payload(Payload(3.0, (0.0, 0.0, 50.0)))            # before connect: sent once connected
+            rb.connect()
+            rb.set_motion_limits(MotionLimits(max_tcp_speed_mm_s=150.0, max_joint_speed_pct=30.0))
+            rb.move_joints([4, -86, 86, -90, -90, 0])              # TCP-bound: base joint far from the TCP
+            rb.move_joints([4, -86, 86, -90, -90, 40])             # joint-bound: the wrist barely moves the TCP
+        finally:
+            rb.close()
+        state = emu.state()
+        assert max(state["movej_speeds"]) <= 0.30 * np.radians(120) + 1e-12
+        assert 0 < state["max_tcp_speed_mm_s"] <= 150.0
+        assert state["payload_kg"] == 3.0 and np.allclose(state["payload_cog"], [0, 0, 0.05])
+        assert "cmd 17" in emu.log()["log"]

@@ -1,0 +1,280 @@
+"""Plausibility checks run before any model is fitted or written: does this data belong to this robot?
+
+* joint values outside the configured limits -> rejected rows, listed by line (CSV) or point record (log);
+* the xyz unit guessed from the scale (spread of the measured points / spread of the nominal model's points):
+  mm is stated, m / cm / inch is an error naming the factor;
+* nominal RMS after registration on the calibration rows must be below 1 % of the robot's reach (wrong robot,
+  wrong DH table, wrong joint order or offsets all fail it: "does this data belong to this robot?");
+* identified deltas beyond physical bounds (a length change > max(5 mm, 2 % of the nominal length), an angle
+  change > 2 deg) mean an error, not a model;
+* a run directory whose log holds fewer points than its plan says so (an interrupted run is never silent).
+
+A failed check raises :class:`campaign.errors.PlausibilityError` (exit 2, one line) unless the operator passed
+``--force`` (:func:`forced`): then the rows outside the limits are dropped, and the report's
+``plausibility.overridden`` lists every check that failed and was overridden.
+"""
+from __future__ import annotations
+
+import csv
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from .errors import DataError, PlausibilityError
+
+REACH_FRACTION = 0.01           # nominal RMS after registration must be < 1 % of the reach
+LENGTH_DELTA_MM = 5.0           # identified length change bound: max(5 mm, 2 % of the nominal length)
+LENGTH_DELTA_FRACTION = 0.02
+ANGLE_DELTA_DEG = 2.0           # identified angle change bound (theta, alpha, beta)
+MAX_ABS_MM = 1.0e6              # |xyz| beyond 1 km is not a tracker reading
+LIMIT_TOL_DEG = 1e-6
+_UNITS = (("mm", 1.0), ("m", 1e-3), ("cm", 0.1), ("inch", 1 / 25.4))
+
+_FORCE: ContextVar[bool] = ContextVar("campaign_plausibility_force", default=False)
+
+
+@contextmanager
+def forced(flag: bool = True) -> Iterator[None]:
+    """Within this block failed plausibility checks are overridden (``--force``) and reported as such."""
+    token = _FORCE.set(bool(flag))
+    try:
+        yield
+    finally:
+        _FORCE.reset(token)
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """What was checked: unit guess, nominal RMS vs its bound, rows rejected, notes, overridden failures."""
+    unit: str = "mm"
+    scale: float | None = None
+    nominal_rms_mm: float | None = None
+    bound_mm: float | None = None
+    rejected_rows: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    overridden: tuple[str, ...] = ()
+    forced: bool = False
+    max_length_delta_mm: float | None = None
+    max_angle_delta_deg: float | None = None
+
+    def to_dict(self) -> dict:
+        return {"unit": self.unit, "scale": self.scale, "nominal_rms_mm": self.nominal_rms_mm,
+                "bound_mm": self.bound_mm, "rejected_rows": list(self.rejected_rows), "notes": list(self.notes),
+                "overridden": list(self.overridden), "forced": self.forced,
+                "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg}
+
+
+def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
+    """Raise unless forced; when forced, record the overridden failure."""
+    if not _FORCE.get():
+        raise PlausibilityError(source, message)
+    return replace(state, overridden=state.overridden + (message,), forced=True)
+
+
+def reach_mm(cfg) -> float:
+    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr|."""
+    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(cfg.tool.p_flange_smr_mm))
+
+
+def row_locations(ds) -> list[str]:
+    """Human location of every row: ``line L`` of a CSV (comments and blank lines counted), else
+    ``point record k``; the point id is appended."""
+    src = Path(ds.source) if ds.source else None
+    lines: list[int] | None = None
+    if src is not None and src.is_file() and src.name != "log.jsonl":
+        try:
+            with open(src, encoding="utf-8-sig", newline="") as fh:
+                numbered = [i + 1 for i, ln in enumerate(fh) if ln.strip() and not ln.lstrip().startswith("#")]
+            lines = numbered[1:] if len(numbered) - 1 == len(ds) else None
+        except (OSError, UnicodeDecodeError):
+            lines = None
+    if lines is None:
+        return [f"point record {i + 1} ({pid})" for i, pid in enumerate(ds.point_id)]
+    return [f"line {ln} ({pid})" for ln, pid in zip(lines, ds.point_id)]
+
+
+def check_dataset(ds, cfg):
+    """Checks on the data alone (before any fit): magnitudes, joint limits, unit, nominal RMS, completeness.
+
+    Unit and nominal RMS are judged on the rows inside the limits; every failed check is named in one line
+    (the wrong-robot verdict first). Returns (dataset, Plausibility): the dataset without the rejected rows
+    when forced, else unchanged."""
+    state = Plausibility()
+    n = len(cfg.robot.joints)
+    if ds.q_deg.shape[1] != n:
+        raise DataError(ds.source, f"has {ds.q_deg.shape[1]} joint columns but the config's robot has {n} joints")
+    ds = _check_magnitudes(ds)
+    keep, state, limits_msg = _check_limits(ds, cfg, state)
+    inside = ds.subset(keep) if limits_msg else ds
+    state = _check_completeness(inside, state)
+    failures = []
+    cal = _calib_rows(inside)
+    if cal.sum() >= 3:
+        state, unit_msg = _check_unit(inside, cfg, cal, state)
+        state, nominal_msg = (state, None) if unit_msg else _check_nominal(inside, cfg, cal, state)
+        failures += [m for m in (nominal_msg, unit_msg) if m]
+    if limits_msg:
+        failures.append(limits_msg)
+    if failures:
+        if not _FORCE.get():
+            raise PlausibilityError(ds.source, "; ".join(failures))
+        state = replace(state, overridden=state.overridden + tuple(failures), forced=True)
+    return inside, state
+
+
+def _calib_rows(ds) -> np.ndarray:
+    return ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1)
+
+
+def _check_magnitudes(ds):
+    """xyz beyond 1 km cannot be a tracker reading (and overflows every computation): a DataError, no override."""
+    big = np.flatnonzero(np.any(np.abs(ds.p_tracker_mm) > MAX_ABS_MM, axis=1))
+    if len(big):
+        where = row_locations(ds)[big[0]]
+        value = ds.p_tracker_mm[big[0]][np.argmax(np.abs(ds.p_tracker_mm[big[0]]))]
+        raise DataError(ds.source, f"{where}: xyz value {value:.6g} mm is not a tracker reading "
+                                   f"(|xyz| > {MAX_ABS_MM:.0e} mm){_more(len(big))}")
+    return ds
+
+
+def _more(n: int) -> str:
+    return f"; {n - 1} more such rows" if n > 1 else ""
+
+
+def _check_limits(ds, cfg, state: Plausibility):
+    """Rows whose joint values lie outside the configured limits: listed, then an error (or dropped if forced)."""
+    lo = np.array([j.q_min_deg for j in cfg.robot.joints]) - LIMIT_TOL_DEG
+    hi = np.array([j.q_max_deg for j in cfg.robot.joints]) + LIMIT_TOL_DEG
+    q = ds.q_deg
+    if q.shape[1] != len(lo):
+        return np.ones(len(ds), bool), state, None      # the joint-count check of the caller reports it
+    finite = np.isfinite(q)
+    outside = finite & ((q < lo) | (q > hi))
+    bad = np.flatnonzero(np.any(outside, axis=1))
+    keep = np.ones(len(ds), bool)
+    if len(bad) == 0:
+        return keep, state, None
+    where = row_locations(ds)
+    items = []
+    for r in bad:
+        j = int(np.flatnonzero(outside[r])[0])
+        items.append(f"{where[r]}: q{j + 1} = {q[r, j]:.6g} deg outside "
+                     f"[{cfg.robot.joints[j].q_min_deg:g}, {cfg.robot.joints[j].q_max_deg:g}]")
+    shown = "; ".join(items[:3]) + (f"; and {len(items) - 3} more rows" if len(items) > 3 else "")
+    keep[bad] = False
+    return keep, replace(state, rejected_rows=tuple(items)), (
+        f"{len(bad)} rows with joint values outside the configured limits: {shown}")
+
+
+def _check_completeness(ds, state: Plausibility) -> Plausibility:
+    """A run directory's log with fewer points than its plan: say how many of each set exist."""
+    src = Path(ds.source) if ds.source else None
+    if src is None or src.name != "log.jsonl":
+        return state
+    plan_csv = src.parent / "plan.csv"
+    try:
+        with open(plan_csv, newline="", encoding="utf-8") as fh:
+            planned = [row[1] for row in list(csv.reader(fh))[1:] if len(row) > 1]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return state
+    notes = []
+    for name in ("calib", "test", "check"):
+        want, have = planned.count(name), int(np.sum(ds.mask(name)))
+        if have < want:
+            notes.append(f"incomplete run: only {have} of {want} planned {name} points were measured")
+    return replace(state, notes=state.notes + tuple(notes))
+
+
+def _spread(p: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
+
+
+def _check_unit(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
+    """Guess the xyz unit from the ratio of measured to nominal point spread (registration cannot fix scale)."""
+    from robocal.kinematics import smr_base
+
+    from .cell import nominal_kinematics
+
+    p_nom = smr_base(nominal_kinematics(cfg), np.radians(ds.q_deg[cal]))
+    s_nom, s_meas = _spread(p_nom), _spread(ds.p_tracker_mm[cal])
+    if s_nom < 1e-6:
+        return state, None
+    scale = s_meas / s_nom
+    unit = None if not scale > 0 else next(
+        (name for name, f in _UNITS if abs(np.log(scale / f)) < np.log(1.25)), None)
+    state = replace(state, scale=scale, unit=unit or "unknown")
+    if unit == "mm":
+        return state, None
+    what = (f"xyz look like {unit}, not mm (measured spread {s_meas:.4g} vs {s_nom:.4g} mm for the nominal model, "
+            f"scale {scale:.4g}): convert to mm") if unit else (
+            f"xyz scale does not match the robot: measured spread {s_meas:.4g} vs {s_nom:.4g} mm for the nominal "
+            f"model (scale {scale:.3g}, expected 1 for mm): does this data belong to this robot?")
+    return state, what
+
+
+def _check_nominal(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
+    """Nominal RMS after a closed-form registration on the calibration rows < 1 % of the reach."""
+    from robocal.identify import IdentificationError, register
+    from robocal.kinematics import smr_tracker
+
+    from .cell import nominal_kinematics
+
+    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
+    try:
+        kin = register(nominal_kinematics(cfg), q, p)
+    except (IdentificationError, np.linalg.LinAlgError):
+        return state, None                  # calibration reports it with its own message
+    err = p - smr_tracker(kin, q)
+    rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    bound = REACH_FRACTION * reach_mm(cfg)
+    state = replace(state, nominal_rms_mm=rms, bound_mm=bound)
+    if not np.isfinite(rms) or rms > bound:
+        return state, (f"does this data belong to this robot ({cfg.robot.model})? nominal error "
+                       f"{rms:.0f} mm RMS after registration, more than {bound:.0f} mm (1 % of the "
+                       f"{reach_mm(cfg):.0f} mm reach)")
+    return state, None
+
+
+def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
+    """Identified geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error."""
+    nominal_len = np.concatenate([kin0.a_mm, kin0.d_mm, kin0.p_flange_smr_mm])
+    delta_len = np.concatenate([kin.a_mm, kin.d_mm, kin.p_flange_smr_mm]) - nominal_len
+    names = ([f"a{i + 1}" for i in range(kin0.n)] + [f"d{i + 1}" for i in range(kin0.n)]
+             + ["tool_x", "tool_y", "tool_z"])
+    bound = np.maximum(LENGTH_DELTA_MM, LENGTH_DELTA_FRACTION * np.abs(nominal_len))
+    delta_ang = np.degrees(np.concatenate([kin.theta_rad - kin0.theta_rad, kin.alpha_rad - kin0.alpha_rad,
+                                           kin.beta_rad - kin0.beta_rad]))
+    delta_ang = (delta_ang + 180.0) % 360.0 - 180.0
+    ang_names = ([f"theta{i + 1}" for i in range(kin0.n)] + [f"alpha{i + 1}" for i in range(kin0.n)]
+                 + [f"beta{i + 1}" for i in range(kin0.n)])
+    state = replace(state, max_length_delta_mm=float(np.max(np.abs(delta_len))),
+                    max_angle_delta_deg=float(np.max(np.abs(delta_ang))))
+    bad = [f"{n} {d:+.1f} mm (bound {b:.1f})" for n, d, b in zip(names, delta_len, bound) if abs(d) > b]
+    bad += [f"{n} {d:+.2f} deg (bound {ANGLE_DELTA_DEG:g})" for n, d in zip(ang_names, delta_ang)
+            if abs(d) > ANGLE_DELTA_DEG]
+    if not bad:
+        return state
+    shown = ", ".join(bad[:4]) + (f" and {len(bad) - 4} more" if len(bad) > 4 else "")
+    return _fail(source, f"identified deltas beyond physical bounds: {shown}: not a calibration of this robot "
+                         "(wrong config, wrong data, or a crash)", state)
+
+
+
+def plausibility_lines(plaus: dict | None) -> list[tuple[str, str]]:
+    """(text, rich style) lines stating what the plausibility checks found, for the terminal."""
+    if not plaus:
+        return []
+    lines = []
+    scale = plaus.get("scale")
+    unit = f"xyz unit: {plaus.get('unit')}" + (f" (scale {scale:.3f} of the nominal model)" if scale else "")
+    if plaus.get("nominal_rms_mm") is not None:
+        unit += (f"; nominal RMS after registration {plaus['nominal_rms_mm']:.3f} mm "
+                 f"(plausible below {plaus['bound_mm']:.0f} mm)")
+    lines.append((unit, ""))
+    lines += [(note, "yellow") for note in plaus.get("notes", [])]
+    lines += [(f"OVERRIDDEN with --force: {what}", "bold red") for what in plaus.get("overridden", [])]
+    return lines
