@@ -31,6 +31,7 @@ class Prepared:
     report: dict
 
 
+MAX_READBACK_RMS_DEG = 1.0   # read-back lags are hundredths of a degree; more means the two sets are not the same poses
 FIT_MARGIN = 0.9    # the read-back set overrides the statistics only when it fits >= 10 % better
 
 
@@ -76,6 +77,11 @@ def choose_joints(ds: Dataset, setting: str, cfg: CampaignConfig | None = None) 
                                             "why": "the data has one joint set only (q1..qn; no qc1..qcn)"}
     q_read, q_cmd = ds.q_deg[robot], ds.qc_deg[robot]
     s = readback_statistics(q_read, q_cmd)
+    worst = int(np.argmax(s.rms_deg))
+    if s.rms_deg[worst] > MAX_READBACK_RMS_DEG:
+        raise DataError(ds.source, f"read-back and commanded joints differ by {s.rms_deg[worst]:.3g} deg RMS on "
+                                   f"J{worst + 1} (q{worst + 1} vs qc{worst + 1}): not the same poses (units? column "
+                                   f"order?); a read-back lag is below {MAX_READBACK_RMS_DEG:g} deg")
     commanded, why = prefer_commanded(s)
     figs: dict = {}
     if setting == "auto" and commanded:

@@ -174,10 +174,9 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
 def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
-    ds = _prepare(ds, cfg)                                  # joint set, nest drift: rows with joints only
     _check_dataset(ds, cfg)
     ds, _ = check_dataset(ds, cfg)
-    return _geometric(ds, cfg).result
+    return _geometric(_prepare(ds, cfg), cfg).result
 
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
@@ -196,9 +195,9 @@ def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     kin0 = nominal_kinematics(cfg)
     geo = _geometric(ds, cfg)
     result = geo.result

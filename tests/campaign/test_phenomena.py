@@ -165,6 +165,18 @@ BAD = {
 
 
 @pytest.mark.system
+def test_commanded_joints_in_other_units_are_refused(lag_run, tmp_path, capsys):
+    from dataclasses import replace
+    cfg, run = lag_run
+    ds = read_csv(run / "data.csv")
+    write_csv(tmp_path / "rad.csv", replace(ds, qc_deg=np.radians(ds.qc_deg)))
+    out = tmp_path / "out"
+    assert main(["reprocess", str(tmp_path / "rad.csv"), "--config", str(cfg), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not the same poses" in err and "rad.csv" in err and "\n" not in err and not out.exists()
+
+
+@pytest.mark.system
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_phenomena_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, capsys, case):
     text, where = BAD[case]
