@@ -107,6 +107,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
         _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
+    if result.iso9283 is not None:                     # plan.kind: iso9283
+        from campaign.iso_run import render_iso
+        render_iso(out, result.iso9283)
+        out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
+        return EXIT_OK
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
     print_plausibility(out, result.processed.report.get("plausibility"))
@@ -303,3 +308,4 @@ def _fail(message: str, code: int) -> int:
     _stderr().print(" ".join(message.split()), style="red", markup=False)
     return code
 import campaign.cli_diagnose  # noqa: E402,F401  (registers "diagnose")
+import campaign.cli_report  # noqa: E402,F401  (registers "report", "export", "iso9283")

@@ -313,6 +313,18 @@ class NestsConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class Iso9283Config:
+    """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
+    P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
+
+    Defaults: ``cycles`` 30 (int >= 2), ``edge_mm`` 0 = the largest cube inside the grid box.
+    """
+
+    cycles: int = 30
+    edge_mm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class PlanConfig:
     """What to measure.
 
@@ -338,6 +350,8 @@ class PlanConfig:
     keep_out: tuple["BoxConfig", ...] = ()
     envelope: "BoxConfig | None" = None
     clearance_mm: float = 25.0
+    kind: str = "grid"                          # grid (calibration campaign) | iso9283 (acceptance test)
+    iso9283: Iso9283Config = Iso9283Config()
 
 
 @dataclass(frozen=True, slots=True)
@@ -1033,6 +1047,8 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         keep_out=_keep_out(r),
         envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
+        kind=r.choice("kind", ("grid", "iso9283"), "grid"),
+        iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
     )
 
 
@@ -1066,6 +1082,10 @@ def _nests(r: _Reader) -> NestsConfig:
         points.append(nest)
     return NestsConfig(points=tuple(points), every_n_points=r.integer("every_n_points", 50, lo=1),
                        max_move_mm=r.number("max_move_mm", 0.2, positive=True))
+
+
+def _iso9283(r: _Reader) -> Iso9283Config:
+    return Iso9283Config(cycles=r.integer("cycles", 30, lo=2), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
 
 
 def _grid(r: _Reader) -> GridConfig:

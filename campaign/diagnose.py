@@ -24,17 +24,18 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, diagnose
+from robocal.diagnose import (Diagnosis, DiagnosisInput, DiagnosisOptions, NestReadings, approach_from_order, diagnose,
+                              moves_from_order)
 from robocal.identify import IdentificationError
 from robocal.noise import noise_floor_mm
-from robocal.selfcheck import LABELS, SelfCheckResult
+from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 
 from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset, dataset_from_log, read_csv
 from .plausibility import check_dataset
-from .process import noise_floor_from_repeats, repeat_groups
+from .process import _prepare, geometric_fit, noise_floor_from_repeats, repeat_groups
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -66,26 +67,65 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
 
 
-def diagnosis_input(ds: Dataset, cfg: CampaignConfig) -> tuple[DiagnosisInput, dict]:
-    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata."""
+def _rows(ds: Dataset, name: str) -> np.ndarray:
+    """(N,) bool: rows of set ``name`` (also for sets this Dataset version does not know, e.g. "nest")."""
+    return np.array([s == name for s in ds.set], dtype=bool)
+
+
+def _nests(ds: Dataset) -> NestReadings | None:
+    """Reference-nest rows (set "nest", with ``nest_id``; their joints may be empty) in measurement order."""
+    nest = _rows(ds, "nest")
+    ids = getattr(ds, "nest_id", None)
+    if not nest.any() or ids is None:
+        return None
+    idx = np.flatnonzero(nest)
+    return NestReadings(ds.p_tracker_mm[idx], tuple(str(ids[i]) for i in idx),
+                        None if ds.t_s is None else np.asarray(ds.t_s, float)[idx], idx.astype(float))
+
+
+def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None, readback: Dataset | None = None
+                    ) -> tuple[DiagnosisInput, dict]:
+    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata.
+    ``baseline``: the geometric fit (``campaign.process.geometric_fit``) to start from; ``ds`` the dataset as
+    that fit saw it (prepared), ``readback`` the original (its q_deg are the read-back joints, for the direct
+    comparison with the commanded ones when the preparation chose the commanded joints)."""
     _check(ds, cfg)
     check = ds.mask("check")
-    use = ~check
+    robot = ~_rows(ds, "nest")                         # rows with joints, in measurement order
+    use = ds.mask("calib") | ds.mask("test")
     p = ds.p_tracker_mm
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    qc_deg = getattr(ds, "qc_deg", None)
+    q_rep = ds.q_deg if qc_deg is None else qc_deg     # repeated poses are repeated commands
+    repeats = noise_floor_from_repeats(q_rep[check], p[check]) if check.any() else None
     specs = noise_floor_mm(p[use], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
     floor, source = (repeats, "repeats") if repeats is not None else (specs, "specs")
-    approach = ds.approach_sign()[use]
+    q_rad = np.radians(ds.q_deg)
+    approach = np.zeros_like(q_rad)
+    move, prev = np.zeros_like(q_rad), np.zeros_like(q_rad)
+    approach[robot] = approach_from_order(q_rad[robot])
+    move[robot], prev[robot] = moves_from_order(q_rad[robot])
     meta = {name: (None if getattr(ds, name) is None else getattr(ds, name)[use])
             for name in ("t_s", "temp_c", "payload_kg")}
-    dof = sum(len(g) - 1 for g in repeat_groups(ds.q_deg[check])) if repeats is not None else None
-    inp = DiagnosisInput(nominal_kinematics(cfg), np.radians(ds.q_deg[use]), p[use], measurement_covariance(cfg, p)[use],
-                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach, **meta)
+    dof = sum(len(g) - 1 for g in repeat_groups(q_rep[check])) if repeats is not None else None
+    kin = None if baseline is None else getattr(baseline, "kinematics", baseline)
+    identified = None if baseline is None else getattr(baseline, "identified", None)
+    inp = DiagnosisInput(nominal_kinematics(cfg), q_rad[use], p[use], measurement_covariance(cfg, p)[use],
+                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach[use],
+                         move_rad=move[use], prev_move_rad=prev[use],
+                         qc_rad=None if qc_deg is None else np.radians(np.asarray(qc_deg, float)[use]),
+                         q_read_rad=None if readback is None or readback.q_deg is ds.q_deg
+                         or len(readback.q_deg) != len(ds.q_deg) else np.radians(np.asarray(readback.q_deg)[use]),
+                         baseline=kin, baseline_identified=None if identified is None else tuple(identified),
+                         nests=_nests(ds), order=np.flatnonzero(use).astype(float), **meta)
     payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
+    nests = inp.nests
     info = {"noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
             "n": {"calib": int(ds.mask("calib").sum()), "test": int(ds.mask("test").sum()), "check": int(check.sum())},
             "metadata": {"timestamps": ds.t_s is not None, "temperatures": ds.temp_c is not None,
-                         "payloads_kg": payloads, "approach": "from row order"}}
+                         "payloads_kg": payloads, "approach": "from row order",
+                         "commanded_joints": qc_deg is not None,
+                         "reference_nests": 0 if nests is None else len(set(nests.nest_id))},
+            "baseline": "campaign.process.geometric_fit (the kinematic stage of reprocess)"}
     return inp, info
 
 
@@ -94,9 +134,11 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
     """Diagnose one dataset; the report dict leads with the JSON contract."""
     _check(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
-    inp, info = diagnosis_input(ds, cfg)
-    info["plausibility"] = plaus.to_dict()
     try:
+        base = geometric_fit(ds, cfg)
+        prepared = _prepare(ds, cfg)       # the same joints and drift compensation as the baseline's fit
+        inp, info = diagnosis_input(prepared, cfg, base, readback=ds)
+        info["plausibility"] = plaus.to_dict()
         d = diagnose(inp, options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"diagnosis failed: {exc}") from None
@@ -138,12 +180,25 @@ def _short_evidence(f: dict) -> str:
     if not f["accepted"]:
         return ev.get("reason", "")
     parts = [f"ΔBIC {ev['delta_bic']:.0f}", f"CV t {ev['cv_gain_t']:.1f} ({ev.get('cv_blocking')} blocks)"]
-    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers"):
+    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers", "gravity torque",
+                                 "signed last move"):
         parts.append(ev["profile"])
     if ev.get("groups"):
         parts.append(", ".join(ev["groups"]))
+    if ev.get("lag_deg_per_deg"):
+        parts.append("lag " + ", ".join(f"{k} {v:+.2e} deg/deg" for k, v in ev["lag_deg_per_deg"].items()))
+    phys = ev.get("physical") or {}
+    stiff = {k: v["stiffness_nm_per_rad"] for k, v in phys.items() if isinstance(v, dict) and "stiffness_nm_per_rad" in v}
+    if stiff:
+        parts.append("stiffness " + ", ".join(f"{k} {v:.2g} N*m/rad" for k, v in stiff.items()))
+    if ev.get("half_width_arcmin"):
+        parts.append("half-width " + ", ".join(f"{k} {v:.2f}'" for k, v in ev["half_width_arcmin"].items()))
+    if ev.get("amplitude_arcsec"):
+        parts.append("amplitude " + ", ".join(f"{k} {v:.0f}\"" for k, v in ev["amplitude_arcsec"].items()))
     if ev.get("confusable_with"):
-        parts.append("confusable with " + ", ".join(c["effect"] for c in ev["confusable_with"]))
+        parts.append("one class with " + ", ".join(c["effect"] + (f" ({c['rejected_by']})" if c.get("rejected_by")
+                                                                   else "") for c in ev["confusable_with"]))
+        parts.append("to separate them: " + ev.get("experiment", ""))
     return "; ".join(parts)
 
 
@@ -194,26 +249,28 @@ def render(console: Console, report: dict) -> None:
 
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:
-    short = {"none": "none", "joint_compliance": "comp", "payload_deflection": "pay", "gear_cyclic": "cyc",
-             "backlash": "back", "thermal_drift": "therm", "axis_coupling": "coup", "registration_drift": "tdrift"}
     m = result.confusion()
     t = Table(title="Self-check: true effect (rows) vs diagnosed effect (first accepted)")
-    t.add_column("truth \\ diagnosed")
+    t.add_column("truth \\ diagnosed", no_wrap=True)
     for b in LABELS:
-        t.add_column(short[b], justify="right")
+        t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
-            t.add_row(short[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
+            t.add_row(SHORT[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
     console.print(t)
     s = result.summary()
     e = s["shrinkage_error_mm"]
     console.print(
-        f"single effects: {s['primary_correct']}/{s['single_trials']} correctly attributed "
-        f"(exact set {s['exact_set']}, joints right {s['joints_ok']}); effect-free controls: "
-        f"{s['controls_clean']}/{s['controls']} with no effect accepted ({s['controls_unexplained']} flagged "
-        f"unexplained); two-effect combinations: {s['combo_exact']}/{s['combo_trials']} exact, recall "
-        f"{_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}", highlight=False)
+        f"single effects: {s['named_right']}/{s['single_trials']} correctly attributed (named, or in the named "
+        f"confusable class; first accepted = truth {s['primary_correct']}, exact set {s['exact_set']}, joints right "
+        f"{s['joints_ok']}); effect-free controls: {s['controls_clean']}/{s['controls']} with no effect accepted "
+        f"({s['controls_unexplained']} flagged unexplained); two-effect combinations: {s['combo_exact']}/"
+        f"{s['combo_trials']} exact, recall {_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}; "
+        f"outside the library: {s['outside_unexplained']}/{s['outside_trials']} flagged unexplained",
+        highlight=False)
+    console.print(f"spurious acceptances: {s['spurious_acceptances']} in {s['datasets']} datasets "
+                  f"({s['spurious_per_20']:.2f} per 20; target <= 1)", highlight=False)
     if e["n"]:
         console.print(f"predicted (calibration CV) minus achieved (test) shrinkage over {e['n']} accepted true effects: "
                       f"mean {e['mean']:+.4f} mm, mean |error| {e['mean_abs']:.4f} mm, max |error| {e['max_abs']:.4f} mm "
@@ -238,27 +295,61 @@ def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
         return PLOTS_MISSING
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    maps, floor = report["maps"], report["noise_floor_mm"]
-    files = [_plot_workspace(plt, maps, floor, out / "where_workspace.png"),
-             _plot_joints(plt, maps, floor, out / "where_joints.png"),
+    maps = report["maps"]
+    files = [_plot_workspace(plt, maps, report, out / "where_workspace.png"),
+             _plot_joints(plt, maps, report, out / "where_joints.png"),
              _plot_shrinkage(plt, report, out / "shrinkage.png")]
     if "time" in maps.get("geometric", {}):
-        files.append(_plot_time(plt, maps, floor, out / "where_time.png"))
+        files.append(_plot_time(plt, maps, report, out / "where_time.png"))
     return files
 
 
-def _plot_workspace(plt, maps, floor, path):
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+def plot_floor(report: dict) -> tuple[float, str, float | None]:
+    """(floor line, its label, the repeat scatter to show dotted or None). When the diagnosis itself notes that
+    the repeat scatter overestimates the floor, the line is the specs floor and the repeat scatter is dotted."""
+    floor = report["noise_floor_mm"]
+    over = any("floor is overestimated" in n for n in report.get("notes", []))
+    if over and report.get("noise_floor_specs_mm"):
+        return (report["noise_floor_specs_mm"], f"noise floor (specs) {report['noise_floor_specs_mm']:.3f} mm",
+                floor)
+    return floor, f"noise floor ({report['noise_floor_source']}) {floor:.3f} mm", None
+
+
+def _floor_lines(ax, report, vertical=False):
+    floor, label, repeat = plot_floor(report)
+    line = ax.axvline if vertical else ax.axhline
+    line(floor, color="k", ls="--", lw=1, label=label)
+    if repeat is not None:
+        line(repeat, color="gray", ls=":", lw=1, label=f"repeat scatter {repeat:.3f} mm (overestimated)")
+
+
+def _same_curves(maps) -> bool:
+    """True when the final model is the geometric one (no effect accepted): one curve, not two on top."""
+    return maps.get("final") == maps.get("geometric")
+
+
+def _plot_workspace(plt, maps, report, path):
+    """Residual RMS per (radius, height) cell; cells without points are hatched grey and say so."""
+    fig, axes = plt.subplots(1, 2, figsize=(11.5, 4.8), constrained_layout=True)
     vmax = max((v for st in ("geometric", "final") for row in maps[st]["workspace"]["rms_mm"] for v in row
-                if v is not None), default=floor)
+                if v is not None), default=report["noise_floor_mm"])
+    floor, label, _ = plot_floor(report)
+    same = _same_curves(maps)
     for ax, st in zip(axes, ("geometric", "final")):
         w = maps[st]["workspace"]
         grid = np.array([[np.nan if v is None else v for v in row] for row in w["rms_mm"]]).T
-        im = ax.pcolormesh(w["radius_edges_mm"], w["z_edges_mm"], grid, vmin=0, vmax=vmax, cmap="viridis")
-        ax.set_title(f"{st} model: residual RMS (floor {floor:.3f} mm)")
+        ax.set_facecolor("0.9")
+        ax.fill_between([w["radius_edges_mm"][0], w["radius_edges_mm"][-1]], w["z_edges_mm"][0], w["z_edges_mm"][-1],
+                        hatch="//", facecolor="0.9", edgecolor="0.7", lw=0, zorder=0)
+        im = ax.pcolormesh(w["radius_edges_mm"], w["z_edges_mm"], np.ma.masked_invalid(grid), vmin=0, vmax=vmax,
+                           cmap="viridis", zorder=1)
+        ax.set_title("geometric model" if st == "geometric" else
+                     ("final model = geometric (no effect accepted)" if same else "final model (with the effects)"),
+                     fontsize=10)
         ax.set_xlabel("radius from the J1 axis (mm)")
         ax.set_ylabel("height z (mm)")
-    fig.colorbar(im, ax=axes, label="RMS (mm)")
+    fig.colorbar(im, ax=axes, label="residual RMS (mm)")
+    fig.suptitle(f"Residual RMS over the workspace; {label}; hatched cells: no points", fontsize=11)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -271,37 +362,43 @@ def _plot_line(ax, m, label, style):
     ax.plot(c, y, style, label=label)
 
 
-def _plot_joints(plt, maps, floor, path):
+def _plot_joints(plt, maps, report, path):
     n = len(maps["geometric"]["joints"])
-    fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(12, 6), constrained_layout=True, squeeze=False)
+    same = _same_curves(maps)
+    fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(12, 6.4), constrained_layout=True, squeeze=False)
     for j, ax in enumerate(axes.ravel()):
         if j >= n:
             ax.axis("off")
             continue
-        _plot_line(ax, maps["geometric"]["joints"][j], "geometric", "o-")
-        _plot_line(ax, maps["final"]["joints"][j], "final", "s-")
-        ax.axhline(floor, color="k", ls="--", lw=1, label="floor")
+        _plot_line(ax, maps["geometric"]["joints"][j], "geometric = final (no effect accepted)" if same else "geometric",
+                   "o-")
+        if not same:
+            _plot_line(ax, maps["final"]["joints"][j], "final", "s-")
+        _floor_lines(ax, report)
         ax.set_xlabel(maps["geometric"]["joints"][j]["label"])
         ax.set_ylabel("RMS (mm)")
         ax.set_ylim(bottom=0)
-    axes.ravel()[0].legend()
-    fig.suptitle("Residual RMS over each joint's range")
+    axes.ravel()[0].legend(fontsize=8)
+    gaps = any(v is None for m in maps["geometric"]["joints"] for v in m["rms_mm"])
+    fig.suptitle("Residual RMS over each joint's range" + ("; gaps: bins without points" if gaps else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
-def _plot_time(plt, maps, floor, path):
-    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
-    _plot_line(ax, maps["geometric"]["time"], "geometric", "o-")
-    if "time" in maps["final"]:
+def _plot_time(plt, maps, report, path):
+    same = _same_curves(maps)
+    fig, ax = plt.subplots(figsize=(7.5, 4), constrained_layout=True)
+    _plot_line(ax, maps["geometric"]["time"], "geometric = final (no effect accepted)" if same else "geometric", "o-")
+    if "time" in maps["final"] and not same:
         _plot_line(ax, maps["final"]["time"], "final", "s-")
-    ax.axhline(floor, color="k", ls="--", lw=1, label="floor")
+    _floor_lines(ax, report)
     ax.set_xlabel("t (min)")
     ax.set_ylabel("RMS (mm)")
     ax.set_ylim(bottom=0)
-    ax.legend()
-    ax.set_title("Residual RMS over time")
+    ax.legend(fontsize=8)
+    gaps = any(v is None for v in maps["geometric"]["time"]["rms_mm"])
+    ax.set_title("Residual RMS over time" + ("; gaps: intervals without points" if gaps else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -314,7 +411,7 @@ def _plot_shrinkage(plt, report, path):
     values = [s[key] for s in stages]
     fig, ax = plt.subplots(figsize=(max(5, 1.7 * len(labels)), 4), constrained_layout=True)
     ax.bar(range(len(values)), [0 if v is None else v for v in values], color="tab:blue")
-    ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
+    _floor_lines(ax, report)
     ax.set_xticks(range(len(values)), labels, rotation=20, ha="right")
     ax.set_ylabel(("test" if key == "test_rms_mm" else "cross-validated") + " RMS (mm)")
     ax.set_title("How far the error shrinks, step by step")

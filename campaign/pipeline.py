@@ -23,6 +23,7 @@ from .config import CampaignConfig
 from .errors import CampaignError, ConfigError
 from .interchange import dataset_from_log, read_csv, write_csv
 from .plan import Plan, build_plan, write_plan_csv
+from .html_report import write_report
 from .process import Processed, process, write_outputs
 from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
@@ -41,6 +42,7 @@ class RunResult:
     run_dir: Path
     outcome: RunOutcome
     processed: Processed | None
+    iso9283: dict | None = None             # the ISO 9283 report of a plan.kind: iso9283 run
 
 
 def software_version() -> str:
@@ -51,13 +53,13 @@ def software_version() -> str:
 
 
 def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path | None = None,
-                 console: Console | None = None) -> RunResult:
+                 console: Console | None = None, plan: Plan | None = None) -> RunResult:
     """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
     console = console or Console()
     if resume is not None:
         check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    plan = build_plan(cfg, kin) if plan is None else plan      # given: campaign iso9283 with corrected cycles
     if not plan.points:
         raise ConfigError(cfg.source_path, "plan", f"no reachable point to measure ({len(plan.skipped)} skipped"
                           + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
@@ -92,12 +94,18 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
+    from .iso_run import finish, is_iso_plan
+    if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
+        iso = finish(cfg, run_dir)
+        write_report(run_dir)
+        return RunResult(run_dir, outcome, None, iso)
     contents = read_log(run_dir)
     dataset = dataset_from_log(contents)
     write_csv(run_dir / "data.csv", dataset)
     processed = process(dataset, cfg)
     processed.report.update(identification(contents))
     write_outputs(processed, run_dir)
+    write_report(run_dir)                       # report.html from report.json
     return RunResult(run_dir, outcome, processed)
 
 
@@ -109,6 +117,7 @@ def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     if contents is not None:
         processed.report.update(identification(contents))      # the hardware the log was measured with
     write_outputs(processed, out_dir)
+    write_report(out_dir)                       # report.html from report.json
     return processed
 
 
@@ -147,6 +156,7 @@ def verify(run_dir: Path, console: Console | None = None):
         result = verify_run(run_dir, measure, cfg, model, tests, out_dir)
         if not log.closed:
             log.close(result.exit_status, result.reason)
+    write_report(run_dir)                       # report.html now includes the verify passes
     return result
 
 

@@ -128,6 +128,9 @@ def _check_poses(q: np.ndarray, p: np.ndarray, count: int) -> list[int]:
 
 def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     """Plan of a campaign config for the nominal model ``kin``."""
+    if cfg.plan.kind == "iso9283":                      # ISO 9283 acceptance test: the standard's cube and cycles
+        from .iso_run import iso_plan
+        return iso_plan(cfg, kin)
     g, pl = cfg.plan.grid, cfg.plan
     R = tool_rotation(pl.tool_direction)
     q_ref = np.radians(pl.q_ref_deg)

@@ -36,6 +36,7 @@ from .fsutil import atomic_write
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 from .prepare import prepare
+from .report_points import cell_summary, point_table
 
 REPORT_FORMAT = "campaign-report/1"
 
@@ -311,6 +312,12 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
+    used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
+    used[geo.rows], used[kept_rows] = 0.0, 1.0
+    report["cell"] = cell_summary(cfg)
+    report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
+                                   {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
+                                    for name, m in stage_models}, used, ds.t_s)
     return Processed(report, model, result)
 
 

@@ -18,10 +18,14 @@ Pure numerics: arrays in, dataclasses out. Steps (``diagnose``):
    a candidate are chosen greedily by BIC; score = ΔBIC (n = 3 x points, RSS-based so it does not trust the
    noise model's scale), extra-sum-of-squares F test, blocked K-fold cross-validation (by pose; contiguous time
    blocks for time effects), and the physical plausibility of the fitted values.
-4. **Forward selection**: accept the candidate with the lowest ΔBIC if ΔBIC < -10, the cross-validated error
-   falls significantly (paired t over points) and the values are plausible; refit geometry + accepted effects
-   with the exact (nonlinear) forward model; repeat until no candidate passes; then one backward pass.
-   Near-ties with overlapping subspaces are reported as a confusable class.
+4. **Forward selection, strongest evidence first**: accept the candidate with the lowest ΔBIC that passes the
+   named gates (ΔBIC < -10, absorption, veto by a direct comparison, blocked CV, physical plausibility judged on
+   physical parameters such as stiffness or lag, the saturation test backlash vs read-back lag, the nested test
+   compliance vs payload deflection); refit geometry + accepted effects with the exact (nonlinear) forward model;
+   repeat until no candidate passes. Then the survivors must pass again in the final model: an effect-agnostic
+   reach-split consistency check, CV against the model without them, ΔBIC of removal; groups no longer needed are
+   pruned. A better-scored candidate rejected by a gate whose visible subspace overlaps the winner's, and
+   near-ties with overlapping subspaces, are reported as one confusable class with the separating experiment.
 5. **Where**: held-out test residuals and cross-validated calibration residuals of the geometric model (and of
    the final model) mapped over workspace cells, each joint's range, base axes, time, approach direction and
    payload; regions whose RMS exceeds the noise floor significantly (chi-square, Bonferroni) are named.
@@ -39,6 +43,7 @@ from typing import Mapping
 
 import numpy as np
 from scipy import stats
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from .effects import G_MM_S2
@@ -46,7 +51,7 @@ from .frames import skew
 from .identify import CalibrationOptions, calibrate
 from .kinematics import Kinematics, ParamLayout, apply_update, chain, identification_jacobian
 
-EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
+EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
                 "axis_coupling", "registration_drift")
 TIME_EFFECTS = ("thermal_drift", "registration_drift")
 REMEDY = {
@@ -54,6 +59,7 @@ REMEDY = {
     "payload_deflection": "measure with a second payload (e.g. none and the rated load), alternating in blocks",
     "gear_cyclic": "cover the joint's whole range; dense single-joint sweeps (0.05-0.2 deg) for motor-rate terms",
     "backlash": "approach the poses from random, recorded directions (or paired +/- approaches)",
+    "readback_lag": "log the commanded joints next to the read-back ones (qc1..qcn) and vary the size of the moves",
     "thermal_drift": "log timestamps (and temperatures) from a cold start, poses in random order over >= 2 h",
     "axis_coupling": "mount the SMR >= 50 mm off the J6 axis and cover J4/J5 widely",
     "registration_drift": "log timestamps and re-measure 3-4 floor nests every 10-15 min",
@@ -86,6 +92,8 @@ class DiagnosisOptions:
     neighbours: int = 10
     permutations: int = 200
     max_regions: int = 12
+    split_alpha: float = 1e-4         # reach-split consistency: parameters of near and far halves must agree ...
+    split_min_ratio: float = 0.25     # ... to within this share of the effect's visible displacement
     seed: int = 0
 
 
@@ -110,9 +118,33 @@ class DiagnosisInput:
     temp_c: np.ndarray | None = None
     payload_kg: np.ndarray | None = None
     approach: np.ndarray | None = None
+    move_rad: np.ndarray | None = None           # (N, n) signed last move of each joint (rad), None: from row order
+    prev_move_rad: np.ndarray | None = None      # (N, n) the move before it
+    qc_rad: np.ndarray | None = None             # (N, n) commanded joints next to the read-back q_rad
+    q_read_rad: np.ndarray | None = None         # (N, n) read-back joints when q_rad are not (commanded chosen)
+    baseline: Kinematics | None = None           # the best geometric model (reprocess's kinematic stage)
+    baseline_identified: tuple[str, ...] | None = None   # its identified parameter names
+    nests: "NestReadings | None" = None
+    order: np.ndarray | None = None              # (N,) position of each row in the measurement sequence
+    payload_rated_kg: float | None = None
 
     def meta(self) -> dict:
-        return {"t_s": self.t_s, "temp_c": self.temp_c, "payload_kg": self.payload_kg, "approach": self.approach}
+        move, prev = self.move_rad, self.prev_move_rad
+        if move is None:
+            move, prev = moves_from_order(self.q_rad)
+        return {"t_s": self.t_s, "temp_c": self.temp_c, "payload_kg": self.payload_kg, "approach": self.approach,
+                "move": move, "prev_move": prev, "qc": self.qc_rad, "payload_rated_kg": self.payload_rated_kg,
+                "q_read": self.q_read_rad}
+
+
+@dataclass(frozen=True, eq=False)
+class NestReadings:
+    """Reference-nest readings in measurement order: ``p_mm`` (M, 3) tracker frame, ``nest_id`` (M,),
+    ``t_s`` (M,) or None, ``order`` (M,) position in the measurement sequence (any monotone index)."""
+    p_mm: np.ndarray
+    nest_id: tuple[str, ...]
+    t_s: np.ndarray | None
+    order: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -228,10 +260,18 @@ class Group:
     dp: np.ndarray | None = None
     limit: np.ndarray | float = np.inf
     dq_limit: float = 2e-3
+    u: np.ndarray | None = None          # (N,) per-point scale of ``base`` (time profiles): X = u * X_base
+    base: "Group | None" = None
 
     @property
     def k(self) -> int:
         return len(self.names)
+
+    def scaled(self, u: np.ndarray) -> "Group":
+        """This group times a per-point profile u (N,): its regressor is u times this one's (exactly, since the
+        whitening is per point), which lets the scoring whiten the base once for all profiles."""
+        return Group(self.label, self.joints, self.names, None if self.dq is None else u[:, None, None] * self.dq,
+                     None if self.dp is None else u[:, None, None] * self.dp, self.limit, self.dq_limit, u, self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,6 +289,8 @@ class Candidate:
     reason: str = ""                    # why the data cannot reveal it ("" = diagnosable)
     notes: tuple[str, ...] = ()
     extends: bool = False               # the unselected groups of an accepted candidate
+    veto: str = ""                      # a gate that rules it out whatever the fit says (e.g. direct comparison)
+    info: dict = field(default_factory=dict)   # extra evidence (direct comparisons, nest drift)
 
     @property
     def key(self) -> str:
@@ -268,7 +310,7 @@ class Candidate:
         """The same candidate restricted to ``profile``'s groups not in ``used`` (None if nothing is left)."""
         left = tuple(g for g in profile.groups if all(g is not u for u in used))
         return Candidate(self.name, self.joints, (Profile(profile.label, left),), notes=self.notes,
-                         extends=True) if left else None
+                         extends=True, info=self.info) if left else None
 
 
 def _torque_per_kg(axis_j, origin_j, P):
@@ -319,6 +361,71 @@ def payload_levers(kin: Kinematics, q_rad: np.ndarray, joint: int, payload_kg: n
         * np.asarray(payload_kg, float)[:, None]
 
 
+def arm_mass_kg(kin: Kinematics) -> float:
+    """Moving mass of an arm of this size (kg): about 25 kg at 0.58 m reach, growing with reach^2.5 (the size
+    law of industrial 6-axis arms from 0.5 to 3 m reach)."""
+    return 25.0 * (robot_reach_mm(kin) / 580.0) ** 2.5
+
+
+def robot_reach_mm(kin: Kinematics) -> float:
+    """Reach from the shoulder: sum of the link lengths after J1 (mm)."""
+    return float(np.sum(np.hypot(kin.a_mm[1:], kin.d_mm[1:])) + np.linalg.norm(kin.p_flange_smr_mm))
+
+
+def physical_torque_nm(kin: Kinematics, q_rad: np.ndarray, payload_kg: np.ndarray | None, arm: bool = True
+                       ) -> np.ndarray:
+    """Gravity torque (N, n) N*m about every joint of a physical lumped-mass model from the robot's size: the
+    moving mass (``arm_mass_kg``) shared over the links after J1 in proportion to their lengths, each at its
+    link's midpoint, plus the payload at the flange. Gravity is -z of the base frame."""
+    c = chain(kin, q_rad, full=False)
+    N, n = np.shape(q_rad)
+    o = np.concatenate([c.origin, c.T_base_flange[:, None, :3, 3]], axis=1)
+    mid = 0.5 * (o[:, :-1] + o[:, 1:])
+    length = np.hypot(kin.a_mm, kin.d_mm)
+    length[0] = 0.0
+    m = arm_mass_kg(kin) * length / max(float(length.sum()), 1e-9) if arm else np.zeros(n)
+    pay = np.zeros(N) if payload_kg is None else np.asarray(payload_kg, float)
+    tau = np.zeros((N, n))
+    for j in range(n):
+        t_links = np.stack([_torque_per_kg(c.axis[:, j], c.origin[:, j], mid[:, i]) for i in range(j, n)], axis=1)
+        tau[:, j] = t_links @ m[j:] + _torque_per_kg(c.axis[:, j], c.origin[:, j], o[:, -1]) * pay
+    return tau
+
+
+def moves_from_order(q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(last move, the move before) per row and joint (N, n) rad, from rows in measurement order."""
+    q = np.asarray(q_rad, float)
+    move = np.zeros_like(q)
+    move[1:] = np.diff(q, axis=0)
+    prev = np.zeros_like(q)
+    prev[1:] = move[:-1]
+    return move, prev
+
+
+def direct_lag(q_read_rad: np.ndarray, qc_rad: np.ndarray, move_rad: np.ndarray, prev_rad: np.ndarray) -> dict:
+    """Read-back minus commanded joints regressed per joint on [1, last move, move before]: the lag (deg/deg),
+    its t value, the memory term and the correlation of the difference with the move."""
+    d = np.asarray(q_read_rad, float) - np.asarray(qc_rad, float)
+    out = {}
+    for j in range(d.shape[1]):
+        ok = np.isfinite(d[:, j]) & np.isfinite(move_rad[:, j])
+        A = np.column_stack([np.ones(ok.sum()), move_rad[ok, j], prev_rad[ok, j]])
+        y = d[ok, j]
+        if ok.sum() < 10 or np.ptp(move_rad[ok, j]) <= 0:
+            continue
+        beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ beta
+        s2 = float(r @ r) / max(len(y) - 3, 1)
+        cov = s2 * np.linalg.pinv(A.T @ A)
+        se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        corr = float(np.corrcoef(y, move_rad[ok, j])[0, 1]) if np.std(y) > 0 else 0.0
+        out[j + 1] = {"lag_deg_per_deg": float(beta[1]), "t": float(beta[1] / se[1]),
+                      "memory_deg_per_deg": float(beta[2]), "t_memory": float(beta[2] / se[2]),
+                      "offset_deg": float(np.degrees(beta[0])), "std_deg": float(np.degrees(np.std(y))),
+                      "correlation_with_move": corr}
+    return out
+
+
 def _dq_group(label, joint_cols: dict, names, n, N, joints, **kw) -> Group:
     """Group whose columns act on single joints: joint_cols {joint (1-based): (N, k_j) array}."""
     k = sum(a.shape[1] for a in joint_cols.values())
@@ -347,23 +454,37 @@ def _compliance(kin, q, meta, rows, opt, payload_only: bool) -> Candidate:
         why = "no payload logged" if payload is None else "one payload only"
         return Candidate(name, joints, reason=f"{why}: a payload-dependent deflection cannot be told from "
                                               "geometry and link-mass compliance")
-    groups = []
+    groups, shape = [], []
+    tau = physical_torque_nm(kin, q, None if payload is None else np.asarray(payload, float), arm=not payload_only)
     for jt in joints:
+        groups.append(_dq_group(f"J{jt}", {jt: tau[:, jt - 1:jt]}, (f"c{jt}",), n, N, (jt,), dq_limit=np.inf))
         parts, names = [], []
         if not payload_only:
             lev, labels = gravity_levers(kin, q, jt)
-            keep = _independent(lev, rows)
-            parts.append(lev[:, keep])
-            names += [f"c{jt}_{labels[i]}" for i in keep]
+            parts.append(lev)
+            names += [f"c{jt}_{lb}" for lb in labels]
         if varies:
             parts.append(payload_levers(kin, q, jt, payload))
             names += [f"c{jt}_payload_flange", f"c{jt}_payload_tool"]
         cols = np.concatenate(parts, axis=1)
-        groups.append(_dq_group(f"J{jt}", {jt: cols}, names, n, N, (jt,)))
+        t = tau[rows, jt - 1]
+        cols = cols - np.outer(tau[:, jt - 1], cols[rows].T @ t / max(float(t @ t), 1e-300))   # beyond the physical
+        keep = _independent(cols, rows, 1e-2)
+        if len(keep):
+            shape.append(_dq_group(f"J{jt} mass distribution", {jt: cols[:, keep]}, tuple(names[i] for i in keep),
+                                   n, N, (jt,), dq_limit=np.inf))
+    groups += shape
     notes = [ELASTIC_CLASS] if not payload_only else []
     if not payload_only and not varies:
         notes.append("one payload only: compliance is partly confounded with geometry (log a second payload)")
-    return Candidate(name, joints, (Profile("gravity levers", tuple(groups)),), notes=tuple(notes))
+    return Candidate(name, joints, (Profile("gravity torque", tuple(groups)),), notes=tuple(notes),
+                     info={"torque_nm": tau, "stiffness_min_nm_per_rad": stiffness_floor_nm_per_rad(kin)})
+
+
+def stiffness_floor_nm_per_rad(kin: Kinematics) -> float:
+    """Lowest plausible joint stiffness of an arm of this size (N*m/rad): 2e4 x (reach in m)^3, about ten times
+    softer than the main axes of industrial arms (stiffness grows with the cube of the size)."""
+    return 2e4 * (robot_reach_mm(kin) / 1000.0) ** 3
 
 
 def _gear(kin, q, joint, rows, opt) -> Candidate:
@@ -400,6 +521,34 @@ def _backlash(kin, q, meta, rows) -> Candidate:
     notes = (f"approach direction constant on J{', J'.join(map(str, constant))}",) if constant else ()
     return Candidate("backlash", tuple(g.joints[0] for g in groups), (Profile("approach", tuple(groups)),),
                      notes=notes)
+
+
+def _readback_lag(kin, q, meta, rows, opt) -> Candidate:
+    """Read-back lag: the reported joint is off by lambda x (signed last move) [+ mu x (move before)]; the model
+    input is corrected by dq = -lambda move (parameter -lambda, rad/rad). With commanded joints the difference is
+    measured directly and decides which joints can carry it."""
+    N, n = q.shape
+    move, prev, qc = meta.get("move"), meta.get("prev_move"), meta.get("qc")
+    joints = tuple(j for j in range(1, n + 1) if np.std(move[rows, j - 1]) > np.radians(1.0))
+    if not joints:
+        return Candidate("readback_lag", tuple(range(1, n + 1)), reason="the joints hardly move between points")
+    veto, direct = "", {}
+    if qc is not None:
+        qcm, qcp = moves_from_order(qc) if meta.get("move_cmd") is None else (meta["move_cmd"], meta["prev_cmd"])
+        direct = direct_lag(q if meta.get("q_read") is None else meta["q_read"], qc, qcm, qcp)
+        sig = tuple(j for j in joints if j in direct and abs(direct[j]["t"]) >= 5.0
+                    and abs(direct[j]["lag_deg_per_deg"]) >= 2e-5)
+        if not sig:
+            veto = ("commanded and read-back joints agree: no lag proportional to the move (direct comparison, "
+                    "|t| < 5 on every joint)")
+        else:
+            joints = sig
+    kw = {"limit": 5e-3, "dq_limit": np.inf}          # judged on the lag itself (deg/deg), not on move x lag
+    groups = [_dq_group(f"J{j}", {j: move[:, j - 1:j]}, (f"lag{j}",), n, N, (j,), **kw) for j in joints]
+    groups += [_dq_group(f"J{j} memory", {j: prev[:, j - 1:j]}, (f"lag{j}_memory",), n, N, (j,), **kw)
+               for j in joints]
+    return Candidate("readback_lag", joints, (Profile("signed last move", tuple(groups)),), veto=veto,
+                     info={"direct_comparison": direct} if direct else {})
 
 
 def _time_profiles(meta, rows, opt) -> tuple[list[tuple[str, np.ndarray]], str]:
@@ -442,32 +591,42 @@ def _thermal(kin, q, meta, J, layout, rows, opt) -> Candidate:
                for c, i, k in layout.joint_cols if k in (1, 2) and abs((kin.d_mm if k == 1 else kin.a_mm)[i]) > 50.0]
     uniform = sum(J[:, :, c] * L for c, _, L in lengths)
     single = [(c, name, L) for c, name, L in lengths if name != "d1"]
-    out = []
-    for label, u in profiles:
-        groups = [Group("uniform growth", (), ("growth_all",), dp=(u[:, None] * uniform)[:, :, None], limit=1e-3)]
-        groups += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(u[:, None] * J[:, :, c] * L)[:, :, None],
-                         limit=1e-3) for c, name, L in single]
-        groups += [_dq_group(f"zero J{j}", {j: u[:, None]}, (f"zero_drift{j}",), n, N, (j,), limit=2e-3)
-                   for j in joints]
-        out.append(Profile(label, tuple(groups)))
+    bases = [Group("uniform growth", (), ("growth_all",), dp=uniform[:, :, None], limit=1e-3)]
+    bases += [Group(f"growth {name}", (), (f"growth_{name}",), dp=(J[:, :, c] * L)[:, :, None], limit=1e-3)
+              for c, name, L in single]
+    bases += [_dq_group(f"zero J{j}", {j: np.ones((N, 1))}, (f"zero_drift{j}",), n, N, (j,), limit=2e-3)
+              for j in joints]
+    out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
     return Candidate("thermal_drift", joints, tuple(out))
 
 
 def _registration(kin, q, meta, p_model, rows, opt) -> Candidate:
+    drift = meta.get("nest_drift")
+    info = {"nest_drift": drift} if drift else {}
+    if drift and drift["ruled_out"]:
+        return Candidate("registration_drift", (), veto=f"ruled out by the reference nests: {drift['summary']}",
+                         info=info)
     if meta.get("t_s") is None:
-        return Candidate("registration_drift", (), reason="no timestamps in the data")
-    profiles, why = _time_profiles(meta, rows, opt)
-    profiles = [(label, u) for label, u in profiles if label != "temperature"]
-    if why or not profiles:
-        return Candidate("registration_drift", (), reason=why or "no timestamps in the data")
+        if drift and drift["detected"]:              # no timestamps: the measurement order carries the time
+            x = np.asarray(meta["order"], float)
+            x = (x - x[rows].min()) / max(np.ptp(x[rows]), 1e-9)
+            profiles = [("linear in measurement order", x), ("quadratic in measurement order", x**2)]
+        else:
+            return Candidate("registration_drift", (), reason="no timestamps in the data"
+                             + ("" if drift else " and no reference nests"), info=info)
+    else:
+        profiles, why = _time_profiles(meta, rows, opt)
+        profiles = [(label, u) for label, u in profiles if label != "temperature"]
+        if why or not profiles:
+            return Candidate("registration_drift", (), reason=why or "no timestamps in the data", info=info)
     centre = p_model[rows].mean(axis=0)
     screw = np.concatenate([np.broadcast_to(np.eye(3), (len(q), 3, 3)), -skew(p_model - centre)], axis=2)
     names = ("vx", "vy", "vz", "wx", "wy", "wz")
     limit = np.array([1.0, 1.0, 1.0, 5e-4, 5e-4, 5e-4])
-    out = [Profile(label, (Group("translation", (), names[:3], dp=u[:, None, None] * screw[:, :, :3], limit=limit[:3]),
-                           Group("rotation", (), names[3:], dp=u[:, None, None] * screw[:, :, 3:], limit=limit[3:])))
-           for label, u in profiles]
-    return Candidate("registration_drift", (), tuple(out))
+    bases = (Group("translation", (), names[:3], dp=screw[:, :, :3], limit=limit[:3]),
+             Group("rotation", (), names[3:], dp=screw[:, :, 3:], limit=limit[3:]))
+    out = [Profile(label, tuple(b.scaled(u) for b in bases)) for label, u in profiles]
+    return Candidate("registration_drift", (), tuple(out), info=info)
 
 
 def _coupling(kin, q) -> Candidate:
@@ -493,7 +652,7 @@ def build_candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, rows: np
     n = kin.n
     cands = [_compliance(kin, q_rad, meta, rows, options, False), _compliance(kin, q_rad, meta, rows, options, True)]
     cands += [_gear(kin, q_rad, j, rows, options) for j in range(1, n + 1)]
-    cands += [_backlash(kin, q_rad, meta, rows), _thermal(kin, q_rad, meta, J, layout, rows, options),
+    cands += [_backlash(kin, q_rad, meta, rows), _readback_lag(kin, q_rad, meta, rows, options), _thermal(kin, q_rad, meta, J, layout, rows, options),
               _coupling(kin, q_rad), _registration(kin, q_rad, meta, p_model, rows, options)]
     return cands
 
@@ -661,7 +820,13 @@ class _Score:
     cv: dict | None = None
     plausible: tuple[bool, str] | None = None
     rejected: str = ""
+    backward_delta_bic: float = float("nan")
+    split_rejected: str = ""               # dropped as a stand-in for structure outside the library
+    pruned: list = field(default_factory=list)     # group labels dropped in the backward pass
+    refit_cv_t: float = float("nan")
     steps: list = field(default_factory=list)      # 1-based selection steps that added groups of this effect
+    physical: dict = field(default_factory=dict)    # physical parameters (stiffness, lag, half-widths)
+    shadowed: list = field(default_factory=list)    # better-scored candidates rejected by a gate, overlapping
     confusable: list = field(default_factory=list)
     extensions: list = field(default_factory=list)
 
@@ -680,6 +845,7 @@ def _greedy(blocks, y, rss0, n, lnn, extra, rank_tol=1e-3, margin=0.0):
     after the first must lower BIC by ``margin``. Returns (chosen indices, ΔBIC, ΔRSS, rank, U)."""
     chosen, S = [], np.zeros((len(y), 0))
     rss, best, r_tot = rss0, 0.0, 0
+    look = 2.0 * math.log(len(blocks)) if len(blocks) > 1 else 0.0     # prior 1/G on which group: look-elsewhere
     y_res = y.copy()
     while len(chosen) < len(blocks):
         trial = None
@@ -687,12 +853,16 @@ def _greedy(blocks, y, rss0, n, lnn, extra, rank_tol=1e-3, margin=0.0):
             if i in chosen:
                 continue
             Zs = Z - S @ (S.T @ Z)
-            U, s, _ = np.linalg.svd(Zs, full_matrices=False)
-            Ug = U[:, s > rank_tol]
+            if Zs.shape[1] == 1:                      # one column: its direction, no SVD needed
+                nz = float(np.linalg.norm(Zs))
+                Ug = Zs / nz if nz > rank_tol else Zs[:, :0]
+            else:
+                U, s, _ = np.linalg.svd(Zs, full_matrices=False)
+                Ug = U[:, s > rank_tol]
             if Ug.shape[1] == 0:
                 continue
             d = float(np.sum((Ug.T @ y_res) ** 2))
-            bic = n * math.log(max(rss - d, 1e-300) / rss0) + (r_tot + Ug.shape[1] + extra) * lnn
+            bic = n * math.log(max(rss - d, 1e-300) / rss0) + (r_tot + Ug.shape[1] + extra) * lnn + look
             if trial is None or bic < trial[0]:
                 trial = (bic, i, Ug, d)
         if trial is None or trial[0] >= best - (margin if chosen else 0.0):
@@ -726,8 +896,9 @@ class _Selector:
         rss0 = float(y @ y)
         best = _Score(cand)
         absorbed_min = 1.0
+        cache: dict[int, np.ndarray] = {}
         for prof in cand.profiles:
-            X = [self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in prof.groups]
+            X = [self.whitened(st, g, cache) for g in prof.groups]
             blocks = []
             for Xg in X:
                 nrm = np.linalg.norm(Xg, axis=0)
@@ -758,6 +929,15 @@ class _Selector:
             best.delta_bic, best.groups = 0.0, ()
         return best
 
+    def whitened(self, st: _State, g: Group, cache: dict) -> np.ndarray:
+        """Whitened calibration-row regressor (3m, k) of a group; a profile-scaled group reuses its base's."""
+        if g.base is None:
+            return self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows)
+        key = id(g.base)
+        if key not in cache:
+            cache[key] = self.eng.wflat(self.eng.regressor(st.J, st.kin, g.base), self.rows)
+        return cache[key] * np.repeat(g.u[self.rows], 3)[:, None]
+
     def cross_validate(self, st: _State, sc: _Score) -> dict:
         """Blocked K-fold CV of the linear model with and without the candidate's selected groups."""
         by_time = sc.cand.time_effect and self.inp.t_s is not None
@@ -777,6 +957,8 @@ class _Selector:
                 "ok": bool(np.mean(d) > 0 and t >= self.opt.cv_min_t and frac >= self.opt.min_excess_fraction)}
 
     def plausibility(self, st: _State, sc: _Score) -> tuple[bool, str]:
+        if sc.cand.name in ("joint_compliance", "payload_deflection") and "torque_nm" in sc.cand.info:
+            return self._physical_compliance(sc)
         at, problems = 0, []
         for g in sc.groups:
             th = sc.gamma[at:at + g.k]
@@ -791,6 +973,134 @@ class _Selector:
                     problems.append(f"implied joint deflection {np.degrees(dq) * 60:.1f} arcmin > "
                                     f"{np.degrees(g.dq_limit) * 60:.1f} arcmin")
         return (not problems, "; ".join(problems) if problems else "within physical bounds")
+
+
+    def _physical_compliance(self, sc: _Score) -> tuple[bool, str]:
+        """Judge compliance on physical parameters: the fitted deflection of each joint (whatever groups carry it)
+        regressed on the physical gravity torque gives the compliance c (rad/N*m) and stiffness k = 1/c; k must be
+        at least the size-derived floor. Coefficients of a general basis are never judged on their own."""
+        rows = self.rows
+        tau = sc.cand.info["torque_nm"]
+        k_min = sc.cand.info["stiffness_min_nm_per_rad"]
+        dq = np.zeros((len(rows), self.inp.q_rad.shape[1]))
+        at = 0
+        for g in sc.groups:
+            dq += g.dq[rows] @ sc.gamma[at:at + g.k]
+            at += g.k
+        problems, values = [], {}
+        for j in sorted({j for g in sc.groups for j in g.joints}):
+            t = tau[rows, j - 1]
+            A = np.column_stack([t, np.ones(len(t))])
+            c = float(np.linalg.lstsq(A, dq[:, j - 1], rcond=None)[0][0])
+            k = 1.0 / c if abs(c) > 1e-300 else np.inf
+            defl = abs(c) * float(np.ptp(t))
+            values[j] = (k, defl)
+            if abs(k) < k_min:
+                problems.append(f"J{j} stiffness {abs(k):.3g} N*m/rad < {k_min:.3g} (size floor)")
+        sc.physical = {f"J{j}": {"stiffness_nm_per_rad": k, "deflection_range_arcmin": np.degrees(d) * 60.0}
+                       for j, (k, d) in values.items()}
+        desc = "; ".join(f"J{j} k = {k:.3g} N*m/rad ({np.degrees(d) * 60:.2f}' over the data)"
+                         for j, (k, d) in values.items())
+        neg = [j for j, (k, _) in values.items() if k < 0]
+        if neg:
+            desc += f"; negative on J{', J'.join(map(str, neg))} (balancer over-compensation or another effect)"
+        return (not problems, "; ".join(problems) if problems else desc)
+
+    def split_consistency(self, st: _State, sc: _Score, exclude=None) -> dict:
+        """Effect-agnostic stability check: fit geometry + the candidate on the near and the far half of the poses
+        (horizontal reach below / above its median) and compare the candidate's parameters (Wald χ², k dof). A
+        physical effect has one set of parameters; a proxy for structure along the reach does not."""
+        rows = self.rows
+        T = st.kin.T_tracker_base
+        pb = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
+        reach = np.hypot(pb[:, 0], pb[:, 1])
+        A0 = self.eng.design(st, rows)
+        y = self.eng.wflat(self.eng.resid(st), rows)
+        if exclude is not None:                  # sc is in the model: take its columns out, add its part back
+            cols, th = exclude
+            y = y + A0[:, cols] @ th
+            keep = np.ones(A0.shape[1], bool)
+            keep[cols] = False
+            A0 = A0[:, keep]
+        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), rows) for g in sc.groups], axis=1)
+        k = X.shape[1]
+        est = []
+        for half in (reach < np.median(reach), reach >= np.median(reach)):
+            r3 = np.repeat(half, 3)
+            M = np.concatenate([A0[r3], X[r3]], axis=1)
+            nrm = np.linalg.norm(M, axis=0)
+            nrm[nrm < 1e-300] = 1.0
+            Ms = M / nrm
+            beta = np.linalg.lstsq(Ms, y[r3], rcond=1e-10)[0]
+            res = y[r3] - Ms @ beta
+            s2 = float(res @ res) / max(int(r3.sum()) - M.shape[1], 1)
+            C = s2 * np.linalg.pinv(Ms.T @ Ms)
+            est.append(((beta / nrm)[-k:], (C / np.outer(nrm, nrm))[-k:, -k:]))
+        d = est[0][0] - est[1][0]
+        W = float(d @ np.linalg.pinv(est[0][1] + est[1][1]) @ d)
+        Q0 = _orth(A0)
+        Xv = X - Q0 @ (Q0.T @ X)                                        # the visible part of the effect
+        full = _lstsq_scaled(np.concatenate([A0, X], axis=1), y)[-k:]
+        ratio = float(np.linalg.norm(Xv @ d) / max(np.linalg.norm(Xv @ full), 1e-300))
+        return {"chi2": W, "dof": k, "p_value": float(stats.chi2.sf(W, k)), "difference_ratio": ratio}
+
+    def given(self, st: _State, sc: _Score, other_groups, Q, y) -> float:
+        """ΔBIC of sc's groups once ``other_groups`` are in the model (both orthogonalised against Q)."""
+        X = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in other_groups],
+                           axis=1)
+        P = _orth(X - Q @ (Q.T @ X), 1e-3)
+        Z = np.concatenate([self.eng.wflat(self.eng.regressor(st.J, st.kin, g), self.rows) for g in sc.groups], axis=1)
+        Z = Z - Q @ (Q.T @ Z)
+        Z = Z - P @ (P.T @ Z)
+        U = _orth(Z, 1e-3)
+        y2 = y - P @ (P.T @ y)
+        rss0 = float(y2 @ y2)
+        d = float(np.sum((U.T @ y2) ** 2))
+        return self.n * math.log(max(rss0 - d, 1e-300) / rss0) + U.shape[1] * self.lnn
+
+    def half_widths(self, st: _State, sc: _Score) -> dict:
+        """Approach-direction offset (half-width, arcmin) of each joint's residual by size of the last move:
+        constant for backlash (it saturates), growing with the move for a read-back lag."""
+        rows = self.rows
+        move = self.inp.meta()["move"][rows]
+        appr = self.inp.approach
+        if appr is None:
+            return {}
+        r = self.eng.resid(st)[rows]
+        Jq = st.J[rows][:, :, self.eng.joint_cols]
+        out = {}
+        edges = (0.0, 10.0, 30.0, 60.0, 100.0, np.inf)
+        for j in sorted({j for g in sc.groups for j in g.joints}):
+            jq = Jq[:, :, j - 1]
+            x = np.einsum("ni,ni->n", r, jq) / np.maximum(np.einsum("ni,ni->n", jq, jq), 1e-12)   # rad
+            s, m = np.asarray(appr)[rows, j - 1], np.degrees(np.abs(move[:, j - 1]))
+            bins = {}
+            for lo, hi in zip(edges[:-1], edges[1:]):
+                b = (m >= lo) & (m < hi)
+                if np.sum(b & (s > 0)) >= 5 and np.sum(b & (s < 0)) >= 5:
+                    hw = 0.5 * (np.mean(x[b & (s > 0)]) - np.mean(x[b & (s < 0)]))
+                    bins[f"{lo:.0f}-{hi:.0f} deg" if np.isfinite(hi) else f">{lo:.0f} deg"] = np.degrees(hw) * 60.0
+            out[f"J{j}"] = bins
+        return out
+
+
+SEPARATING_EXPERIMENT = {
+    frozenset({"joint_compliance", "gear_cyclic"}): "compare poses with equal q2 and different q3 (a J2 harmonic "
+    "cannot depend on q3, gravity compliance does), or measure with a second payload",
+    frozenset({"payload_deflection", "gear_cyclic"}): "measure the same poses with and without the payload",
+    frozenset({"backlash", "readback_lag"}): "log the commanded joints (qc1..qcn), or approach the same poses with "
+    "short and long moves from both sides",
+    frozenset({"thermal_drift", "registration_drift"}): "re-measure floor reference nests during the run (tracker "
+    "drift moves the nests, thermal growth does not)",
+    frozenset({"joint_compliance", "payload_deflection"}): "measure with two payloads in alternating blocks",
+    frozenset({"joint_compliance", "thermal_drift"}): "measure the poses in random order over the whole run",
+}
+
+
+def separating_experiment(a: str, b: str) -> str:
+    return SEPARATING_EXPERIMENT.get(frozenset({a, b}),
+                                     "widen the range of the inputs where they differ (joints, time, payload) "
+                                     "or add a second SMR for orientation")
 
 
 def _absorption(X, Qgeo) -> float:
@@ -998,14 +1308,67 @@ def structure_test(w: np.ndarray, spaces: Mapping[str, np.ndarray], rng: np.rand
         F = F + 1e-9 * rng.standard_normal(F.shape)          # break ties (repeated values)
         _, nn = cKDTree(F).query(F, k=k + 1)
         nn = nn[:, 1:]
-        S = float(np.mean(np.sum(w * w[nn].mean(axis=1), axis=1)))
-        Sp = np.array([np.mean(np.sum(w[pp] * w[pp][nn].mean(axis=1), axis=1)) for pp in perms])
+        A = sparse.csr_matrix((np.full(m * k, 1.0 / k), nn.ravel(), np.arange(0, m * k + 1, k)), shape=(m, m))
+        S = float(np.mean(np.sum(w * (A @ w), axis=1)))
+        Wp = np.concatenate([w[pp] for pp in perms], axis=1)            # (m, 3 x permutations)
+        Sp = np.sum((Wp * (A @ Wp)).reshape(m, len(perms), 3), axis=(0, 2)) / m
         z = float((S - Sp.mean()) / max(Sp.std(ddof=1), 1e-12))
         out[name] = {"S": S, "z": z}
     return out
 
 
 # ============================================================================ the diagnosis
+def nest_drift(nests: NestReadings, floor_mm: float, alpha: float = 1e-3) -> dict | None:
+    """Tracker drift seen by reference nests: each nest's readings (minus their mean) fitted with a quadratic in
+    time (or in measurement order without timestamps); pooled F test against a constant; the drift is the largest
+    3-D excursion of the fitted trends. ``ruled_out`` when not detected and its upper bound (trend + 3 standard
+    errors) is below 1.5 x the noise floor (a drift range that adds less than 0.45 x the floor in RMS). None with fewer than 3 readings of any nest."""
+    ids = np.asarray(nests.nest_id)
+    x_all = np.asarray(nests.t_s if nests.t_s is not None else nests.order, float)
+    span = float(np.ptp(x_all)) if len(x_all) else 0.0
+    if span <= 0:
+        return None
+    rss0 = rss1 = 0.0
+    dof1, k_extra, excursion, m_min = 0, 0, 0.0, np.inf
+    slopes = []
+    for nid in np.unique(ids):
+        sel = ids == nid
+        if sel.sum() < 4:
+            continue
+        x = (x_all[sel] - x_all.min()) / span
+        p = np.asarray(nests.p_mm)[sel] - np.asarray(nests.p_mm)[sel].mean(axis=0)
+        A = np.column_stack([np.ones(len(x)), x - x.mean(), (x - x.mean()) ** 2])
+        beta, *_ = np.linalg.lstsq(A, p, rcond=None)
+        trend = A[:, 1:] @ beta[1:]
+        r = p - A @ beta
+        rss0 += float(np.sum(p**2))
+        rss1 += float(np.sum(r**2))
+        dof1 += 3 * (len(x) - 3)
+        k_extra += 6
+        excursion = max(excursion, float(np.max(np.linalg.norm(trend - trend[:, None].mean(axis=0), axis=1))) * 2.0)
+        m_min = min(m_min, len(x))
+        xc = x - x.mean()
+        slopes.append(xc @ p / max(float(xc @ xc), 1e-300))      # linear drift over the run (mm per run)
+    if k_extra == 0 or dof1 <= 0:
+        return None
+    sigma = math.sqrt(rss1 / dof1)
+    F = ((rss0 - rss1) / k_extra) / max(rss1 / dof1, 1e-300)
+    p_value = float(stats.f.sf(F, k_extra, dof1))
+    linear = float(np.linalg.norm(np.mean(slopes, axis=0)))        # common to all nests (the tracker moved)
+    se = sigma * math.sqrt(12.0 / m_min) / math.sqrt(len(slopes))
+    detected = p_value < alpha
+    if not detected:
+        excursion = linear
+    bound = linear + 2.0 * math.sqrt(3.0) * se
+    ruled_out = (not detected) and bound < 1.5 * floor_mm         # a range of 1.5 x floor is < 0.45 x floor RMS
+    basis = "time" if nests.t_s is not None else "measurement order"
+    summary = (f"nests moved {excursion:.3f} mm over the run (p = {p_value:.2g}, by {basis})" if detected else
+               f"nests stable within {bound:.3f} mm (drift {excursion:.3f} mm, p = {p_value:.2g}, by {basis})")
+    return {"detected": detected, "ruled_out": ruled_out, "drift_mm": excursion, "upper_bound_mm": bound,
+            "p_value": p_value, "nest_sigma_mm": sigma, "n_nests": int(k_extra // 6), "basis": basis,
+            "summary": summary}
+
+
 def approach_from_order(q: np.ndarray) -> np.ndarray:
     """(N, n) sign of each joint's last motion from row order (rows in measurement order): the same rule as the
     interchange CSV (a joint that did not move keeps its previous sign; 0 before its first move)."""
@@ -1048,20 +1411,41 @@ def _base_fit(inp: DiagnosisInput, opt: DiagnosisOptions):
 def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()) -> Diagnosis:
     """Run the whole diagnosis on one dataset (see the module docstring)."""
     opt = options
-    res, cols = _base_fit(inp, opt)
+    if inp.baseline is not None and inp.baseline_identified is not None:
+        kin0 = inp.baseline
+        layout = ParamLayout.of(kin0)
+        cols = np.array([layout.index(nm) for nm in inp.baseline_identified], int)
+    else:
+        res, cols = _base_fit(inp, opt)
+        kin0 = res.kinematics if inp.baseline is None else inp.baseline
     eng = _Engine(inp, cols, np.flatnonzero(inp.calib), np.flatnonzero(inp.test))
-    st = eng.fit(res.kinematics, [])
+    if inp.baseline is not None:              # the best geometric model as given: "before" agrees everywhere
+        pred, J = eng.predict(kin0, [], np.zeros(0))
+        geo_state = _State(kin0, [], np.zeros(0), pred, J)
+    st = eng.fit(kin0, [])
     outliers = _outliers(eng, st, opt)
     if len(outliers):
         eng.fit_rows = np.setdiff1d(eng.fit_rows, outliers)
         st = eng.fit(st.kin, [])
-    cands = build_candidates(st.kin, inp.q_rad, inp.meta(), eng.fit_rows, st.J, st.pred, opt)
+    if inp.baseline is None:
+        geo_state = st
+    drift = nest_drift(inp.nests, inp.noise_floor_mm) if inp.nests is not None else None
+    meta = dict(inp.meta(), nest_drift=drift, order=np.arange(len(inp.q_rad)) if inp.order is None else inp.order)
+    cands = build_candidates(st.kin, inp.q_rad, meta, eng.fit_rows, st.J, st.pred, opt)
     sel = _Selector(eng, inp, opt)
     Qgeo = _orth(eng.wflat(st.J[:, :, cols], eng.fit_rows))
-    geo_state = st
-    stages = [_stage_summary(eng, st, [], opt)]
+    stages = [_stage_summary(eng, geo_state, [], opt)]
+    if st is not geo_state:
+        stages[0]["refit_test_rms_mm"] = eng.test_rms(st)
     st, accepted, last_scores = _forward(eng, sel, st, cands, stages, Qgeo, opt)
     st, accepted, stages, dropped = _backward(eng, sel, st, accepted, stages, opt)
+    for _ in range(2):                  # what is left must pass again once the dropped effects are gone
+        if not dropped or not accepted:
+            break
+        st, accepted, stages, more = _backward(eng, sel, st, accepted, stages, opt)
+        if not more:
+            break
+        dropped += more
     return _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_scores, dropped, outliers, Qgeo)
 
 
@@ -1074,7 +1458,7 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
         Q, y, _ = sel.base(st)
         scores = sorted((sel.score(c, st, Q, y, Qgeo) for c in pool), key=lambda s: s.delta_bic)
         last_scores = {s.cand.key: s for s in scores}
-        chosen = _pick(sel, st, scores, opt)
+        chosen = _pick(sel, st, scores, opt, pool)
         if chosen is None:
             break
         new = eng.fit(st.kin, st.groups + list(chosen.groups), np.concatenate([st.theta, chosen.gamma]))
@@ -1085,16 +1469,34 @@ def _forward(eng, sel, st, cands, stages, Qgeo, opt):
         rest = chosen.cand.rest(chosen.profile, chosen.groups)      # its other groups may enter later
         if rest is not None:
             pool.append(rest)
+        twin = ELASTIC_TWIN.get(chosen.cand.name)
+        other = next((c for c in pool if c.name == twin and not c.extends), None)
+        if other is not None and not chosen.cand.extends:     # one gravity-elastic effect: the other refines it
+            pool = [c for c in pool if c is not other]
+            pool.append(Candidate(chosen.cand.name, chosen.cand.joints, other.profiles, notes=chosen.cand.notes,
+                                  extends=True, info=other.info))
     return st, accepted, last_scores
 
 
-def _pick(sel, st, scores, opt) -> _Score | None:
-    """The best-scoring candidate that passes every gate: ΔBIC, absorption, blocked CV, plausibility."""
+ELASTIC_TWIN = {"joint_compliance": "payload_deflection", "payload_deflection": "joint_compliance"}
+SATURATION_PARTNER = {"backlash": "readback_lag", "readback_lag": "backlash", "joint_compliance": "payload_deflection"}
+
+
+def _pick(sel, st, scores, opt, pool=()) -> _Score | None:
+    """The strongest evidence (lowest ΔBIC) that passes every named gate: absorption, veto (direct comparison),
+    blocked CV, physical plausibility, saturation test (backlash vs read-back lag). A better-scored candidate that
+    a gate rejected and whose visible subspace overlaps the winner's is kept with it as one confusable class."""
+    rejected = []
+    Q = y = None
     for sc in scores:
         if sc.delta_bic >= -opt.bic_threshold:
             return None
         if sc.absorbed_min > opt.absorbed_limit:
             sc.rejected = f"{100 * sc.absorbed_min:.0f} % absorbed by the geometric model"
+            continue
+        if sc.cand.veto:
+            sc.rejected = sc.cand.veto
+            rejected.append(sc)
             continue
         sc.cv = sel.cross_validate(st, sc)
         sc.plausible = sel.plausibility(st, sc)
@@ -1103,7 +1505,34 @@ def _pick(sel, st, scores, opt) -> _Score | None:
         elif not sc.plausible[0]:
             sc.rejected = f"implausible values: {sc.plausible[1]}"
         else:
+            partner = SATURATION_PARTNER.get(sc.cand.name)
+            other = next((c for c in pool if c.name == partner and c.profiles and not c.reason and not c.veto
+                          and not c.extends), None)
+            if other is not None:
+                if Q is None:
+                    Q, y, _ = sel.base(st)
+                js = {j for g in sc.groups for j in g.joints}
+                og = [g for g in other.profiles[0].groups if set(g.joints) & js]
+                if og:
+                    dbic = sel.given(st, sc, og, Q, y)
+                    elastic = sc.cand.name == "joint_compliance"
+                    key = "nested_test" if elastic else "saturation_test"
+                    sc.physical[key] = {"delta_bic_given_" + partner: dbic}
+                    if not elastic:
+                        sc.physical[key]["half_width_arcmin_by_move"] = sel.half_widths(st, sc)
+                    if dbic >= -opt.bic_threshold:
+                        sc.rejected = (
+                            f"nested test: the arm's own weight adds ΔBIC {dbic:+.1f} beyond the payload torque "
+                            "(payload deflection of a balanced arm)" if elastic else "saturation test: " + (
+                                "the approach offset grows with the size of the move (read-back lag); backlash adds "
+                                if sc.cand.name == "backlash" else
+                                "the approach offset does not grow with the move (it saturates: backlash); the lag "
+                                "adds ") + f"ΔBIC {dbic:+.1f} once {partner} is modelled")
+                        rejected.append(sc)
+                        continue
+            sc.shadowed = [r for r in rejected if r.cand.name != sc.cand.name and _overlap(r.U, sc.U) > 0.5]
             return sc
+        rejected.append(sc)
     return None
 
 
@@ -1119,7 +1548,8 @@ def _record(chosen: _Score, accepted: list, scores, step: int, opt) -> None:
     chosen.confusable = [_confusion_entry(chosen, o) for o in scores if o is not chosen
                          and o.delta_bic < -opt.bic_threshold and o.cand.name != chosen.cand.name
                          and o.delta_bic - chosen.delta_bic < opt.bic_threshold
-                         and _overlap(chosen.U, o.U) > 0.5]
+                         and _overlap(chosen.U, o.U) > 0.5 and not any(o is r for r in chosen.shadowed)]
+    chosen.confusable += [dict(_confusion_entry(chosen, o), rejected_by=o.rejected) for o in chosen.shadowed]
     chosen.steps.append(step)
     accepted.append(chosen)
 
@@ -1162,11 +1592,44 @@ def _backward(eng, sel, st, accepted, stages, opt):
     """One backward pass: drop an accepted effect whose removal no longer costs ΔBIC < -threshold given the
     others (its fitted contribution, orthogonalised against everything else, is what removing it would cost)."""
     dropped = []
-    if len(accepted) < 2:
+    if not accepted:
         return st, accepted, stages, dropped
     _, y, A = sel.base(st)
     rss = float(y @ y)
+    proxies = []
+    for sc in accepted:                 # effect-agnostic: one physical effect has one set of parameters
+        split = sel.split_consistency(st, sc, _columns_of(eng, st, sc.groups))
+        sc.physical["reach_split"] = split
+        if split["p_value"] < opt.split_alpha and split["difference_ratio"] > opt.split_min_ratio:
+            sc.split_rejected = (f"its parameters differ between near and far reach in the final model (Wald χ² "
+                                 f"{split['chi2']:.0f}, p = {split['p_value']:.1g}; the two fits differ by "
+                                 f"{100 * split['difference_ratio']:.0f} % of the effect): it stands in for "
+                                 "structure along the reach")
+            proxies.append(sc)
     for sc in accepted:
+        if sc not in proxies and any(_overlap(p.U, sc.U) > 0.5 for p in proxies):
+            p = next(p for p in proxies if _overlap(p.U, sc.U) > 0.5)
+            sc.split_rejected = (f"it overlaps {p.cand.name}, which stands in for structure along the reach: the "
+                                 "same structure, not an effect of the library")
+            proxies.append(sc)
+    dropped += proxies
+    for sc in accepted:
+        if sc in proxies:
+            continue
+        cols, th = _columns_of(eng, st, sc.groups)
+        mask = np.ones(A.shape[1], bool)
+        mask[cols] = False
+        by_time = sc.cand.time_effect and sel.inp.t_s is not None
+        folds = eng.folds(by_time, sel.inp.t_s, opt.cv_folds, opt.seed)
+        yr = eng.wflat(eng.resid(st), eng.fit_rows) + A[:, cols] @ th     # the data as the model without it sees them
+        e0, e1 = eng.cv_errors(A[:, mask], yr, folds), eng.cv_errors(A, yr, folds)
+        dd = np.sum(e0**2, axis=1) - np.sum(e1**2, axis=1)
+        sc.refit_cv_t = float(np.mean(dd) / max(np.std(dd, ddof=1) / math.sqrt(len(dd)), 1e-300))
+        if sc.refit_cv_t < opt.cv_min_t:
+            dropped.append(sc)
+    for sc in (accepted if len(accepted) >= 2 else ()):
+        if sc in dropped:
+            continue
         cols, th = _columns_of(eng, st, sc.groups)
         mask = np.ones(A.shape[1], bool)
         mask[cols] = False
@@ -1178,7 +1641,16 @@ def _backward(eng, sel, st, accepted, stages, opt):
         sc.backward_delta_bic = sel.n * math.log(rss / (rss + float(d @ d))) + r_k * sel.lnn
         if sc.backward_delta_bic > -opt.bic_threshold:
             dropped.append(sc)
-    if not dropped:
+    pruned = False
+    for sc in accepted:                 # groups (joints, terms) that the final model no longer needs
+        if sc in dropped or len(sc.groups) < 2:
+            continue
+        for g in list(sc.groups):
+            if _removal_bic(sel, eng, st, A, rss, [g]) > -opt.group_bic_margin and len(sc.groups) > 1:
+                sc.groups = tuple(h for h in sc.groups if h is not g)
+                sc.pruned.append(g.label)
+                pruned = True
+    if not dropped and not pruned:
         return st, accepted, stages, dropped
     keep = [s for s in accepted if s not in dropped]
     stages = stages[:1]
@@ -1192,10 +1664,24 @@ def _backward(eng, sel, st, accepted, stages, opt):
     return st, keep, stages, dropped
 
 
+def _removal_bic(sel, eng, st, A, rss, groups) -> float:
+    """ΔBIC of keeping ``groups`` in the final linearised model (negative: they are needed)."""
+    cols, th = _columns_of(eng, st, groups)
+    mask = np.ones(A.shape[1], bool)
+    mask[cols] = False
+    Qo = _orth(A[:, mask])
+    d = A[:, cols] @ th
+    d = d - Qo @ (Qo.T @ d)
+    Xp = A[:, cols] - Qo @ (Qo.T @ A[:, cols])
+    r_k = _orth(Xp, 1e-3).shape[1] if np.any(Xp) else 0
+    return sel.n * math.log(rss / (rss + float(d @ d))) + r_k * sel.lnn
+
+
 def _confusion_entry(best: _Score, other: _Score) -> dict:
     return {"effect": other.cand.name, "joints": list(other.joints), "delta_bic": other.delta_bic,
             "log10_bayes_factor": (other.delta_bic - best.delta_bic) / (2.0 * math.log(10.0)),
-            "overlap": _overlap(best.U, other.U)}
+            "overlap": _overlap(best.U, other.U),
+            "experiment": separating_experiment(best.cand.name, other.cand.name)}
 
 
 def _params(sc: _Score, theta: np.ndarray | None = None) -> dict:
@@ -1225,13 +1711,22 @@ def _assemble(inp, opt, eng, sel, cands, geo_state, st, accepted, stages, last_s
     final = stages[-1][key]
     for sc in dropped:
         ev = _evidence(sc, inp.noise_floor_mm, final)
-        ev["reason"] = f"dropped in the backward step (ΔBIC of keeping it {sc.backward_delta_bic:.1f})"
+        ev["reason"] = (sc.split_rejected if sc.split_rejected else
+                        f"does not survive the refit with the other accepted effects (cross-validated t "
+                        f"{sc.refit_cv_t:.1f} < {opt.cv_min_t:g})" if sc.refit_cv_t < opt.cv_min_t else
+                        f"dropped in the backward step (ΔBIC of keeping it {sc.backward_delta_bic:.1f})")
         findings.append(Finding(sc.cand.name, sc.joints, False, final, final, ev))
     done = {s.cand.key for s in accepted} | {s.cand.key for s in dropped}
     others, undiagnosable = _other_findings(eng, sel, st, [c for c in cands if c.key not in done], last_scores,
                                             final, inp.noise_floor_mm, Qgeo, opt)
     where, maps = _where_stages(inp, opt, eng, geo_state, st, stages)
     structure, unexplained, notes = _leftover(inp, opt, eng, st, stages, inp.noise_floor_mm)
+    drift = next((c.info["nest_drift"] for c in cands if c.name == "registration_drift" and c.info.get("nest_drift")),
+                 None)
+    if drift:
+        notes.append(("tracker drift ruled out by the reference nests: " if drift["ruled_out"] else
+                      "reference nests: tracker drift detected, " if drift["detected"] else
+                      "reference nests: drift neither detected nor ruled out, ") + drift["summary"])
     final_regions = maps.pop("_final_regions")
     if unexplained:
         where += [r for r in final_regions if r.kind != "all"]
@@ -1256,6 +1751,11 @@ def _accepted_findings(eng, st, accepted, stages, key, floor) -> list[Finding]:
         achieved = sum(stages[s - 1][key] - stages[s][key] for s in sc.steps)
         ev.update(step=first, parameters=_params(sc, _columns_of(eng, st, sc.groups)[1]),
                   predicted_shrinkage_mm=predicted, achieved_shrinkage_mm=achieved)
+        if sc.cand.name == "readback_lag":
+            ev["lag_deg_per_deg"] = _lags(ev["parameters"])
+        ev.update(_physical_values(sc.cand.name, ev["parameters"]))
+        if sc.pruned:
+            ev["pruned_groups"] = list(sc.pruned)
         if sc.extensions:
             ev["extended"] = sc.extensions
             ev["dof"] = sc.rank + sum(e["dof"] for e in sc.extensions)
@@ -1271,11 +1771,18 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
     Q, y, _ = sel.base(st)
     rest, undiagnosable = [], []
     for c in cands:
+        if c.veto and not c.profiles:
+            ev = {"diagnosable": True, "reason": c.veto}
+            ev.update({k: v for k, v in c.info.items() if k != "torque_nm"})
+            rest.append((np.inf, Finding(c.name, c.joints, False, final, final, ev)))
+            continue
         if c.reason or not c.profiles:
             undiagnosable.append({"effect": c.name, "joints": list(c.joints), "reason": c.reason,
                                   "remedy": REMEDY[c.name]})
-            rest.append((np.inf, Finding(c.name, c.joints, False, final, final,
-                                         {"diagnosable": False, "reason": c.reason, "remedy": REMEDY[c.name]})))
+            ev = {"diagnosable": False, "reason": c.reason, "remedy": REMEDY[c.name]}
+            if c.info.get("nest_drift"):
+                ev["nest_drift"] = c.info["nest_drift"]
+            rest.append((np.inf, Finding(c.name, c.joints, False, final, final, ev)))
             continue
         sc = sel.score(c, st, Q, y, Qgeo)
         prev = last_scores.get(c.key)
@@ -1293,10 +1800,12 @@ def _other_findings(eng, sel, st, cands, last_scores, final, floor, Qgeo, opt):
             sc.cv = sel.cross_validate(st, sc)
             sc.plausible = sel.plausibility(st, sc)
             ev = _evidence(sc, floor, final)
-            ev["reason"] = (prev.rejected if prev is not None and prev.rejected else
+            ev["reason"] = (c.veto if c.veto else prev.rejected if prev is not None and prev.rejected else
                             _cv_reason(sc.cv, opt) if not sc.cv["ok"] else
                             f"implausible values: {sc.plausible[1]}" if not sc.plausible[0] else
                             f"limit of {opt.max_effects} effects reached")
+        if c.veto:
+            ev["reason"] = c.veto
         if c.notes:
             ev["notes"] = list(c.notes)
         after = _what_if(eng, st, sc) if sc.rank else final
@@ -1327,9 +1836,42 @@ def _evidence(sc: _Score, floor: float, after: float) -> dict:
     if conf:
         ev["confusable_with"] = conf
         ev["class"] = " / ".join([sc.cand.name] + [c["effect"] for c in conf])
+        ev["experiment"] = "; ".join(dict.fromkeys(c["experiment"] for c in conf))
     if sc.cand.name == "joint_compliance":
-        ev["class"] = ELASTIC_CLASS
+        ev["elastic_class"] = ELASTIC_CLASS
+        ev.setdefault("class", ELASTIC_CLASS)
+    if sc.physical:
+        ev["physical"] = sc.physical
+    if sc.cand.info.get("nest_drift"):
+        ev["nest_drift"] = sc.cand.info["nest_drift"]
+    if "direct_comparison" in sc.cand.info:
+        ev["direct_comparison"] = {f"J{j}": v for j, v in sc.cand.info["direct_comparison"].items()}
+    if sc.cand.name == "readback_lag" and sc.gamma is not None:
+        ev["lag_deg_per_deg"] = _lags(_params(sc))
+    if np.isfinite(sc.refit_cv_t):
+        ev["refit_cv_t"] = sc.refit_cv_t
     return ev
+
+
+def _physical_values(name: str, params: dict) -> dict:
+    """Physical reading of fitted parameters: gear amplitude per harmonic (arcsec), backlash half-width (arcmin)."""
+    if name == "gear_cyclic":
+        amp = {}
+        for k, v in params.items():
+            h = k.split(":")[-1]
+            if h.startswith("sin"):
+                c = params.get(k.replace("sin", "cos"), 0.0)
+                amp[f"h{h[3:]}"] = math.degrees(math.hypot(v, c)) * 3600.0
+        return {"amplitude_arcsec": amp}
+    if name == "backlash":
+        return {"half_width_arcmin": {k.split(":")[-1].replace("b", "J"): math.degrees(abs(v)) * 60.0 / 2.0
+                                      for k, v in params.items()}}
+    return {}
+
+
+def _lags(params: dict) -> dict:
+    """Read-back lag per joint (deg/deg) from the fitted parameters (-lambda)."""
+    return {k.split(":")[-1].replace("lag", "J"): -v for k, v in params.items() if k.split(":")[-1].startswith("lag")}
 
 
 def _what_if(eng: _Engine, st: _State, sc: _Score) -> float:
@@ -1395,7 +1937,8 @@ def _leftover(inp, opt, eng, st, stages, floor):
     T = st.kin.T_tracker_base
     p_base = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
     q = inp.q_rad[rows]
-    spaces = {"joint space": q, "workspace": p_base}
+    spaces = {"joint space": q, "workspace": p_base, "reach": np.hypot(p_base[:, 0], p_base[:, 1]),
+              "height": p_base[:, 2]}
     for j in range(q.shape[1]):
         spaces[f"J{j + 1}"] = q[:, j]
     if inp.t_s is not None and np.ptp(np.asarray(inp.t_s)[rows]) > 0:

@@ -1,0 +1,81 @@
+"""``campaign report``, ``campaign export`` and ``campaign iso9283``.
+
+    campaign report RUN_DIR [--out report.html]
+    campaign export MODEL.json [--urdf robot.urdf] [--dh-csv dh.csv] [--robodk robodk.txt] [--name NAME]
+    campaign iso9283 CONFIG [--model MODEL.json] [--out RUN_DIR]
+
+Imported at the end of :mod:`campaign.cli`, which registers them.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from campaign.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
+from campaign.errors import DataError
+
+
+def _report_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", metavar="RUN_DIR", type=Path,
+                        help="a run or output directory with report.json, diagnosis.json or verify-*/verify.json")
+    parser.add_argument("--out", type=Path, metavar="FILE", help="HTML file (default RUN_DIR/report.html)")
+
+
+@command("report", "write the self-contained HTML report of a run (figures also as PNG)", _report_arguments)
+def cmd_report(args: argparse.Namespace) -> int:
+    from campaign.html_report import write_report
+
+    path = write_report(args.run_dir, args.out)
+    _stdout().print(f"wrote {path} (figures as PNG in {path.parent / 'figures'})", markup=False)
+    return EXIT_OK
+
+
+def _export_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL.json", type=Path, help="model.json written by run or reprocess")
+    parser.add_argument("--urdf", type=Path, metavar="FILE", help="URDF of the calibrated chain (tool = fixed link)")
+    parser.add_argument("--dh-csv", type=Path, metavar="FILE", help="CSV table of the calibrated parameters")
+    parser.add_argument("--robodk", type=Path, metavar="FILE", help="DH(M) table as RoboDK users enter it by hand")
+    parser.add_argument("--name", default="robot", help="robot name in the URDF (default: robot)")
+
+
+@command("export", "export a calibrated model as URDF, a DH table (CSV) or a RoboDK DH(M) table", _export_arguments)
+def cmd_export(args: argparse.Namespace) -> int:
+    from campaign.export import export
+    from campaign.process import load_model
+
+    if not (args.urdf or args.dh_csv or args.robodk):
+        raise DataError("export", "nothing to write: give --urdf, --dh-csv and/or --robodk")
+    for path in (args.urdf, args.dh_csv, args.robodk):
+        if path is not None and not path.parent.resolve().is_dir():
+            raise DataError(str(path), "the directory does not exist")
+    files = export(load_model(args.model), args.urdf, args.dh_csv, args.robodk, args.name)
+    _stdout().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
+    return EXIT_OK
+
+
+def _iso_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("config", metavar="CONFIG", help="campaign YAML of the cell (plan.grid box, plan.iso9283)")
+    parser.add_argument("--model", type=Path, metavar="MODEL.json",
+                        help="calibrated model: its registration gives the base frame, and corrected cycles follow "
+                             "the nominal ones (before/after certificate)")
+    parser.add_argument("--out", type=Path, metavar="RUN_DIR", help="run directory (default: output.dir/NAME-TIMESTAMP)")
+
+
+@command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",
+         _iso_arguments)
+def cmd_iso9283(args: argparse.Namespace) -> int:
+    from campaign.config import load_config
+    from campaign.iso_run import render_iso, run_iso9283
+    from campaign.process import load_model
+
+    cfg = load_config(args.config)
+    model = load_model(args.model) if args.model else None
+    out = _stdout()
+    result, report = run_iso9283(cfg, model, args.out, out)
+    o = result.outcome
+    if report is None:
+        _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)
+        return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
+    render_iso(out, report)
+    out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
+    return EXIT_OK

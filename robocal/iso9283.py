@@ -1,0 +1,117 @@
+"""ISO 9283 pose and distance characteristics (position part), and the standard's test cube.
+
+Pure numerics, mm throughout. For one pose j measured in n cycles (attained positions ``p_mm`` (n, 3), the
+commanded position ``p_cmd_mm`` (3,)):
+
+* AP (pose accuracy): the barycentre ``p_bar = mean(p_i)``; ``APx, APy, APz = p_bar - p_cmd``;
+  ``AP = |p_bar - p_cmd|``.
+* RP (pose repeatability): ``l_i = |p_i - p_bar|``, ``l_bar = mean(l_i)``,
+  ``S_l = sqrt(sum((l_i - l_bar)^2) / (n - 1))``, ``RP = l_bar + 3 S_l``.
+
+For two poses measured in the same n cycles (``D_i = |p1_i - p2_i|``, commanded ``D_c = |c1 - c2|``):
+
+* AD (distance accuracy) ``= mean(D_i) - D_c``, per axis ``ADx = mean(x1_i - x2_i) - (c1x - c2x)`` etc.
+* RD (distance repeatability) ``= 3 S_D`` with ``S_D = sqrt(sum((D_i - mean D)^2) / (n - 1))`` (stated as +-RD).
+
+The cube: the largest cube inside a box (edges parallel to the base axes); P1 is its centre and P2..P5 lie on
+the diagonals of the diagonal plane through two opposite edges, at 0.1 L from the corners (L = diagonal length),
+i.e. ``centre + 0.8 * (corner - centre)``. P2/P4 and P3/P5 are the ends of one diagonal each.
+The cycle visits P1, P5, P4, P3, P2 so each pose is always approached from the same neighbour.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+POSE_NAMES = ("P1", "P2", "P3", "P4", "P5")
+CYCLE_ORDER = (0, 4, 3, 2, 1)          # P1 -> P5 -> P4 -> P3 -> P2 (-> P1 of the next cycle)
+CORNER_FRACTION = 0.1                  # P2..P5 at 0.1 L from the corners along the plane's diagonals
+DEFAULT_CYCLES = 30
+
+
+@dataclass(frozen=True)
+class PoseCharacteristics:
+    """AP and RP of one pose (mm). ``l_mean_mm``/``s_l_mm``: mean and standard deviation of l_i."""
+    pose: str
+    n: int
+    ap_mm: float
+    apx_mm: float
+    apy_mm: float
+    apz_mm: float
+    rp_mm: float
+    l_mean_mm: float
+    s_l_mm: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class DistanceCharacteristics:
+    """AD (signed, mm; per axis too) and RD (mm, stated as +-RD) between two poses."""
+    poses: tuple[str, str]
+    n: int
+    distance_cmd_mm: float
+    distance_mean_mm: float
+    ad_mm: float
+    adx_mm: float
+    ady_mm: float
+    adz_mm: float
+    rd_mm: float
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["poses"] = list(self.poses)
+        return d
+
+
+def pose_characteristics(p_mm: np.ndarray, p_cmd_mm: np.ndarray, pose: str = "") -> PoseCharacteristics:
+    """AP, APx/y/z and RP of attained positions ``p_mm`` (n, 3) against the commanded ``p_cmd_mm`` (3,)."""
+    p = np.asarray(p_mm, float)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2:
+        raise ValueError(f"expected attained positions of shape (n >= 2, 3), got {p.shape}")
+    bar = p.mean(axis=0)
+    ap = bar - np.asarray(p_cmd_mm, float)
+    l = np.linalg.norm(p - bar, axis=1)
+    s_l = float(np.std(l, ddof=1))
+    return PoseCharacteristics(pose, len(p), float(np.linalg.norm(ap)), float(ap[0]), float(ap[1]), float(ap[2]),
+                               float(l.mean() + 3.0 * s_l), float(l.mean()), s_l)
+
+
+def distance_characteristics(p1_mm: np.ndarray, p2_mm: np.ndarray, c1_mm: np.ndarray, c2_mm: np.ndarray,
+                             poses: tuple[str, str] = ("P2", "P4")) -> DistanceCharacteristics:
+    """AD and RD between poses measured in the same cycles: ``p1_mm``, ``p2_mm`` (n, 3); commanded (3,)."""
+    p1, p2 = np.asarray(p1_mm, float), np.asarray(p2_mm, float)
+    if p1.shape != p2.shape or p1.ndim != 2 or p1.shape[1] != 3 or len(p1) < 2:
+        raise ValueError(f"expected two (n >= 2, 3) arrays of the same shape, got {p1.shape} and {p2.shape}")
+    dc = np.asarray(c1_mm, float) - np.asarray(c2_mm, float)
+    d = np.linalg.norm(p1 - p2, axis=1)
+    ad_axis = (p1 - p2).mean(axis=0) - dc
+    return DistanceCharacteristics(tuple(poses), len(d), float(np.linalg.norm(dc)), float(d.mean()),
+                                   float(d.mean() - np.linalg.norm(dc)), float(ad_axis[0]), float(ad_axis[1]),
+                                   float(ad_axis[2]), float(3.0 * np.std(d, ddof=1)))
+
+
+def largest_cube(center_mm, size_mm) -> tuple[np.ndarray, float]:
+    """Centre (3,) and edge (mm) of the largest cube, edges parallel to the axes, inside a box."""
+    return np.asarray(center_mm, float), float(np.min(size_mm))
+
+
+def cube_poses(center_mm, edge_mm: float) -> np.ndarray:
+    """P1..P5 (5, 3) mm on the diagonal plane through the cube's edges at (y, z) = (-h, -h) and (+h, +h)."""
+    h = edge_mm / 2.0
+    corners = np.array([[-h, -h, -h], [h, -h, -h], [h, h, h], [-h, h, h]])     # C1, C2, C7, C8
+    return np.vstack([np.zeros(3), (1.0 - 2.0 * CORNER_FRACTION) * corners]) + np.asarray(center_mm, float)
+
+
+def characteristics(p_by_pose_mm: np.ndarray, p_cmd_mm: np.ndarray, pose_names=POSE_NAMES,
+                    distance_pair: tuple[int, int] = (1, 3)) -> tuple[list[PoseCharacteristics], DistanceCharacteristics]:
+    """Every pose's AP/RP and the distance characteristics between ``distance_pair`` (default P2-P4).
+
+    ``p_by_pose_mm`` (P, n, 3): attained positions per pose and cycle; ``p_cmd_mm`` (P, 3)."""
+    p = np.asarray(p_by_pose_mm, float)
+    poses = [pose_characteristics(p[j], p_cmd_mm[j], pose_names[j]) for j in range(len(p))]
+    a, b = distance_pair
+    dist = distance_characteristics(p[a], p[b], p_cmd_mm[a], p_cmd_mm[b], (pose_names[a], pose_names[b]))
+    return poses, dist
