@@ -37,7 +37,7 @@ class DiagnosisOptions:
     split_min_ratio: float = 0.25     # ... to within this share of the effect's visible displacement
     seed: int = 0
     # gates of the selection
-    overlap_min: float = 0.5          # visible subspaces whose smallest principal angle has a larger cosine overlap
+    overlap_min: float = 0.5          # cos of the smallest principal angle above which two effects overlap (one class)
     cv_excess_min_share: float = 0.25  # CV excess over the floor counted as at least this share of the CV MSE
     cv_param_inflation: float = 1.25  # floor inflation per parameter share (parameter error, K-1 of K folds)
     outlier_max_fraction: float = 0.1  # more gross outliers than this share: none set aside (structure, not outliers)
