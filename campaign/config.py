@@ -78,15 +78,7 @@ JOINT_SETS = ("auto", "commanded", "readback")
 PLAN_ORDERS = ("serpentine", "random")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
-EFFECT_NAMES = (
-    "joint_compliance",
-    "gear_cyclic",
-    "backlash",
-    "thermal_drift",
-    "axis_coupling",
-    "registration_drift",
-    "payload_deflection",
-)
+from robocal.effects import SIMULATED_EFFECTS as EFFECT_NAMES  # noqa: E402  (one owner: robocal.effects)
 MAX_JOINTS = 12
 
 _ORTHONORMAL_TOL = 1e-3
