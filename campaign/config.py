@@ -63,10 +63,7 @@ __all__ = [
     "parse_config",
 ]
 
-ROBOT_SCHEMES = frozenset({"mock", "abb-rws", "ur-rtde"})
-TRACKER_SCHEMES = frozenset(
-    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop", "emscon"}
-)
+from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES  # noqa: E402  (the registry owns the url schemes)
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")

@@ -31,7 +31,7 @@ import numpy as np
 from robocal.approach import next_approach
 
 from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
-                          TrackerReading, Unstable)
+                          Unstable, average_samples)
 
 from .config import MeasurementConfig, NestsConfig
 from .motion_safety import PathGuard, UnsafeMotion
@@ -54,16 +54,6 @@ class RunOutcome:
 
 class PointFailed(Exception):
     """A point could not be measured within the retry limits (the run pauses)."""
-
-
-def average_samples(readings: list[TrackerReading], stability_mm: float) -> tuple[np.ndarray, float]:
-    """Mean xyz (3,) mm and spread (max distance from the mean, mm); Unstable if spread > stability_mm."""
-    xyz = np.array([r.xyz_mm for r in readings], float)
-    mean = xyz.mean(axis=0)
-    spread = float(np.max(np.linalg.norm(xyz - mean, axis=1)))
-    if spread > stability_mm:
-        raise Unstable(f"readings spread {spread:.4f} mm > stability limit {stability_mm:.4f} mm")
-    return mean, spread
 
 
 class Runner:
