@@ -48,6 +48,8 @@ __all__ = [
     "GridConfig",
     "JointConfig",
     "MeasurementConfig",
+    "NestConfig",
+    "NestsConfig",
     "OutputConfig",
     "PlanConfig",
     "RobotConfig",
@@ -61,10 +63,7 @@ __all__ = [
     "parse_config",
 ]
 
-ROBOT_SCHEMES = frozenset({"mock", "abb-rws", "ur-rtde"})
-TRACKER_SCHEMES = frozenset(
-    {"mock", "tracker+socket", "tracker+serial", "tracker+rfc2217", "tracker+loop", "emscon"}
-)
+from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES  # noqa: E402  (the registry owns the url schemes)
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
@@ -72,17 +71,11 @@ RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
 OUTLIER_SCREENS = ("local", "none")
 MODEL_EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
                       "axis_coupling")
+JOINT_SETS = ("auto", "commanded", "readback")
+PLAN_ORDERS = ("serpentine", "random")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
-EFFECT_NAMES = (
-    "joint_compliance",
-    "gear_cyclic",
-    "backlash",
-    "thermal_drift",
-    "axis_coupling",
-    "registration_drift",
-    "payload_deflection",
-)
+from robocal.effects import SIMULATED_EFFECTS as EFFECT_NAMES  # noqa: E402  (one owner: robocal.effects)
 MAX_JOINTS = 12
 
 _ORTHONORMAL_TOL = 1e-3
@@ -284,6 +277,31 @@ class CheckPosesConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class NestConfig:
+    """One fixed reference nest: ``id`` (text), its approximate position ``p_base_mm`` in the robot base frame and,
+    optionally, ``p_tracker_mm`` in the tracker frame (where a tracker without ``select_nest`` first aims)."""
+
+    id: str
+    p_base_mm: Vec3
+    p_tracker_mm: Vec3 | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class NestsConfig:
+    """Fixed floor nests re-measured through the run (tracker-registration drift).
+
+    ``points`` (default none) the nests; each is measured at the start, after every ``every_n_points``
+    robot points (int >= 1, default 50) and at the end; the tracker aims at the nest, the robot does not
+    move. The run pauses when a nest reads more than ``max_move_mm`` (default 0.2 mm) from its first
+    reading (tracker or nest disturbed).
+    """
+
+    points: tuple[NestConfig, ...] = ()
+    every_n_points: int = 50
+    max_move_mm: float = 0.2
+
+
+@dataclass(frozen=True, slots=True)
 class Iso9283Config:
     """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
     P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
@@ -302,6 +320,10 @@ class PlanConfig:
     ``tool_direction``: fixed flange z-axis in the base frame (non-zero, not
     normalised). ``q_ref_deg``: reference joint configuration (one value per
     joint, inside the limits) selecting the IK branch. ``test`` and
+    ``check_poses`` are optional. ``nests`` (optional) reference nests;
+    ``order`` ``serpentine`` (default: grid order, each test point next to its
+    nearest grid point) or ``random`` (calib and test points shuffled with
+    ``order_seed``, default 0).
     ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
     (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     """
@@ -311,6 +333,9 @@ class PlanConfig:
     tool_direction: Vec3
     q_ref_deg: tuple[float, ...]
     check_poses: CheckPosesConfig
+    nests: NestsConfig = NestsConfig()
+    order: str = "serpentine"
+    order_seed: int = 0
     keep_out: tuple["BoxConfig", ...] = ()
     envelope: "BoxConfig | None" = None
     clearance_mm: float = 25.0
@@ -354,6 +379,13 @@ class CalibrationConfig:
     when it varies across the calibration points; the report gives the
     predictive standard deviation of every test point), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
+
+    ``joints`` (one of ``JOINT_SETS``, default auto) which joint values drive
+    the model when the data holds both commanded (``qc1..qcn``) and read-back
+    (``q1..qn``) joints: ``auto`` takes the commanded ones when read-back minus
+    command is significantly above the encoder noise or correlates with the
+    last move, unless a geometric fit with the read-back ones is clearly better
+    (campaign/prepare.py), else the read-back ones.
     """
 
     method: str
@@ -364,6 +396,7 @@ class CalibrationConfig:
     residual: str
     idw_power: float
     idw_k_nearest: int
+    joints: str = "auto"
     outliers: str = "local"
     effects: str | tuple["EffectSpec", ...] = "auto"
     cv_folds: int = 5
@@ -425,6 +458,15 @@ class SimulationConfig:
     ``tracker.position_in_base_mm`` (identity if that is absent),
     ``p_flange_smr_mm`` (true SMR offset) defaults to ``tool.p_flange_smr_mm``,
     ``effects`` none, ``motion_time_s`` 0 (instant moves), ``faults`` none.
+
+    Read-back and tracker phenomena (all default 0 = off):
+    ``readback_lag_deg_per_deg`` (one number per joint): the mock robot reports
+    ``q_read = q_cmd + lag_j * (last move of joint j) + N(0, readback_noise_deg)``
+    while it really stands at ``q_cmd``; ``tracker_drift_mm_per_h`` and
+    ``tracker_drift_urad_per_h`` (3 numbers each, tracker frame): every tracker
+    reading (SMRs and nests) is displaced by ``u(t) * (v + w x p)``, u = t in
+    hours, or with ``tracker_drift_tau_s`` > 0 a settling curve
+    ``tau_h * (1 - exp(-t / tau))`` with the same initial rate.
     """
 
     seed: int
@@ -434,6 +476,11 @@ class SimulationConfig:
     effects: tuple[EffectSpec, ...]
     motion_time_s: float
     faults: FaultsConfig
+    readback_lag_deg_per_deg: tuple[float, ...] = ()
+    readback_noise_deg: float = 0.0
+    tracker_drift_mm_per_h: Vec3 = (0.0, 0.0, 0.0)
+    tracker_drift_urad_per_h: Vec3 = (0.0, 0.0, 0.0)
+    tracker_drift_tau_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -849,7 +896,8 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
         plan=plan,
         calibration=_calibration(r.section("calibration", CalibrationConfig, required=False)),
         correction=_correction(r.section("correction", CorrectionConfig, required=False)),
-        simulation=_simulation(r.section("simulation", SimulationConfig, required=False), tool, tracker),
+        simulation=_simulation(r.section("simulation", SimulationConfig, required=False), tool, tracker,
+                               robot.n_joints),
         output=_output(r.section("output", OutputConfig, required=False)),
         source_path=r.file,
         sha256=sha256,
@@ -982,6 +1030,9 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         tool_direction=direction,
         q_ref_deg=q_ref,
         check_poses=_check_poses(r.section("check_poses", CheckPosesConfig, required=False)),
+        nests=_nests(r.section("nests", NestsConfig, required=False)),
+        order=r.choice("order", PLAN_ORDERS, "serpentine"),
+        order_seed=r.integer("order_seed", 0, lo=0),
         keep_out=_keep_out(r),
         envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
@@ -1003,6 +1054,23 @@ def _box(r: _Reader, default_name: str) -> BoxConfig:
         if hi[k] <= lo[k]:
             raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
     return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
+
+
+def _nests(r: _Reader) -> NestsConfig:
+    """``plan.nests``: ids unique and non-empty, positions in the base frame (mm)."""
+    where = r.child_list("points")
+    points: list[NestConfig] = []
+    for i, item in enumerate(r.items("points", [], what="nests")):
+        nr = where.reader(i, item, NestConfig)
+        nest = NestConfig(id=nr.string("id"), p_base_mm=nr.vector("p_base_mm", 3),
+                          p_tracker_mm=nr.vector("p_tracker_mm", 3, None))
+        if not _NAME_RE.match(nest.id):
+            raise nr.error("id", f"expected letters, digits, '_', '.' or '-', got {_describe(nest.id)}")
+        if any(n.id == nest.id for n in points):
+            raise nr.error("id", f"duplicate nest id {nest.id!r}")
+        points.append(nest)
+    return NestsConfig(points=tuple(points), every_n_points=r.integer("every_n_points", 50, lo=1),
+                       max_move_mm=r.number("max_move_mm", 0.2, positive=True))
 
 
 def _iso9283(r: _Reader) -> Iso9283Config:
@@ -1069,6 +1137,7 @@ def _calibration(r: _Reader) -> CalibrationConfig:
         residual=r.choice("residual", RESIDUAL_MODELS, "auto"),
         idw_power=r.number("idw_power", 2.0, positive=True),
         idw_k_nearest=r.integer("idw_k_nearest", 8, lo=1),
+        joints=r.choice("joints", JOINT_SETS, "auto"),
         outliers=r.choice("outliers", OUTLIER_SCREENS, "local"),
         effects=_model_effects(r),
         cv_folds=r.integer("cv_folds", 5, lo=2, hi=20),
@@ -1104,7 +1173,7 @@ def _correction(r: _Reader) -> CorrectionConfig:
     )
 
 
-def _simulation(r: _Reader, tool: ToolConfig, tracker: TrackerConfig) -> SimulationConfig:
+def _simulation(r: _Reader, tool: ToolConfig, tracker: TrackerConfig, n_joints: int = 6) -> SimulationConfig:
     matrix = r.matrix("T_tracker_base", 4, 4, _default_T_tracker_base(tracker.position_in_base_mm))
     _check_rigid(matrix, r.key_path("T_tracker_base"), r.file)
     return SimulationConfig(
@@ -1115,6 +1184,11 @@ def _simulation(r: _Reader, tool: ToolConfig, tracker: TrackerConfig) -> Simulat
         effects=_effects(r),
         motion_time_s=r.number("motion_time_s", 0.0, lo=0.0),
         faults=_faults(r.section("faults", FaultsConfig, required=False)),
+        readback_lag_deg_per_deg=r.vector("readback_lag_deg_per_deg", n_joints, [0.0] * n_joints),
+        readback_noise_deg=r.number("readback_noise_deg", 0.0, lo=0.0),
+        tracker_drift_mm_per_h=r.vector("tracker_drift_mm_per_h", 3, [0.0, 0.0, 0.0]),
+        tracker_drift_urad_per_h=r.vector("tracker_drift_urad_per_h", 3, [0.0, 0.0, 0.0]),
+        tracker_drift_tau_s=r.number("tracker_drift_tau_s", 0.0, lo=0.0),
     )
 
 

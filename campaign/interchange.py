@@ -6,14 +6,22 @@ Format (one row per measurement, rows in measurement order)::
 
 * ``point_id``: non-empty text, unique; only ``check`` rows may repeat an id
   (the same check pose measured again), and never an id of a calib/test row.
-* ``set``: ``calib`` | ``test`` | ``check`` (case-insensitive).
+* ``set``: ``calib`` | ``test`` | ``check`` | ``nest`` (case-insensitive).
+  ``nest`` rows are readings of a fixed reference nest (column ``nest_id``,
+  required on them, empty elsewhere; ``t_s`` required); their joint columns
+  may be empty (NaN) and their ``point_id`` may repeat among nest rows.
 * ``q1..qn``: joint values in degrees as the controller reports them; any
   number n >= 1 of joints, contiguous from ``q1``.
+* optional ``qc1..qcn``: the commanded joints (deg) when ``q1..qn`` are the
+  read-back ones; exactly as many as ``q`` columns.
 * ``x,y,z``: SMR centre in mm in the tracker frame; ``x2..z2`` / ``x3..z3``
   optional second and third SMR (all three columns of a group, and the
   third only with the second).
 * optional ``t_s`` (s), ``temp_c`` (deg C), ``payload_kg`` (kg); when a
-  column is present every row needs a value (leave the column out if unknown).
+  column is present every row needs a value (leave the column out if unknown),
+  except nest rows (may be empty).  Optional ``env_temp_c`` (deg C),
+  ``env_pressure_hpa`` (hPa), ``env_humidity_pct`` (%): the tracker's weather
+  station; an empty cell means not read (NaN).
 * There is no approach column: approach directions come from row order
   (:meth:`Dataset.approach_sign`).
 
@@ -52,8 +60,10 @@ from campaign.errors import DataError
 
 __all__ = ["SETS", "Dataset", "read_csv", "write_csv", "dataset_from_log"]
 
-SETS = ("calib", "test", "check")
+SETS = ("calib", "test", "check", "nest")
 _SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
+_ENV = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
+_QC_RE = re.compile(r"qc([1-9][0-9]*)")
 _SMR = {2: ("x2", "y2", "z2"), 3: ("x3", "y3", "z3")}
 _Q_RE = re.compile(r"q([1-9][0-9]*)")
 _NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
@@ -85,6 +95,11 @@ class Dataset:
     None; ``t_s`` (N,) seconds, ``temp_c`` (N,) deg C, ``payload_kg`` (N,) kg,
     ``sigma_mm`` (N,) mm (1-sigma, from logs only), each or None.  ``source``
     names where the data came from.  Arrays are read-only float64 copies.
+    ``qc_deg`` (N, n) commanded joints in degrees (``q_deg`` then holds the
+    read-back ones) or None; ``nest_id`` (N,) text, "" on rows that are not
+    ``nest`` rows (reference-nest readings, whose joints are NaN), or None
+    without nest rows; ``env_temp_c`` (deg C), ``env_pressure_hpa`` (hPa),
+    ``env_humidity_pct`` (%) (N,) tracker weather readings (NaN = not read).
     """
 
     point_id: tuple[str, ...]
@@ -98,6 +113,11 @@ class Dataset:
     p3_tracker_mm: np.ndarray | None = None
     sigma_mm: np.ndarray | None = None
     source: str = ""
+    qc_deg: np.ndarray | None = None
+    nest_id: tuple[str, ...] | None = None
+    env_temp_c: np.ndarray | None = None
+    env_pressure_hpa: np.ndarray | None = None
+    env_humidity_pct: np.ndarray | None = None
     cov_mm2: np.ndarray | None = None  # (N, 3, 3) mm^2 from the tracker's own statistics (logs only), or None
 
     def __post_init__(self) -> None:
@@ -117,11 +137,29 @@ class Dataset:
         for name in ("p2_tracker_mm", "p3_tracker_mm"):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows, 3)))
-        for name in (*_SCALARS, "sigma_mm"):
+        for name in (*_SCALARS, "sigma_mm", *_ENV):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows,)))
         if self.cov_mm2 is not None:
             put("cov_mm2", _float_array(self.cov_mm2, "cov_mm2", (n_rows, 3, 3)))
+        if self.qc_deg is not None:
+            put("qc_deg", _float_array(self.qc_deg, "qc_deg", self.q_deg.shape))
+        self._check_nests(put)
+
+    def _check_nests(self, put: Callable[[str, Any], None]) -> None:
+        """``nest_id``: one text per row, non-empty exactly on ``nest`` rows."""
+        is_nest = [s == "nest" for s in self.set]
+        if self.nest_id is None:
+            if any(is_nest):
+                raise ValueError("Dataset.nest_id: nest rows need a nest_id")
+            return
+        put("nest_id", tuple(str(v) for v in self.nest_id))
+        if len(self.nest_id) != len(self.set):
+            raise ValueError(f"Dataset.nest_id: expected {len(self.set)} entries, got {len(self.nest_id)}")
+        for i, (nid, nest) in enumerate(zip(self.nest_id, is_nest)):
+            if bool(nid) != nest:
+                what = "a nest row without nest_id" if nest else f"nest_id {nid!r} on a {self.set[i]} row"
+                raise ValueError(f"Dataset.nest_id: row {i + 1}: {what}")
 
     def __len__(self) -> int:
         return len(self.point_id)
@@ -152,7 +190,7 @@ class Dataset:
         kwargs: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name in ("point_id", "set"):
+            if f.name in ("point_id", "set") or (f.name == "nest_id" and value is not None):
                 kwargs[f.name] = tuple(value[i] for i in sel)
             elif isinstance(value, np.ndarray):
                 kwargs[f.name] = value[sel]
@@ -165,9 +203,13 @@ class Dataset:
 
         Row i holds ``sign(q[i] - q[i-1])`` per joint, from row order; a joint
         that did not move (``|dq| <= tol_deg``) keeps the previous row's sign;
-        row 0, and a joint that has not moved yet, is 0.
+        row 0, and a joint that has not moved yet, is 0.  Rows without joints
+        (nest rows, NaN) are skipped and get 0.
         """
-        return approach_signs(self.q_deg, tol_deg)
+        robot = np.all(np.isfinite(self.q_deg), axis=1)
+        out = np.zeros(self.q_deg.shape)
+        out[robot] = approach_signs(self.q_deg[robot], tol_deg)
+        return out
 
 
 # --------------------------------------------------------------------------
@@ -189,6 +231,9 @@ class _Layout:
     n_joints: int
     smr: tuple[int, ...]  # extra SMR indices present: (), (2,), (2, 3)
     scalars: tuple[str, ...]  # optional scalar columns present
+    has_qc: bool = False  # commanded joints qc1..qcn present
+    env: tuple[str, ...] = ()  # environment columns present
+    line: int | None = None  # the header's line number
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -222,7 +267,7 @@ def _split(line: str, sep: str) -> list[str]:
     return [p.strip() for p in parts]
 
 
-def _parse_header(line: str, src: str) -> _Layout:
+def _parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
     """Validate the header line and return the column layout."""
     sep = ";" if line.count(";") > line.count(",") else ","
     shown = _split(line, sep)
@@ -235,20 +280,38 @@ def _parse_header(line: str, src: str) -> _Layout:
             raise DataError(src, f"header: duplicate column {_show(shown[pos - 1])}")
         seen.add(name)
     n_joints = _check_known_columns(names, shown, src)
-    smr = _check_smr_groups(seen, src)
+    smr = _check_smr_groups(seen, src, line_no)
     scalars = tuple(s for s in _SCALARS if s in seen)
-    return _Layout(sep, names, shown, n_joints, smr, scalars)
+    has_qc = _check_qc_columns(names, shown, n_joints, src, line_no)
+    env = tuple(e for e in _ENV if e in seen)
+    return _Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no)
+
+
+def _check_qc_columns(names: list[str], shown: list[str], n_joints: int, src: str, line_no: int | None) -> bool:
+    """Commanded joints ``qc1..qcn`` come complete, one per ``q`` column; True if present."""
+    qc = {int(m.group(1)): as_written for name, as_written in zip(names, shown) if (m := _QC_RE.fullmatch(name))}
+    if not qc:
+        return False
+    for k in sorted(qc):
+        if k > n_joints:
+            raise DataError(src, f"header: {len(qc)} commanded-joint columns but {n_joints} joint columns "
+                            f"q1..q{n_joints} ('{qc[k]}' has no 'q{k}')", line=line_no, column=f"'{qc[k]}'")
+    for k in range(1, n_joints + 1):
+        if k not in qc:
+            raise DataError(src, f"header: missing column 'qc{k}' ({len(qc)} commanded-joint columns but "
+                            f"{n_joints} joint columns q1..q{n_joints})", line=line_no, column=f"'qc{k}'")
+    return True
 
 
 def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
     """Reject unknown columns, require the mandatory ones; return n joints."""
-    known = {"point_id", "set", "x", "y", "z", *_SCALARS, *_SMR[2], *_SMR[3]}
+    known = {"point_id", "set", "x", "y", "z", *_SCALARS, *_SMR[2], *_SMR[3], "nest_id", *_ENV}
     joints = set()
     for name, as_written in zip(names, shown):
         match = _Q_RE.fullmatch(name)
         if match:
             joints.add(int(match.group(1)))
-        elif name not in known:
+        elif name not in known and not _QC_RE.fullmatch(name):
             raise DataError(src, f"header: unknown column {_show(as_written)}")
     n_joints = max(joints, default=1)
     for name in ("point_id", "set", *(f"q{k}" for k in range(1, n_joints + 1)), "x", "y", "z"):
@@ -257,18 +320,19 @@ def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
     return n_joints
 
 
-def _check_smr_groups(present: set[str], src: str) -> tuple[int, ...]:
+def _check_smr_groups(present: set[str], src: str, line_no: int | None = None) -> tuple[int, ...]:
     """Second/third SMR columns come as complete groups, the third only with the second."""
     groups = []
     for k, cols in _SMR.items():
         have = [c for c in cols if c in present]
         if have and len(have) < 3:
             missing = next(c for c in cols if c not in present)
-            raise DataError(src, f"header: missing column '{missing}' (needed with '{have[0]}')")
+            raise DataError(src, f"header: missing column '{missing}' (needed with '{have[0]}')",
+                            line=line_no, column=f"'{missing}'")
         if have:
             groups.append(k)
     if groups == [3]:
-        raise DataError(src, "header: missing column 'x2' (x3,y3,z3 need x2,y2,z2)")
+        raise DataError(src, "header: missing column 'x2' (x3,y3,z3 need x2,y2,z2)", line=line_no, column="'x2'")
     return tuple(groups)
 
 
@@ -370,7 +434,7 @@ def _check_ids(
         if not pid:
             raise fail(i, "point_id is empty")
         k = first.setdefault(pid, i)
-        if k != i and not (set_name == "check" and sets[k] == "check"):
+        if k != i and not (set_name in ("check", "nest") and sets[k] == set_name):
             raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
 
 
@@ -386,11 +450,13 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     header_idx = next((i for i, ln in enumerate(lines) if not _is_skipped(ln)), None)
     if header_idx is None:
         raise DataError(src, "no data rows (empty file, no header)")
-    layout = _parse_header(lines[header_idx], src)
+    layout = _parse_header(lines[header_idx], src, header_idx + 1)
     table = _data_table(lines, header_idx + 1, layout, src)
     line_nos = table.line_nos
     ids = table.column(layout.index("point_id"))
     sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
+    nest_ids = _nest_ids(table, layout, sets, src)
+    blanks = _blank_cells(table, layout, sets)
     _check_ids(
         ids,
         sets,
@@ -401,14 +467,63 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     for k in layout.smr:
         names += _SMR[k]
     names += layout.scalars
-    values = _numbers(table, layout, names, src)
+    tail = [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc + list(layout.env)
+    values = _numbers(table, layout, names + tail, src)
+    for name, rows in blanks.items():
+        values[rows, (names + tail).index(name)] = np.nan
     n = layout.n_joints
-    extra: dict[str, np.ndarray] = {}
+    extra: dict[str, Any] = {}
     for j, k in enumerate(layout.smr):
         extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
     for j, name in enumerate(layout.scalars):
         extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
-    return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, **extra)
+    m = len(names)
+    if layout.has_qc:
+        extra["qc_deg"] = values[:, m : m + n]
+    for j, name in enumerate(layout.env):
+        extra[name] = values[:, m + n * layout.has_qc + j]
+    return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
+                   **extra)
+
+
+def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
+    """The ``nest_id`` column: required (non-empty) on nest rows, empty elsewhere; nest rows need ``t_s``."""
+    first = next((i for i, s in enumerate(sets) if s == "nest"), None)
+    if "nest_id" not in layout.names:
+        if first is not None:
+            raise DataError(src, "a nest row needs a nest id, but there is no 'nest_id' column",
+                            line=table.line_nos[first], column="'nest_id'")
+        return None
+    if first is not None and "t_s" not in layout.names:
+        raise DataError(src, "nest rows need a 't_s' column (drift is a function of time)",
+                        line=table.line_nos[first], column="'t_s'")
+    col = table.column(layout.index("nest_id"))
+    for i, (nid, s) in enumerate(zip(col, sets)):
+        if (s == "nest") != bool(nid):
+            what = ("nest row without a nest id" if s == "nest"
+                    else f"nest_id {_show(nid)} on a {s} row (only nest rows have one)")
+            raise DataError(src, what, line=table.line_nos[i], column=f"'{layout.shown[layout.index('nest_id')]}'")
+    return tuple(col)
+
+
+def _blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np.ndarray]:
+    """Empty cells that are allowed (joints, extra SMRs, temp_c, payload_kg on nest rows; environment columns
+    anywhere): set to "0" in ``table`` for the strict parser; returns {column: row indices} to become NaN."""
+    nest_rows = [i for i, s in enumerate(sets) if s == "nest"]
+    nullable_on_nest = [f"q{k}" for k in range(1, layout.n_joints + 1)]
+    nullable_on_nest += [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc
+    nullable_on_nest += [c for k in layout.smr for c in _SMR[k]]
+    nullable_on_nest += [s for s in ("temp_c", "payload_kg") if s in layout.scalars]
+    out: dict[str, np.ndarray] = {}
+    for name, rows in [(c, nest_rows) for c in nullable_on_nest] + [(e, None) for e in layout.env]:
+        pos = layout.index(name)
+        col = table.column(pos)
+        empty = [i for i in (range(len(col)) if rows is None else rows) if col[i] == ""]
+        for i in empty:
+            table.flat[i * table.width + pos] = "0"
+        if empty:
+            out[name] = np.array(empty, dtype=np.intp)
+    return out
 
 
 def _parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
@@ -417,7 +532,7 @@ def _parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
     for i, s in enumerate(sets):
         if s not in SETS:
             raise DataError(
-                src, f"expected calib, test or check, got {_show(raw[i])}", line=line_nos[i], column="'set'"
+                src, f"expected calib, test, check or nest, got {_show(raw[i])}", line=line_nos[i], column="'set'"
             )
     return sets
 
@@ -432,7 +547,10 @@ def _header(ds: Dataset) -> list[str]:
     for k in (2, 3):
         if getattr(ds, f"p{k}_tracker_mm") is not None:
             names += _SMR[k]
-    return names + [s for s in _SCALARS if getattr(ds, s) is not None]
+    names += [s for s in _SCALARS if getattr(ds, s) is not None]
+    if ds.qc_deg is not None:
+        names += [f"qc{k}" for k in range(1, ds.n_joints + 1)]
+    return names + [e for e in _ENV if getattr(ds, e) is not None] + ["nest_id"] * (ds.nest_id is not None)
 
 
 def _numeric_block(ds: Dataset) -> np.ndarray:
@@ -440,10 +558,23 @@ def _numeric_block(ds: Dataset) -> np.ndarray:
     parts = [ds.q_deg, ds.p_tracker_mm]
     parts += [a for a in (ds.p2_tracker_mm, ds.p3_tracker_mm) if a is not None]
     parts += [getattr(ds, s)[:, None] for s in _SCALARS if getattr(ds, s) is not None]
+    parts += [ds.qc_deg] if ds.qc_deg is not None else []
+    parts += [getattr(ds, e)[:, None] for e in _ENV if getattr(ds, e) is not None]
     return np.hstack(parts)
 
 
-def _check_writable(ds: Dataset, src: str, numbers: np.ndarray) -> None:
+def _blank_allowed(ds: Dataset, names: list[str]) -> np.ndarray:
+    """(N, m) bool: numeric cells that may be written empty (NaN): see :func:`_blank_cells`."""
+    numeric = [n for n in names if n not in ("point_id", "set", "nest_id")]
+    nest = np.array([s == "nest" for s in ds.set])
+    on_nest = {f"q{k}" for k in range(1, ds.n_joints + 1)} | {f"qc{k}" for k in range(1, ds.n_joints + 1)}
+    on_nest |= set(_SMR[2]) | set(_SMR[3]) | {"temp_c", "payload_kg"}
+    cols = [np.ones(len(ds), bool) if n in _ENV else (nest if n in on_nest else np.zeros(len(ds), bool))
+            for n in numeric]
+    return np.stack(cols, axis=1)
+
+
+def _check_writable(ds: Dataset, src: str, numbers: np.ndarray, blank_ok: np.ndarray | None = None) -> None:
     """Refuse data that :func:`read_csv` would not read back identically."""
     if len(ds) == 0:
         raise DataError(src, "no data rows to write")
@@ -452,7 +583,13 @@ def _check_writable(ds: Dataset, src: str, numbers: np.ndarray) -> None:
     for i, pid in enumerate(ds.point_id):
         if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid):
             raise DataError(src, f"row {i + 1}: point_id {pid!r} cannot be written to CSV")
-    bad = np.argwhere(~np.isfinite(numbers))
+    for i, nid in enumerate(ds.nest_id or ()):
+        if nid != nid.strip() or _BAD_ID_CHARS & set(nid):
+            raise DataError(src, f"row {i + 1}: nest_id {nid!r} cannot be written to CSV")
+    bad = ~np.isfinite(numbers)
+    if blank_ok is not None:
+        bad &= ~(blank_ok & np.isnan(numbers))
+    bad = np.argwhere(bad)
     if bad.size:
         raise DataError(src, f"row {int(bad[0, 0]) + 1}: non-finite value")
 
@@ -467,10 +604,14 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     """
     src = str(path)
     numbers = _numeric_block(dataset)
-    _check_writable(dataset, src, numbers)
-    lines = [",".join(_header(dataset))]
-    for pid, set_name, row in zip(dataset.point_id, dataset.set, numbers.tolist()):
-        lines.append(",".join([pid, set_name, *map(repr, row)]))
+    header = _header(dataset)
+    _check_writable(dataset, src, numbers, _blank_allowed(dataset, header))
+    lines = [",".join(header)]
+    nest_ids = dataset.nest_id if dataset.nest_id is not None else None
+    cell = (lambda v: "" if v != v else repr(v)) if np.isnan(numbers).any() else repr  # noqa: E731
+    for i, (pid, set_name, row) in enumerate(zip(dataset.point_id, dataset.set, numbers.tolist())):
+        tail = [nest_ids[i]] if nest_ids is not None else []
+        lines.append(",".join([pid, set_name, *map(cell, row), *tail]))
     atomic_write(path, ("\n".join(lines) + "\n").encode("utf-8"))
 
 
@@ -522,8 +663,27 @@ def _log_set(rec: dict, where: str, src: str) -> str:
     """``check`` for check-pose records, else the record's ``set``."""
     set_name = "check" if rec.get("kind") == "check" else rec.get("set")
     if set_name not in SETS:
-        raise DataError(src, f"{where}: set must be calib, test or check, got {set_name!r}")
+        raise DataError(src, f"{where}: set must be calib, test, check or nest, got {set_name!r}")
+    if set_name == "nest" and not str(rec.get("nest_id") or ""):
+        raise DataError(src, f"{where}: a nest record without 'nest_id'")
     return set_name
+
+
+def _env_from(key: str) -> Callable[[dict], Any]:
+    """``temperatures[key]`` (the tracker's environment readings) or None."""
+    def get(rec: dict) -> Any:
+        temps = rec.get("temperatures")
+        return temps.get(key) if isinstance(temps, dict) else None
+    return get
+
+
+_ENV_KEYS = {"env_temp_c": "temp_c", "env_pressure_hpa": "pressure_hpa", "env_humidity_pct": "humidity_pct"}
+
+
+def _with_nan(values: list, robot: list[bool], width: int | None) -> list:
+    """Robot-row values kept, nest rows NaN (a scalar, or a row of ``width``)."""
+    blank = math.nan if width is None else [math.nan] * width
+    return [v if r else blank for v, r in zip(values, robot)]
 
 
 def _log_q(rec: dict, where: str, src: str) -> list:
@@ -534,6 +694,14 @@ def _log_q(rec: dict, where: str, src: str) -> list:
     if q is None:
         raise DataError(src, f"{where}: has neither 'q_read_deg' nor 'q_cmd_deg'")
     return q
+
+
+def _spread(values: list, idx: list[int], n: int) -> list:
+    """A list of length ``n`` with ``values`` at the positions ``idx`` (None elsewhere)."""
+    out: list = [None] * n
+    for i, v in zip(idx, values):
+        out[i] = v
+    return out
 
 
 def dataset_from_log(contents: Any) -> Dataset:
@@ -547,6 +715,11 @@ def dataset_from_log(contents: Any) -> Dataset:
     ``payload_kg``; ``sigma_mm`` from ``sigma_mm`` or sqrt(trace(cov_mm2)/3);
     ``p2_tracker_mm``/``p3_tracker_mm`` if recorded.  An optional field must
     be in all point records or in none.  Raises :class:`DataError`.
+    With both ``q_read_deg`` and ``q_cmd_deg`` in every record, ``q_deg`` is
+    the read-back set and ``qc_deg`` the commanded one.  Nest records
+    (``set`` nest, ``nest_id``) become nest rows (joints NaN).  The tracker's
+    environment (``temperatures``: temp_c, pressure_hpa, humidity_pct) gives
+    ``env_temp_c``, ``env_pressure_hpa``, ``env_humidity_pct`` (NaN where not read).
     """
     src = getattr(contents, "path", "") or "<run log>"
     recs = list(contents.points)
@@ -564,23 +737,51 @@ def dataset_from_log(contents: Any) -> Dataset:
         lambda i, what: DataError(src, f"point record {i + 1}: {what}"),
         lambda k: f"in point record {k + 1}",
     )
-    q = [_log_q(r, where(i), src) for i, r in enumerate(recs)]
+    robot = [s != "nest" for s in sets]
+    idx = [i for i, r in enumerate(robot) if r]
+    if not idx:
+        raise DataError(src, "no data rows (only nest records)")
+    q = [_log_q(recs[i], where(i), src) for i in idx]
     widths = {len(v) for v in q}
     if len(widths) != 1:
         raise DataError(src, f"point records have different joint counts {sorted(widths)}")
+    n_joints = widths.pop()
     p = [r.get("p_tracker_mm") for r in recs]
     if any(v is None for v in p):
         raise DataError(src, f"{where(p.index(None))}: has no 'p_tracker_mm'")
+    rob = [recs[i] for i in idx]
+    back = lambda values: _with_nan(_spread(values, idx, len(recs)), robot, None)  # noqa: E731
     try:
-        extra = {
-            name: _optional([get(r) for r in recs], name, where, src) for name, get in _LOG_FIELDS.items()
-        }
+        extra: dict[str, Any] = {}
+        for name, get in _LOG_FIELDS.items():
+            if name in ("t_s", "sigma_mm"):           # nest records have them too
+                extra[name] = _optional([get(r) for r in recs], name, where, src)
+                continue
+            values = [get(r) for r in rob]
+            if name == "temp_c" and None in values and all(r.get("temp_c") is None for r in rob):
+                continue    # tracker weather readings with gaps (a failed read): kept as env_temp_c with NaN
+            got = _optional(values, name, lambda k: where(idx[k]), src)
+            if got is not None:
+                width = 3 if name.endswith("_tracker_mm") else None
+                extra[name] = _with_nan(_spread(got, idx, len(recs)), robot, width)
         if extra["t_s"] is not None:
             t = np.asarray(extra["t_s"], dtype=np.float64)
             extra["t_s"] = t - t[0]
-        device = [r.get("cov_mm2") if r.get("cov_source") == "device" else None for r in recs]
-        extra["cov_mm2"] = device if all(v is not None for v in device) else None    # all rows or none
-        return Dataset(tuple(ids), tuple(sets), q, p, source=src, **extra)
+        elif not all(robot):
+            raise DataError(src, "nest records need 't_end_s' (drift is a function of time)")
+        if all(r.get("q_read_deg") is not None and r.get("q_cmd_deg") is not None for r in rob):
+            extra["qc_deg"] = _with_nan(_spread([r["q_cmd_deg"] for r in rob], idx, len(recs)), robot, n_joints)
+        for name, key in _ENV_KEYS.items():
+            env = [_env_from(key)(r) for r in recs]
+            if any(v is not None for v in env):
+                extra[name] = [math.nan if v is None else v for v in env]
+        if not all(robot):
+            extra["nest_id"] = tuple("" if r else str(rec.get("nest_id")) for r, rec in zip(robot, recs))
+        q_all = _with_nan(_spread(q, idx, len(recs)), robot, n_joints)
+        device = [r.get("cov_mm2") if r.get("cov_source") == "device" else None for r in rob]
+        if all(v is not None for v in device):             # all robot rows or none; nest rows: their logged cov
+            extra["cov_mm2"] = [r.get("cov_mm2") or [[math.nan] * 3] * 3 for r in recs]
+        return Dataset(tuple(ids), tuple(sets), q_all, p, source=src, **extra)
     except DataError:
         raise
     except (TypeError, ValueError) as exc:

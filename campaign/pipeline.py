@@ -71,7 +71,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
         robot, tracker = _open_devices(cfg, world, stack)
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
-                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm))
+                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm), nests=cfg.plan.nests)
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
         identity = device_identity(robot, tracker)
@@ -88,7 +88,8 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
-            runner.on_point = lambda point, record: (predictor.observe(record["q_read_deg"], record["p_tracker_mm"]),
+            runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record["q_read_deg"],
+                                                                                          record["p_tracker_mm"]),
                                                      advance(record))
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
@@ -208,7 +209,16 @@ def mock_world(cfg: CampaignConfig) -> MockWorld:
     extra = [tuple(np.asarray(p) + offset) for p in cfg.tool.smrs_mm[1:]]
     return MockWorld(simulated_cell(cfg), s.seed, motion_time_s=s.motion_time_s,
                      joint_speed_deg_s=cfg.robot.max_joint_speed_deg_s, payload_kg=cfg.tool.payload_kg,
-                     faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra)
+                     faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra, **mock_phenomena(cfg))
+
+
+def mock_phenomena(cfg: CampaignConfig) -> dict:
+    """MockWorld keywords of the simulated read-back lag, tracker drift and reference nests."""
+    s = cfg.simulation
+    drift = (s.tracker_drift_mm_per_h, np.asarray(s.tracker_drift_urad_per_h) * 1e-6, s.tracker_drift_tau_s)
+    return {"readback_lag_deg_per_deg": s.readback_lag_deg_per_deg or None, "readback_noise_deg": s.readback_noise_deg,
+            "tracker_drift": drift if any(drift[0]) or np.any(drift[1]) else None,
+            "nests": {n.id: n.p_base_mm for n in cfg.plan.nests.points}}
 
 
 def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None,

@@ -3,7 +3,10 @@
 Seed 000's grid (box centre/size/step in the robot base frame) + a seeded random test set in the same
 box, one fixed SMR orientation and ONE robot configuration for every point (the IK branch of
 ``q_ref``), unreachable points reported and skipped, a serpentine motion order with each test point
-measured next to its nearest grid point, and repeated check poses through the run.
+measured next to its nearest grid point (or ``plan.order: random``: a seeded shuffle, so that approach
+directions and move sizes vary), repeated check poses through the run, and rounds of reference-nest
+readings (``plan.nests``; set ``nest``; the robot waits, the tracker aims at the nest) at the start, every
+``every_n_points`` points and at the end.
 """
 from __future__ import annotations
 
@@ -27,8 +30,10 @@ WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J
 
 @dataclass(frozen=True)
 class PlanPoint:
-    """One measurement: id, set (calib | test | check), commanded joints (deg), target SMR position (mm, base),
-    and the via poses (deg) the robot passes on its way there (keep-out boxes; usually none)."""
+    """One measurement: id, set (calib | test | check | nest), commanded joints (deg), target SMR position (mm, base),
+    and the via poses (deg) the robot passes on its way there (keep-out boxes; usually none). A ``nest`` point is a
+    tracker reading of a fixed nest: ``p_base_mm`` is the nest's approximate position and ``q_deg`` where the robot
+    waits meanwhile (the previous point's joints; the runner never moves for a nest)."""
     point_id: str
     set: str
     q_deg: tuple[float, ...]
@@ -59,7 +64,9 @@ class Plan:
         stationary reading). ``campaign.eta.estimate_duration_s`` adds the speed caps and via poses."""
         if not self.points:
             return 0.0
-        q = np.array([p.q_deg for p in self.points])
+        q = np.array([p.q_deg for p in self.points if p.set != "nest"])
+        if len(q) == 0:
+            return 0.0
         moves = np.max(np.abs(np.diff(q, axis=0)), axis=1).sum() / joint_speed_deg_s
         return float(moves + len(self.points) * (settle_s + samples * sample_s))
 
@@ -155,8 +162,11 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
     order = _interleave(p_all, grid_ok, test_ok)
+    if pl.order == "random":
+        order = [order[i] for i in np.random.default_rng(pl.order_seed).permutation(len(order))]
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
     points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
+    points = with_nest_rounds(points, pl.nests)
     if guard is not None:
         points = _with_vias(cfg, guard, points)
     digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
@@ -212,9 +222,38 @@ def _with_check_poses(points, q_grid, p_grid, grid_ids, cfg_check) -> list[PlanP
     return out
 
 
+def nest_point_id(nest_id: str, round_no: int) -> str:
+    """Plan/log id of round ``round_no`` (1-based) of nest ``nest_id``."""
+    return f"{nest_id}@{round_no:03d}"
+
+
+def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
+    """Insert a round of every nest (``NestsConfig``) at the start, after every ``every_n_points`` points and at
+    the end; nest points have set ``nest``, the nest's approximate base-frame position and, as joints, where the
+    robot waits (the previous point's; the first point's for the start round)."""
+    if not nests.points or not points:
+        return points
+    out: list[PlanPoint] = []
+    rounds = 0
+
+    def one_round():
+        nonlocal rounds
+        rounds += 1
+        q = out[-1].q_deg if out else points[0].q_deg
+        out.extend(PlanPoint(nest_point_id(n.id, rounds), "nest", q, tuple(n.p_base_mm)) for n in nests.points)
+    one_round()
+    for k, pt in enumerate(points):
+        out.append(pt)
+        if (k + 1) % nests.every_n_points == 0 and k + 1 < len(points):
+            one_round()
+    one_round()
+    return out
+
+
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
     """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
-    (id ``POINT.viaK``, no position) before the point they lead to."""
+    (id ``POINT.viaK``, no position) before the point they lead to; nest rows: where the
+    robot waits, the nest's approximate position."""
     n = len(plan.points[0].q_deg) if plan.points else 0
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)

@@ -36,6 +36,7 @@ from .errors import DataError
 from .fsutil import atomic_write
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
+from .prepare import prepare
 from .report_points import cell_summary, point_table
 
 REPORT_FORMAT = "campaign-report/1"
@@ -92,8 +93,8 @@ def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
 
 def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     """The single place where a dataset is prepared before any fit: joint-set choice (commanded / read-back)
-    and tracker-drift compensation from the reference nests (campaign/prepare.py). Identity without it."""
-    return ds
+    and tracker-drift compensation from the reference nests (campaign/prepare.py)."""
+    return prepare(ds, cfg).dataset
 
 
 def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray) -> dict:
@@ -181,7 +182,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    ds = _prepare(ds, cfg)
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     kin0 = nominal_kinematics(cfg)
     geo = _geometric(ds, cfg)
     result = geo.result
@@ -288,6 +289,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "residual_choice": choice.to_dict(),
         "plausibility": plaus.to_dict(),
         "residual_cv": _residual_cv_summary(choice),
+        "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
         report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)

@@ -35,6 +35,7 @@ def render_stages(console: Console, report: dict) -> None:
         console.print(f"residual layer ({report['method']['residual']}): {cv['folds']}-fold CV on the calibration "
                       f"points, RMS {cv['rms_without_mm']:.4f} -> {cv['rms_with_mm']:.4f} mm "
                       f"({100 * cv['gain']:+.0f} %): {verdict}")
+    render_preparation(console, report.get("preparation"))
     console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
                   f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
@@ -48,6 +49,19 @@ def render_identity(console: Console, report: dict) -> None:
         console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
                       f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
                       f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
+
+
+def render_preparation(console: Console, prep: dict | None) -> None:
+    """Which joint set drove the model and why; the tracker drift the reference nests showed."""
+    if not prep:
+        return
+    j, d = prep["joints"], prep["drift"]
+    console.print(f"joints: {j['used']} ({j['why']})", markup=False)
+    if d["nests"]:
+        move = d["translation_at_end_mm"]
+        console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
+                      f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
+                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
 
 
 def render_choices(console: Console, report: dict) -> None:
@@ -112,8 +126,9 @@ def _vias(plan: Plan) -> str:
 
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
-                  f"{plan.count('check')} check-pose measurements, {len(plan.skipped)} skipped"
-                  f"{_vias(plan)}; "
+                  f"{plan.count('check')} check-pose measurements, "
+                  + (f"{plan.count('nest')} nest readings, " if plan.count("nest") else "")
+                  + f"{len(plan.skipped)} skipped{_vias(plan)}; "
                   f"estimated duration {duration_s / 60:.1f} min")
     if plan.skipped:
         t = Table(title="Skipped points")

@@ -38,6 +38,16 @@ def _point_lines(path: Path) -> list[int]:
     return out
 
 
+def _nest_problem(rec: dict, pid: str) -> str | None:
+    """Why one nest record cannot be trusted (None when it is fine): its nest id and its reading."""
+    if not isinstance(rec.get("nest_id"), str) or not rec["nest_id"] or not pid.startswith(rec["nest_id"] + "@"):
+        return f"{pid}: nest record with nest_id {str(rec.get('nest_id'))[:40]!r}"
+    p = rec.get("p_tracker_mm")
+    if not _finite_list(p, 3) or max(abs(v) for v in p) > MAX_ABS_MM:
+        return f"{pid}: p_tracker_mm must be 3 finite numbers below {MAX_ABS_MM:.0e} mm, got {str(p)[:60]}"
+    return None
+
+
 def record_problem(rec: dict, plan_points: dict, lo: list[float], hi: list[float], seen: set[str]) -> str | None:
     """Why one point record cannot be trusted (None when it is fine)."""
     n = len(lo)
@@ -51,6 +61,8 @@ def record_problem(rec: dict, plan_points: dict, lo: list[float], hi: list[float
     planned = plan_points[pid]
     if rec.get("set") != planned.set:
         return f"{pid}: set {str(rec.get('set'))[:40]!r}, the plan says {planned.set!r}"
+    if planned.set == "nest":                                # a reference-nest reading: no joints (the robot waited)
+        return _nest_problem(rec, pid)
     q_cmd = rec.get("q_cmd_deg")
     if not _finite_list(q_cmd, n):
         return f"{pid}: q_cmd_deg must be {n} finite numbers"

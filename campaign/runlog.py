@@ -58,6 +58,7 @@ __all__ = [
     "KINDS",
     "EXIT_STATUSES",
     "RunLogError",
+    "NestRecord",
     "RunLogExistsError",
     "LogContents",
     "RunLog",
@@ -100,6 +101,41 @@ class LogContents:
     n_good_bytes: int = 0
     n_records: int = 0
     path: str = ""
+
+
+@dataclass(frozen=True)
+class NestRecord:
+    """One reference-nest reading (stored as a ``point`` record with ``set`` and ``kind`` "nest").
+
+    ``p_tracker_mm`` (3,) mean of the samples, mm, tracker frame; ``cov_mm2`` (3, 3); ``spread_mm`` max sample
+    distance from the mean; ``t_start_s``/``t_end_s`` the runner's clock (s; ``t_s`` = ``t_end_s``);
+    ``p_nest_base_mm`` the nest's approximate position in the robot base frame from the plan;
+    ``temperatures`` the tracker's environment readings (or None).
+    """
+
+    point_id: str
+    nest_id: str
+    p_tracker_mm: tuple[float, float, float]
+    cov_mm2: tuple[tuple[float, ...], ...]
+    spread_mm: float
+    n_samples: int
+    t_start_s: float
+    t_end_s: float
+    retries: int
+    p_nest_base_mm: tuple[float, float, float]
+    temperatures: dict | None = None
+
+    def to_dict(self) -> dict:
+        """The log record's data (plain JSON types)."""
+        data = {"point_id": self.point_id, "set": "nest", "kind": "nest", "nest_id": self.nest_id,
+                "p_tracker_mm": [float(v) for v in self.p_tracker_mm],
+                "cov_mm2": [[float(v) for v in row] for row in self.cov_mm2], "spread_mm": float(self.spread_mm),
+                "n_samples": int(self.n_samples), "t_start_s": float(self.t_start_s), "t_end_s": float(self.t_end_s),
+                "t_s": float(self.t_end_s), "retries": int(self.retries),
+                "p_nest_base_mm": [float(v) for v in self.p_nest_base_mm]}
+        if self.temperatures:
+            data["temperatures"] = dict(self.temperatures)
+        return data
 
 
 # --------------------------------------------------------------------------

@@ -10,6 +10,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Mapping, Protocol, Sequence, runtime_checkable
 
+import numpy as np
+
 
 class DriverError(Exception):
     """Base of all driver failures; ``str()`` is one line naming the device."""
@@ -66,6 +68,22 @@ class TrackerReading:
     xyz_mm: tuple[float, float, float]
     t_s: float
     extra: Mapping[str, float] = field(default_factory=dict)
+
+
+def average_samples(readings: Sequence[TrackerReading | Sequence[float]],
+                    stability_mm: float) -> tuple[np.ndarray, float]:
+    """Mean xyz (3,) mm and spread (max distance of a sample from the mean, mm) of N tracker samples.
+
+    ``Unstable`` if the spread exceeds ``stability_mm``; ``ValueError`` if there are no readings.
+    """
+    if len(readings) == 0:
+        raise ValueError("average_samples: no readings")
+    xyz = np.array([r.xyz_mm if isinstance(r, TrackerReading) else r for r in readings], float)
+    mean = xyz.mean(axis=0)
+    spread = float(np.max(np.linalg.norm(xyz - mean, axis=1)))
+    if spread > stability_mm:
+        raise Unstable(f"readings spread {spread:.4f} mm > stability limit {stability_mm:.4f} mm")
+    return mean, spread
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,10 @@ Fault injection (beam break, timeout, garbage) follows the configured probabilit
 A multi-SMR tool (seed 003): ``extra_smrs_flange_mm`` gives the true flange-frame centres of SMRs 2, 3, ...;
 they move rigidly with SMR 1 (same repeatability scatter, own tracker error) and ``MockTracker.select_smr(k)``
 chooses which SMR the following ``measure()`` calls read.
+Real-cell phenomena (all off by default, seeded): read-back lag (``readback_lag_deg_per_deg``: the robot stands at
+the commanded joints but reports ``q_cmd + lag * last move + N(0, readback_noise_deg)``), tracker-registration
+drift (``tracker_drift``: every reading, SMR or nest, is displaced by ``u(t) (v + w x p)`` in the tracker frame)
+and fixed reference nests (``nests``: id -> position in the base frame; ``MockTracker.select_nest`` aims at one).
 Motion caps: ``MockRobot`` takes ``set_motion_limits`` like a real driver, times every joint move so that no
 joint exceeds its share of the rated speed and neither the flange nor any SMR exceeds the TCP cap, and its
 command layer refuses (``MotionError``) any move that would be faster; accepted commands are recorded in
@@ -22,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from robocal.noise import repeatability_sigma_mm
-from robocal.simulate import SimulatedCell
+from robocal.simulate import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
 from robocal.sweep import move_durations_s, peak_speed_per_unit_s
 
@@ -60,7 +64,9 @@ class MockWorld:
     def __init__(self, cell: SimulatedCell, seed: int = 0, *, motion_time_s: float = 0.0,
                  joint_speed_deg_s: float = 60.0, payload_kg: float = 0.0, faults: Mapping[str, float] | None = None,
                  jitter_mm: float = 0.002, q0_deg: Sequence[float] | None = None,
-                 extra_smrs_flange_mm: Sequence[Sequence[float]] = ()) -> None:
+                 extra_smrs_flange_mm: Sequence[Sequence[float]] = (),
+                 readback_lag_deg_per_deg: Sequence[float] | None = None, readback_noise_deg: float = 0.0,
+                 tracker_drift: tuple | None = None, nests: Mapping[str, Sequence[float]] | None = None) -> None:
         self.cell = cell
         self.rng = np.random.default_rng(seed)
         self.fault_rng = np.random.default_rng(seed + 7919)
@@ -81,6 +87,27 @@ class MockWorld:
         self.extra_error_mm = np.zeros((len(self.extra_cells), 3))
         self.moves = 0
         self.stopped = False
+        self.readback_rng = np.random.default_rng(seed + 104729)       # own stream: enabling lag changes nothing else
+        self.readback_lag = np.zeros(n) if readback_lag_deg_per_deg is None else np.asarray(readback_lag_deg_per_deg,
+                                                                                             float)
+        self.readback_noise_deg = float(readback_noise_deg)
+        self.last_move_deg = np.zeros(n)
+        self.q_read_deg = self.q_deg.copy()
+        self.tracker_drift = tracker_drift          # (v_mm_per_h (3,), w_rad_per_h (3,), tau_s) or None
+        self.nests = {str(k): np.asarray(v, float) for k, v in (nests or {}).items()}
+        self.nest_rng = np.random.default_rng(seed + 15485863)
+
+    def drift_mm(self, p_tracker_mm: np.ndarray) -> np.ndarray:
+        """Apparent displacement (3,) mm of a point read at p_tracker_mm now (tracker-registration drift)."""
+        if self.tracker_drift is None:
+            return np.zeros(3)
+        v, w, tau_s = self.tracker_drift
+        return tracker_drift_mm(p_tracker_mm, self.clock.now(), v, w, tau_s)[0]
+
+    def nest_tracker_mm(self, nest_id: str) -> np.ndarray:
+        """True position (3,) mm of a nest in the tracker frame (undrifted)."""
+        T = self.cell.truth.T_tracker_base
+        return T[:3, :3] @ self.nests[nest_id] + T[:3, 3]
 
     def meta(self) -> dict:
         return {"t_s": np.array([self.clock.now()]), "payload_kg": np.array([self.payload_kg]),
@@ -110,6 +137,9 @@ class MockWorld:
         if self.motion_time_s > 0:
             time.sleep(self.motion_time_s)
         self.q_deg = q_deg.copy()
+        self.last_move_deg = delta
+        self.q_read_deg = readback_joints_deg(q_deg, delta, self.readback_lag, self.readback_noise_deg,
+                                              self.readback_rng)
         self.p_smr_tracker_mm = self._realise()
         cov = self.cell.tracker.covariance(self.p_smr_tracker_mm[None])[0]
         self.point_error_mm = np.linalg.cholesky(cov) @ self.rng.standard_normal(3)
@@ -194,7 +224,8 @@ class MockRobot:
         self.command_move(q, self.move_duration_s(self.world.q_deg, q))
 
     def read_joints(self) -> tuple[float, ...]:
-        return tuple(float(v) for v in self.world.q_deg)
+        """The read-back joints (deg): the commanded ones, plus the simulated read-back lag and noise."""
+        return tuple(float(v) for v in self.world.q_read_deg)
 
     def stop(self) -> None:
         self.world.stopped = True
@@ -213,6 +244,8 @@ class MockTracker:
         self.world, self.url = world, url
         self.robot = None if isinstance(robot, MockRobot) else robot
         self.smr = 1
+        self.nest: str | None = None
+        self.nest_error_mm = np.zeros(3)
 
     def _follow(self) -> None:
         q = np.asarray(self.robot.read_joints(), float)
@@ -227,6 +260,17 @@ class MockTracker:
         if not 1 <= k <= 1 + len(self.world.extra_cells):
             raise TargetNotFound(f"{self.url}: no SMR {k} on the tool (it has {1 + len(self.world.extra_cells)})")
         self.smr = k
+        self.nest = None
+
+    def select_nest(self, nest_id: str, p_tracker_mm_guess: Sequence[float] | None = None) -> None:
+        """Aim at a fixed reference nest (the world's ``nests``) for the following measurements."""
+        w = self.world
+        if nest_id not in w.nests:
+            raise TargetNotFound(f"{self.url}: no reference nest {nest_id!r}")
+        self.nest = nest_id
+        p = w.nest_tracker_mm(nest_id)
+        cov = w.cell.tracker.covariance(p[None])[0]
+        self.nest_error_mm = np.linalg.cholesky(cov) @ w.nest_rng.standard_normal(3)
 
     def measure(self) -> TrackerReading:
         w = self.world
@@ -238,11 +282,17 @@ class MockTracker:
             raise TrackerTimeout(f"{self.url}: no reply")
         if w.fault("garbage_probability"):
             raise GarbageReply(f"{self.url}: unparseable reply '#%!?'")
+        if self.nest is not None:
+            p = w.nest_tracker_mm(self.nest)
+            xyz = p + w.drift_mm(p) + self.nest_error_mm + w.nest_rng.normal(0.0, w.jitter_mm, 3)
+            w.clock.sleep(0.05)
+            return TrackerReading(tuple(float(v) for v in xyz), w.clock.now())
         if self.smr == 1:
             xyz = w.p_smr_tracker_mm + w.point_error_mm + w.rng.normal(0.0, w.jitter_mm, 3)
         else:
             k = self.smr - 2
             xyz = w.p_extra_tracker_mm[k] + w.extra_error_mm[k] + w.rng.normal(0.0, w.jitter_mm, 3)
+        xyz = xyz + w.drift_mm(xyz)
         w.clock.sleep(0.05)
         return TrackerReading(tuple(float(v) for v in xyz), w.clock.now())
 

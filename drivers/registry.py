@@ -16,6 +16,8 @@ ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_r
 TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
                    "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
                    "tracker+loop": "drivers.tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
+ROBOT_SCHEMES = frozenset(ROBOT_DRIVERS)        # the url schemes a cell config may name (campaign.config)
+TRACKER_SCHEMES = frozenset(TRACKER_DRIVERS)
 
 
 def _factory(table: Mapping[str, str], url: str, what: str):

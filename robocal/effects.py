@@ -23,8 +23,9 @@ from .kinematics import Kinematics, ParamLayout, chain, identification_jacobian
 from .frames import skew, transform_points
 
 G_MM_S2 = 9.80665
-EFFECT_NAMES = ("joint_compliance", "gear_cyclic", "backlash", "thermal_drift", "axis_coupling",
-                "registration_drift", "payload_deflection")
+EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
+                "axis_coupling", "registration_drift")     # every effect the diagnosis names, in report order
+SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag")   # what ``by_name`` builds
 
 
 @dataclass(frozen=True)
@@ -266,7 +267,7 @@ def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:
                  "backlash": backlash, "thermal_drift": thermal_drift, "axis_coupling": axis_coupling,
                  "registration_drift": registration_drift}
     if name not in factories:
-        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(EFFECT_NAMES)})")
+        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(SIMULATED_EFFECTS)})")
     return factories[name](**kwargs)
 
 

@@ -33,13 +33,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .diagnose import (DiagnosisInput, DiagnosisOptions, EFFECT_NAMES, NestReadings, approach_from_order, diagnose,
-                       moves_from_order, repeat_dof, repeat_floor)
-from .effects import (DEFAULT_LINK_MASSES_KG, Effect, apply_effects, axis_coupling, backlash, gear_cyclic,
-                      joint_compliance, lumped_compliance, registration_drift_curve, thermal_warmup)
+from .approach import approach_signs as approach_from_order
+from .diagnose import DiagnosisInput, DiagnosisOptions, NestReadings, diagnose, moves_from_order
+from .effects import (DEFAULT_LINK_MASSES_KG, EFFECT_NAMES, Effect, apply_effects, axis_coupling, backlash,
+                      gear_cyclic, joint_compliance, lumped_compliance, registration_drift_curve, thermal_warmup)
 from .frames import make_T, rotvec_to_matrix
 from .kinematics import Kinematics, identification_jacobian, smr_base
 from .noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
+from .repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
 from .simulate import SimulatedCell, random_geometric_errors
 from .truth import LIBRARY_TRUTHS, TruthCampaign, TruthProtocol, simulate
 

@@ -69,3 +69,23 @@ class SimulatedCell:
     def noise_floor(self, q_rad: np.ndarray, meta: Mapping | None = None) -> float:
         """Expected 3-D RMS of the measurement noise at these poses (mm)."""
         return noise_floor_mm(self.true_smr_tracker(q_rad, meta), self.tracker, self.repeatability_rp_mm)
+
+
+def readback_joints_deg(q_cmd_deg: np.ndarray, move_deg: np.ndarray, lag_deg_per_deg: np.ndarray,
+                        noise_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """Read-back joints (N, n) deg of a robot standing at q_cmd_deg (N, n) whose controller reports a lag
+    proportional to the signed last move ``move_deg`` (N, n): q_cmd + lag_j * move_j + N(0, noise_deg)
+    (real arms: about -0.0005 deg per deg of move on J1-J3)."""
+    q = np.asarray(q_cmd_deg, float) + np.asarray(lag_deg_per_deg, float) * np.asarray(move_deg, float)
+    return q + rng.normal(0.0, noise_deg, q.shape) if noise_deg > 0 else q
+
+
+def tracker_drift_mm(p_tracker_mm: np.ndarray, t_s: np.ndarray, v_mm_per_h, w_rad_per_h,
+                     tau_s: float = 0.0) -> np.ndarray:
+    """Apparent displacement (N, 3) mm of points read at p_tracker_mm (N, 3) at times t_s (N,) s when the
+    tracker's registration drifts: u(t) (v + w x p), u = t in hours, or with tau_s > 0 the settling curve
+    tau_h (1 - exp(-t / tau)) with the same initial rate (v mm/h, w rad/h, tracker frame)."""
+    t = np.asarray(t_s, float)
+    u = t / 3600.0 if tau_s <= 0 else tau_s / 3600.0 * (1.0 - np.exp(-t / tau_s))
+    p = np.atleast_2d(np.asarray(p_tracker_mm, float))
+    return np.atleast_1d(u)[:, None] * (np.asarray(v_mm_per_h, float) + np.cross(np.asarray(w_rad_per_h, float), p))

@@ -21,22 +21,20 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import random
-import select
-import signal
 import socket
 import sys
-import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Mapping, Protocol, Sequence
 
+from drivers.emulators.faults import FaultDeck
+from drivers.emulators.line_server import TcpServer, wait_for_shutdown
+from drivers.emulators.tracker_server import FAULT_ORDER, encode_line, fault_response, join_with_seq
+from drivers.emulators.tracker_server import Response as Reply  # the sample protocol's reply (one owner)
+
 ERROR_WORDS = {"beam_broken": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE", "timeout": "TIMEOUT",
                "error": "DEVICE_ERROR"}
-FAULT_WORDS = {"beam_break": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE"}
-FAULT_ORDER = ("disconnect", "drop", "delay", "garbage", "beam_break", "no_target", "unstable")
-GARBAGE = b"\xa7#%!?@@ \x01garbage\r\n"
 POLL_S = 0.05
 
 
@@ -191,45 +189,26 @@ class SpatialAnalyzerBackend:
 
 # ------------------------------------------------------------------------------------------------------ protocol
 
-def _line(text: str) -> bytes:
-    return text.encode("ascii") + b"\r\n"
-
-
-def _join(word: str, seq: str | None, *rest: str) -> str:
-    return " ".join([word] + ([seq] if seq is not None else []) + list(rest))
-
-
-@dataclass(frozen=True)
-class Reply:
-    data: bytes = b""
-    delay_s: float = 0.0
-    disconnect: bool = False
-
-
-class LineBridge:
+class LineBridge(TcpServer):
     """Serves the line protocol from ``backend`` over TCP (one client at a time, one background thread).
 
     Test hooks (to check a driver against the contract): ``inject(*faults)`` queues one-shot faults for the next
     MEAS requests (``FAULT_ORDER``); ``probabilities`` draws them at random with ``seed``; ``delay_s`` for ``delay``.
     ``requests``, ``connections`` and ``replies_sent`` count what happened.
     """
+    thread_name, label = "line-bridge", "line bridge"
+    poll_s = POLL_S
 
     def __init__(self, backend: Backend, port: int = 0, host: str = "127.0.0.1", *, seed: int = 0,
                  probabilities: Mapping[str, float] | None = None, delay_s: float = 0.5) -> None:
         bad = set(probabilities or {}) - set(FAULT_ORDER)
         if bad:
             raise ValueError(f"unknown faults {sorted(bad)} (expected {', '.join(FAULT_ORDER)})")
-        self.backend, self.host, self._requested_port = backend, host, port
+        super().__init__(host, port)
+        self.backend = backend
         self.probabilities, self.delay_s = dict(probabilities or {}), delay_s
-        self._rng = random.Random(seed + 7919)
-        self._queued: deque[str] = deque()
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
+        self._deck = FaultDeck(FAULT_ORDER, random.Random(seed + 7919))
         self.requests: deque[str] = deque(maxlen=1000)
-        self.connections = 0
         self.replies_sent = 0
 
     @property
@@ -237,11 +216,7 @@ class LineBridge:
         return f"tracker+socket://{self.host}:{self.port}"
 
     def inject(self, *faults: str) -> None:
-        bad = [f for f in faults if f not in FAULT_ORDER]
-        if bad:
-            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULT_ORDER)})")
-        with self._lock:
-            self._queued.extend(faults)
+        self._deck.inject(*faults)
 
     # -- the contract
     def respond(self, line: str) -> Reply:
@@ -255,112 +230,52 @@ class LineBridge:
                 return self._measure(seq)
             if command == "INIT" and not args:
                 self.backend.open()
-                return Reply(_line("READY"))
+                return Reply(encode_line("READY"))
             if command == "ENV" and not args:
                 env = self.backend.environment()
                 if env is None:
-                    return Reply(_line("ERR - NO_ENVIRONMENT"))
-                return Reply(_line(f"ENV {env[0]:.2f} {env[1]:.2f} {env[2]:.1f}"))
+                    return Reply(encode_line("ERR - NO_ENVIRONMENT"))
+                return Reply(encode_line(f"ENV {env[0]:.2f} {env[1]:.2f} {env[2]:.1f}"))
             if command == "GOTO" and len(args) in (3, 4) and hasattr(self.backend, "goto"):
                 self.backend.goto(*(float(v) for v in args[-3:]))
-                return Reply(_line(_join("OK", seq)))
+                return Reply(encode_line(join_with_seq("OK", seq)))
             if command == "FIND" and len(args) <= 1 and hasattr(self.backend, "find"):
                 self.backend.find()
-                return Reply(_line(_join("OK", seq)))
+                return Reply(encode_line(join_with_seq("OK", seq)))
             if command == "STOP" and not args:
-                return Reply(_line("STOPPED"))
+                return Reply(encode_line("STOPPED"))
         except BackendError as exc:
-            return Reply(_line(_join("ERR", seq, ERROR_WORDS[exc.kind])))
+            return Reply(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[exc.kind])))
         except ValueError:
-            return Reply(_line("ERR - BAD_ARGUMENT"))
-        return Reply(_line("ERR - UNKNOWN_COMMAND"))
+            return Reply(encode_line("ERR - BAD_ARGUMENT"))
+        return Reply(encode_line("ERR - UNKNOWN_COMMAND"))
 
     def _measure(self, seq: str | None) -> Reply:
         fault = self._draw_fault()
-        if fault == "disconnect":
-            return Reply(disconnect=True)
-        if fault == "drop":
-            return Reply()
-        if fault == "garbage":
-            return Reply(GARBAGE)
-        if fault in FAULT_WORDS:
-            return Reply(_line(_join("ERR", seq, FAULT_WORDS[fault])))
+        forced = fault_response(fault, seq)
+        if forced is not None:
+            return forced
         try:
             m = self.backend.measure()
         except BackendError as exc:
-            return Reply(_line(_join("ERR", seq, ERROR_WORDS[exc.kind])))
+            return Reply(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[exc.kind])))
         fields = [f"{v:.5f}" for v in m.xyz_mm] + ([f"{v:.5f}" for v in m.std_mm] if m.std_mm else [])
-        return Reply(_line(_join("OK", seq, *fields)), delay_s=self.delay_s if fault == "delay" else 0.0)
+        return Reply(encode_line(join_with_seq("OK", seq, *fields)), delay_s=self.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
-        with self._lock:
-            if self._queued:
-                return self._queued.popleft()
-            draws = [(name, self._rng.random()) for name in FAULT_ORDER]
-        return next((name for name, u in draws if u < self.probabilities.get(name, 0.0)), None)
+        return self._deck.draw(lambda name: self.probabilities.get(name, 0.0))
 
     # -- transport
-    def start(self) -> "LineBridge":
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((self.host, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"line-bridge-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
     def stop(self, timeout_s: float = 2.0) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
+        self._join(timeout_s)
         self.backend.close()
 
-    def __enter__(self) -> "LineBridge":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
-
     def _serve_client(self, conn: socket.socket) -> None:
-        buf = b""
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(4096)
-            except OSError:
+        for raw in self._lines(conn):
+            reply = self.respond(raw.decode("ascii", errors="replace").strip())
+            if not self._deliver(conn, reply.data, reply.delay_s, reply.disconnect):
                 return
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                raw, buf = buf.split(b"\n", 1)
-                reply = self.respond(raw.decode("ascii", errors="replace").strip())
-                if reply.disconnect or (reply.delay_s and self._stop.wait(reply.delay_s)):
-                    return
-                if reply.data:
-                    try:
-                        conn.sendall(reply.data)
-                    except OSError:
-                        return
-                    self.replies_sent += 1
+            self.replies_sent += bool(reply.data)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -385,26 +300,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         backend = FaroSdkBackend(args.address)
     else:
         backend = SpatialAnalyzerBackend()
-    done = threading.Event()
     with LineBridge(backend, args.port, args.host) as bridge:
         if args.print_port:
             print(bridge.port, flush=True)
         print(f"line bridge ({args.backend}) on {args.host}:{bridge.port}", file=sys.stderr, flush=True)
-        if not args.ignore_stdin:
-            def watch() -> None:
-                try:
-                    while os.read(sys.stdin.fileno(), 4096):
-                        pass
-                except (OSError, ValueError):
-                    pass
-                done.set()
-            threading.Thread(target=watch, name="stdin-watch", daemon=True).start()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        try:
-            while not done.wait(0.2):
-                pass
-        except KeyboardInterrupt:
-            pass
+        wait_for_shutdown(watch_stdin=not args.ignore_stdin)
     return 0
 
 

@@ -33,18 +33,17 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import random
-import select
-import signal
 import socket
 import sys
-import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
 from drivers import emscon_protocol as P
+
+from .faults import FaultDeck
+from .line_server import TcpServer, wait_for_shutdown
 
 HOST = "127.0.0.1"
 POLL_S = 0.02
@@ -111,9 +110,8 @@ class EmsconDevice:
         self.initialised, self.init_time_s = initialised, init_time_s
         self.search_radius_mm, self.late_s, self.meas_time_scale = search_radius_mm, late_s, meas_time_scale
         self.serial = serial
-        self._rng, self._fault_rng = random.Random(seed), random.Random(seed + 7919)
-        self._lock = threading.Lock()
-        self._queued: deque[str] = deque()
+        self._rng = random.Random(seed)
+        self._deck = FaultDeck(FAULTS, random.Random(seed + 7919))
         bad = set(fault_probabilities or {}) - set(FAULTS)
         if bad:
             raise ValueError(f"unknown faults {sorted(bad)} (expected {', '.join(FAULTS)})")
@@ -130,19 +128,11 @@ class EmsconDevice:
 
     # -- fault control
     def inject(self, *names: str) -> None:
-        bad = [n for n in names if n not in FAULTS]
-        if bad:
-            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULTS)})")
-        with self._lock:
-            self._queued.extend(names)
+        self._deck.inject(*names)
 
     def _draw_fault(self) -> str | None:
-        with self._lock:
-            if self._queued:
-                return self._queued.popleft()
-            probs = dict(self.fault_probabilities)
-        draws = [(name, self._fault_rng.random()) for name in FAULTS]
-        return next((n for n, u in draws if u < probs.get(n, 0.0)), None)
+        probs = dict(self.fault_probabilities)
+        return self._deck.draw(lambda name: probs.get(name, 0.0))
 
     # -- dispatch
     def respond(self, packet: bytes) -> list[Out]:
@@ -326,21 +316,18 @@ class EmsconDevice:
         return (value - 32.0) / 1.8 if self.units[2] == 1 else value
 
 
-class EmsconEmulator:
+class EmsconEmulator(TcpServer):
     """The device served over TCP on 127.0.0.1 by one background thread; a context manager.
 
     ``port=0`` picks a free port (``.port``; ``.url`` is the driver URL). ``connections`` and ``packets_sent`` count
     accepted clients and packets sent. Keyword arguments go to ``EmsconDevice``.
     """
+    thread_name, label = "emscon-emulator", "emScon emulator"
+    poll_s = POLL_S
 
     def __init__(self, position_source: PositionSource | None = None, port: int = 0, **device_options) -> None:
+        super().__init__(HOST, port)
         self.device = EmsconDevice(position_source, **device_options)
-        self._requested_port = port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
-        self.connections = 0
         self.packets_sent = 0
 
     @property
@@ -350,57 +337,13 @@ class EmsconEmulator:
     def inject(self, *names: str) -> None:
         self.device.inject(*names)
 
-    def start(self) -> "EmsconEmulator":
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((HOST, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"emscon-emulator-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
     def stop(self, timeout_s: float = 3.0) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
-            if thread.is_alive():
-                raise RuntimeError(f"emScon emulator thread did not stop within {timeout_s} s")
-
-    def __enter__(self) -> "EmsconEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
+        super().stop(timeout_s)
 
     def _serve_client(self, conn: socket.socket) -> None:
         conn.settimeout(2.0)
         reader = P.PacketReader()
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(65536)
-            except OSError:
-                return
-            if not data:
-                return
+        for data in self._received(conn, 65536):
             reader.feed(data)
             try:
                 while (packet := reader.next_packet()) is not None:
@@ -411,15 +354,9 @@ class EmsconEmulator:
 
     def _answer(self, conn: socket.socket, packet: bytes) -> bool:
         for out in self.device.respond(packet):
-            if out.disconnect:
+            if not self._deliver(conn, out.data, out.delay_s, out.disconnect):
                 return False
-            if out.delay_s and self._stop.wait(out.delay_s):
-                return False
-            try:
-                conn.sendall(out.data)
-                self.packets_sent += 1
-            except OSError:
-                return False
+            self.packets_sent += 1
         return True
 
 
@@ -477,33 +414,17 @@ def cell_position_source(config_path: str, robot_url: str | None = None) -> tupl
     return position, (robot.close if robot is not None else (lambda: None))
 
 
-def _watch_stdin(done: threading.Event) -> None:
-    try:
-        while os.read(sys.stdin.fileno(), 4096):
-            pass
-    except (OSError, ValueError):
-        pass
-    done.set()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     source, release = cell_position_source(args.cell, args.robot_url) if args.cell else (None, lambda: None)
-    done = threading.Event()
     with EmsconEmulator(source, port=args.port, seed=args.seed, initialised=args.initialised,
                         meas_time_scale=args.meas_time_scale, late_s=args.late_s,
                         fault_probabilities=_fault_probabilities(args.faults)) as emulator:
         if args.print_port:
             print(emulator.port, flush=True)
         print(f"emScon emulator on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
-        if not args.ignore_stdin:
-            threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
         try:
-            while not done.wait(0.2):
-                pass
-        except KeyboardInterrupt:
-            pass
+            wait_for_shutdown(watch_stdin=not args.ignore_stdin)
         finally:
             release()
     return 0

@@ -12,6 +12,11 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Iterator, Mapping, Sequence
 
+DASHBOARD_PORT = 29999                    # the controller's fixed ports (ur_rtde cannot be pointed elsewhere)
+SCRIPT_PORTS = (30001, 30002, 30003)
+RTDE_PORT = 30004
+FIXED_PORTS = (DASHBOARD_PORT, *SCRIPT_PORTS, RTDE_PORT)
+
 HEADER = struct.Struct(">HB")
 
 # packet types

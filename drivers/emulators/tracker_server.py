@@ -27,16 +27,16 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import random
-import select
-import signal
 import socket
 import sys
 import threading
 from collections import deque
 from dataclasses import dataclass, fields, replace
 from typing import Callable, Mapping, Sequence
+
+from .faults import FaultDeck
+from .line_server import TcpServer, wait_for_shutdown
 
 HOST = "127.0.0.1"
 POLL_S = 0.05
@@ -96,11 +96,11 @@ class SampleDevice:
         if mode not in ("cartesian", "spherical"):
             raise ValueError(f"mode: expected cartesian or spherical, got {mode!r}")
         self.mode, self.noise_mm, self.std_mm, self.environment = mode, noise_mm, std_mm, environment
-        self._noise_rng, self._fault_rng = random.Random(seed), random.Random(seed + 7919)
+        self._noise_rng = random.Random(seed)
+        self._deck = FaultDeck(FAULT_ORDER, random.Random(seed + 7919))
         self._position = position_source or self._default_position
         self._lock = threading.Lock()
         self._faults = _faults(faults)
-        self._queued: deque[str] = deque()
         self.requests: deque[str] = deque(maxlen=1000)
 
     @property
@@ -114,11 +114,7 @@ class SampleDevice:
 
     def inject(self, *names: str) -> None:
         """Queue one-shot faults, consumed by the next ``MEAS`` requests in order (before any random draw)."""
-        bad = [n for n in names if n not in FAULT_ORDER]
-        if bad:
-            raise ValueError(f"unknown faults {bad} (expected {', '.join(FAULT_ORDER)})")
-        with self._lock:
-            self._queued.extend(names)
+        self._deck.inject(*names)
 
     def respond(self, line: str) -> Response:
         """The response to one request line (terminator already stripped)."""
@@ -129,29 +125,20 @@ class SampleDevice:
             return self._measure(args[0] if args else None)
         simple = {"INIT": "READY", "STOP": "STOPPED", "ENV": self._environment_line()}
         if command in simple and not args:
-            return Response(_line(simple[command]))
-        return Response(_line("ERR - UNKNOWN_COMMAND"))
+            return Response(encode_line(simple[command]))
+        return Response(encode_line("ERR - UNKNOWN_COMMAND"))
 
     def _measure(self, seq: str | None) -> Response:
         fault = self._draw_fault()
-        if fault == "disconnect":
-            return Response(disconnect=True)
-        if fault == "drop":
-            return Response()
-        if fault == "garbage":
-            return Response(GARBAGE)
-        if fault in ERROR_WORDS:
-            return Response(_line(_join("ERR", seq, ERROR_WORDS[fault])))
-        data = _line(_join("OK", seq, *self._fields()))
+        forced = fault_response(fault, seq)
+        if forced is not None:
+            return forced
+        data = encode_line(join_with_seq("OK", seq, *self._fields()))
         return Response(data, delay_s=self._faults.delay_s if fault == "delay" else 0.0)
 
     def _draw_fault(self) -> str | None:
-        with self._lock:
-            if self._queued:
-                return self._queued.popleft()
-            draws = [(name, self._fault_rng.random()) for name in FAULT_ORDER]
-            faults = self._faults
-        return next((name for name, u in draws if u < getattr(faults, name)), None)
+        faults = self._faults
+        return self._deck.draw(lambda name: getattr(faults, name))
 
     def _fields(self) -> list[str]:
         x, y, z = (float(v) for v in self._position())
@@ -170,31 +157,43 @@ class SampleDevice:
         return f"ENV {t:.2f} {p:.2f} {h:.1f}"
 
 
-def _join(word: str, seq: str | None, *rest: str) -> str:
+def fault_response(fault: str | None, seq: str | None) -> Response | None:
+    """The reply a ``MEAS`` fault forces instead of a reading; ``None`` for no fault or ``delay`` (reply, later)."""
+    if fault == "disconnect":
+        return Response(disconnect=True)
+    if fault == "drop":
+        return Response()
+    if fault == "garbage":
+        return Response(GARBAGE)
+    if fault in ERROR_WORDS:
+        return Response(encode_line(join_with_seq("ERR", seq, ERROR_WORDS[fault])))
+    return None
+
+
+def join_with_seq(word: str, seq: str | None, *rest: str) -> str:
+    """``word [seq] rest...`` separated by spaces (the seq only when the request carried one)."""
     return " ".join([word] + ([seq] if seq is not None else []) + list(rest))
 
 
-def _line(text: str) -> bytes:
+def encode_line(text: str) -> bytes:
+    """One ASCII reply line with its ``\\r\\n`` terminator."""
     return text.encode("ascii") + b"\r\n"
 
 
-class TrackerEmulator:
+class TrackerEmulator(TcpServer):
     """The sample device served over TCP on 127.0.0.1 by one background thread; use as a context manager.
 
     ``port=0`` picks a free port (read it from ``.port``; ``.url`` is the driver URL). ``stop()`` joins the thread.
     ``connections`` and ``replies_sent`` count accepted clients and reply lines sent (for tests).
     Keyword arguments after ``port`` go to ``SampleDevice`` (``mode``, ``seed``, ``noise_mm``, ``std_mm``, ...).
     """
+    thread_name, label = "tracker-emulator", "tracker emulator"
+    poll_s = POLL_S
 
     def __init__(self, position_source: PositionSource | None = None,
                  faults: Faults | Mapping[str, float] | None = None, port: int = 0, **device_options) -> None:
+        super().__init__(HOST, port)
         self.device = SampleDevice(position_source, faults, **device_options)
-        self._requested_port = port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._listener: socket.socket | None = None
-        self.port = 0
-        self.connections = 0
         self.replies_sent = 0
 
     @property
@@ -207,78 +206,18 @@ class TrackerEmulator:
     def inject(self, *names: str) -> None:
         self.device.inject(*names)
 
-    def start(self) -> "TrackerEmulator":
-        """Bind, listen and start serving (idempotent)."""
-        if self._thread is not None:
-            return self
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((HOST, self._requested_port))
-        listener.listen(1)
-        self._listener, self.port = listener, listener.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name=f"tracker-emulator-{self.port}", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self, timeout_s: float = 2.0) -> None:
-        """Stop serving, close all sockets and join the thread (within about ``POLL_S``)."""
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(timeout_s)
-            if thread.is_alive():
-                raise RuntimeError(f"tracker emulator thread did not stop within {timeout_s} s")
-
-    def __enter__(self) -> "TrackerEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        listener = self._listener
-        try:
-            while not self._stop.is_set():
-                if select.select([listener], [], [], POLL_S)[0]:
-                    conn, _ = listener.accept()
-                    self.connections += 1
-                    with conn:
-                        self._serve_client(conn)
-        finally:
-            listener.close()
-
     def _serve_client(self, conn: socket.socket) -> None:
         conn.settimeout(1.0)
-        buf = b""
-        while not self._stop.is_set():
-            if not select.select([conn], [], [], POLL_S)[0]:
-                continue
-            try:
-                data = conn.recv(4096)
-            except OSError:
+        for line in self._lines(conn):
+            if not self._answer(conn, line):
                 return
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                if not self._answer(conn, line):
-                    return
 
     def _answer(self, conn: socket.socket, raw: bytes) -> bool:
         """Handle one request; ``False`` when the connection must end."""
         response = self.device.respond(raw.decode("ascii", errors="replace").strip())
-        if response.disconnect:
+        if not self._deliver(conn, response.data, response.delay_s, response.disconnect):
             return False
-        if response.delay_s and self._stop.wait(response.delay_s):
-            return False
-        try:
-            if response.data:
-                conn.sendall(response.data)
-                self.replies_sent += 1
-        except OSError:
-            return False
+        self.replies_sent += bool(response.data)
         return True
 
 
@@ -297,32 +236,14 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _watch_stdin(done: threading.Event) -> None:
-    """Set ``done`` at end of file on stdin (raw reads: no buffered-reader lock held at interpreter exit)."""
-    try:
-        while os.read(sys.stdin.fileno(), 4096):
-            pass
-    except (OSError, ValueError):
-        pass
-    done.set()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     faults = {name: getattr(args, name) for name in FAULT_ORDER} | {"delay_s": args.delay_s}
-    done = threading.Event()
     with TrackerEmulator(faults=faults, port=args.port, mode=args.mode, seed=args.seed) as emulator:
         if args.print_port:
             print(emulator.port, flush=True)
         print(f"tracker emulator ({args.mode}) on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
-        if not args.ignore_stdin:
-            threading.Thread(target=_watch_stdin, args=(done,), name="stdin-watch", daemon=True).start()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        try:
-            while not done.wait(0.2):
-                pass
-        except KeyboardInterrupt:
-            pass
+        wait_for_shutdown(watch_stdin=not args.ignore_stdin)
     return 0
 
 

@@ -244,11 +244,11 @@ BAD_CASES = {
     "empty_column_name": (HEADER6 + ",\n" + ROWS6[0] + ",\n", "header: empty column name at position 12"),
     "y2_without_x2": (
         HEADER6 + ",y2,z2\n" + ROWS6[0] + ",1,2\n",
-        "header: missing column 'x2' (needed with 'y2')",
+        "line 1, column 'x2': header: missing column 'x2' (needed with 'y2')",
     ),
     "third_smr_without_second": (
         HEADER6 + ",x3,y3,z3\n" + ROWS6[0] + ",1,2,3\n",
-        "header: missing column 'x2' (x3,y3,z3 need x2,y2,z2)",
+        "line 1, column 'x2': header: missing column 'x2' (x3,y3,z3 need x2,y2,z2)",
     ),
     "duplicate_point_id": (
         replace_line(GOOD + ["P4,test,0,0,0,0,0,0,0,0,0"], 3, "P1,test,0,0,0,0,0,0,0,0,0"),
@@ -266,7 +266,7 @@ BAD_CASES = {
     "too_many_fields": (replace_line(GOOD, 3, ROWS6[2] + ",7"), "line 4: expected 11 fields, got 12"),
     "bad_set": (
         replace_line(GOOD, 2, "P2,train,5,10,15,30,45,50,1001.5,201.25,301.125"),
-        "line 3, column 'set': expected calib, test or check, got 'train'",
+        "line 3, column 'set': expected calib, test, check or nest, got 'train'",
     ),
     "header_only": ("# comment\n" + HEADER6 + "\n\n# nothing else\n", "no data rows"),
     "empty_file": ("", "no data rows (empty file, no header)"),

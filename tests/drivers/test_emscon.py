@@ -7,12 +7,8 @@ the emulator on 127.0.0.1 with small timeouts; the third-party client ``cesapi``
 from __future__ import annotations
 
 import math
-import select
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
@@ -21,8 +17,8 @@ from drivers.base import BeamBroken, ConnectionLost, DriverError, GarbageReply, 
 from drivers.emscon import EmsconSettings, EmsconTracker, NotReady, open_tracker, parse_url, status_error
 from drivers.emulators.emscon_server import DEFAULT_POINT_MM, EmsconDevice, EmsconEmulator, NoiseModel
 from drivers.registry import open_tracker as registry_open_tracker
+from tests.drivers.helpers import served_port
 
-REPO = Path(__file__).resolve().parents[2]
 T = 0.3
 FAST = {"timeout_s": T, "meas_time_ms": 10}
 
@@ -313,23 +309,12 @@ def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
     cfg_path = small_config(tmp_path)
     world = mock_world(load_config(cfg_path))
     expected = world.p_smr_tracker_mm + world.point_error_mm
-    proc = subprocess.Popen([sys.executable, "-m", "drivers.emulators.emscon_server", "--port", "0", "--print-port",
-                             "--cell", str(cfg_path)], cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    try:
-        assert select.select([proc.stdout], [], [], 30)[0], "emulator did not print its port"
-        port = int(proc.stdout.readline())
+    with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), wait_s=30) as (proc, port):
         with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=2.0)) as tracker:
             r = tracker.measure()
         assert r.xyz_mm == pytest.approx(expected.tolist(), abs=0.05)
         proc.stdin.close()
         assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        proc.stdout.close()
-        proc.stderr.close()
 
 
 @pytest.mark.unit
@@ -362,12 +347,8 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
         cfg_path = small_config(tmp_path, **{"robot.url": rws.url,
                                              "robot.options": {"credentials": {"use_default": True}}})
         truth = simulated_cell(load_config(cfg_path)).truth
-        proc = subprocess.Popen([sys.executable, "-m", "drivers.emulators.emscon_server", "--port", "0",
-                                 "--print-port", "--cell", str(cfg_path), "--robot-url", rws.url], cwd=REPO,
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        try:
-            assert select.select([proc.stdout], [], [], 30)[0], "emulator did not print its port"
-            port = int(proc.stdout.readline())
+        with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), "--robot-url", rws.url,
+                         wait_s=30) as (proc, port):
             with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=5.0)) as tracker:
                 for q in ([10.0, 20.0, 10.0, 0.0, 30.0, 0.0], [-30.0, 5.0, -20.0, 40.0, -45.0, 90.0]):
                     rws.joints = list(q)
@@ -376,9 +357,3 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
             proc.stdin.close()
             assert proc.wait(10) == 0
             assert rws.counts["logouts"] >= 1                        # the robot session was released
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(5)
-            proc.stdout.close()
-            proc.stderr.close()

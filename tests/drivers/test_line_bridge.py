@@ -8,10 +8,6 @@ from __future__ import annotations
 
 import csv
 import random
-import select
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +18,7 @@ from drivers.bridge.line_bridge import (BackendError, FaroSdkBackend, LineBridge
 from drivers.emulators.tracker_server import DEFAULT_POINT_MM
 from drivers.tracker import open_tracker
 from tests.drivers import test_tracker as contract
+from tests.drivers.helpers import served_port
 from tests.drivers.test_tracker import (no_leftover_threads,  # noqa: F401 (autouse fixture)
                                         test_connection_refused_is_connection_lost,
                                         test_emulator_disconnect_is_connection_lost_and_reconnect_works,
@@ -35,7 +32,6 @@ from tests.drivers.test_tracker import (no_leftover_threads,  # noqa: F401 (auto
                                         test_emulator_random_faults_are_seeded,
                                         test_emulator_readings_with_default_options)
 
-REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.system
 CONTRACT_TESTS = (test_connection_refused_is_connection_lost,
                   test_emulator_disconnect_is_connection_lost_and_reconnect_works,
@@ -154,22 +150,11 @@ def test_untested_skeletons_refuse_to_run():
 def test_command_line_replays_a_csv(tmp_path):
     path = tmp_path / "session.csv"
     path.write_text("x,y,z\n1200.0,-300.0,150.0\n")
-    proc = subprocess.Popen([sys.executable, "-m", "drivers.bridge.line_bridge", "--csv", str(path), "--port", "0",
-                             "--print-port"], cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    try:
-        assert select.select([proc.stdout], [], [], 10)[0], "bridge did not print its port"
-        port = int(proc.stdout.readline())
+    with served_port("drivers.bridge.line_bridge", "--csv", str(path)) as (proc, port):
         with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
             assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
         proc.stdin.close()
         assert proc.wait(5) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        proc.stdout.close()
-        proc.stderr.close()
 
 
 def test_measurement_record():

@@ -5,8 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal.diagnose import (DiagnosisOptions, _absorption, _greedy, _orth, diagnose,
-                              structure_test, where_analysis)
+from robocal.diagnose import DiagnosisOptions, diagnose, structure_test, where_analysis
+from robocal.diagnose.engine import _absorption, _orth
+from robocal.diagnose.scoring import _greedy
 from robocal.effects import gravity_torques, lumped_gravity_torques, thermal_warmup, warmup_curve
 from robocal.selfcheck import Protocol, irb2600, simulate_campaign
 
