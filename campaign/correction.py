@@ -253,7 +253,7 @@ def _format_rejections(accepted, formats) -> tuple[list, list[Rejected]]:
     """Targets a chosen format cannot hold (RAPID: ids over 80 characters or not ISO 8859-1) -> rejected."""
     if "rapid" not in formats:
         return list(accepted), []
-    from .writeback import _rapid_string
+    from drivers.rapid.literals import _rapid_string
 
     ok, bad = [], []
     for t in accepted:

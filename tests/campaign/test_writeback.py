@@ -514,7 +514,7 @@ def test_targets_csv_round_trip(tmp_path):
     assert header == ("target_id,q1,q2,q3,q4,q5,q6,q1_nominal,q2_nominal,q3_nominal,q4_nominal,q5_nominal,"
                       "q6_nominal,x_cmd,y_cmd,z_cmd,qw,qx,qy,qz,cf1,cf4,cf6,cfx,predicted_residual_mm,"
                       "predicted_rot_err_deg,predicted_std_mm")
-    back = wb.read_targets_csv(path)
+    back = wb.read_corrected_targets_csv(path)
     assert len(back) == len(targets)
     for a, b in zip(targets, back):
         assert dataclasses.replace(a, predicted_rot_err_deg=0.0) == dataclasses.replace(b, predicted_rot_err_deg=0.0)
@@ -526,7 +526,7 @@ def test_targets_csv_other_joint_counts(tmp_path):
     t = make_targets(1)[0]
     t4 = dataclasses.replace(t, q_nominal_deg=t.q_nominal_deg[:4], q_corrected_deg=t.q_corrected_deg[:4])
     path = wb.write_targets_csv(tmp_path / "t.csv", [t4], q_min_deg=Q_MIN[:4], q_max_deg=Q_MAX[:4])
-    back = wb.read_targets_csv(path)[0]
+    back = wb.read_corrected_targets_csv(path)[0]
     assert back.q_corrected_deg == t4.q_corrected_deg and back.q_nominal_deg == t4.q_nominal_deg
     assert "q4_nominal,x_cmd" in path.read_text()
     with pytest.raises(ValueError):
