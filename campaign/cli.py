@@ -24,47 +24,9 @@ from rich.console import Console
 from campaign.config import load_config
 from campaign.plausibility import forced
 from campaign.errors import CampaignError, ConfigError, DataError
+from campaign.cli_common import (COMMANDS, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Command,  # noqa: F401
+                                 command, print_plausibility, _stderr, _stdout)
 from drivers.base import DriverConfigError, DriverError
-
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
-
-Handler = Callable[[argparse.Namespace], int]
-Configure = Callable[[argparse.ArgumentParser], None]
-
-
-@dataclass(frozen=True)
-class Command:
-    """A subcommand: its name, one-line help, argument setup and handler."""
-
-    name: str
-    help: str
-    configure: Configure
-    run: Handler
-
-
-COMMANDS: dict[str, Command] = {}
-
-
-def command(name: str, help: str, configure: Configure) -> Callable[[Handler], Handler]:
-    """Decorator registering ``handler`` as subcommand ``name``."""
-
-    def register(handler: Handler) -> Handler:
-        COMMANDS[name] = Command(name, help, configure, handler)
-        return handler
-
-    return register
-
-
-def _stdout() -> Console:
-    return Console(soft_wrap=True, highlight=False)
-
-
-def _stderr() -> Console:
-    return Console(stderr=True, soft_wrap=True, highlight=False)
-
 
 # --------------------------------------------------------------------------- commands
 
@@ -255,14 +217,6 @@ def _force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
                              "implausible deltas); the report says they were overridden")
-
-
-def print_plausibility(out: Console, plaus: dict | None) -> None:
-    """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
-    from campaign.plausibility import plausibility_lines
-
-    for line, style in plausibility_lines(plaus):
-        out.print(line, style=style, markup=False)
 
 
 # --------------------------------------------------------------------------- entry point

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli_common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
 MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
@@ -56,7 +56,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from campaign.diagnose import diagnose_source, render, write_json, write_plots
 
     cfg = load_config(args.config)
-    from campaign.cli import print_plausibility
+    from campaign.cli_common import print_plausibility
     from campaign.plausibility import forced
 
     with forced(args.force):

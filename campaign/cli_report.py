@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli_common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
 

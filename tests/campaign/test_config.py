@@ -22,6 +22,7 @@ from campaign.cli import main
 from campaign.config import EffectSpec, FrozenMap, load_config, parse_config
 from campaign.errors import CampaignError, ConfigError, DataError, RunAborted
 
+
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = ROOT / "configs"
 REFERENCE = CONFIGS / "irb2600.yaml"
@@ -39,6 +40,7 @@ def reference_dict() -> dict[str, Any]:
 # --------------------------------------------------------------------------- good configs
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_configs_load(name: str) -> None:
     cfg = load_config(CONFIGS / name)
@@ -48,6 +50,7 @@ def test_shipped_configs_load(name: str) -> None:
     assert cfg.sha256 == hashlib.sha256((CONFIGS / name).read_bytes()).hexdigest()
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", SHIPPED)
 def test_to_dict_is_json_and_reloads_to_the_same_config(name: str, tmp_path: Path) -> None:
     cfg = load_config(CONFIGS / name)
@@ -61,6 +64,7 @@ def test_to_dict_is_json_and_reloads_to_the_same_config(name: str, tmp_path: Pat
     assert dataclasses.replace(reloaded, source_path=cfg.source_path, sha256=cfg.sha256) == cfg
 
 
+@pytest.mark.unit
 def test_reference_values_are_typed_floats_and_tuples() -> None:
     cfg = load_config(REFERENCE)
     assert cfg.robot.joints[1].theta_deg == -90.0
@@ -75,6 +79,7 @@ def test_reference_values_are_typed_floats_and_tuples() -> None:
     assert cfg.output.dir == "runs"
 
 
+@pytest.mark.unit
 def test_config_is_frozen_and_hashable() -> None:
     cfg = load_config(REFERENCE)
     assert hash(cfg) == hash(load_config(REFERENCE))
@@ -82,6 +87,7 @@ def test_config_is_frozen_and_hashable() -> None:
         cfg.name = "other"  # type: ignore[misc]
 
 
+@pytest.mark.unit
 def test_sha256_changes_when_the_file_changes(tmp_path: Path) -> None:
     path = tmp_path / "cell.yaml"
     path.write_text(reference_text(), encoding="utf-8")
@@ -112,6 +118,7 @@ def minimal_dict() -> dict[str, Any]:
     }
 
 
+@pytest.mark.unit
 def test_minimal_config_takes_documented_defaults(tmp_path: Path) -> None:
     path = tmp_path / "minimal.yaml"
     path.write_text(yaml.safe_dump(minimal_dict()), encoding="utf-8")
@@ -129,6 +136,7 @@ def test_minimal_config_takes_documented_defaults(tmp_path: Path) -> None:
     assert cfg.output.dir == "runs"
 
 
+@pytest.mark.unit
 def test_effects_and_options_are_frozen_mappings(tmp_path: Path) -> None:
     data = reference_dict()
     data["simulation"]["effects"] = [
@@ -148,6 +156,7 @@ def test_effects_and_options_are_frozen_mappings(tmp_path: Path) -> None:
     assert cfg.to_dict()["simulation"]["effects"][1]["params"] == {"harmonics": [1, 2], "joint": 3}
 
 
+@pytest.mark.unit
 def test_parse_config_from_bytes() -> None:
     cfg = parse_config(REFERENCE.read_bytes(), "inline.yaml")
     assert cfg.source_path == "inline.yaml" and cfg.name == "irb2600"
@@ -310,10 +319,12 @@ def bad_config(request: pytest.FixtureRequest, tmp_path: Path) -> tuple[Path, Ba
     return path, case
 
 
+@pytest.mark.unit
 def test_enough_distinct_bad_configs() -> None:
     assert len(BAD) >= 18
 
 
+@pytest.mark.unit
 def test_bad_config_raises_one_line_error(bad_config: tuple[Path, Bad]) -> None:
     path, case = bad_config
     with pytest.raises(ConfigError) as info:
@@ -326,6 +337,7 @@ def test_bad_config_raises_one_line_error(bad_config: tuple[Path, Bad]) -> None:
     assert isinstance(info.value, ValueError) and isinstance(info.value, CampaignError)
 
 
+@pytest.mark.unit
 def test_bad_config_cli_exit_2(bad_config: tuple[Path, Bad], capsys: pytest.CaptureFixture[str]) -> None:
     path, case = bad_config
     assert main(["validate", str(path)]) == 2
@@ -336,6 +348,7 @@ def test_bad_config_cli_exit_2(bad_config: tuple[Path, Bad], capsys: pytest.Capt
     assert str(path) in err and case.expect[0] in err
 
 
+@pytest.mark.unit
 def test_key_path_attribute() -> None:
     data = reference_dict()
     data["robot"]["joints"][2]["a_mm"] = "long"
@@ -346,6 +359,7 @@ def test_key_path_attribute() -> None:
     assert err.message == "expected a number, got 'long'"
 
 
+@pytest.mark.unit
 def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "nope.yaml"
     with pytest.raises(ConfigError, match="file not found"):
@@ -354,11 +368,13 @@ def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert "file not found" in capsys.readouterr().err
 
 
+@pytest.mark.unit
 def test_directory_instead_of_file(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="directory"):
         load_config(tmp_path)
 
 
+@pytest.mark.unit
 def test_not_utf8(tmp_path: Path) -> None:
     path = tmp_path / "latin1.yaml"
     path.write_bytes(b"name: \xff\xfe\n")
@@ -369,6 +385,7 @@ def test_not_utf8(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- errors
 
 
+@pytest.mark.unit
 def test_error_formats() -> None:
     err = ConfigError("configs/irb2600.yaml", "plan.grid.step_mm", "expected a positive number, got -200")
     assert str(err) == "configs/irb2600.yaml: plan.grid.step_mm: expected a positive number, got -200"
@@ -387,6 +404,7 @@ def test_error_formats() -> None:
 # --------------------------------------------------------------------------- CLI
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", SHIPPED)
 def test_validate_good_config(name: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["validate", str(CONFIGS / name)]) == 0
@@ -412,6 +430,7 @@ def _register(monkeypatch: pytest.MonkeyPatch, exc: BaseException) -> None:
         (KeyboardInterrupt(), 130),
     ],
 )
+@pytest.mark.unit
 def test_cli_error_exit_codes(
     exc: BaseException, code: int, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -421,6 +440,7 @@ def test_cli_error_exit_codes(
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+@pytest.mark.unit
 def test_cli_usage_errors_return_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([]) == 2
     assert main(["no-such-command"]) == 2
@@ -428,6 +448,7 @@ def test_cli_usage_errors_return_2(capsys: pytest.CaptureFixture[str]) -> None:
     capsys.readouterr()
 
 
+@pytest.mark.system
 def test_python_m_campaign(tmp_path: Path) -> None:
     ok = subprocess.run(
         [sys.executable, "-m", "campaign", "validate", str(REFERENCE)], capture_output=True, text=True, cwd=ROOT

@@ -24,6 +24,8 @@ from drivers.base import DriverError, TargetNotFound
 from drivers.mock import MockRobot, MockTracker, MockWorld
 from tests.campaign.helpers import ROOT, small_config
 
+pytestmark = pytest.mark.unit
+
 CONFIGS = ROOT / "configs"
 SMR2 = [72.676, -65.854, 80.0]          # seed 003 Table 4 triangle (d12 = 144.833 mm, d13, d23 ~ 210 mm)
 SMR3 = [-0.518, 131.707, 80.0]

@@ -7,6 +7,8 @@ from campaign.cli import main
 from campaign.writeback import check_rapid_syntax, parse_rapid_module
 from tests.campaign.helpers import ROOT
 
+pytestmark = pytest.mark.system
+
 CONFIG = str(ROOT / "configs/irb2600.yaml")
 
 

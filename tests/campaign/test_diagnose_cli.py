@@ -36,6 +36,7 @@ def diagnosed(tmp_path_factory):
     return code, json.loads(out.read_text()), camp
 
 
+@pytest.mark.system
 def test_json_contract(diagnosed):
     code, rep, _ = diagnosed
     assert code == 0
@@ -55,6 +56,7 @@ def test_json_contract(diagnosed):
         assert "vs floor" in w["description"]
 
 
+@pytest.mark.system
 def test_the_withheld_effects_are_found_and_the_gap_shrinks_to_the_floor(diagnosed):
     _, rep, camp = diagnosed
     found = {f["effect"]: f for f in rep["findings"] if f["accepted"]}
@@ -72,6 +74,7 @@ def test_the_withheld_effects_are_found_and_the_gap_shrinks_to_the_floor(diagnos
     assert rep["undiagnosable"] == [] and rep["evaluation"] == "test"
 
 
+@pytest.mark.system
 def test_noise_floor_from_specs_without_repeats(tmp_path, capsys):
     csv, cfg, _ = campaign_csv(tmp_path, [], 52, drop_check=True)
     out = tmp_path / "r.json"
@@ -82,6 +85,7 @@ def test_noise_floor_from_specs_without_repeats(tmp_path, capsys):
     assert "Which effect" in capsys.readouterr().out
 
 
+@pytest.mark.system
 def test_bad_csv_is_one_line_exit_2(tmp_path, capsys):
     csv, cfg, _ = campaign_csv(tmp_path, [], 53)
     lines = csv.read_text().splitlines()
@@ -98,6 +102,7 @@ def test_bad_csv_is_one_line_exit_2(tmp_path, capsys):
     (["diagnose", "missing.csv", "--config", "CFG"], "missing.csv: no such file or run directory"),
     (["diagnose", "--self-check", "data.csv"], "--self-check takes no data"),
 ])
+@pytest.mark.system
 def test_usage_errors_are_one_line_exit_2(tmp_path, capsys, args, message):
     cfg = small_config(tmp_path)
     args = [str(cfg) if a == "CFG" else str(tmp_path / a) if a.endswith(".csv") else a for a in args]
@@ -106,6 +111,7 @@ def test_usage_errors_are_one_line_exit_2(tmp_path, capsys, args, message):
     assert err.count("\n") == 0 and message in err
 
 
+@pytest.mark.system
 def test_wrong_joint_count_and_too_few_rows_exit_2(tmp_path, capsys):
     rows = ["point_id,set,q1,q2,q3,x,y,z"] + [f"P{i},calib,{i},{i},{i},1,2,{i}" for i in range(50)]
     (tmp_path / "three.csv").write_text("\n".join(rows) + "\n")
@@ -118,6 +124,7 @@ def test_wrong_joint_count_and_too_few_rows_exit_2(tmp_path, capsys):
     assert "only 12 calib rows: the diagnosis needs at least 40" in capsys.readouterr().err
 
 
+@pytest.mark.system
 def test_plots_or_a_one_line_note(tmp_path, capsys, monkeypatch):
     csv, cfg, _ = campaign_csv(tmp_path, ["gear_cyclic"], 54)
     if importlib.util.find_spec("matplotlib") is None:
@@ -141,6 +148,7 @@ def test_plots_or_a_one_line_note(tmp_path, capsys, monkeypatch):
         assert "matplotlib is not installed: no plots" in capsys.readouterr().out
 
 
+@pytest.mark.system
 def test_self_check_entry_point_prints_the_confusion_matrix_and_writes_json(tmp_path, capsys, monkeypatch):
     import robocal.selfcheck as sc
     monkeypatch.setattr(sc, "trial_plan", lambda seeds, *a, **k: [("single", ("backlash",), 61),

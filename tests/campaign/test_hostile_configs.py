@@ -188,12 +188,12 @@ def _write(tmp_path: Path, case: Case) -> Path:
     return path
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_table_size():
     assert len(CASES) >= 40
 
 
-@pytest.mark.unit
+@pytest.mark.system
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_hostile_config(name, tmp_path, capsys, monkeypatch):
     """validate, plan and run all refuse it with the same one line, exit 2; nothing is written."""
@@ -208,7 +208,7 @@ def test_hostile_config(name, tmp_path, capsys, monkeypatch):
     assert snapshot(tmp_path) == before
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_shipped_configs_validate(capsys):
     for path in sorted((ROOT / "configs").glob("*.yaml")):
         code, out, err = cli(capsys, "validate", path)

@@ -188,12 +188,12 @@ def _write(tmp: Path, base: dict, case: Case) -> Path:
     return path
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_table_size():
     assert len(CASES) >= 30
 
 
-@pytest.mark.unit
+@pytest.mark.system
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_hostile_csv(name, base, tmp_path, capsys):
     case = CASES[name]
@@ -207,7 +207,7 @@ def test_hostile_csv(name, base, tmp_path, capsys):
     assert snapshot(tmp_path) == before                 # no out/, no model.json, no diag.json
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_force_overrides_and_the_report_says_so(base, tmp_path, capsys):
     import json
 
@@ -219,7 +219,7 @@ def test_force_overrides_and_the_report_says_so(base, tmp_path, capsys):
     assert plaus["forced"] and len(plaus["rejected_rows"]) == 1 and "q2 = 1000" in plaus["overridden"][0]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_reprocess_states_unit_and_nominal_bound(base, tmp_path, capsys):
     path = _write(tmp_path, base, Case())
     code, out, err = cli(capsys, "reprocess", path, "--config", base["config"], "--out", tmp_path / "out")

@@ -127,12 +127,12 @@ LOG_CASES: dict[str, LogCase] = {
 }
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_log_table_size():
     assert len(LOG_CASES) >= 15
 
 
-@pytest.mark.unit
+@pytest.mark.system
 @pytest.mark.parametrize("name", sorted(LOG_CASES))
 def test_hostile_log_resume_refused_before_anything_moves(name, base, tmp_path, capsys):
     case = LOG_CASES[name]
@@ -144,9 +144,9 @@ def test_hostile_log_resume_refused_before_anything_moves(name, base, tmp_path, 
     assert snapshot(tmp_path) == before                  # not even a resume event was appended
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("name", ["xyz_1e300", "xyz_strings", "xyz_missing", "bad_crc_in_the_middle",
                                   "seq_gap", "empty_log", "q_read_1000_deg"])
+@pytest.mark.system
 def test_hostile_log_reprocess(name, base, tmp_path, capsys):
     case = LOG_CASES[name]
     lines = [bytes(b) for b in base["lines"]]
@@ -157,7 +157,7 @@ def test_hostile_log_reprocess(name, base, tmp_path, capsys):
     assert snapshot(tmp_path) == before
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_reprocess_of_an_interrupted_run_says_what_is_missing(base, tmp_path, capsys):
     run = _interrupted(tmp_path, base)
     code, out, err = cli(capsys, "reprocess", run, "--config", base["config"], "--out", tmp_path / "out")
@@ -208,7 +208,7 @@ IO_CASES: dict[str, IOCase] = {
 }
 
 
-@pytest.mark.unit
+@pytest.mark.system
 @pytest.mark.parametrize("name", sorted(IO_CASES))
 def test_missing_paths(name, base, tmp_path, capsys):
     case = IO_CASES[name]
@@ -218,7 +218,7 @@ def test_missing_paths(name, base, tmp_path, capsys):
     assert snapshot(tmp_path, base["run"]) == before
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_read_only_output_dir(base, tmp_path, capsys, monkeypatch):
     """The output directory is on a read-only file system (simulated: we run as root in CI containers)."""
     ro = tmp_path / "ro"
@@ -236,7 +236,7 @@ def test_read_only_output_dir(base, tmp_path, capsys, monkeypatch):
     assert list(ro.iterdir()) == []
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_disk_full_during_reprocess(base, tmp_path, capsys, monkeypatch):
     def full(fd, data):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -249,7 +249,7 @@ def test_disk_full_during_reprocess(base, tmp_path, capsys, monkeypatch):
     assert not out_dir.exists() or list(out_dir.iterdir()) == []      # no partial report/model, no temp file
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_disk_full_during_run_keeps_the_log_intact(base, tmp_path, capsys, monkeypatch):
     import campaign.runlog as runlog
 
@@ -271,7 +271,7 @@ def test_disk_full_during_run_keeps_the_log_intact(base, tmp_path, capsys, monke
     assert 1 <= len(contents.points) <= 6
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_internal_error_writes_a_crash_report(base, tmp_path, capsys, monkeypatch):
     import campaign.plan
 
@@ -347,7 +347,7 @@ def _targets(tmp: Path, rows: list[str]) -> Path:
     return path
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_correct_all_rejected_exits_1_with_the_reasons(base, tmp_path, capsys):
     targets = _targets(tmp_path, ["FAR1,3000,0,1000", "FAR2,0,3500,0"])
     out_dir = tmp_path / "out"
@@ -359,7 +359,7 @@ def test_correct_all_rejected_exits_1_with_the_reasons(base, tmp_path, capsys):
     assert (out_dir / "rejected.csv").read_text().count("unreachable") == 2
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_correct_model_of_another_robot_exits_2(base, tmp_path, capsys):
     other = small_config(tmp_path, "irb4600")
     targets = _targets(tmp_path, ["A,900,0,1000"])
@@ -369,7 +369,7 @@ def test_correct_model_of_another_robot_exits_2(base, tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_correct_long_id_is_rejected_with_its_reason_and_only_the_controllers_formats(base, tmp_path, capsys):
     long_id = "L" * 90
     targets = _targets(tmp_path, ["A,900,0,1000", f"{long_id},1000,100,900"])

@@ -76,7 +76,7 @@ def _check(code: int, out: str, err: str, allowed: set[int]) -> None:
         assert len(err.strip().splitlines()) == 1, err[:800]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_500_mutated_configs(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     rng = np.random.default_rng(SEED)

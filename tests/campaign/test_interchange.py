@@ -11,6 +11,7 @@ from campaign.errors import DataError
 from campaign.interchange import Dataset, dataset_from_log, read_csv, write_csv
 from campaign.runlog import RunLog, read_log
 
+
 HEADER6 = "point_id,set,q1,q2,q3,q4,q5,q6,x,y,z"
 ROWS6 = [
     "P1,calib,0,10,20,30,40,50,1000.5,200.25,300.125",
@@ -49,6 +50,7 @@ def assert_same(a: Dataset, b: Dataset) -> None:
 # ---------------------------------------------------------------- good input
 
 
+@pytest.mark.unit
 def test_read_simple_6_joint_file(tmp_path):
     path = write(tmp_path, "\n".join([HEADER6, *ROWS6]) + "\n")
     ds = read_csv(path)
@@ -63,6 +65,7 @@ def test_read_simple_6_joint_file(tmp_path):
     assert test.point_id == ("P3",) and test.q_deg.shape == (1, 6)
 
 
+@pytest.mark.unit
 def test_read_7_joint_file_any_column_order(tmp_path):
     header = "x,y,z,Q7,q6,q5,q4,q3,q2,q1,SET,point_id,temp_c"
     row = "1,2,3,7,6,5,4,3,2,1,Calib,A,20.5"
@@ -73,6 +76,7 @@ def test_read_7_joint_file_any_column_order(tmp_path):
     assert ds.set == ("calib",) and ds.temp_c.tolist() == [20.5]
 
 
+@pytest.mark.unit
 def test_semicolon_separator_with_decimal_comma(tmp_path):
     text = "point_id;set;q1;q2;x;y;z;t_s\nA;calib;1,5;-2;10,25;0;1e3;0\nB;test;2.5;3;11;1;2;1,5\n"
     ds = read_csv(write(tmp_path, text))
@@ -81,6 +85,7 @@ def test_semicolon_separator_with_decimal_comma(tmp_path):
     np.testing.assert_array_equal(ds.t_s, [0.0, 1.5])
 
 
+@pytest.mark.unit
 def test_bom_comments_blank_lines_crlf_whitespace_quotes(tmp_path):
     text = (
         "\ufeff# exported by some tracker software\r\n"
@@ -98,6 +103,7 @@ def test_bom_comments_blank_lines_crlf_whitespace_quotes(tmp_path):
     assert ds.q_deg[1, 0] == 5.0
 
 
+@pytest.mark.unit
 def test_second_and_third_smr_and_scalars(tmp_path):
     header = HEADER6 + ",x2,y2,z2,x3,y3,z3,t_s,temp_c,payload_kg"
     row = ROWS6[0] + ",1,2,3,4,5,6,0.5,21.0,12"
@@ -107,12 +113,14 @@ def test_second_and_third_smr_and_scalars(tmp_path):
     assert (ds.t_s[0], ds.temp_c[0], ds.payload_kg[0]) == (0.5, 21.0, 12.0)
 
 
+@pytest.mark.unit
 def test_check_rows_may_repeat_their_id(tmp_path):
     rows = [ROWS6[0], "C1,check,0,0,0,0,0,0,1,2,3", ROWS6[1], "C1,check,0,0,0,0,0,0,1,2,3.01"]
     ds = read_csv(write(tmp_path, "\n".join([HEADER6, *rows])))
     assert ds.point_id.count("C1") == 2 and ds.mask("check").sum() == 2
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("n_joints", [6, 7])
 def test_round_trip_write_read(tmp_path, n_joints):
     rng = np.random.default_rng(n_joints)
@@ -141,6 +149,7 @@ def test_round_trip_write_read(tmp_path, n_joints):
     assert_same(ds, read_csv(path))
 
 
+@pytest.mark.unit
 def test_write_refuses_unreadable_data(tmp_path):
     rng = np.random.default_rng(1)
     ds = random_dataset(rng, 3, 6)
@@ -154,6 +163,7 @@ def test_write_refuses_unreadable_data(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing left behind
 
 
+@pytest.mark.system
 def test_large_file_round_trips(tmp_path):
     """100k rows (timing: bench/bench_io.py)."""
     rng = np.random.default_rng(7)
@@ -167,6 +177,7 @@ def test_large_file_round_trips(tmp_path):
 # ---------------------------------------------------------------- approach
 
 
+@pytest.mark.unit
 def test_approach_sign_hand_made_sequence():
     q = np.array(
         [
@@ -186,6 +197,7 @@ def test_approach_sign_hand_made_sequence():
     np.testing.assert_array_equal(single.approach_sign(), [[0, 0, 0]])
 
 
+@pytest.mark.unit
 def test_dataset_is_validated_and_read_only():
     with pytest.raises(ValueError, match="p_tracker_mm"):
         Dataset(("A",), ("calib",), [[1.0]], [[1.0, 2.0]])
@@ -277,6 +289,7 @@ BAD_CASES = {
 }
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("case", sorted(BAD_CASES))
 def test_bad_input_gives_one_line_data_error(tmp_path, case):
     text, expected = BAD_CASES[case]
@@ -289,6 +302,7 @@ def test_bad_input_gives_one_line_data_error(tmp_path, case):
     assert isinstance(info.value, ValueError)
 
 
+@pytest.mark.unit
 def test_errors_report_the_physical_line_number(tmp_path):
     text = "# c1\n\n" + HEADER6 + "\n# c2\n" + ROWS6[0] + "\n\nP2,calib,5,10,15,30,45,50,x,1,2\n"
     path = write(tmp_path, text)
@@ -299,6 +313,7 @@ def test_errors_report_the_physical_line_number(tmp_path):
 # ---------------------------------------------------------------- from a log
 
 
+@pytest.mark.unit
 def test_dataset_from_log(tmp_path):
     start = {"config_sha256": "0" * 64, "plan_sha256": "1" * 64, "config": {}, "created_utc": "t",
              "software_version": "test", "units": {}}
@@ -337,6 +352,7 @@ def test_dataset_from_log(tmp_path):
     assert_same(ds, read_csv(tmp_path / "out.csv"))
 
 
+@pytest.mark.unit
 def test_dataset_from_log_rejects_mixed_optional_fields(tmp_path):
     start = {"units": {}}
     with RunLog.create(tmp_path, start) as log:

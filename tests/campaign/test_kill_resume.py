@@ -17,6 +17,10 @@ from campaign.plan import build_plan
 from campaign.runlog import read_log
 from tests.campaign.helpers import ROOT, small_config
 
+import pytest
+
+pytestmark = pytest.mark.system
+
 KILLS = 12
 
 

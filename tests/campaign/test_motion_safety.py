@@ -138,7 +138,7 @@ def _random_plan(rng, kin, p_pts):
     return q, Boxes(lo, hi), q_ref, envelope
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(tmp_path):
     """200 random plans: plan_route either routes every move (via poses, a point visited later) or refuses naming
     the pair; on every routed plan a

@@ -189,7 +189,7 @@ def test_bad_phenomena_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, ca
     assert not out.exists()
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_plan_nest_rounds_and_random_order(tmp_path):
     from campaign.cell import nominal_kinematics
     from campaign.plan import build_plan

@@ -14,6 +14,8 @@ from robocal.ik import branch_signature
 from robocal.kinematics import smr_base, within_limits
 from tests.campaign.helpers import ROOT, small_config
 
+pytestmark = pytest.mark.system
+
 
 @pytest.fixture(scope="module")
 def full_run(tmp_path_factory):

@@ -48,7 +48,7 @@ def plain_lm_test_rms(q, p):
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_default_is_never_worse_than_plain_lm_without_gross_outliers():
     ratios, excluded, extra = [], 0, 0
     for seed in range(20):
@@ -62,7 +62,7 @@ def test_default_is_never_worse_than_plain_lm_without_gross_outliers():
     assert max(ratios) <= 1.03
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_isolated_gross_outliers_are_excluded_and_nothing_else():
     for seed in (100, 101, 102):
         ds, q, p, bad = simulated_dataset(seed, outlier_fraction=0.05)
@@ -96,7 +96,7 @@ def test_three_smr_dataset_reports_offsets_and_orientation():
     assert all(v["rms_mm"] < 0.03 for v in multi["test"].values())
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_structure_is_kept_and_faults_found_under_strong_compliance():
     """J2/J3 compliance at 4x the typical value: the geometric residuals are structured (0.2-0.3 mm at high
     gravity torque); no clean point is excluded, every isolated 1-3 mm fault is, and the model takes compliance."""

@@ -26,6 +26,7 @@ from campaign.runlog import (
     read_log,
 )
 
+
 REPO = Path(__file__).resolve().parents[2]
 
 START = {
@@ -87,6 +88,7 @@ def make_log(run_dir: Path, n_points: int = 5, status: str | None = "success") -
 # ---------------------------------------------------------------- round trip
 
 
+@pytest.mark.unit
 def test_round_trip(tmp_path):
     run = tmp_path / "run"
     with RunLog.create(run, START) as log:
@@ -115,6 +117,7 @@ def test_round_trip(tmp_path):
     assert read_log(run).n_records == 8  # a run directory is accepted too
 
 
+@pytest.mark.unit
 def test_create_refuses_existing_log(tmp_path):
     make_log(tmp_path)
     with pytest.raises(RunLogExistsError) as info:
@@ -125,6 +128,7 @@ def test_create_refuses_existing_log(tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name != LOG_NAME]  # no temp file left
 
 
+@pytest.mark.unit
 def test_closed_log_refuses_appends(tmp_path):
     log = RunLog.create(tmp_path, START)
     log.close("abort", "e-stop")
@@ -134,6 +138,7 @@ def test_closed_log_refuses_appends(tmp_path):
     assert read_log(tmp_path).stops[0]["exit_status"] == "abort"
 
 
+@pytest.mark.unit
 def test_bad_arguments(tmp_path):
     log = RunLog.create(tmp_path, START)
     size = (tmp_path / LOG_NAME).stat().st_size
@@ -148,6 +153,7 @@ def test_bad_arguments(tmp_path):
     log.close()
 
 
+@pytest.mark.unit
 def test_context_manager_records_failure(tmp_path):
     with pytest.raises(RuntimeError):
         with RunLog.create(tmp_path, START) as log:
@@ -157,6 +163,7 @@ def test_context_manager_records_failure(tmp_path):
     assert stop == {"exit_status": "fail", "reason": "RuntimeError: tracker lost the beam", "n_points": 1}
 
 
+@pytest.mark.unit
 def test_second_writer_is_locked_out(tmp_path):
     log = RunLog.create(tmp_path, START)
     with pytest.raises(RunLogError, match="in use"):
@@ -177,6 +184,7 @@ def corrupt_line(path: Path, line_no: int) -> None:
     path.write_bytes(b"\n".join(lines))
 
 
+@pytest.mark.unit
 def test_crc_mismatch_in_middle_is_an_error(tmp_path):
     path = make_log(tmp_path)
     corrupt_line(path, 3)
@@ -190,6 +198,7 @@ def test_crc_mismatch_in_middle_is_an_error(tmp_path):
     assert path.read_bytes() == before  # resume refused and changed nothing
 
 
+@pytest.mark.unit
 def test_bad_json_in_middle_is_an_error(tmp_path):
     path = make_log(tmp_path)
     lines = path.read_bytes().split(b"\n")
@@ -199,6 +208,7 @@ def test_bad_json_in_middle_is_an_error(tmp_path):
         read_log(path)
 
 
+@pytest.mark.unit
 def test_seq_out_of_order_is_an_error_even_last(tmp_path):
     path = make_log(tmp_path, n_points=2, status=None)
     with open(path, "ab") as fh:
@@ -207,6 +217,7 @@ def test_seq_out_of_order_is_an_error_even_last(tmp_path):
         read_log(path)
 
 
+@pytest.mark.unit
 def test_missing_start_is_an_error(tmp_path):
     (tmp_path / LOG_NAME).write_bytes(b"")
     with pytest.raises(RunLogError, match="no complete start record"):
@@ -216,6 +227,7 @@ def test_missing_start_is_an_error(tmp_path):
         RunLog.open_for_resume(tmp_path)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("tail", ["half", "no_newline", "bad_crc_last", "garbage", "zeros"])
 def test_torn_tail_ignored_then_truncated(tmp_path, tail):
     path = make_log(tmp_path, n_points=4, status=None)
@@ -245,6 +257,7 @@ def test_torn_tail_ignored_then_truncated(tmp_path, tail):
     assert c.events == [{"type": "resume", "previous_exit": None, "dropped_tail_bytes": len(torn)}]
 
 
+@pytest.mark.unit
 def test_resume_after_stop_continues_seq(tmp_path):
     path = make_log(tmp_path, n_points=3, status="paused")
     before = path.read_bytes()
@@ -290,6 +303,7 @@ CHILD = textwrap.dedent(
 )
 
 
+@pytest.mark.system
 def test_sigkill_at_random_moments(tmp_path):
     rng = np.random.default_rng(20260101)
     script = tmp_path / "child.py"

@@ -8,6 +8,10 @@ from campaign.runner import Runner
 from drivers.base import BeamBroken, MotionError, TrackerReading
 from drivers.mock import VirtualClock
 
+import pytest
+
+pytestmark = pytest.mark.unit
+
 
 class StubRobot:
     n_joints = 6

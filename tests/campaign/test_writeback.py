@@ -14,6 +14,8 @@ import pytest
 from campaign import writeback as wb
 from campaign.writeback import CorrectedTarget, Rejected
 
+pytestmark = pytest.mark.unit
+
 Q_MIN = (-180.0, -95.0, -180.0, -400.0, -120.0, -400.0)
 Q_MAX = (180.0, 155.0, 75.0, 400.0, 120.0, 400.0)
 LIMITS = dict(q_min_deg=Q_MIN, q_max_deg=Q_MAX)

@@ -26,6 +26,8 @@ from drivers.tracker import (LineProfile, LineSensor, LineTracker, NoReply, Sens
                              open_tracker)
 from tests.drivers.helpers import served_port
 
+pytestmark = pytest.mark.system
+
 REPO = Path(__file__).resolve().parents[2]
 T = 0.2  # request timeout used throughout (s)
 SLACK = 3.0  # scheduling tolerance on elapsed-time upper bounds (s): they prove 'never hangs', not speed

@@ -13,6 +13,8 @@ from drivers.base import (BeamBroken, GarbageReply, TargetNotFound, TrackerError
 from drivers.tracker import (LineProfile, Reply, TrackerCodec, average_readings, open_tracker, port_spec,
                              spherical_to_xyz)
 
+pytestmark = pytest.mark.unit
+
 
 def codec(**options) -> TrackerCodec:
     return TrackerCodec(LineProfile.from_options(options))

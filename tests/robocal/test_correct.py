@@ -10,6 +10,7 @@ from robocal.simulate import random_geometric_errors
 from tests.cells import irb2600
 
 
+
 def truth_model(seed=0):
     nominal = irb2600()
     truth = random_geometric_errors(nominal, np.random.default_rng(seed))
@@ -25,6 +26,7 @@ def targets(nominal, T_tool, n=200, seed=1):
     return q, fk(nominal, q) @ T_tool
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("generator", GENERATORS)
 def test_every_generator_compensates_position(generator):
     nominal, T_tool, ap = truth_model()
@@ -37,6 +39,7 @@ def test_every_generator_compensates_position(generator):
         assert np.degrees(c.rot_err_rad).mean() < 0.02
 
 
+@pytest.mark.system
 def test_pose_error_function_and_ensemble_pick_the_best():
     nominal, T_tool, ap = truth_model(2)
     q, Td = targets(nominal, T_tool, 100, 3)
@@ -46,6 +49,7 @@ def test_pose_error_function_and_ensemble_pick_the_best():
     assert set(ens.generator) <= {"multiply", "quaternion"}
 
 
+@pytest.mark.unit
 def test_exact_model_needs_no_iteration():
     nominal, T_tool, _ = truth_model()
     q, Td = targets(nominal, T_tool, 20)
@@ -53,6 +57,7 @@ def test_exact_model_needs_no_iteration():
     assert np.all(c.iterations == 0) and np.allclose(c.q_rad, q)
 
 
+@pytest.mark.unit
 def test_generators_are_fixed_points_at_the_target():
     rng = np.random.default_rng(4)
     R = rotvec_to_matrix(rng.normal(size=(5, 3)))
@@ -65,6 +70,7 @@ def test_generators_are_fixed_points_at_the_target():
                                        atol=1e-9)
 
 
+@pytest.mark.unit
 def test_quaternion_update_is_eq19():
     rng = np.random.default_rng(5)
     Rp, Ra, Rd = (rotvec_to_matrix(rng.normal(size=(4, 3))) for _ in range(3))

@@ -11,6 +11,7 @@ from robocal.diagnose.scoring import _greedy
 from robocal.effects import gravity_torques, lumped_gravity_torques, thermal_warmup, warmup_curve
 from robocal.selfcheck import Protocol, irb2600, simulate_campaign
 
+
 CONTRACT = {"noise_floor_mm", "noise_floor_source", "baseline_test_rms_mm", "final_test_rms_mm", "unexplained",
             "findings", "where"}
 
@@ -22,6 +23,7 @@ def accepted(d):
 # ---------------------------------------------------------------- one effect present -> found, with its joints
 @pytest.mark.parametrize("effect,seed", [("backlash", 11), ("gear_cyclic", 12), ("axis_coupling", 13),
                                          ("joint_compliance", 14), ("thermal_drift", 15)])
+@pytest.mark.system
 def test_one_withheld_effect_is_found_with_its_joints(effect, seed):
     camp = simulate_campaign([effect], seed, magnitude=1.0)
     d = diagnose(camp.diagnosis_input())
@@ -43,6 +45,7 @@ def test_one_withheld_effect_is_found_with_its_joints(effect, seed):
     assert CONTRACT <= set(d.to_dict())
 
 
+@pytest.mark.system
 def test_effect_free_data_accept_nothing_and_leave_no_structure():
     for seed in (21, 22):
         d = diagnose(simulate_campaign([], seed).diagnosis_input())
@@ -54,6 +57,7 @@ def test_effect_free_data_accept_nothing_and_leave_no_structure():
 
 
 # ---------------------------------------------------------------- metadata that cannot reveal an effect
+@pytest.mark.unit
 def test_missing_timestamps_make_thermal_drift_undiagnosable_not_misattributed():
     camp = simulate_campaign(["thermal_drift"], 31, magnitude=1.0)
     d = diagnose(replace(camp.diagnosis_input(), t_s=None))
@@ -64,6 +68,7 @@ def test_missing_timestamps_make_thermal_drift_undiagnosable_not_misattributed()
     assert any("without spatial structure" in n for n in d.notes)
 
 
+@pytest.mark.unit
 def test_approach_directions_that_never_change_make_backlash_undiagnosable():
     camp = simulate_campaign(["backlash"], 32, magnitude=1.0)
     inp = camp.diagnosis_input()
@@ -73,6 +78,7 @@ def test_approach_directions_that_never_change_make_backlash_undiagnosable():
     assert "backlash" not in [e for e, _ in accepted(d)]
 
 
+@pytest.mark.system
 def test_single_payload_reports_payload_deflection_as_undiagnosable_and_compliance_as_a_class():
     camp = simulate_campaign(["payload_deflection"], 33, magnitude=1.0, protocol=Protocol(payloads_kg=(12.0,)))
     d = diagnose(camp.diagnosis_input())
@@ -86,6 +92,7 @@ def test_single_payload_reports_payload_deflection_as_undiagnosable_and_complian
 
 
 # ---------------------------------------------------------------- scoring building blocks
+@pytest.mark.unit
 def test_greedy_bic_selects_the_block_that_is_in_the_data_and_only_it():
     rng = np.random.default_rng(0)
     n = 600
@@ -98,6 +105,7 @@ def test_greedy_bic_selects_the_block_that_is_in_the_data_and_only_it():
     assert chosen == [] and dbic == 0.0
 
 
+@pytest.mark.unit
 def test_absorption_index_of_a_regressor_inside_and_outside_the_base():
     rng = np.random.default_rng(1)
     base = rng.normal(size=(300, 5))
@@ -108,6 +116,7 @@ def test_absorption_index_of_a_regressor_inside_and_outside_the_base():
     assert _absorption([outside], Q) < 0.1
 
 
+@pytest.mark.unit
 def test_structure_test_separates_noise_from_a_smooth_field():
     rng = np.random.default_rng(2)
     x = rng.uniform(0, 1, (400, 2))
@@ -119,6 +128,7 @@ def test_structure_test_separates_noise_from_a_smooth_field():
     assert res["x"]["z"] > 6 and res["x"]["S"] > 0.5
 
 
+@pytest.mark.unit
 def test_where_names_the_far_reach_region_in_words():
     rng = np.random.default_rng(3)
     m = 300
@@ -137,6 +147,7 @@ def test_where_names_the_far_reach_region_in_words():
 
 
 # ---------------------------------------------------------------- helpers shared with the campaign layer
+@pytest.mark.unit
 def test_alternative_effect_forms_reduce_to_the_library_ones():
     kin = irb2600()
     q = np.random.default_rng(6).uniform(-1, 1, (30, 6))
@@ -154,6 +165,7 @@ def test_alternative_effect_forms_reduce_to_the_library_ones():
     assert np.max(np.abs(b.dp)) > 0.05                 # 100 ppm growth of ~1.5 m of links, saturated
 
 
+@pytest.mark.unit
 def test_options_are_respected():
     camp = simulate_campaign(["backlash", "gear_cyclic"], 41, magnitude=1.0)
     d = diagnose(camp.diagnosis_input(), DiagnosisOptions(max_effects=1))

@@ -37,7 +37,7 @@ def test_truth_gravity_torque_on_j2_depends_on_q3():
     assert abs(tau[0, 1] - tau[1, 1]) > 0.05 * abs(tau[0, 1])
 
 
-@pytest.mark.unit
+@pytest.mark.system
 @pytest.mark.parametrize("truth,other", [("readback_lag", "backlash"), ("backlash", "readback_lag")])
 def test_readback_lag_and_backlash_are_told_apart_on_ten_seeds(truth, other):
     """Random move order, read-back joints only (no commanded joints): the saturation test decides."""
@@ -58,7 +58,7 @@ def test_readback_lag_and_backlash_are_told_apart_on_ten_seeds(truth, other):
     assert right == 10
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_commanded_joints_measure_the_lag_directly():
     camp = simulate(["readback_lag"], 321, SMALL)
     d = diagnose(truth_input(camp, with_qc=True))
@@ -73,7 +73,7 @@ def test_commanded_joints_measure_the_lag_directly():
     assert not lag.accepted and "commanded and read-back joints agree" in lag.evidence["reason"]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_gravity_compliance_with_q3_dependent_torque_is_not_called_a_j2_gear_error():
     for seed in (401, 402, 403):
         camp = simulate(["joint_compliance"], seed, SMALL)
@@ -91,7 +91,7 @@ def test_gravity_compliance_with_q3_dependent_torque_is_not_called_a_j2_gear_err
         assert set(phys) <= {"J2", "J3"} and k_true
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_effect_free_controls_accept_nothing():
     for seed in (501, 502, 503):
         d = diagnose(truth_input(simulate([], seed, SMALL), with_qc=seed % 2 == 0))
@@ -99,7 +99,7 @@ def test_effect_free_controls_accept_nothing():
         assert d.final_test_rms_mm == d.baseline_test_rms_mm
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_reference_nests_rule_drift_out_or_see_it_without_timestamps():
     pr = TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4, timestamps=False, nest_every=10)
     stable = simulate([], 601, pr)
@@ -116,7 +116,7 @@ def test_reference_nests_rule_drift_out_or_see_it_without_timestamps():
     assert reg2.evidence["nest_drift"]["detected"]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_reduced_self_check_meets_the_targets():
     """One seed per effect, 3 controls, 2 two-effect cases, 1 out-of-library case (the full run: bench)."""
     result = run_self_check(seeds=1, controls=3, combos=2, outside=1)
@@ -129,7 +129,7 @@ def test_reduced_self_check_meets_the_targets():
     assert s["shrinkage_error_mm"]["mean_abs"] < 0.05
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_compliance_and_j2_gear_are_one_class_when_the_data_cannot_separate_them():
     """J3 held at one angle and one payload: the J2 gravity torque is a pure function of q2, like a J2 harmonic.
     Whichever is named first, the other is in its class, with the experiment that would separate them."""

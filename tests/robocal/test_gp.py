@@ -21,11 +21,13 @@ from tests.campaign.helpers import small_config
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 
+
 def smooth(X):
     """A smooth 'robot error' (mm) of 6 joint angles (rad) that ignores joint 6."""
     return 0.3 * np.sin(1.5 * X[:, 1] + X[:, 2]) + 0.1 * np.cos(X[:, 0]) * X[:, 3] + 0.05 * X[:, 4] ** 2
 
 
+@pytest.mark.unit
 def test_likelihood_gradient_matches_finite_differences():
     rng = np.random.default_rng(0)
     X = np.column_stack([rng.uniform(-1, 1, (40, 3)), rng.uniform(0, 50, 40)])   # joints rad + payload kg
@@ -44,6 +46,7 @@ def test_likelihood_gradient_matches_finite_differences():
         assert L == pytest.approx(direct, rel=1e-10)
 
 
+@pytest.mark.unit
 def test_gp_recovers_a_smooth_function_with_calibrated_uncertainty():
     rng = np.random.default_rng(1)
     lo, hi = np.radians([-40, -20, -50, -60, -90, -90]), np.radians([40, 50, 20, 60, -20, 90])
@@ -65,6 +68,7 @@ def test_gp_recovers_a_smooth_function_with_calibrated_uncertainty():
     assert far[0] == pytest.approx(gp.sigma_f**2 + gp.sigma_n**2, rel=1e-6)
 
 
+@pytest.mark.unit
 def test_rbf_network_fits_the_same_function_less_well():
     rng = np.random.default_rng(2)
     X, Xt = rng.uniform(-1, 1, (100, 6)), rng.uniform(-1, 1, (200, 6))
@@ -77,6 +81,7 @@ def test_rbf_network_fits_the_same_function_less_well():
     assert e_rbf < 0.5 * smooth(Xt).std() and e_gp < e_rbf
 
 
+@pytest.mark.system
 def test_gpr_layer_reduces_held_out_rms_and_round_trips_through_json():
     qc, qt = irb2600_poses()
     rng = np.random.default_rng(3)
@@ -100,6 +105,7 @@ def test_gpr_layer_reduces_held_out_rms_and_round_trips_through_json():
     np.testing.assert_allclose(back.residual.predict_std(qt), layer.predict_std(qt), atol=1e-12)
 
 
+@pytest.mark.unit
 def test_payload_as_an_input_and_the_deflection_grows_with_payload():
     kin = irb4600()
     q = random_configurations(40, seed=0)
@@ -129,6 +135,7 @@ def test_payload_as_an_input_and_the_deflection_grows_with_payload():
     np.testing.assert_allclose(back.predict(qt), layer.predict(qt, None, 30.0), atol=1e-9)
 
 
+@pytest.mark.system
 def test_campaign_reprocess_with_gpr_residual(tmp_path):
     """`campaign run` then `campaign reprocess` with calibration.residual: gpr on a simulated dataset."""
     cfg = small_config(tmp_path, "irb4600", **{"calibration.residual": "gpr", "tool.payload_kg": 40.0,

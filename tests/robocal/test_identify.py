@@ -9,10 +9,12 @@ from robocal.stats import error_stats
 from tests.cells import T_SEED000, irb2600, irb2600_poses, make_cell, measure, ur10, ur10_poses
 
 
+
 def held_out_rms(result, q_test, p_test):
     return error_stats(p_test - smr_tracker(result.kinematics, q_test)).rms_mm
 
 
+@pytest.mark.unit
 def test_registration_closed_form_far_rotated_frame():
     kin = irb2600()
     q = np.random.default_rng(0).uniform(-1, 1, (30, 6))
@@ -20,6 +22,7 @@ def test_registration_closed_form_far_rotated_frame():
     np.testing.assert_allclose(register(kin, q, p_tracker).T_tracker_base, T_SEED000, atol=1e-8)
 
 
+@pytest.mark.unit
 def test_fit_rigid_handles_a_half_turn():
     rng = np.random.default_rng(1)
     a = rng.normal(size=(10, 3)) * 500
@@ -28,6 +31,7 @@ def test_fit_rigid_handles_a_half_turn():
     np.testing.assert_allclose(fit_rigid(a, transform_points(T, a)), T, atol=1e-9)
 
 
+@pytest.mark.system
 @pytest.mark.parametrize("robot,poses", [(irb2600, irb2600_poses), (ur10, ur10_poses)], ids=["irb2600", "ur10"])
 def test_geometric_recovery_reaches_noise_floor(robot, poses):
     qc, qt = poses()
@@ -45,6 +49,7 @@ def test_geometric_recovery_reaches_noise_floor(robot, poses):
     assert np.mean(ratios) <= 1.15 and max(ratios) <= 1.25
 
 
+@pytest.mark.unit
 def test_identifiability_finds_the_classical_redundancies():
     kin = irb2600().with_(p_flange_smr_mm=[30.0, 20.0, 80.0])
     rng = np.random.default_rng(3)
@@ -68,6 +73,7 @@ def test_identifiability_finds_the_classical_redundancies():
         assert abs(result.delta[i] - true_delta) < 5 * result.std[i] + 1e-3, name
 
 
+@pytest.mark.system
 def test_robust_ridge_rejects_outliers():
     qc, qt = irb2600_poses()
     rng = np.random.default_rng(11)
@@ -90,6 +96,7 @@ def test_robust_ridge_rejects_outliers():
     assert np.mean(robust.point_weights == 0) < 0.08
 
 
+@pytest.mark.system
 def test_huber_option_downweights_outliers():
     qc, qt = irb2600_poses()
     rng = np.random.default_rng(12)
@@ -100,11 +107,13 @@ def test_huber_option_downweights_outliers():
     assert np.all(result.point_weights[:5] < 0.1)
 
 
+@pytest.mark.unit
 def test_igg3_weight_function_segments():
     w = igg3_weight(np.array([0.0, 1.5, 2.0, 2.5, 3.0]), 1.5, 2.5)
     np.testing.assert_allclose(w, [1, 1, 1.5 / 2.0 * (0.5 / 1.0) ** 2, 0, 0])
 
 
+@pytest.mark.unit
 def test_nominal_smr_on_the_j6_axis_does_not_hide_wrist_parameters():
     """The config's SMR guess sits on the J6 axis (theta6, a5, alpha5 degenerate there) while the real SMR is
     67 mm off it: identifiability is re-analysed at the solution, so the full set is identified."""

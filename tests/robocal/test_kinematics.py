@@ -5,6 +5,8 @@ from robocal.kinematics import (Kinematics, ParamLayout, apply_update, fk, ident
                                 smr_tracker)
 from tests.cells import T_SEED000, irb2600, ur10
 
+pytestmark = pytest.mark.unit
+
 
 def dh_reference(alpha, a, d, theta, q):
     """Independent standard-DH FK written from the textbook matrix (seed 000 eq. 1), one pose."""

@@ -11,6 +11,8 @@ from robocal.noise import TrackerUncertainty, cartesian_to_spherical, spherical_
 from robocal.payload import HeavyPayloadCell, irb4600, random_configurations
 from robocal.simulate import random_geometric_errors
 
+pytestmark = pytest.mark.unit
+
 TOOL = seed003_tool()
 
 

@@ -9,6 +9,8 @@ from robocal.noise import (TrackerUncertainty, cartesian_to_spherical, noise_flo
 from robocal.stats import error_stats
 from tests.cells import T_SEED000, irb2600, tool_frame
 
+pytestmark = pytest.mark.unit
+
 
 def test_spherical_covariance_matches_jacobian_form_and_monte_carlo():
     unc = TrackerUncertainty()

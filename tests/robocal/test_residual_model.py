@@ -10,12 +10,16 @@ from robocal.residual import IDWResidual, idw, infer_lattice
 from robocal.stats import error_stats
 from tests.cells import grid, irb2600, irb2600_poses, make_cell, measure
 
+import pytest
+
+
 
 def field(p):
     """A smooth 'robot error' field (mm) over base-frame positions (mm)."""
     return np.stack([0.2 * np.sin(p[:, 0] / 400), 0.1 * np.cos(p[:, 1] / 500), 1e-4 * p[:, 2]], axis=1)
 
 
+@pytest.mark.unit
 def test_idw_inside_a_cube_uses_its_eight_vertices():
     nodes = grid([0, 0, 0], [400, 400, 400], 200)
     rng = np.random.default_rng(0)
@@ -33,6 +37,7 @@ def test_idw_inside_a_cube_uses_its_eight_vertices():
     np.testing.assert_allclose(layer.predict(None, nodes_actual[4:5]), err[4:5], atol=1e-12)
 
 
+@pytest.mark.unit
 def test_outside_grid_and_missing_vertices_fall_back_to_nearest_neighbours():
     nodes = grid([0, 0, 0], [400, 400, 400], 200)
     err = np.arange(len(nodes) * 3, dtype=float).reshape(-1, 3)
@@ -47,10 +52,12 @@ def test_outside_grid_and_missing_vertices_fall_back_to_nearest_neighbours():
         np.testing.assert_allclose(pred[i], idw(d[nn][None], err[keep][nn][None], 2.0)[0], atol=1e-9)
 
 
+@pytest.mark.unit
 def test_random_nodes_have_no_lattice():
     assert infer_lattice(np.random.default_rng(0).uniform(0, 1000, (50, 3))) is None
 
 
+@pytest.mark.unit
 def test_correction_sign_target_minus_predicted_error():
     nodes = grid([1000, 0, 1000], [800, 800, 800], 100)
     layer = IDWResidual.fit(nodes + field(nodes), field(nodes))
@@ -64,6 +71,7 @@ def test_correction_sign_target_minus_predicted_error():
     assert np.mean(np.linalg.norm(wrong + field(wrong) - targets, axis=1)) > 1.5 * np.mean(before)
 
 
+@pytest.mark.system
 def test_idw_reduces_held_out_rms_under_joint_compliance():
     qc, qt = irb2600_poses()
     kin_rms, idw_rms = [], []
@@ -81,6 +89,7 @@ def test_idw_reduces_held_out_rms_under_joint_compliance():
     assert all(i < 0.8 * k for i, k in zip(idw_rms, kin_rms))
 
 
+@pytest.mark.system
 def test_model_round_trips_through_json():
     qc, qt = irb2600_poses()
     rng = np.random.default_rng(5)

@@ -1,0 +1,59 @@
+"""What every subcommand module shares: exit codes, the command registry, consoles, plausibility lines.
+
+``campaign.cli`` builds the parser from the registry; the subcommand modules (``cli``, ``cli_diagnose``,
+``cli_report``) register into it. They import this module, never each other.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rich.console import Console
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+Handler = Callable[[argparse.Namespace], int]
+Configure = Callable[[argparse.ArgumentParser], None]
+
+
+@dataclass(frozen=True)
+class Command:
+    """A subcommand: its name, one-line help, argument setup and handler."""
+
+    name: str
+    help: str
+    configure: Configure
+    run: Handler
+
+
+COMMANDS: dict[str, Command] = {}
+
+
+def command(name: str, help: str, configure: Configure) -> Callable[[Handler], Handler]:
+    """Decorator registering ``handler`` as subcommand ``name``."""
+
+    def register(handler: Handler) -> Handler:
+        COMMANDS[name] = Command(name, help, configure, handler)
+        return handler
+
+    return register
+
+
+def _stdout() -> Console:
+    return Console(soft_wrap=True, highlight=False)
+
+
+def _stderr() -> Console:
+    return Console(stderr=True, soft_wrap=True, highlight=False)
+
+
+def print_plausibility(out: Console, plaus: dict | None) -> None:
+    """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
+    from campaign.plausibility import plausibility_lines
+
+    for line, style in plausibility_lines(plaus):
+        out.print(line, style=style, markup=False)

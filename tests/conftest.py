@@ -1,0 +1,17 @@
+"""Every test is either ``unit`` (fast, in-process) or ``system`` (subprocesses, emulators, sockets, whole runs).
+
+A module sets the mark with ``pytestmark`` or on each test. A test with neither, or with both, fails collection,
+so ``pytest -m unit`` and ``pytest -m system`` always split the whole suite in two.
+"""
+from __future__ import annotations
+
+import pytest
+
+KINDS = {"unit", "system"}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    bad = [item.nodeid for item in items if len({m.name for m in item.iter_markers()} & KINDS) != 1]
+    if bad:
+        raise pytest.UsageError("tests need exactly one of the marks unit/system: " + ", ".join(bad[:10])
+                                + (f" (+{len(bad) - 10} more)" if len(bad) > 10 else ""))
