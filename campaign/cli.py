@@ -5,7 +5,7 @@ the parsed ``argparse.Namespace`` and returns the exit code. Operator-facing
 errors are printed as one red line on stderr, never as a traceback:
 
 * ``ConfigError`` / ``DataError`` / ``PlausibilityError`` -> exit 2 (same as a command-line usage error)
-* any other ``CampaignError`` (e.g. ``RunAborted``) or ``DriverError`` -> exit 1
+* any other ``CampaignError`` or ``DriverError`` (e.g. a lost connection) -> exit 1
 * ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
 * Ctrl-C, SIGTERM, SIGHUP -> exit 130
 * anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)

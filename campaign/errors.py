@@ -80,20 +80,6 @@ class DataError(CampaignError, ValueError):
         return (type(self), (self.file, self.message, self.line, self.column))
 
 
-class RunAborted(CampaignError):
-    """A campaign run stopped before completion (operator, safety, hardware)."""
-
-    def __init__(self, reason: str) -> None:
-        self.reason = _one_line(reason)
-        super().__init__(str(self))
-
-    def __str__(self) -> str:
-        return f"run aborted: {self.reason}"
-
-    def __reduce__(self):
-        return (type(self), (self.reason,))
-
-
 class PlausibilityError(CampaignError):
     """The data do not fit the configured robot (wrong robot, wrong unit, impossible deltas): exit 2.
 
