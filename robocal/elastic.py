@@ -20,6 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
+from .lm import levenberg_marquardt
 from .effects import Effect, by_name, effect_regressor, gravity_torques, DEFAULT_LINK_MASSES_KG
 from .identify import (CalibrationOptions, Unidentifiable, analyse_identifiability, whitening, _whiten)
 from .kinematics import Kinematics, ParamLayout, apply_update, chain, identification_jacobian
@@ -178,34 +179,18 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
         A = _whiten(W, np.concatenate([J[:, :, geo_cols], R[:, :, eff_keep]], axis=2)).reshape(-1, P) / D
         return r, A
 
-    def step(kin, x, dx_scaled):
+    def step(state, dx_scaled):
+        kin, x = state
         dx = dx_scaled / D
         full = np.zeros(layout.size)
         full[geo_cols] = dx[: len(geo_cols)]
         x_new = x.copy()
         x_new[eff_keep] += dx[len(geo_cols):]
-        return apply_update(kin, full), x_new, dx
+        return (apply_update(kin, full), x_new), dx
 
-    lam = 1e-3
-    r, A = residual_and_A(kin, x)
-    cost = r @ r
-    converged = False
-    it = 0
-    for it in range(1, max_iter + 1):
-        H, g = A.T @ A, A.T @ r
-        while True:
-            dxs = np.linalg.solve(H + lam * np.diag(np.diag(H)) + options.ridge_mu * np.eye(P), g)
-            kin_t, x_t, dx = step(kin, x, dxs)
-            r_t, A_t = residual_and_A(kin_t, x_t)
-            if r_t @ r_t <= cost or lam > 1e12:
-                break
-            lam *= 10.0
-        old = cost
-        kin, x, r, A, cost = kin_t, x_t, r_t, A_t, r_t @ r_t
-        lam = max(lam / 10.0, 1e-9)
-        if np.max(np.abs(dx)) < options.step_tol or old - cost < 1e-14 * max(old, 1e-300):
-            converged = True
-            break
+    fit = levenberg_marquardt((kin, x), lambda s: residual_and_A(*s), step, options.ridge_mu, max_iter,
+                              options.step_tol)
+    (kin, x), r, A, cost, it, converged = fit.state, fit.r, fit.A, fit.cost, fit.iterations, fit.converged
     m = len(r)
     sigma0 = float(np.sqrt(cost / max(m - P, 1)))
     cov = sigma0**2 * np.linalg.pinv(A.T @ A)

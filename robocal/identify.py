@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .lm import levenberg_marquardt
 from .frames import fit_rigid
 from .kinematics import (Kinematics, ParamLayout, apply_update, identification_jacobian, parameter_difference,
                          smr_base)
@@ -198,25 +199,9 @@ def _apply(kin, layout, cols, dx_scaled, D):
 
 
 def _levenberg_marquardt(kin, q, p_meas, W, cols, D, layout, opt):
-    lam = 1e-3
-    r, A = _linearise(kin, q, p_meas, W, cols, D)
-    cost = r @ r
-    converged = False
-    for it in range(1, opt.max_iter + 1):
-        H, g = A.T @ A, A.T @ r
-        while True:
-            dx = np.linalg.solve(H + lam * np.diag(np.diag(H)) + opt.ridge_mu * np.eye(len(cols)), g)
-            trial, step = _apply(kin, layout, cols, dx, D)
-            r_t, A_t = _linearise(trial, q, p_meas, W, cols, D)
-            if r_t @ r_t <= cost or lam > 1e12:
-                break
-            lam *= 10.0
-        kin, r, A, old, cost = trial, r_t, A_t, cost, r_t @ r_t
-        lam = max(lam / 10.0, 1e-9)
-        if np.max(np.abs(step)) < opt.step_tol or old - cost < 1e-14 * max(old, 1e-300):
-            converged = True
-            break
-    return kin, np.ones(len(q)), it, converged
+    fit = levenberg_marquardt(kin, lambda k: _linearise(k, q, p_meas, W, cols, D),
+                              lambda k, dx: _apply(k, layout, cols, dx, D), opt.ridge_mu, opt.max_iter, opt.step_tol)
+    return fit.state, np.ones(len(q)), fit.iterations, fit.converged
 
 
 def _standardized(A, v, w_rows, Ninv, p, sigma0_mode):

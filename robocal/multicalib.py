@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .lm import levenberg_marquardt
 from .frames import fit_rigid, transform_points
 from .identify import (CalibrationOptions, IdentificationError, Unidentifiable, analyse_identifiability,
                        priority_order, whitening, _whiten)
@@ -104,31 +105,16 @@ def calibrate_multi_smr(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.nd
         r = _whiten(W, p_meas - p).reshape(-1)
         return r, _whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
 
-    def step(kin, offsets, dxs):
+    def step(state, dxs):
+        kin, offsets = state
         full = np.zeros(len(names))
         full[cols] = dxs / D
         geo = np.zeros(layout.size)
         geo[: nj + 6] = full[: nj + 6]
-        return apply_update(kin, geo), offsets + full[nj + 6:].reshape(S, 3), full[cols]
+        return (apply_update(kin, geo), offsets + full[nj + 6:].reshape(S, 3)), full[cols]
 
-    lam, converged, it = 1e-3, False, 0
-    r, Am = lin(kin, offsets)
-    cost = r @ r
-    for it in range(1, max_iter + 1):
-        H, g = Am.T @ Am, Am.T @ r
-        while True:
-            dxs = np.linalg.solve(H + lam * np.diag(np.diag(H)) + options.ridge_mu * np.eye(len(cols)), g)
-            kin_t, off_t, dx = step(kin, offsets, dxs)
-            r_t, A_t = lin(kin_t, off_t)
-            if r_t @ r_t <= cost or lam > 1e12:
-                break
-            lam *= 10.0
-        old = cost
-        kin, offsets, r, Am, cost = kin_t, off_t, r_t, A_t, r_t @ r_t
-        lam = max(lam / 10.0, 1e-9)
-        if np.max(np.abs(dx)) < options.step_tol or old - cost < 1e-14 * max(old, 1e-300):
-            converged = True
-            break
+    fit = levenberg_marquardt((kin, offsets), lambda s: lin(*s), step, options.ridge_mu, max_iter, options.step_tol)
+    (kin, offsets), r, cost, it, converged = fit.state, fit.r, fit.cost, fit.iterations, fit.converged
     kin = kin.with_(p_flange_smr_mm=offsets[0])
     res = P - predict_multi(kin, offsets, q)
     sigma0 = float(np.sqrt(cost / max(len(r) - len(cols), 1)))
