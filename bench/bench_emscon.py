@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import campaign.pipeline as pipeline  # noqa: E402
 from campaign.cli import main  # noqa: E402
 from campaign.config import load_config  # noqa: E402
-from campaign.interchange import dataset_from_log  # noqa: E402
+from campaign.log_dataset import dataset_from_log  # noqa: E402
 from campaign.process import process  # noqa: E402
 from campaign.runlog import read_log  # noqa: E402
 from drivers.emulators.emscon_server import EmsconEmulator  # noqa: E402

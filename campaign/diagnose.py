@@ -33,7 +33,8 @@ from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .config import CampaignConfig
 from .errors import DataError
-from .interchange import Dataset, dataset_from_log, read_csv
+from .interchange import Dataset, read_csv
+from .log_dataset import dataset_from_log
 from .plausibility import check_dataset
 from robocal.repeats import noise_floor_from_repeats, repeat_dof
 

@@ -21,7 +21,8 @@ from drivers.registry import open_robot, open_tracker
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
 from .config import CampaignConfig
 from .errors import CampaignError, ConfigError
-from .interchange import dataset_from_log, read_csv, write_csv
+from .interchange import read_csv, write_csv
+from .log_dataset import dataset_from_log
 from .plan import Plan, build_plan, write_plan_csv
 from .html_report import write_report
 from .process import Processed, process, write_outputs

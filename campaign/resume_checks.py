@@ -106,7 +106,7 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
     """Every point record of RUN_DIR's log is checked against the plan (``plan``, or RUN_DIR/plan.csv when
     None, so that a bad log is refused before the plan is even built) and ``cfg`` before anything moves; then
     the whole log must convert to a dataset (as it will at the end of the run)."""
-    from .interchange import dataset_from_log
+    from .log_dataset import dataset_from_log
 
     from .errors import CampaignError
 

@@ -16,7 +16,8 @@ from campaign.cell import measurement_covariance, nominal_kinematics, simulated_
 from campaign.cli import main
 from campaign.config import load_config
 from campaign.errors import ConfigError
-from campaign.interchange import dataset_from_log, read_csv, write_csv
+from campaign.interchange import read_csv, write_csv
+from campaign.log_dataset import dataset_from_log
 from campaign.plan import build_plan
 from campaign.runlog import RunLog, read_log
 from campaign.runner import Runner

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from campaign.errors import DataError
-from campaign.interchange import Dataset, dataset_from_log, read_csv, write_csv
+from campaign.interchange import Dataset, read_csv, write_csv
+from campaign.log_dataset import dataset_from_log
 from campaign.runlog import RunLog, read_log
 
 

@@ -7,7 +7,8 @@ import pytest
 
 from campaign.cli import main
 from campaign.config import load_config
-from campaign.interchange import Dataset, dataset_from_log, read_csv, write_csv
+from campaign.interchange import Dataset, read_csv, write_csv
+from campaign.log_dataset import dataset_from_log
 from campaign.prepare import prepare
 from campaign.runlog import LogContents, read_log
 from tests.campaign.helpers import small_config

@@ -61,7 +61,7 @@ def test_prediction_after_registration_is_within_a_few_mm(tmp_path, name):
 def test_device_covariance_reaches_the_dataset_only_when_every_point_has_it():
     from types import SimpleNamespace
 
-    from campaign.interchange import dataset_from_log
+    from campaign.log_dataset import dataset_from_log
 
     def record(i, source):
         cov = (np.eye(3) * (1e-4 if source == "device" else 4e-4)).tolist()

@@ -18,7 +18,7 @@ import campaign.pipeline as pipeline
 from campaign.cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from campaign.cli import main
 from campaign.config import load_config
-from campaign.interchange import dataset_from_log
+from campaign.log_dataset import dataset_from_log
 from campaign.plan import build_plan
 from campaign.runlog import RunLog, read_log
 from campaign.runner import Runner
