@@ -8,7 +8,6 @@ position (seed 001 §4.2) where the measured error is significant; report before
 from __future__ import annotations
 
 import csv
-import json
 import warnings
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -27,6 +26,7 @@ from .cell import measurement_covariance, nominal_kinematics
 from .config import CampaignConfig
 from .errors import DataError
 from .plan import PlanPoint
+from .fsutil import write_json
 from .writeback import (CorrectedTarget, Rejected, check_targets, write_rapid_module, write_rejected_csv,
                         write_targets_csv, write_ur_json, write_urscript)
 
@@ -331,10 +331,6 @@ def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str |
             "all": error_stats(err).to_dict(), "corrected": error_stats(err[safe]).to_dict() if safe.any() else None}
 
 
-def atomic_write_json(path: Path, data: dict) -> Path:
-    from .fsutil import atomic_write
-
-    return atomic_write(path, json.dumps(data, indent=1, allow_nan=False).encode())
 
 
 @dataclass(frozen=True)
@@ -412,7 +408,7 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
                               "corrected": "figures over the points whose correction was commanded"},
               "created_utc": datetime.now(timezone.utc).isoformat()}
     out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out_dir / "verify.json", report)
+    write_json(out_dir / "verify.json", report)
     return VerifyResult(report, out_dir, status, reason)
 
 

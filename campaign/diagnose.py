@@ -15,7 +15,6 @@ importable. The self-check (``robocal.selfcheck``) is rendered by ``render_self_
 """
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +32,7 @@ from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .config import CampaignConfig
 from .errors import DataError
+from .fsutil import write_json as _write_json
 from .interchange import Dataset, read_csv
 from .log_dataset import dataset_from_log
 from .plausibility import check_dataset
@@ -158,17 +158,11 @@ def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
 
 
 def write_json(path: str | os.PathLike, data: dict) -> Path:
-    """Atomic JSON write (no NaN: missing figures are null)."""
+    """The report as JSON (atomic, no NaN); a missing directory is bad input."""
     path = Path(path)
     if path.parent and not path.parent.exists():
         raise DataError(str(path), "the directory does not exist")
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=1, allow_nan=False)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    return path
+    return _write_json(path, data)
 
 
 # ============================================================================ terminal

@@ -1,8 +1,10 @@
 """Durable file writes shared by the log, the reports and the write-back files."""
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
+from typing import Any
 
 
 def fsync_dir(directory: str | os.PathLike) -> None:
@@ -38,3 +40,16 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     os.replace(tmp, path)
     fsync_dir(path.parent)
     return path
+
+
+def _plain(x: Any) -> Any:
+    """numpy scalars and arrays as plain JSON values (``json.dumps`` default)."""
+    if hasattr(x, "tolist"):                     # numpy arrays and scalars
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def write_json(path: str | os.PathLike, data: Any) -> Path:
+    """The one way the project writes a JSON file: atomically (see :func:`atomic_write`), NaN refused (missing
+    figures are null), numpy values converted."""
+    return atomic_write(path, json.dumps(data, indent=1, allow_nan=False, default=_plain).encode())

@@ -183,12 +183,12 @@ def finish(cfg: CampaignConfig, run_dir, model: CalibratedModel | None = None) -
     from pathlib import Path
 
     from .cell import nominal_kinematics
-    from .process import _write_json
+    from .fsutil import write_json
     from .runlog import read_log
 
     records = [p for p in read_log(Path(run_dir)).points if ":" in p["point_id"]]
     report = iso_report(cfg, records, iso_cube(cfg, nominal_kinematics(cfg)), model)
-    _write_json(Path(run_dir) / "report.json", report)
+    write_json(Path(run_dir) / "report.json", report)
     return report
 
 

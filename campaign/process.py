@@ -33,7 +33,7 @@ from .cell import calibration_options, measurement_covariance, nominal_kinematic
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
-from .fsutil import atomic_write
+from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 from .prepare import prepare
@@ -382,24 +382,12 @@ def _parameters(result: CalibrationResult) -> list[dict]:
     return rows
 
 
-def _write_json(path: Path, data: dict) -> None:
-    atomic_write(path, json.dumps(data, indent=1, allow_nan=False, default=_plain).encode())
-
-
-def _plain(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
-
-
 def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
     """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "report.json", processed.report)
-    _write_json(out / "model.json", processed.model.to_dict())
+    write_json(out / "report.json", processed.report)
+    write_json(out / "model.json", processed.model.to_dict())
     return out / "report.json"
 
 
