@@ -15,8 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
@@ -188,24 +187,10 @@ def _verify_arguments(parser: argparse.ArgumentParser) -> None:
          _verify_arguments)
 def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.pipeline import verify
-    from rich.table import Table
+    from campaign.report import render_verify
 
     result = verify(args.run_dir, _stdout())
-    rep = result.report
-    floor = rep["noise_floor_mm"]
-    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {floor:.3f} mm); "
-                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
-    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
-        t.add_column(col, justify="left" if col == "stage" else "right")
-    fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
-    for p in rep["passes"]:
-        c = p["corrected"]
-        t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
-                  fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
-    _stdout().print(t)
-    for p in rep["passes"]:
-        for why, count in p["held"].items():
-            _stdout().print(f"{p['stage']}: {count} held: {why}", markup=False)
+    render_verify(_stdout(), result.report)
     _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
         _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)

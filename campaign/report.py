@@ -137,3 +137,21 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
         for s in plan.skipped:
             t.add_row(s.point_id, s.set, *(f"{v:.0f}" for v in s.p_base_mm), s.reason)
         console.print(t)
+
+
+def render_verify(console: Console, rep: dict) -> None:
+    """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
+    floor = rep["noise_floor_mm"]
+    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {floor:.3f} mm); "
+                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
+    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
+        t.add_column(col, justify="left" if col == "stage" else "right")
+    fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
+    for p in rep["passes"]:
+        c = p["corrected"]
+        t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
+                  fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
+    console.print(t)
+    for p in rep["passes"]:
+        for why, count in p["held"].items():
+            console.print(f"{p['stage']}: {count} held: {why}", markup=False)
