@@ -71,6 +71,18 @@ def _points(report: dict):
     return sets, p, q, err
 
 
+def _test_points(report: dict):
+    """(p_base (M, 3), q_deg (M, n), {stage: |err| (M,)}) of the test points, or None without any."""
+    got = _points(report)
+    if got is None:
+        return None
+    sets, p, q, err = got
+    test = sets == "test"
+    if not test.any():
+        return None
+    return p[test], q[test], {k: v[test] for k, v in err.items()}
+
+
 # ============================================================================ calibration run
 def plan_figure(report: dict) -> Figure | None:
     got = _points(report)
@@ -97,20 +109,17 @@ def plan_figure(report: dict) -> Figure | None:
 
 
 def histogram_figure(report: dict) -> Figure | None:
-    got = _points(report)
+    got = _test_points(report)
     if got is None:
         return None
-    sets, _, _, err = got
-    test = sets == "test"
-    if not test.any():
-        return None
+    p, q, err = got
     floor = report["noise_floor_mm"]
     stages = _stages(err)
     fig, axes = _subplots(1, len(stages), (4 * len(stages), 3.6), left=0.06 * 3 / len(stages), bottom=0.16, top=0.9,
                           wspace=0.28)
     axes = axes[0]
     for ax, (key, label) in zip(axes, stages):
-        e = err[key][test]
+        e = err[key]
         ax.hist(e[np.isfinite(e)], bins=20, color=COLORS[key], alpha=0.8)
         ax.axvline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor:.3f} mm")
         ax.set_title(label)
@@ -123,17 +132,14 @@ def histogram_figure(report: dict) -> Figure | None:
 
 
 def cdf_figure(report: dict) -> Figure | None:
-    got = _points(report)
+    got = _test_points(report)
     if got is None:
         return None
-    sets, _, _, err = got
-    test = sets == "test"
-    if not test.any():
-        return None
+    p, q, err = got
     fig, axes = _subplots(1, 1, (7.5, 4.2), left=0.1, bottom=0.14, top=0.96)
     ax = axes[0][0]
     for key, label in _stages(err):
-        e = np.sort(err[key][test][np.isfinite(err[key][test])])
+        e = np.sort(err[key][np.isfinite(err[key])])
         ax.step(e, np.arange(1, len(e) + 1) / len(e), where="post", color=COLORS[key], label=label)
     ax.axvline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
     ax.set_xscale("log")
@@ -146,19 +152,16 @@ def cdf_figure(report: dict) -> Figure | None:
 
 
 def reach_height_figure(report: dict) -> Figure | None:
-    got = _points(report)
+    got = _test_points(report)
     if got is None:
         return None
-    sets, p, _, err = got
-    test = sets == "test"
-    if not test.any():
-        return None
+    p, q, err = got
     fig, axes = _subplots(1, 2, (11, 3.8), left=0.08, bottom=0.15, top=0.95, wspace=0.22)
     axes = axes[0]
-    reach = np.hypot(p[test, 0], p[test, 1])
-    for ax, x, xl in zip(axes, (reach, p[test, 2]), ("reach: radius from the J1 axis (mm)", "height z (mm)")):
+    reach = np.hypot(p[:, 0], p[:, 1])
+    for ax, x, xl in zip(axes, (reach, p[:, 2]), ("reach: radius from the J1 axis (mm)", "height z (mm)")):
         for key, label in _stages(err):
-            ax.plot(x, err[key][test], ".", ms=4, color=COLORS[key], label=label, alpha=0.8)
+            ax.plot(x, err[key], ".", ms=4, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
         ax.set_yscale("log")
         ax.set_xlabel(xl)
@@ -170,13 +173,10 @@ def reach_height_figure(report: dict) -> Figure | None:
 
 
 def joints_figure(report: dict) -> Figure | None:
-    got = _points(report)
+    got = _test_points(report)
     if got is None:
         return None
-    sets, _, q, err = got
-    test = sets == "test"
-    if not test.any():
-        return None
+    p, q, err = got
     n = q.shape[1]
     cols = (n + 1) // 2
     fig, axes = _subplots(2, cols, (4 * cols, 6), left=0.07, bottom=0.09, top=0.97, wspace=0.32, hspace=0.32)
@@ -185,7 +185,7 @@ def joints_figure(report: dict) -> Figure | None:
             ax.axis("off")
             continue
         for key, label in _stages(err)[1:]:
-            ax.plot(q[test, j], err[key][test], ".", ms=5, color=COLORS[key], label=label, alpha=0.8)
+            ax.plot(q[:, j], err[key], ".", ms=5, color=COLORS[key], label=label, alpha=0.8)
         ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
         ax.set_ylim(bottom=0)
         ax.set_xlabel(f"J{j + 1} (deg)")
@@ -198,18 +198,15 @@ def joints_figure(report: dict) -> Figure | None:
 
 
 def workspace_map_figure(report: dict) -> Figure | None:
-    got = _points(report)
+    got = _test_points(report)
     if got is None:
         return None
-    sets, p, _, err = got
-    test = sets == "test"
-    if not test.any():
-        return None
+    p, q, err = got
     fig, axes = _subplots(1, 2, (11.5, 4.6), left=0.07, right=0.97, bottom=0.12, top=0.92, wspace=0.25)
     axes = axes[0]
-    reach = np.hypot(p[test, 0], p[test, 1])
+    reach = np.hypot(p[:, 0], p[:, 1])
     for ax, key, title in zip(axes, ("nominal", "compensated"), ("before: nominal model", "after: calibrated model")):
-        sc = ax.scatter(reach, p[test, 2], c=err[key][test], s=40, cmap="viridis", vmin=0)
+        sc = ax.scatter(reach, p[:, 2], c=err[key], s=40, cmap="viridis", vmin=0)
         fig.colorbar(sc, ax=ax, label="|error| (mm)")
         ax.set_title(title)
         ax.set_xlabel("radius from the J1 axis (mm)")
