@@ -305,9 +305,12 @@ POOLED = "after correction (all passes pooled)"
 
 
 def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray, hi: np.ndarray,
-                 limit_deg: float) -> list[str | None]:
-    """Per point: None when the corrected joints q (N, n) rad may be commanded, else why it is held at q0."""
+                 limit_deg: float, moved_mm: np.ndarray | None = None, limit_mm: float = np.inf) -> list[str | None]:
+    """Per point: None when the corrected joints q (N, n) rad may be commanded, else why it is held at q0.
+    ``moved_mm`` (N,): how far the corrected command moves the nominal tool point from the target (mm), held above
+    ``limit_mm`` (the same bounds as ``check_targets``)."""
     step = np.abs(q - q0)
+    moved = np.zeros(len(q)) if moved_mm is None else np.asarray(moved_mm, float)
     out: list[str | None] = []
     for i in range(len(q)):
         over = np.flatnonzero(step[i] > limit_rad)
@@ -316,6 +319,8 @@ def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray
             out.append(f"corrected joint {outside[0] + 1} outside its limits")
         elif len(over):
             out.append(f"correction of joint {over[0] + 1} > max_joint_correction_deg {limit_deg:g}")
+        elif moved[i] > limit_mm:
+            out.append(f"command moves the tool > max_position_correction_mm {limit_mm:g} from the target")
         else:
             out.append(None)
     return out
@@ -369,7 +374,9 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     corrected, corrected_only = [], []                    # every measurement; those of corrected points
     safe = np.ones(len(ids), bool)
     for k in range(cfg.correction.closed_loop_iterations + 1):
-        held = held_reasons(q, q0, limit, lo, hi, cfg.correction.max_joint_correction_deg)
+        moved = np.linalg.norm((fk(kin, q) @ T_tool)[:, :3, 3] - p_d, axis=1)
+        held = held_reasons(q, q0, limit, lo, hi, cfg.correction.max_joint_correction_deg, moved,
+                            cfg.correction.max_position_correction_mm)
         safe = np.array([h is None for h in held])
         q = np.where(safe[:, None], q, q0)                # an unsafe correction is never commanded
         points = [PlanPoint(f"{i}.v{k}", "verify", tuple(np.degrees(qq)), tuple(pd)) for i, qq, pd in zip(ids, q, p_d)]
