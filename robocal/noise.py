@@ -17,7 +17,11 @@ RP_PER_SIGMA = 2.0 * np.sqrt(2.0 / np.pi) + 3.0 * np.sqrt(3.0 - 8.0 / np.pi)
 
 @dataclass(frozen=True)
 class TrackerUncertainty:
-    """MPE terms of a tracker (defaults: Leica AT960 class, transverse 15 um + 6 um/m, ADM 10 um + 0.3 um/m)."""
+    """MPE terms of a tracker (defaults: Leica AT960 class, transverse 15 um + 6 um/m, ADM 10 um + 0.3 um/m).
+
+    ``*_a_um`` micrometres (> 0), ``*_b_um_per_m`` micrometres per metre (>= 0), ``coverage_k`` > 0. Also the
+    ``tracker.uncertainty`` section of a campaign config (which requires the four terms; ``coverage_k`` default 2).
+    """
     transverse_a_um: float = 15.0
     transverse_b_um_per_m: float = 6.0
     range_a_um: float = 10.0
