@@ -40,7 +40,7 @@ class TrackerUncertainty:
         p = np.atleast_2d(np.asarray(p_tracker_mm, float))
         r = np.linalg.norm(p, axis=1)
         u_r, u_t = self.sigmas_mm(r)
-        e_r = p / r[:, None]
+        e_r = p / np.where(r > 0, r, 1.0)[:, None]     # at the origin (r = 0): isotropic u_t
         # Sigma = u_t^2 I + (u_r^2 - u_t^2) e_r e_r^T (the transverse plane is isotropic)
         return (u_t**2)[:, None, None] * np.eye(3) + ((u_r**2 - u_t**2)[:, None, None]) * e_r[:, :, None] * e_r[:, None, :]
 
