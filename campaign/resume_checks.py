@@ -8,7 +8,6 @@ The first bad record is a :class:`campaign.runlog.RunLogError` naming its line: 
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -23,19 +22,6 @@ MAX_ABS_MM = 1.0e6
 def _finite_list(value: Any, n: int) -> bool:
     return (isinstance(value, list) and len(value) == n
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
-
-
-def _point_lines(path: Path) -> list[int]:
-    """1-based line numbers of the point records, in file order."""
-    out = []
-    with open(path, "rb") as fh:
-        for i, raw in enumerate(fh):
-            try:
-                if json.loads(raw).get("kind") == "point":
-                    out.append(i + 1)
-            except (ValueError, AttributeError):
-                break                        # torn tail: read_log ignores it too
-    return out
 
 
 def _nest_problem(rec: dict, pid: str) -> str | None:
@@ -118,7 +104,7 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
         raise CampaignError(f"{run_dir}: the config file changed since the run started; resume with the same config")
     if plan is not None and contents.start.get("plan_sha256") != plan.sha256:
         raise CampaignError(f"{run_dir}: the plan differs from the one the run started with")
-    lines = _point_lines(path)
+    lines = contents.point_lines
     plan_points = {p.point_id: p for p in (plan.points if plan is not None else _plan_csv(Path(run_dir)))}
     lo = [j.q_min_deg for j in cfg.robot.joints]
     hi = [j.q_max_deg for j in cfg.robot.joints]
@@ -129,5 +115,6 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
             line = lines[k] if k < len(lines) else None
             raise RunLogError(str(path), f"{problem}: the log cannot be resumed (nothing was moved)", line=line)
         seen.add(rec["point_id"])
+    contents.records()                       # every field of every record typed and checked (line and field named)
     if contents.points:
         dataset_from_log(contents)
