@@ -138,3 +138,16 @@ def test_verify_report_round_trip_and_errors():
     assert report.to_dict() == data and list(report.to_dict()) == list(data) and report["n"] == 3
     with pytest.raises(RecordError, match="'n'"):
         VerifyReport.from_dict({**data, "n": -1})
+
+
+def test_report_page_refuses_a_verify_json_with_a_bad_field(tmp_path: Path):
+    from campaign.errors import DataError
+    from campaign.html_report import collect
+
+    doc = {"format": "campaign-verify/2", "run": "r", "n": "three", "noise_floor_mm": 0.02, "n_uncorrected": None,
+           "stages": {}, "passes": [], "exit_status": "success", "reason": "", "definitions": {},
+           "created_utc": "2026-01-01T00:00:00+00:00"}
+    (tmp_path / "verify-1").mkdir()
+    (tmp_path / "verify-1" / "verify.json").write_text(json.dumps(doc))
+    with pytest.raises(DataError, match=r"verify-1/verify.json: field 'n': expected a non-negative integer"):
+        collect(tmp_path)
