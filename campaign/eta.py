@@ -79,7 +79,8 @@ class RunEta:
         last reading; a nest reading has no move)."""
         if self.done < len(self.move):
             t0, t2 = float(record.t_start_s), float(record.t_end_s)
-            t1 = float(getattr(record, "t_measure_s", t0))
+            t1 = getattr(record, "t_measure_s", None)            # nest readings and earlier logs: no split
+            t1 = t0 if t1 is None else float(t1)
             self.sums += (max(0.0, t1 - t0), self.move[self.done], max(0.0, t2 - t1), self.read[self.done])
         self.done += 1
 

@@ -45,66 +45,53 @@ def _get(data: Mapping, name: str, optional: bool = False) -> Any:
     return data[name]
 
 
-def _num(data: Mapping, name: str, optional: bool = False) -> float | None:
-    """A finite number (bool refused)."""
+def _check(data: Mapping, name: str, optional: bool, ok, expected: str, convert=lambda v: v) -> Any:
+    """``convert(data[name])`` when ``ok(value)``; None for an absent optional field; RecordError otherwise."""
     v = _get(data, name, optional)
     if v is None:
         return None
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise RecordError(name, f"expected a finite number, got {v!r}")
-    return float(v)
+    if not ok(v):
+        raise RecordError(name, f"expected {expected}, got {repr(v)[:80]}")
+    return convert(v)
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _num(data: Mapping, name: str, optional: bool = False) -> float | None:
+    """A finite number (bool refused)."""
+    return _check(data, name, optional, _is_num, "a finite number", float)
 
 
 def _int(data: Mapping, name: str, optional: bool = False) -> int | None:
     """A non-negative integer."""
-    v = _get(data, name, optional)
-    if v is None:
-        return None
-    if type(v) is not int or v < 0:
-        raise RecordError(name, f"expected a non-negative integer, got {v!r}")
-    return v
+    return _check(data, name, optional, lambda v: type(v) is int and v >= 0, "a non-negative integer")
 
 
 def _str(data: Mapping, name: str, optional: bool = False) -> str | None:
     """A string."""
-    v = _get(data, name, optional)
-    if v is None:
-        return None
-    if not isinstance(v, str):
-        raise RecordError(name, f"expected a string, got {v!r}")
-    return v
-
-
-def _vec(data: Mapping, name: str, n: int | None = None, optional: bool = False) -> tuple[float, ...] | None:
-    """A list of finite numbers (of length ``n`` when given)."""
-    v = _get(data, name, optional)
-    if v is None:
-        return None
-    if not isinstance(v, (list, tuple)) or (n is not None and len(v) != n) or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
-        size = f"{n} " if n is not None else ""
-        raise RecordError(name, f"expected a list of {size}finite numbers, got {v!r}")
-    return tuple(float(x) for x in v)
-
-
-def _mat3(data: Mapping, name: str, optional: bool = False) -> tuple[tuple[float, ...], ...] | None:
-    """A 3 x 3 nested list of finite numbers."""
-    v = _get(data, name, optional)
-    if v is None:
-        return None
-    if not isinstance(v, (list, tuple)) or len(v) != 3:
-        raise RecordError(name, f"expected a 3 x 3 list of numbers, got {v!r}")
-    return tuple(_vec({name: row}, name, 3) for row in v)
+    return _check(data, name, optional, lambda v: isinstance(v, str), "a string")
 
 
 def _obj(data: Mapping, name: str, optional: bool = False) -> dict | None:
     """A JSON object (kept as a dict)."""
-    v = _get(data, name, optional)
-    if v is None:
-        return None
-    if not isinstance(v, Mapping):
-        raise RecordError(name, f"expected an object, got {v!r}")
-    return dict(v)
+    return _check(data, name, optional, lambda v: isinstance(v, Mapping), "an object", dict)
+
+
+def _vec(data: Mapping, name: str, n: int | None = None, optional: bool = False) -> tuple[float, ...] | None:
+    """A list of finite numbers (of length ``n`` when given)."""
+    size = f"{n} " if n is not None else ""
+    return _check(data, name, optional, lambda v: isinstance(v, (list, tuple)) and (n is None or len(v) == n)
+                  and all(_is_num(x) for x in v), f"a list of {size}finite numbers", lambda v: tuple(map(float, v)))
+
+
+def _mat3(data: Mapping, name: str, optional: bool = False) -> tuple[tuple[float, ...], ...] | None:
+    """A 3 x 3 nested list of finite numbers."""
+    ok = lambda v: isinstance(v, (list, tuple)) and len(v) == 3 and all(  # noqa: E731
+        isinstance(r, (list, tuple)) and len(r) == 3 and all(_is_num(x) for x in r) for r in v)
+    return _check(data, name, optional, ok, "a 3 x 3 list of finite numbers",
+                  lambda v: tuple(tuple(float(x) for x in r) for r in v))
 
 
 def _floats(values) -> list[float]:
@@ -145,6 +132,9 @@ class SmrReading:
                    _int(data, f"retries{k}"))
 
 
+_LATER_FIELDS = ("cov_source", "t_measure_s")           # optional on reading: logs of earlier versions lack them
+
+
 @dataclass(frozen=True)
 class PointRecord:
     """One robot measurement as the runner logs it.
@@ -152,7 +142,8 @@ class PointRecord:
     ``q_cmd_deg``/``q_read_deg`` (n,) commanded / read-back joints, deg; ``p_tracker_mm`` (3,) mean of the samples,
     mm, tracker frame; ``cov_mm2`` (3, 3) its covariance, from the tracker (``cov_source`` "device") or the spec
     ("spec"); ``spread_mm`` max sample distance from the mean; ``t_start_s``/``t_measure_s``/``t_end_s`` the
-    runner's clock at the move, the first reading and the end (s); ``approach`` (n,) sign of each joint's last
+    runner's clock at the move, the first reading and the end (s; ``cov_source`` and ``t_measure_s`` are None in
+    logs of versions that did not write them); ``approach`` (n,) sign of each joint's last
     motion; ``retries`` failed readings; ``p_target_base_mm`` (3,) planned SMR position in the base frame.
     Optional: ``temperatures`` (tracker environment, ``temp_c``/``pressure_hpa``/``humidity_pct``...),
     ``joint_temp_c`` (n,), ``payload_cog_flange_mm`` (3,) (with a configured payload), ``device_std_mm`` (3,) and
@@ -165,11 +156,11 @@ class PointRecord:
     q_read_deg: tuple[float, ...]
     p_tracker_mm: tuple[float, float, float]
     cov_mm2: tuple[tuple[float, ...], ...]
-    cov_source: str
+    cov_source: str | None
     spread_mm: float
     n_samples: int
     t_start_s: float
-    t_measure_s: float
+    t_measure_s: float | None
     t_end_s: float
     approach: tuple[float, ...]
     payload_kg: float
@@ -188,9 +179,14 @@ class PointRecord:
                 "q_read_deg": _floats(self.q_read_deg), "p_tracker_mm": _floats(self.p_tracker_mm),
                 "cov_mm2": _rows(self.cov_mm2), "cov_source": self.cov_source, "spread_mm": float(self.spread_mm),
                 "n_samples": int(self.n_samples), "t_start_s": float(self.t_start_s),
-                "t_measure_s": float(self.t_measure_s), "t_end_s": float(self.t_end_s),
+                "t_measure_s": self.t_measure_s, "t_end_s": float(self.t_end_s),
                 "approach": _floats(self.approach), "payload_kg": float(self.payload_kg),
                 "retries": int(self.retries), "p_target_base_mm": _floats(self.p_target_base_mm)}
+        for name in _LATER_FIELDS:                        # absent in logs written before these fields existed
+            if data[name] is None:
+                del data[name]
+            elif name == "t_measure_s":
+                data[name] = float(data[name])
         if self.temperatures:
             data["temperatures"] = dict(self.temperatures)
         if self.joint_temp_c is not None:
@@ -211,8 +207,8 @@ class PointRecord:
         smrs = tuple(s for s in (SmrReading.from_dict(data, k) for k in (2, 3)) if s is not None)
         return cls(
             _str(data, "point_id"), _str(data, "set"), _vec(data, "q_cmd_deg"), _vec(data, "q_read_deg", n),
-            _vec(data, "p_tracker_mm", 3), _mat3(data, "cov_mm2"), _str(data, "cov_source"),
-            _num(data, "spread_mm"), _int(data, "n_samples"), _num(data, "t_start_s"), _num(data, "t_measure_s"),
+            _vec(data, "p_tracker_mm", 3), _mat3(data, "cov_mm2"), _str(data, "cov_source", True),
+            _num(data, "spread_mm"), _int(data, "n_samples"), _num(data, "t_start_s"), _num(data, "t_measure_s", True),
             _num(data, "t_end_s"), _vec(data, "approach", n), _num(data, "payload_kg"), _int(data, "retries"),
             _vec(data, "p_target_base_mm", 3), _obj(data, "temperatures", True),
             _vec(data, "joint_temp_c", n, True), _vec(data, "payload_cog_flange_mm", 3, True),

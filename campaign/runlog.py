@@ -12,7 +12,9 @@ File format (one JSON object per line, bluesky event-model flavoured)::
 * ``kind`` is ``start`` | ``point`` | ``event`` | ``stop``;
 * ``seq`` is 0, 1, 2, ... consecutive over the whole file (across resumes);
   record 0 is the only ``start`` record;
-* ``data`` is a JSON object (see the ``append_*`` methods);
+* ``data`` is a JSON object (see the ``append_*`` methods); a ``point`` record's
+  is the ``to_dict()`` of a :class:`campaign.records.PointRecord` (robot
+  measurement) or :class:`campaign.records.NestRecord` (reference nest);
 * ``crc`` is ``zlib.crc32`` of the canonical JSON of ``{"kind", "seq", "data"}``
   (``json.dumps(..., sort_keys=True, separators=(",", ":"), allow_nan=False)``)
   as 8 lowercase hex digits.

@@ -71,6 +71,13 @@ def test_point_record_from_dict_names_the_bad_field(field, value, says):
     assert err.value.field == field and repr(field) in str(err.value)
 
 
+def test_fields_added_later_may_be_absent_and_stay_absent():
+    data = point().to_dict()
+    del data["t_measure_s"], data["cov_source"]
+    rec = PointRecord.from_dict(data)
+    assert rec.t_measure_s is None and rec.cov_source is None and rec.to_dict() == data
+
+
 def test_nan_is_refused_by_name():
     data = point().to_dict()
     data["spread_mm"] = float("nan")
