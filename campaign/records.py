@@ -290,6 +290,7 @@ class _ReportMapping(Mapping):
 
 
 _IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version")
+_N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
 @dataclass(frozen=True, eq=False)
@@ -308,27 +309,27 @@ class CalibrationReport(_ReportMapping):
     source: str
     n: dict
     stages: dict
-    noise_floor_mm: Any
+    noise_floor_mm: float
     noise_floor_source: str
-    noise_floor_specs_mm: Any
-    noise_floor_repeats_mm: Any
-    parameters: Any
+    noise_floor_specs_mm: float
+    noise_floor_repeats_mm: float | None
+    parameters: list
     unidentifiable: list
-    condition_number: Any
+    condition_number: float
     observability: Any
-    sigma0: Any
-    iterations: Any
-    converged: Any
+    sigma0: float
+    iterations: int
+    converged: bool
     rejected_points: list
     excluded_points: list
-    structure_note: Any
+    structure_note: str | None
     T_tracker_base: list
     method: dict
-    effects: Any
-    residual_choice: Any
-    plausibility: Any
-    residual_cv: Any
-    preparation: Any
+    effects: dict
+    residual_choice: dict | None
+    plausibility: dict | None
+    residual_cv: dict | None
+    preparation: dict | None
     multi_smr: dict | None = None
     cell: Any = None
     points: Any = None
@@ -336,7 +337,7 @@ class CalibrationReport(_ReportMapping):
 
     def to_dict(self) -> dict:
         """The report.json object (the key order written so far)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)[:26]}
+        out = {name: getattr(self, name) for name in _REPORT_KEYS}
         if self.multi_smr is not None:
             out["multi_smr"] = self.multi_smr
         out["cell"], out["points"] = self.cell, self.points
@@ -352,11 +353,10 @@ class CalibrationReport(_ReportMapping):
         """A report.json object; RecordError names a missing field or one of the wrong kind."""
         if not isinstance(data, Mapping):
             raise RecordError("report", f"expected an object, got {type(data).__name__}")
-        names = [f.name for f in fields(cls)[:26]]
-        args = {name: _get(data, name, optional=True) for name in names}
-        for name in ("format", "config", "source", "n", "stages", "T_tracker_base"):
-            _get(data, name)
-        _str(data, "format"), _obj(data, "n"), _obj(data, "stages"), _obj(data, "method", True)
+        for check, name in ((_str, "format"), (_str, "config"), (_str, "source"), (_obj, "n"), (_obj, "stages"),
+                            (_num, "noise_floor_mm"), (_get, "T_tracker_base")):
+            check(data, name)
+        args = {name: _get(data, name, optional=True) for name in _REPORT_KEYS}
         return cls(**args, multi_smr=_obj(data, "multi_smr", True), cell=data.get("cell"),
                    points=data.get("points"),
                    identification=tuple((k, data[k]) for k in _IDENTIFICATION if k in data))
@@ -397,3 +397,6 @@ class VerifyReport(_ReportMapping):
                    _int(data, "n_uncorrected", True), _obj(data, "stages"), list(_get(data, "passes")),
                    _str(data, "exit_status"), _str(data, "reason"), _obj(data, "definitions"),
                    _str(data, "created_utc"))
+
+
+_REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
