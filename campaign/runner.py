@@ -249,15 +249,19 @@ class Runner:
         dev_cov = device_covariance(readings)
         use_dev = dev_cov is not None and self.covariance_from_device is not None
         cov = self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)
-        return PointRecord(
-            point.point_id, point.set, tuple(q_cmd), tuple(q_read), tuple(mean), tuple(map(tuple, cov)),
-            "device" if use_dev else "spec", spread, len(readings), t_start, t_measure, self.clock.now(),
-            tuple(approach), self.payload.mass_kg if self.payload is not None else self.payload_kg, retries,
-            tuple(point.p_base_mm), env or None, None if joint_temp is None else tuple(joint_temp),
-            None if self.payload is None else tuple(self.payload.cog_flange_mm),
-            None if dev_cov is None else tuple(np.sqrt(np.diag(dev_cov))),
-            None if dev_cov is None else tuple(map(tuple, dev_cov)),
-            tuple(self._measure_smr(k, point, log) for k in range(2, self.n_smrs + 1)))
+        payload = self.payload
+        return PointRecord(                                 # t_end_s is taken before SMRs 2 and 3 are measured
+            point_id=point.point_id, set=point.set, q_cmd_deg=tuple(q_cmd), q_read_deg=tuple(q_read),
+            p_tracker_mm=tuple(mean), cov_mm2=tuple(map(tuple, cov)), cov_source="device" if use_dev else "spec",
+            spread_mm=spread, n_samples=len(readings), t_start_s=t_start, t_measure_s=t_measure,
+            t_end_s=self.clock.now(), approach=tuple(approach),
+            payload_kg=payload.mass_kg if payload is not None else self.payload_kg, retries=retries,
+            p_target_base_mm=tuple(point.p_base_mm), temperatures=env or None,
+            joint_temp_c=None if joint_temp is None else tuple(joint_temp),
+            payload_cog_flange_mm=None if payload is None else tuple(payload.cog_flange_mm),
+            device_std_mm=None if dev_cov is None else tuple(np.sqrt(np.diag(dev_cov))),
+            device_cov_mm2=None if dev_cov is None else tuple(map(tuple, dev_cov)),
+            smrs=tuple(self._measure_smr(k, point, log) for k in range(2, self.n_smrs + 1)))
 
     def _remember_nests(self, contents) -> None:
         """First/last nest readings of earlier sessions (resume), so the bound refers to the run's start."""
