@@ -265,7 +265,7 @@ class NestRecord:
 def point_from_dict(data: Mapping) -> PointRecord | NestRecord:
     """A log ``point`` record's data as the typed record its ``set`` says (nest or robot point)."""
     if not isinstance(data, Mapping):
-        raise RecordError("data", f"expected an object, got {data!r}")
+        raise RecordError("data", f"expected an object, got {repr(data)[:80]}")
     return NestRecord.from_dict(data) if data.get("set") == "nest" else PointRecord.from_dict(data)
 
 
@@ -394,7 +394,7 @@ class VerifyReport(_ReportMapping):
         if not isinstance(data, Mapping):
             raise RecordError("verify", f"expected an object, got {type(data).__name__}")
         return cls(_str(data, "format"), _str(data, "run"), _int(data, "n"), _num(data, "noise_floor_mm"),
-                   _int(data, "n_uncorrected", True), _obj(data, "stages"), list(_get(data, "passes")),
+                   _int(data, "n_uncorrected", True), _obj(data, "stages"), _check(data, "passes", False, lambda v: isinstance(v, list), "a list"),
                    _str(data, "exit_status"), _str(data, "reason"), _obj(data, "definitions"),
                    _str(data, "created_utc"))
 

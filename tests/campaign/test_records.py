@@ -145,6 +145,8 @@ def test_verify_report_round_trip_and_errors():
     assert report.to_dict() == data and list(report.to_dict()) == list(data) and report["n"] == 3
     with pytest.raises(RecordError, match="'n'"):
         VerifyReport.from_dict({**data, "n": -1})
+    with pytest.raises(RecordError, match="'passes': expected a list"):
+        VerifyReport.from_dict({**data, "passes": 3})
 
 
 def test_report_page_refuses_a_verify_json_with_a_bad_field(tmp_path: Path):
