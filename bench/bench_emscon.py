@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import campaign.pipeline as pipeline  # noqa: E402
+import campaign.devices as devices  # noqa: E402
 from campaign.cli import main  # noqa: E402
 from campaign.config import load_config  # noqa: E402
 from campaign.log_dataset import dataset_from_log  # noqa: E402
@@ -30,9 +30,9 @@ SMALL = {"plan.test.count": 30, "plan.check_poses": {"count": 0, "every_n_points
 
 def one(tmp: Path, seed: int) -> None:
     tmp.mkdir(parents=True, exist_ok=True)
-    world = pipeline.mock_world(load_config(small_config(tmp, **SMALL, **{"simulation.seed": seed})))
+    world = devices.mock_world(load_config(small_config(tmp, **SMALL, **{"simulation.seed": seed})))
     world.faults = {}
-    pipeline.mock_world = lambda cfg: world
+    devices.mock_world = lambda cfg: world
     with EmsconEmulator(lambda: world.p_smr_tracker_mm + world.point_error_mm, seed=seed) as emu:
         path = small_config(tmp, **SMALL, **{"simulation.seed": seed, "tracker.url": emu.url,
                                              "tracker.options": {"meas_time_ms": 10}})

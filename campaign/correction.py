@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
+from robocal.correct import Correction, closed_loop_step, correct, matrix_to_quat, tool_transform
 from robocal.frames import transform_points
-from robocal.ik import branch_signature, solve_ik, solve_on_branch
+from robocal.ik import branch_signature, solve_on_branch
 from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 from robocal.stats import error_stats
@@ -347,10 +347,57 @@ class VerifyResult:
     reason: str
 
 
-def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: CalibratedModel, test_points: list[PointRecord],
-               out_dir: Path) -> VerifyResult:
-    """Closed-loop verification on a run's test points. ``measure_fn(points: list[PlanPoint]) ->
-    (p_tracker_mm (N, 3), status, reason)`` drives the robot and measures (durably logged by the caller)."""
+class VerifyPasses:
+    """The passes of closed-loop verification, a plan the runner executes: the model-corrected pass, then up to
+    ``closed_loop_iterations`` passes re-solved from the previous pass's measurements (seed 001 §4.2). Every pass
+    holds a correction beyond a bound at the planned joints (``held_reasons``). ``results``: (stage, err (N, 3)
+    mm tracker frame, safe (N,), held) per measured pass."""
+
+    def __init__(self, cfg: CampaignConfig, kin, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
+                 q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray):
+        self.cfg, self.kin, self.T_tool, self.ids, self.p_d, self.q0, self.q = cfg, kin, T_tool, ids, p_d, q0, q
+        self.R_d, self.T_tb, self.target_tracker = R_d, T_tb, target_tracker
+        self.limit = np.radians(cfg.correction.max_joint_correction_deg)
+        self.lo, self.hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
+        self.p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
+        self.k, self.stage = 0, "model-corrected"
+        self.safe, self.held = np.ones(len(ids), bool), [None] * len(ids)
+        self.results: list[tuple[str, np.ndarray, np.ndarray, list[str | None]]] = []
+
+    def first(self) -> list[PlanPoint]:
+        return self._points()
+
+    def _points(self) -> list[PlanPoint]:
+        """This pass's commands: the current joints, or the planned ones where a bound holds the correction."""
+        moved = np.linalg.norm((fk(self.kin, self.q) @ self.T_tool)[:, :3, 3] - self.p_d, axis=1)
+        self.held = held_reasons(self.q, self.q0, self.limit, self.lo, self.hi,
+                                 self.cfg.correction.max_joint_correction_deg, moved,
+                                 self.cfg.correction.max_position_correction_mm)
+        self.safe = np.array([h is None for h in self.held])
+        self.q = np.where(self.safe[:, None], self.q, self.q0)    # an unsafe correction is never commanded
+        return [PlanPoint(f"{i}.v{self.k}", "verify", tuple(np.degrees(qq)), tuple(pd))
+                for i, qq, pd in zip(self.ids, self.q, self.p_d)]
+
+    def next(self, p_meas: np.ndarray) -> list[PlanPoint] | None:
+        """Record the pass measured at ``p_meas`` (N, 3) mm tracker frame; the next pass's points, or None."""
+        err = p_meas - self.target_tracker
+        self.results.append((self.stage, err, self.safe, self.held))
+        if self.k == self.cfg.correction.closed_loop_iterations:
+            return None
+        sigma = np.sqrt(np.trace(measurement_covariance(self.cfg, p_meas), axis1=1, axis2=2))
+        significant = np.linalg.norm(err, axis=1) > self.cfg.correction.significance * sigma
+        R_flange = np.broadcast_to(self.R_d[0] @ self.T_tool[:3, :3].T, (len(self.ids), 3, 3))
+        self.q, self.p_pseudo = closed_loop_step(self.kin, self.T_tool, self.q, self.p_pseudo,
+                                                 err @ self.T_tb[:3, :3], significant, R_flange)   # err in base
+        self.k += 1
+        self.stage = f"closed loop {self.k}"
+        return self._points()
+
+
+def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: CalibratedModel,
+               test_points: list[PointRecord], out_dir: Path) -> VerifyResult:
+    """Closed-loop verification on a run's test points. ``execute_passes(plan: VerifyPasses) -> RunOutcome``
+    drives the robot through the plan's passes and measures (durably logged by the caller)."""
     kin = nominal_kinematics(cfg)
     T_tool = tool_transform(cfg.tool.p_flange_smr_mm)
     ids = [p.point_id for p in test_points]
@@ -367,39 +414,15 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
     c = run_correction(cfg, model_pose_fn(model, T_tool), T_d, q0, T_tool)
-    q = c.q_rad
-    limit = np.radians(cfg.correction.max_joint_correction_deg)
-    lo, hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
-    p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
-    stage, status, reason = "model-corrected", "success", ""
+    plan = VerifyPasses(cfg, kin, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker)
+    outcome = execute_passes(plan)
+    status, reason, safe = outcome.exit_status, outcome.reason, plan.safe
     corrected, corrected_only = [], []                    # every measurement; those of corrected points
-    safe = np.ones(len(ids), bool)
-    for k in range(cfg.correction.closed_loop_iterations + 1):
-        moved = np.linalg.norm((fk(kin, q) @ T_tool)[:, :3, 3] - p_d, axis=1)
-        held = held_reasons(q, q0, limit, lo, hi, cfg.correction.max_joint_correction_deg, moved,
-                            cfg.correction.max_position_correction_mm)
-        safe = np.array([h is None for h in held])
-        q = np.where(safe[:, None], q, q0)                # an unsafe correction is never commanded
-        points = [PlanPoint(f"{i}.v{k}", "verify", tuple(np.degrees(qq)), tuple(pd)) for i, qq, pd in zip(ids, q, p_d)]
-        p_meas, status, reason = measure_fn(points)
-        if status != "success":
-            break
-        err = p_meas - target_tracker
+    for stage, err, safe_k, held in plan.results:
         rows[stage] = error_stats(err).to_dict()
-        passes.append(pass_summary(stage, err, safe, held))
+        passes.append(pass_summary(stage, err, safe_k, held))
         corrected.append(err)
-        corrected_only.append(err[safe])
-        if k == cfg.correction.closed_loop_iterations:
-            break
-        sigma = np.sqrt(np.trace(measurement_covariance(cfg, p_meas), axis1=1, axis2=2))
-        significant = np.linalg.norm(err, axis=1) > cfg.correction.significance * sigma
-        err_base = err @ T_tb[:3, :3]                     # rotate into the base frame
-        p_cmd = (fk(kin, q) @ T_tool)[:, :3, 3]           # nominal position of what was commanded (held: q0)
-        p_pseudo = np.where(significant[:, None], p_cmd - err_base, p_pseudo)
-        R_flange = np.broadcast_to(R_d[0] @ T_tool[:3, :3].T, (len(ids), 3, 3))
-        q = np.where(significant[:, None],
-                     solve_ik(kin, p_pseudo, R_flange, q, point_mm=T_tool[:3, 3]).q_rad, q)
-        stage = f"closed loop {k + 1}"
+        corrected_only.append(err[safe_k])
     if corrected:
         pooled = np.concatenate(corrected_only)
         rows[POOLED] = error_stats(np.concatenate(corrected)).to_dict()

@@ -14,11 +14,8 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-from drivers.base import SystemClock
-from drivers.mock import MockWorld
-from drivers.registry import open_robot, open_tracker
-
-from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics, simulated_cell
+from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
+from .devices import mock_phenomena, mock_world, open_cell      # mock_*: import path of older callers
 from .config import CampaignConfig
 from .errors import CampaignError, ConfigError
 from .interchange import read_csv, write_csv
@@ -29,7 +26,7 @@ from .process import Processed, process, write_outputs
 from .records import PointRecord
 from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
-from .runner import RunOutcome, Runner, pending, start_record
+from .runner import RunOutcome, Runner, closing_on_error, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
@@ -67,18 +64,17 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                           + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
     if resume is not None:
         check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
-    world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
-    clock = world.clock if world else SystemClock()
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
-        robot, tracker = _open_devices(cfg, world, stack)
+        cell = stack.enter_context(open_cell(cfg))
+        robot, tracker, clock = cell.robot, cell.tracker, cell.clock
         runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
                         cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm), nests=cfg.plan.nests)
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
         identity = device_identity(robot, tracker)
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
-        stack.push(lambda *exc: _close_on_error(log, exc[1]))    # the runner closes it from execute on
+        stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
         for change in identity_changes(log.contents.start, identity) if resume else ():
             logger.warning("resuming on different hardware: %s", change)   # also in the devices event
@@ -136,41 +132,22 @@ def verify(run_dir: Path, console: Console | None = None):
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
-    world = mock_world(cfg) if "mock" in (_scheme(cfg.robot.url), _scheme(cfg.tracker.url)) else None
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
-        robot, tracker = _open_devices(cfg, world, stack)
+        cell = stack.enter_context(open_cell(cfg))
+        robot, tracker = cell.robot, cell.tracker
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()} | device_identity(robot, tracker))
+        stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
         logging_.to_file(out_dir)
-        runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
+        runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
         runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).records())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-
-        def measure(points):
-            got = []
-            runner.on_point = lambda point, record: got.append(record.p_tracker_mm)
-            outcome = runner.execute(points, log, close=False)
-            return np.array(got), outcome.exit_status, outcome.reason
-
-        result = verify_run(run_dir, measure, cfg, model, tests, out_dir)
-        if not log.closed:
-            log.close(result.exit_status, result.reason)
+        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
-
-
-def _close_on_error(log: RunLog, exc: BaseException | None) -> bool:
-    """Close a log left open by an exception raised outside the runner (stop record with the reason)."""
-    if exc is not None and not log.closed:
-        status = "fail" if isinstance(exc, Exception) else "abort"
-        try:
-            log.close(status, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
-        except Exception:
-            pass
-    return False
 
 
 def _safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
@@ -190,39 +167,6 @@ def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
     return predictor
 
 
-def _open_devices(cfg: CampaignConfig, world: MockWorld | None, stack: ExitStack):
-    """Open and connect robot and tracker; both are closed by ``stack`` whatever happens next."""
-    robot = open_robot(cfg.robot.url, cfg.robot.options, world=world, n_joints=len(cfg.robot.joints))
-    stack.callback(robot.close)
-    options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set
-    tracker = open_tracker(cfg.tracker.url, options, world=world, robot=robot, clock=world.clock if world else None)
-    stack.callback(tracker.close)
-    robot.connect()
-    tracker.connect()
-    return robot, tracker
-
-
-def mock_world(cfg: CampaignConfig) -> MockWorld:
-    s = cfg.simulation
-    faults = {"beam_break_probability": s.faults.beam_break_probability,
-              "timeout_probability": s.faults.timeout_probability,
-              "garbage_probability": s.faults.garbage_probability}
-    offset = np.asarray(s.p_flange_smr_mm) - np.asarray(cfg.tool.p_flange_smr_mm)    # true vs nominal SMR 1
-    extra = [tuple(np.asarray(p) + offset) for p in cfg.tool.smrs_mm[1:]]
-    return MockWorld(simulated_cell(cfg), s.seed, motion_time_s=s.motion_time_s,
-                     joint_speed_deg_s=cfg.robot.max_joint_speed_deg_s, payload_kg=cfg.tool.payload_kg,
-                     faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra, **mock_phenomena(cfg))
-
-
-def mock_phenomena(cfg: CampaignConfig) -> dict:
-    """MockWorld keywords of the simulated read-back lag, tracker drift and reference nests."""
-    s = cfg.simulation
-    drift = (s.tracker_drift_mm_per_h, np.asarray(s.tracker_drift_urad_per_h) * 1e-6, s.tracker_drift_tau_s)
-    return {"readback_lag_deg_per_deg": s.readback_lag_deg_per_deg or None, "readback_noise_deg": s.readback_noise_deg,
-            "tracker_drift": drift if any(drift[0]) or np.any(drift[1]) else None,
-            "nests": {n.id: n.p_base_mm for n in cfg.plan.nests.points}}
-
-
 def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None,
              identity: dict | None = None) -> tuple[RunLog, Path]:
     """A new run directory with its log, config copy and plan CSV; or the resumed one after checking that
@@ -240,17 +184,10 @@ def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path
     run_dir = Path(run_dir)
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
                                               datetime.now(timezone.utc).isoformat()) | (identity or {}))
-    try:
+    with closing_on_error(log):                             # the log never stays open without a stop record
         shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
         write_plan_csv(plan, run_dir / "plan.csv")
-    except BaseException as exc:                            # the log never stays open without a stop record
-        _close_on_error(log, exc)
-        raise
     return log, run_dir
-
-
-def _scheme(url: str) -> str:
-    return url.split("://", 1)[0]
 
 
 class _progress:

@@ -23,8 +23,9 @@ pauses the run (tracker stand or nest disturbed).
 from __future__ import annotations
 
 import logging
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Iterator, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -99,33 +100,23 @@ class Runner:
         self._poses: np.ndarray | None = None
         self._stopped = False
 
-    def execute(self, points: Iterable[PlanPoint], log: RunLog, close: bool = True) -> RunOutcome:
-        """Measure ``points`` in order; return how the run ended. The log is closed on every failure path,
-        and on success unless ``close`` is False (a caller measuring in several passes)."""
+    def execute(self, points: Iterable[PlanPoint], log: RunLog) -> RunOutcome:
+        """Measure ``points`` in order; return how the run ended. The log is closed with the exit status and
+        reason whatever happens."""
+        return self.execute_passes(_OnePass(points), log)
+
+    def execute_passes(self, plan: "PassPlan", log: RunLog) -> RunOutcome:
+        """Measure the passes of ``plan`` in turn (each pass's measurements decide the next), then close the log
+        with the exit status and reason whatever happens; the robot is stopped once at the end."""
         n = 0
         status, reason, self._stopped = "fail", "internal error", False
         self._remember_nests(getattr(log, "contents", None))
         try:
-            points = list(points)
-            self._poses = np.array([p.q_deg for p in points], float) if points else None
-            self._prepare(log)
-            if self.first_pass_limits is not None and points:
-                self._first_pass(points, log)
-            for point in points:
-                if point.set == "nest":
-                    record = self.measure_nest(point, log)
-                    log.append_point(record)                  # durable before the bound check can pause
-                    n += 1
-                    if self.on_point:
-                        self.on_point(point, record)
-                    self._check_nest(record)
-                    continue
-                record = self.measure_point(point, log)
-                log.append_point(record)                      # flushed + fsynced before the next move
-                self.p_last = np.asarray(record.p_tracker_mm, float)
-                n += 1
-                if self.on_point:
-                    self.on_point(point, record)
+            points = plan.first()
+            while points is not None:
+                p_tracker_mm, n_pass = self._measure_pass(list(points), log)
+                n += n_pass
+                points = plan.next(p_tracker_mm)
             status, reason = "success", "all planned points measured"
         except PointFailed as exc:
             self._safe_stop()
@@ -149,15 +140,37 @@ class Runner:
             reason = f"{type(exc).__name__}: {_one_line(exc)}"
             raise
         finally:
-            if status != "success" or close:
-                self._safe_stop()
-                (logger.info if status == "success" else logger.warning)("run %s: %s (%d points measured now)",
-                                                                          status, reason, n)
-                try:
-                    log.close(status, reason)
-                except Exception:                            # a broken log: a resume drops its torn tail
-                    pass
+            self._safe_stop()
+            (logger.info if status == "success" else logger.warning)("run %s: %s (%d points measured now)",
+                                                                      status, reason, n)
+            close_log(log, status, reason)
         return RunOutcome(status, reason, n)
+
+    def _measure_pass(self, points: list[PlanPoint], log: RunLog) -> tuple[np.ndarray, int]:
+        """One pass over ``points`` (caps, payload and devices event first); returns the robot points' readings
+        (M, 3) mm in order and the number of points measured."""
+        n, got = 0, []
+        self._poses = np.array([p.q_deg for p in points], float) if points else None
+        self._prepare(log)
+        if self.first_pass_limits is not None and points:
+            self._first_pass(points, log)
+        for point in points:
+            if point.set == "nest":
+                record = self.measure_nest(point, log)
+                log.append_point(record)                  # durable before the bound check can pause
+                n += 1
+                if self.on_point:
+                    self.on_point(point, record)
+                self._check_nest(record)
+                continue
+            record = self.measure_point(point, log)
+            log.append_point(record)                      # flushed + fsynced before the next move
+            self.p_last = np.asarray(record.p_tracker_mm, float)
+            got.append(self.p_last)
+            n += 1
+            if self.on_point:
+                self.on_point(point, record)
+        return np.array(got, float).reshape(-1, 3), n
 
     def _safe_stop(self) -> None:
         """Command the robot to stop, once per ``execute``; best effort on an already failing device."""
@@ -425,6 +438,48 @@ class Runner:
         drain = getattr(self.tracker, "drain_events", None)
         for step in (drain() if callable(drain) else ()):
             log.append_event({"type": "tracker_step", "point_id": point.point_id, **step, "t_s": self.clock.now()})
+
+
+class PassPlan(Protocol):
+    """Passes the runner measures in turn: ``first()`` the points of the first pass, ``next(p_tracker_mm)``
+    those of the following one from the robot points' readings (M, 3) mm of the previous, None when done."""
+
+    def first(self) -> Sequence[PlanPoint] | None: ...
+
+    def next(self, p_tracker_mm: np.ndarray) -> Sequence[PlanPoint] | None: ...
+
+
+class _OnePass:
+    """A plan of one pass over given points."""
+
+    def __init__(self, points: Iterable[PlanPoint]) -> None:
+        self.points = points
+
+    def first(self):
+        return list(self.points)
+
+    def next(self, p_tracker_mm):
+        return None
+
+
+def close_log(log: RunLog, status: str, reason: str) -> None:
+    """Close ``log`` with its stop record (status, one-line reason) unless already closed; a broken log stays as
+    it is (a resume drops its torn tail)."""
+    try:
+        if not getattr(log, "closed", False):
+            log.close(status, reason)
+    except Exception:
+        pass
+
+
+@contextmanager
+def closing_on_error(log: RunLog) -> Iterator[RunLog]:
+    """Close ``log`` with the reason when an exception leaves the block before the runner took it over."""
+    try:
+        yield log
+    except BaseException as exc:
+        close_log(log, "fail" if isinstance(exc, Exception) else "abort", f"{type(exc).__name__}: {_one_line(exc)}")
+        raise
 
 
 def _one_line(exc: BaseException) -> str:

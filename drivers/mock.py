@@ -156,6 +156,7 @@ class MockRobot:
 
     def __init__(self, world: MockWorld, url: str = "mock://robot", speed_override_pct: float = 100.0) -> None:
         self.world, self.url = world, url
+        self.simulated_clock = world.clock          # campaign time of the simulated cell (Cell.clock)
         self.n_joints = world.cell.truth.n
         kin = world.cell.truth
         self.q_min_deg, self.q_max_deg = np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad)
@@ -242,6 +243,7 @@ class MockTracker:
 
     def __init__(self, world: MockWorld, url: str = "mock://tracker", robot=None) -> None:
         self.world, self.url = world, url
+        self.simulated_clock = world.clock          # campaign time of the simulated cell (Cell.clock)
         self.robot = None if isinstance(robot, MockRobot) else robot
         self.smr = 1
         self.nest: str | None = None

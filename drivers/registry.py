@@ -5,7 +5,8 @@ Real drivers are imported lazily so that a cell only needs the libraries of the 
 from __future__ import annotations
 
 import importlib
-from typing import Any, Mapping
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Mapping
 from urllib.parse import urlsplit
 
 from .base import DriverConfigError, DriverError, Robot, Tracker
@@ -42,6 +43,39 @@ def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) 
     try:
         return factory(url, dict(options or {}), **context)
     except ValueError as exc:                      # option validation of the line-protocol driver
+        raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class CellContext:
+    """What the drivers of one cell may need beyond url and options: ``n_joints`` (robot config), ``simulation``
+    (zero-argument builder of the simulated world behind mock:// drivers, called only by them), ``robot`` (the
+    cell's robot, set when its tracker is opened). Real factories receive only what they use: robots
+    ``n_joints``, trackers ``clock`` (the robot's ``simulated_clock`` if any); a factory with ``uses_cell``
+    (the mock drivers) also receives the whole context as ``cell``."""
+    n_joints: int | None = None
+    simulation: Callable[[], Any] | None = None
+    robot: Robot | None = None
+
+
+def _with_cell(factory, cell: CellContext, **used) -> dict:
+    return {**used, "cell": cell} if getattr(factory, "uses_cell", False) else used
+
+
+def open_cell_robot(cell: CellContext, url: str, options: Mapping[str, Any] | None = None) -> Robot:
+    """The cell's robot driver for ``url`` (not yet connected)."""
+    factory = _factory(ROBOT_DRIVERS, url, "robot")
+    return factory(url, dict(options or {}), **_with_cell(factory, cell, n_joints=cell.n_joints))
+
+
+def open_cell_tracker(cell: CellContext, url: str, options: Mapping[str, Any] | None, robot: Robot) -> Tracker:
+    """The cell's tracker driver for ``url`` next to ``robot`` (not yet connected); readings are stamped with the
+    robot's simulated clock when it has one. Bad options or url -> ``DriverConfigError``."""
+    factory = _factory(TRACKER_DRIVERS, url, "tracker")
+    context = _with_cell(factory, replace(cell, robot=robot), clock=getattr(robot, "simulated_clock", None))
+    try:
+        return factory(url, dict(options or {}), **context)
+    except ValueError as exc:
         raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
 
 

@@ -182,3 +182,18 @@ def correct_ensemble(T_target, q_start_rad, actual_pose: PoseFn, ik_kin: Kinemat
     pick = lambda attr: np.stack([getattr(r, attr) for r in results])[best, np.arange(len(best))]
     return Correction(pick("q_rad"), pick("pos_err_mm"), pick("rot_err_rad"), pick("error"), pick("iterations"),
                       np.array([generators[b] for b in best], dtype=object))
+
+
+# ---------------------------------------------------------------- closed loop (seed 001 §4.2)
+def closed_loop_step(ik_kin: Kinematics, T_flange_tool: np.ndarray, q_rad: np.ndarray, p_pseudo_mm: np.ndarray,
+                     err_base_mm: np.ndarray, significant: np.ndarray, R_flange: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """One closed-loop correction with the measured error: where ``significant`` (N,) the pseudo-target becomes
+    the nominal tool position of the commanded joints ``q_rad`` (N, n) minus the measured error ``err_base_mm``
+    (N, 3, base frame), and the joints are re-solved by nominal IK (flange orientation ``R_flange`` (N, 3, 3), warm
+    start ``q_rad``); elsewhere both stay. Returns (q_rad (N, n), p_pseudo_mm (N, 3))."""
+    sig = np.asarray(significant, bool)[:, None]
+    p_cmd = (fk(ik_kin, q_rad) @ T_flange_tool)[:, :3, 3]     # nominal position of what was commanded
+    p_pseudo = np.where(sig, p_cmd - err_base_mm, p_pseudo_mm)
+    q_new = solve_ik(ik_kin, p_pseudo, R_flange, q_rad, point_mm=T_flange_tool[:3, 3]).q_rad
+    return np.where(sig, q_new, q_rad), p_pseudo

@@ -2,7 +2,7 @@
 mock tracker, and every tracker fault through the runner, each ending measured or paused with the reason, bounded
 in time, losing no point.
 
-The emulator measures the same simulated cell the mock robot moves (``campaign.pipeline.mock_world`` is pointed at
+The emulator measures the same simulated cell the mock robot moves (``campaign.devices.mock_world`` is pointed at
 one shared world), so its readings are the cell's SMR + the cell's per-point tracker error + the emulator's own noise.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-import campaign.pipeline as pipeline
+import campaign.devices as devices
 from campaign.cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from campaign.cli import main
 from campaign.config import load_config
@@ -34,7 +34,7 @@ FAST = {"timeout_s": 0.3, "meas_time_ms": 10}
 
 
 def _world(cfg):
-    world = pipeline.mock_world(cfg)
+    world = devices.mock_world(cfg)
     world.faults = {}
     return world
 
@@ -48,7 +48,7 @@ def test_campaign_run_with_emscon_matches_the_mock_tracker(tmp_path, monkeypatch
     cfg_mock = small_config(tmp_path, **SMALL)
     assert main(["run", str(cfg_mock), "--out", str(tmp_path / "mock")]) == 0
     world = _world(load_config(cfg_mock))
-    monkeypatch.setattr(pipeline, "mock_world", lambda cfg: world)
+    monkeypatch.setattr(devices, "mock_world", lambda cfg: world)
     with EmsconEmulator(_smr(world), seed=5) as emu:
         cfg = small_config(tmp_path, **SMALL, **{"tracker.url": emu.url, "tracker.options": {"meas_time_ms": 10}})
         assert main(["run", str(cfg), "--out", str(tmp_path / "emscon")]) == 0
