@@ -13,7 +13,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from campaign.cell import measurement_covariance, nominal_kinematics  # noqa: E402
 from campaign.config import load_config  # noqa: E402
-from campaign.pipeline import mock_world  # noqa: E402
+from campaign.devices import mock_world  # noqa: E402
 from campaign.plan import build_plan  # noqa: E402
 from campaign.runlog import RunLog  # noqa: E402
 from campaign.runner import Runner  # noqa: E402

@@ -15,7 +15,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
-from .devices import mock_phenomena, mock_world, open_cell      # mock_*: import path of older callers
+from .devices import open_cell
 from .config import CampaignConfig
 from .errors import CampaignError, ConfigError
 from .interchange import read_csv, write_csv

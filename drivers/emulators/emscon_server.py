@@ -395,7 +395,7 @@ def cell_position_source(config_path: str, robot_url: str | None = None) -> tupl
     function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
     released by the close function), else it stays at the plan's q_ref."""
     from campaign.config import load_config
-    from campaign.pipeline import mock_world
+    from campaign.devices import mock_world
     from drivers.mock import MockTracker
     from drivers.registry import open_robot
 

@@ -7,7 +7,7 @@ from campaign.cell import nominal_kinematics
 from campaign.config import load_config
 from campaign.errors import ConfigError
 from campaign.motion_safety import PathGuard, UnsafeMotion, motion_limits, payload, plan_route
-from campaign.pipeline import mock_world
+from campaign.devices import mock_world
 from campaign.plan import build_plan
 from campaign.runlog import RunLog, read_log
 from campaign.runner import Runner

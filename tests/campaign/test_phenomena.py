@@ -252,7 +252,7 @@ class _AimByPosition:
 @pytest.mark.unit
 def test_nests_with_a_position_only_tracker(tmp_path):
     from drivers.base import DriverError
-    from campaign.pipeline import mock_world
+    from campaign.devices import mock_world
     from campaign.plan import build_plan
     from campaign.cell import nominal_kinematics
     from campaign.runlog import RunLog

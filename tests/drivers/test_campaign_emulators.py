@@ -11,7 +11,7 @@ import pytest
 
 from campaign.cli import main
 from campaign.config import load_config
-from campaign.pipeline import mock_world
+from campaign.devices import mock_world
 from campaign.runlog import read_log
 from drivers.emulators.rtde_server import start_emulator
 from drivers.emulators.rws_server import RwsEmulator

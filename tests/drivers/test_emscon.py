@@ -303,7 +303,7 @@ def test_cesapi_client_initialises_configures_measures_and_decodes():
 @pytest.mark.system
 def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
     from campaign.config import load_config
-    from campaign.pipeline import mock_world
+    from campaign.devices import mock_world
     from tests.campaign.helpers import small_config
 
     cfg_path = small_config(tmp_path)

@@ -165,7 +165,7 @@ def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path
     """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
     from campaign.cell import measurement_covariance, nominal_kinematics
     from campaign.config import load_config
-    from campaign.pipeline import mock_world
+    from campaign.devices import mock_world
     from campaign.plan import build_plan
     from campaign.runlog import RunLog, read_log
     from campaign.runner import Runner
