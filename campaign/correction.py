@@ -26,6 +26,7 @@ from .cell import measurement_covariance, nominal_kinematics
 from .config import CampaignConfig
 from .errors import DataError
 from .plan import PlanPoint
+from .records import PointRecord, VerifyReport
 from .fsutil import write_json
 from .writeback import (CorrectedTarget, Rejected, check_targets, write_rapid_module, write_rejected_csv,
                         write_targets_csv, write_ur_json, write_urscript)
@@ -340,24 +341,24 @@ def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str |
 
 @dataclass(frozen=True)
 class VerifyResult:
-    report: dict
+    report: VerifyReport
     out_dir: Path
     exit_status: str
     reason: str
 
 
-def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: CalibratedModel, test_points: list[dict],
+def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: CalibratedModel, test_points: list[PointRecord],
                out_dir: Path) -> VerifyResult:
     """Closed-loop verification on a run's test points. ``measure_fn(points: list[PlanPoint]) ->
     (p_tracker_mm (N, 3), status, reason)`` drives the robot and measures (durably logged by the caller)."""
     kin = nominal_kinematics(cfg)
     T_tool = tool_transform(cfg.tool.p_flange_smr_mm)
-    ids = [p["point_id"] for p in test_points]
-    p_d = np.array([p["p_target_base_mm"] for p in test_points], float)
-    q0 = np.radians([p["q_cmd_deg"] for p in test_points])
+    ids = [p.point_id for p in test_points]
+    p_d = np.array([p.p_target_base_mm for p in test_points], float)
+    q0 = np.radians([p.q_cmd_deg for p in test_points])
     T_tb = model.kinematics.T_tracker_base
     target_tracker = transform_points(T_tb, p_d)
-    before = np.array([p["p_tracker_mm"] for p in test_points]) - target_tracker
+    before = np.array([p.p_tracker_mm for p in test_points]) - target_tracker
     floor = float(np.sqrt(np.mean(np.trace(measurement_covariance(cfg, target_tracker), axis1=1, axis2=2))))
     rows = {UNCORRECTED: error_stats(before).to_dict()}
     passes = [{"stage": UNCORRECTED, "n_corrected": 0, "n_held": len(ids), "held": {},
@@ -405,17 +406,17 @@ def verify_run(run_dir: Path, measure_fn, cfg: CampaignConfig, model: Calibrated
         passes.append({"stage": POOLED, "n_corrected": int(len(pooled)),
                        "n_held": int(sum(len(e) for e in corrected) - len(pooled)), "held": {},
                        "all": rows[POOLED], "corrected": error_stats(pooled).to_dict() if len(pooled) else None})
-    report = {"format": "campaign-verify/2", "run": str(run_dir), "n": len(ids), "noise_floor_mm": floor,
-              "n_uncorrected": int(np.sum(~safe)) if corrected else None,
-              "stages": rows, "passes": passes, "exit_status": status, "reason": reason,
-              "definitions": {UNCORRECTED: "the test points commanded at their planned (nominal-IK) joints, "
-                                           "measured against the targets through the calibrated registration",
-                              "held": "points commanded at their planned joints in a corrected pass because the "
-                                      "correction would exceed a bound (reason per point count)",
-                              "corrected": "figures over the points whose correction was commanded"},
-              "created_utc": datetime.now(timezone.utc).isoformat()}
+    report = VerifyReport(
+        "campaign-verify/2", str(run_dir), len(ids), floor, int(np.sum(~safe)) if corrected else None,
+        rows, passes, status, reason,
+        definitions={UNCORRECTED: "the test points commanded at their planned (nominal-IK) joints, "
+                                  "measured against the targets through the calibrated registration",
+                     "held": "points commanded at their planned joints in a corrected pass because the "
+                             "correction would exceed a bound (reason per point count)",
+                     "corrected": "figures over the points whose correction was commanded"},
+        created_utc=datetime.now(timezone.utc).isoformat())
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "verify.json", report)
+    write_json(out_dir / "verify.json", report.to_dict())
     return VerifyResult(report, out_dir, status, reason)
 
 

@@ -16,6 +16,7 @@ from robocal.sweep import move_durations_s
 
 from .config import CampaignConfig
 from .plan import PlanPoint
+from .records import NestRecord, PointRecord
 
 
 def point_durations_s(points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics,
@@ -73,12 +74,13 @@ class RunEta:
     def for_plan(cls, points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics) -> "RunEta":
         return cls(*point_times_s(points, cfg, kin))
 
-    def observe(self, record: dict) -> None:
+    def observe(self, record: PointRecord | NestRecord) -> None:
         """A measured point record (``t_start_s`` before its move, ``t_measure_s`` settled, ``t_end_s`` after the
-        last reading)."""
+        last reading; a nest reading has no move)."""
         if self.done < len(self.move):
-            t0, t2 = float(record["t_start_s"]), float(record["t_end_s"])
-            t1 = float(record.get("t_measure_s", t0))
+            t0, t2 = float(record.t_start_s), float(record.t_end_s)
+            t1 = getattr(record, "t_measure_s", None)            # nest readings and earlier logs: no split
+            t1 = t0 if t1 is None else float(t1)
             self.sums += (max(0.0, t1 - t0), self.move[self.done], max(0.0, t2 - t1), self.read[self.done])
         self.done += 1
 

@@ -24,6 +24,7 @@ from markupsafe import Markup
 
 from .errors import DataError
 from .fsutil import atomic_write
+from .records import CalibrationReport, RecordError, VerifyReport
 from .report import STAGE_LABELS
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
@@ -47,6 +48,15 @@ def _read(path: Path) -> dict:
         raise DataError(str(path), f"not a readable JSON report: {exc}") from None
 
 
+def _checked(doc: dict, path: Path, record) -> dict:
+    """``doc`` once ``record.from_dict`` accepts it (a DataError names the file and the field otherwise)."""
+    try:
+        record.from_dict(doc)
+    except RecordError as exc:
+        raise DataError(str(path), exc.message) from None
+    return doc
+
+
 def collect(directory: str | os.PathLike) -> ReportSources:
     """Find the JSON documents of a run or output directory; DataError when there are none."""
     d = Path(directory)
@@ -59,12 +69,15 @@ def collect(directory: str | os.PathLike) -> ReportSources:
         kind = {CALIBRATION: "calibration", ISO: "iso9283"}.get(doc.get("format"))
         if kind is None:
             raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
+        if kind == "calibration":
+            _checked(doc, d / "report.json", CalibrationReport)
         found[kind], files[kind] = doc, "report.json"
     if (d / "diagnosis.json").exists():
         found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"
     verify = []
     for i, p in enumerate(sorted(d.glob("verify-*/verify.json"))):
-        verify.append(_read(p))
+        doc = _read(p)
+        verify.append(_checked(doc, p, VerifyReport) if doc.get("format") == "campaign-verify/2" else doc)
         files[f"verify{i}"] = str(p.relative_to(d))
     if not found and not verify:
         raise DataError(str(d), "no report.json, diagnosis.json or verify-*/verify.json to report on")

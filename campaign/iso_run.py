@@ -28,6 +28,7 @@ from .cell import tracker_uncertainty
 from .config import CampaignConfig
 from .errors import CampaignError, ConfigError, DataError
 from .plan import Plan, PlanPoint, tool_rotation
+from .records import PointRecord
 
 REPORT_FORMAT = "campaign-iso9283/1"
 SHRINK = 0.95
@@ -121,12 +122,12 @@ def corrected_joints(cfg: CampaignConfig, model: CalibratedModel, cube: IsoCube)
     return np.array([by_id[name].q_corrected_deg for name in POSE_NAMES])
 
 
-def iso_report(cfg: CampaignConfig, records: list[dict], cube: IsoCube, model: CalibratedModel | None) -> dict:
+def iso_report(cfg: CampaignConfig, records: list[PointRecord], cube: IsoCube, model: CalibratedModel | None) -> dict:
     """AP/RP per pose and AD/RD (P2-P4) of every target kind in the log records (``N:`` and ``C:`` ids)."""
     by_kind: dict[str, dict[str, list]] = {}
     for rec in records:
-        kind, rest = rec["point_id"].split(":", 1)
-        by_kind.setdefault(kind, {}).setdefault(rest.split(".")[0], []).append(rec["p_tracker_mm"])
+        kind, rest = rec.point_id.split(":", 1)
+        by_kind.setdefault(kind, {}).setdefault(rest.split(".")[0], []).append(rec.p_tracker_mm)
     if "N" not in by_kind:
         raise DataError("iso9283", "the log has no ISO 9283 cycles (point ids N:Pk.cNN)")
     p_cmd = cube.p_base_mm
@@ -186,7 +187,7 @@ def finish(cfg: CampaignConfig, run_dir, model: CalibratedModel | None = None) -
     from .fsutil import write_json
     from .runlog import read_log
 
-    records = [p for p in read_log(Path(run_dir)).points if ":" in p["point_id"]]
+    records = [p for p in read_log(Path(run_dir)).records() if ":" in p.point_id]
     report = iso_report(cfg, records, iso_cube(cfg, nominal_kinematics(cfg)), model)
     write_json(Path(run_dir) / "report.json", report)
     return report

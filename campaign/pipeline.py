@@ -4,7 +4,7 @@ from __future__ import annotations
 import logging
 import shutil
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -26,6 +26,7 @@ from .log_dataset import dataset_from_log
 from .plan import Plan, build_plan, write_plan_csv
 from .html_report import write_report
 from .processing_lazy import Processed, process, write_outputs   # the numerics load on first use, not at start-up
+from .records import PointRecord
 from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, pending, start_record
@@ -86,11 +87,11 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
         eta = RunEta(times[0][left], times[1][left])
-        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.points if log.contents else ())
+        runner.predict_p_tracker_mm = predictor = _smr_predictor(cfg, log.contents.records() if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with _progress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
-            runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record["q_read_deg"],
-                                                                                          record["p_tracker_mm"]),
+            runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
+                                                                                          record.p_tracker_mm),
                                                      advance(record))
             outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
@@ -104,7 +105,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     dataset = dataset_from_log(contents)
     write_csv(run_dir / "data.csv", dataset)
     processed = process(dataset, cfg)
-    processed.report.update(identification(contents))
+    processed = replace(processed, report=processed.report.with_identification(identification(contents)))
     write_outputs(processed, run_dir)
     write_report(run_dir)                       # report.html from report.json
     return RunResult(run_dir, outcome, processed)
@@ -116,7 +117,7 @@ def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
     processed = process(dataset, cfg)
     if contents is not None:
-        processed.report.update(identification(contents))      # the hardware the log was measured with
+        processed = replace(processed, report=processed.report.with_identification(identification(contents)))
     write_outputs(processed, out_dir)
     write_report(out_dir)                       # report.html from report.json
     return processed
@@ -131,7 +132,7 @@ def verify(run_dir: Path, console: Console | None = None):
 
     cfg = load_config(run_dir / "config.yaml")
     model = load_model(run_dir / "model.json")
-    tests = [p for p in read_log(run_dir).points if p["set"] == "test"]
+    tests = [p for p in read_log(run_dir).records() if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
@@ -145,12 +146,12 @@ def verify(run_dir: Path, console: Console | None = None):
         runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock if world else SystemClock(),
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
-        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).points)
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).records())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
 
         def measure(points):
             got = []
-            runner.on_point = lambda point, record: got.append(record["p_tracker_mm"])
+            runner.on_point = lambda point, record: got.append(record.p_tracker_mm)
             outcome = runner.execute(points, log, close=False)
             return np.array(got), outcome.exit_status, outcome.reason
 
@@ -184,8 +185,8 @@ def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
     so far (a resumed or verified run's), else the config's rough tracker position."""
     predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
     for record in records:
-        if record.get("q_read_deg") is not None and record.get("p_tracker_mm") is not None:
-            predictor.observe(record["q_read_deg"], record["p_tracker_mm"])
+        if isinstance(record, PointRecord):                 # nest readings are not at the robot's SMR
+            predictor.observe(record.q_read_deg, record.p_tracker_mm)
     return predictor
 
 

@@ -37,6 +37,7 @@ from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 from .prepare import prepare
+from .records import CalibrationReport
 from .report_points import cell_summary, point_table
 
 REPORT_FORMAT = "campaign-report/1"
@@ -44,7 +45,7 @@ REPORT_FORMAT = "campaign-report/1"
 
 @dataclass(frozen=True, eq=False)
 class Processed:
-    report: dict
+    report: CalibrationReport
     model: CalibratedModel
     calibration: CalibrationResult
 
@@ -302,7 +303,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
                                    {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
                                     for name, m in stage_models}, used, ds.t_s)
-    return Processed(report, model, result)
+    return Processed(CalibrationReport(**report), model, result)
 
 
 def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
@@ -386,7 +387,7 @@ def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
     """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", processed.report)
+    write_json(out / "report.json", processed.report.to_dict())
     write_json(out / "model.json", processed.model.to_dict())
     return out / "report.json"
 

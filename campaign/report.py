@@ -5,6 +5,7 @@ from rich.console import Console
 from rich.table import Table
 
 from .plan import Plan
+from .records import CalibrationReport, VerifyReport
 
 STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
                 ("elastic", "kinematic + physical effects"), ("compensated", "final model (+ residual layer, if any)"))
@@ -14,37 +15,38 @@ def _mm(v) -> str:
     return "-" if v is None else f"{v:.3f}"
 
 
-def render_stages(console: Console, report: dict) -> None:
+def render_stages(console: Console, report: CalibrationReport) -> None:
     """Seed 000 Table 3 rows on the held-out test set, with the noise floor."""
-    t = Table(title=f"Position error on the test set (n = {report['n']['test']}), mm")
+    t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
     for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
-    floor = report["noise_floor_mm"]
+    floor = report.noise_floor_mm
     for key, label in STAGE_LABELS:
-        if key not in report["stages"]:
+        if key not in report.stages:
             continue
-        s = report["stages"][key]["test"]
+        s = report.stages[key]["test"]
         ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
         t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
     console.print(t)
     render_choices(console, report)
-    cv = report.get("residual_cv")
-    if cv and "residual_choice" not in report:
+    cv = report.residual_cv
+    if cv and report.residual_choice is None:
         verdict = ("it predicts structure" if cv["gain"] > 0.02 else
                    "no structured residual above the noise: the layer mostly interpolates noise")
-        console.print(f"residual layer ({report['method']['residual']}): {cv['folds']}-fold CV on the calibration "
+        console.print(f"residual layer ({report.method['residual']}): {cv['folds']}-fold CV on the calibration "
                       f"points, RMS {cv['rms_without_mm']:.4f} -> {cv['rms_with_mm']:.4f} mm "
                       f"({100 * cv['gain']:+.0f} %): {verdict}")
-    render_preparation(console, report.get("preparation"))
-    console.print(f"noise floor {_mm(floor)} mm (from {report['noise_floor_source']}; specs "
-                  f"{_mm(report['noise_floor_specs_mm'])} mm)   condition number {report['condition_number']:.0f}   "
-                  f"sigma0 {report['sigma0']:.2f}   rejected points {report['n']['rejected']}")
+    render_preparation(console, report.preparation)
+    console.print(f"noise floor {_mm(floor)} mm (from {report.noise_floor_source}; specs "
+                  f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
+                  f"sigma0 {report.sigma0:.2f}   rejected points {report.n['rejected']}")
     render_identity(console, report)
 
 
-def render_identity(console: Console, report: dict) -> None:
+def render_identity(console: Console, report: CalibrationReport) -> None:
     """One line naming the hardware the data was measured with (when the report carries it)."""
-    r, t = report.get("robot_identity"), report.get("tracker_identity")
+    ident = dict(report.identification)
+    r, t = ident.get("robot_identity"), ident.get("tracker_identity")
     if r and t:
         console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
                       f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
@@ -64,9 +66,9 @@ def render_preparation(console: Console, prep: dict | None) -> None:
                       f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
 
 
-def render_choices(console: Console, report: dict) -> None:
+def render_choices(console: Console, report: CalibrationReport) -> None:
     """Which effects and which residual layer the data supported (CV figures), and the excluded points."""
-    sel = (report.get("effects") or {}).get("selection")
+    sel = (report.effects or {}).get("selection")
     if sel:
         tried = {}
         for t in sel["trials"]:
@@ -76,24 +78,24 @@ def render_choices(console: Console, report: dict) -> None:
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
         console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
                       f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
-    for fe in (report.get("effects") or {}).get("fitted", []):
+    for fe in (report.effects or {}).get("fitted", []):
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
                                                                  if "stiffness_Nm_per_rad" in p else "")
                          for n, p in fe["params"].items())
         console.print(f"  {fe['name']}: {vals}")
-    for note in (report.get("effects") or {}).get("notes", []):
+    for note in (report.effects or {}).get("notes", []):
         console.print(f"  note: {note}")
-    ch = report.get("residual_choice")
+    ch = report.residual_choice
     if ch and ch.get("candidates"):
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
                          for k, v in ch["candidates"].items())
         console.print(f"residual layer by {ch['folds']}-fold CV on the calibration points (RMS mm): {figs} -> "
                       f"{ch['chosen']}")
-    for e in report.get("excluded_points") or []:
+    for e in report.excluded_points or []:
         console.print(f"excluded {e['point_id']}: {e['reason']}")
-    if report.get("structure_note"):
-        console.print(report["structure_note"])
-    multi = report.get("multi_smr")
+    if report.structure_note:
+        console.print(report.structure_note)
+    multi = report.multi_smr
     if multi and "skipped" not in multi:
         figs = ", ".join(f"{k} RMS {v['rms_mm']:.4f}" for k, v in multi["test"].items())
         console.print(f"{multi['n_smr']}-SMR calibration (one offset per SMR), test set: {figs} mm")
@@ -105,17 +107,17 @@ def render_choices(console: Console, report: dict) -> None:
         console.print(f"multi-SMR calibration skipped: {multi['skipped']}")
 
 
-def render_parameters(console: Console, report: dict) -> None:
+def render_parameters(console: Console, report: CalibrationReport) -> None:
     t = Table(title="Identified parameters (delta from nominal; base relative to the registered frame)")
     for col in ("parameter", "delta", "std", "unit"):
         t.add_column(col, justify="left" if col == "parameter" else "right")
-    for row in report["parameters"]:
+    for row in report.parameters:
         if row["identified"]:
             t.add_row(row["name"], f"{row['delta']:+.4f}", f"{row['std']:.4f}", row["unit"])
     console.print(t)
-    if report["unidentifiable"]:
+    if report.unidentifiable:
         notes = ", ".join(f"{u['name']} (~{'/'.join(u['redundant_with']) or u['reason']})"
-                          for u in report["unidentifiable"])
+                          for u in report.unidentifiable)
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
 
 
@@ -139,19 +141,19 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
         console.print(t)
 
 
-def render_verify(console: Console, rep: dict) -> None:
+def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
-    floor = rep["noise_floor_mm"]
-    t = Table(title=f"Verification on {rep['n']} test points, mm (noise floor {floor:.3f} mm); "
+    floor = rep.noise_floor_mm
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm); "
                     "corrected = points whose correction was commanded, held = commanded at their planned joints")
     for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
     fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
-    for p in rep["passes"]:
+    for p in rep.passes:
         c = p["corrected"]
         t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
                   fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
     console.print(t)
-    for p in rep["passes"]:
+    for p in rep.passes:
         for why, count in p["held"].items():
             console.print(f"{p['stage']}: {count} held: {why}", markup=False)

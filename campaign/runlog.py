@@ -12,7 +12,9 @@ File format (one JSON object per line, bluesky event-model flavoured)::
 * ``kind`` is ``start`` | ``point`` | ``event`` | ``stop``;
 * ``seq`` is 0, 1, 2, ... consecutive over the whole file (across resumes);
   record 0 is the only ``start`` record;
-* ``data`` is a JSON object (see the ``append_*`` methods);
+* ``data`` is a JSON object (see the ``append_*`` methods); a ``point`` record's
+  is the ``to_dict()`` of a :class:`campaign.records.PointRecord` (robot
+  measurement) or :class:`campaign.records.NestRecord` (reference nest);
 * ``crc`` is ``zlib.crc32`` of the canonical JSON of ``{"kind", "seq", "data"}``
   (``json.dumps(..., sort_keys=True, separators=(",", ":"), allow_nan=False)``)
   as 8 lowercase hex digits.
@@ -47,6 +49,8 @@ from typing import Any
 from .fsutil import fsync_dir
 
 from campaign.errors import DataError
+
+from .records import NestRecord, PointRecord, RecordError, point_from_dict
 
 try:  # POSIX advisory locking; absent on Windows.
     import fcntl
@@ -87,7 +91,9 @@ class LogContents:
     """Everything :func:`read_log` found in a log, in file order.
 
     ``start`` is the data of record 0; ``points``/``events``/``stops`` are the
-    ``data`` dicts of those records.  ``torn_tail`` is True when bytes after
+    ``data`` dicts of those records as stored (:meth:`records` gives the points
+    as typed, checked :class:`PointRecord`/:class:`NestRecord`; ``point_lines``
+    their 1-based line numbers).  ``torn_tail`` is True when bytes after
     the last good record were ignored; ``n_good_bytes`` is the length of the
     intact prefix (the file size after a resume truncates the tail).
     ``n_records`` is the number of good records (= next ``seq``).
@@ -101,41 +107,19 @@ class LogContents:
     n_good_bytes: int = 0
     n_records: int = 0
     path: str = ""
+    point_lines: list[int] = field(default_factory=list)
 
-
-@dataclass(frozen=True)
-class NestRecord:
-    """One reference-nest reading (stored as a ``point`` record with ``set`` and ``kind`` "nest").
-
-    ``p_tracker_mm`` (3,) mean of the samples, mm, tracker frame; ``cov_mm2`` (3, 3); ``spread_mm`` max sample
-    distance from the mean; ``t_start_s``/``t_end_s`` the runner's clock (s; ``t_s`` = ``t_end_s``);
-    ``p_nest_base_mm`` the nest's approximate position in the robot base frame from the plan;
-    ``temperatures`` the tracker's environment readings (or None).
-    """
-
-    point_id: str
-    nest_id: str
-    p_tracker_mm: tuple[float, float, float]
-    cov_mm2: tuple[tuple[float, ...], ...]
-    spread_mm: float
-    n_samples: int
-    t_start_s: float
-    t_end_s: float
-    retries: int
-    p_nest_base_mm: tuple[float, float, float]
-    temperatures: dict | None = None
-
-    def to_dict(self) -> dict:
-        """The log record's data (plain JSON types)."""
-        data = {"point_id": self.point_id, "set": "nest", "kind": "nest", "nest_id": self.nest_id,
-                "p_tracker_mm": [float(v) for v in self.p_tracker_mm],
-                "cov_mm2": [[float(v) for v in row] for row in self.cov_mm2], "spread_mm": float(self.spread_mm),
-                "n_samples": int(self.n_samples), "t_start_s": float(self.t_start_s), "t_end_s": float(self.t_end_s),
-                "t_s": float(self.t_end_s), "retries": int(self.retries),
-                "p_nest_base_mm": [float(v) for v in self.p_nest_base_mm]}
-        if self.temperatures:
-            data["temperatures"] = dict(self.temperatures)
-        return data
+    def records(self) -> list[PointRecord | NestRecord]:
+        """The point records as typed records; a bad one raises :class:`RunLogError` naming its line and field."""
+        out = []
+        for k, data in enumerate(self.points):
+            try:
+                out.append(point_from_dict(data))
+            except RecordError as exc:
+                line = self.point_lines[k] if k < len(self.point_lines) else None
+                raise RunLogError(self.path, f"point record {data.get('point_id')!r}: {exc.message}",
+                                  line=line) from None
+        return out
 
 
 # --------------------------------------------------------------------------
@@ -241,6 +225,8 @@ def _parse_log(blob: bytes, path: str) -> LogContents:
             contents = LogContents(start=rec["data"], path=path)
         else:
             _bucket(contents, rec)
+            if rec["kind"] == "point":
+                contents.point_lines.append(index + 1)
         offset += len(raw) + 1
     if contents is None:
         raise RunLogError(path, "no complete start record (log empty or torn)", line=1)
@@ -474,18 +460,16 @@ class RunLog:
         """True once :meth:`close` ran (or the descriptor was lost)."""
         return self._fd is None
 
-    def append_point(self, data: dict) -> int:
+    def append_point(self, record: PointRecord | NestRecord | dict) -> int:
         """Durably append one measurement record; return its ``seq``.
 
-        ``data`` is the caller's measurement dict (``point_id``, ``set``,
-        ``kind`` "plan"/"check", ``q_cmd_deg``, ``q_read_deg``,
-        ``p_tracker_mm``, ``cov_mm2`` or ``sigma_mm``, ``n_samples``,
-        ``spread_mm``, ``t_start_s``, ``t_end_s``, ``temperatures``,
-        ``approach``, ``payload_kg``, ``retries``, ...); numpy values are
-        stored as lists/floats.  NaN/inf are refused.
+        ``record`` is a :class:`PointRecord` or :class:`NestRecord` (stored as its ``to_dict()``), or a plain
+        dict with a ``point_id`` (other writers and tools); numpy values are stored as lists/floats.
+        NaN/inf are refused.
         """
+        data = record.to_dict() if isinstance(record, (PointRecord, NestRecord)) else record
         if not isinstance(data, dict) or "point_id" not in data:
-            raise TypeError("point data must be a dict with a 'point_id'")
+            raise TypeError("point data must be a record or a dict with a 'point_id'")
         seq = self._append("point", data)
         self._n_points += 1
         return seq

@@ -36,7 +36,8 @@ from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload,
 from .config import MeasurementConfig, NestsConfig
 from .motion_safety import PathGuard, UnsafeMotion
 from .plan import PlanPoint
-from .runlog import NestRecord, RunLog, RunLogError
+from .records import NestRecord, PointRecord, SmrReading
+from .runlog import RunLog, RunLogError
 from .tracker_quality import check_device_stability, device_covariance
 from .traceability import device_identity, environment_from_readings
 
@@ -121,7 +122,7 @@ class Runner:
                     continue
                 record = self.measure_point(point, log)
                 log.append_point(record)                      # flushed + fsynced before the next move
-                self.p_last = np.asarray(record["p_tracker_mm"], float)
+                self.p_last = np.asarray(record.p_tracker_mm, float)
                 n += 1
                 if self.on_point:
                     self.on_point(point, record)
@@ -226,7 +227,7 @@ class Runner:
             self.robot.move_joints(q)
             self.q_at = np.asarray(q, float)
 
-    def measure_point(self, point: PlanPoint, log: RunLog) -> dict:
+    def measure_point(self, point: PlanPoint, log: RunLog) -> PointRecord:
         """Move, settle and measure one point; returns the log record."""
         q_cmd = np.asarray(point.q_deg, float)
         t_start = self.clock.now()
@@ -247,38 +248,30 @@ class Runner:
         joint_temp = self._joint_temperatures(point, log)
         dev_cov = device_covariance(readings)
         use_dev = dev_cov is not None and self.covariance_from_device is not None
-        record = {
-            "point_id": point.point_id, "set": point.set, "q_cmd_deg": q_cmd.tolist(), "q_read_deg": q_read.tolist(),
-            "p_tracker_mm": mean.tolist(),
-            "cov_mm2": (self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)).tolist(),
-            "cov_source": "device" if use_dev else "spec", "spread_mm": spread,
-            "n_samples": len(readings), "t_start_s": t_start, "t_measure_s": t_measure, "t_end_s": self.clock.now(),
-            "approach": approach.tolist(), "payload_kg": self.payload_kg, "retries": retries,
-            "p_target_base_mm": list(point.p_base_mm),
-        }
-        if env:
-            record["temperatures"] = env
-        if joint_temp is not None:
-            record["joint_temp_c"] = joint_temp
-        if self.payload is not None:
-            record["payload_kg"] = self.payload.mass_kg
-            record["payload_cog_flange_mm"] = list(self.payload.cog_flange_mm)
-        if dev_cov is not None:
-            record["device_std_mm"] = np.sqrt(np.diag(dev_cov)).tolist()
-            record["device_cov_mm2"] = dev_cov.tolist()
-        for k in range(2, self.n_smrs + 1):
-            record.update(self._measure_smr(k, point, log))
-        return record
+        cov = self.covariance_from_device(dev_cov) if use_dev else self.covariance(mean)
+        payload = self.payload
+        return PointRecord(                                 # t_end_s is taken before SMRs 2 and 3 are measured
+            point_id=point.point_id, set=point.set, q_cmd_deg=tuple(q_cmd), q_read_deg=tuple(q_read),
+            p_tracker_mm=tuple(mean), cov_mm2=tuple(map(tuple, cov)), cov_source="device" if use_dev else "spec",
+            spread_mm=spread, n_samples=len(readings), t_start_s=t_start, t_measure_s=t_measure,
+            t_end_s=self.clock.now(), approach=tuple(approach),
+            payload_kg=payload.mass_kg if payload is not None else self.payload_kg, retries=retries,
+            p_target_base_mm=tuple(point.p_base_mm), temperatures=env or None,
+            joint_temp_c=None if joint_temp is None else tuple(joint_temp),
+            payload_cog_flange_mm=None if payload is None else tuple(payload.cog_flange_mm),
+            device_std_mm=None if dev_cov is None else tuple(np.sqrt(np.diag(dev_cov))),
+            device_cov_mm2=None if dev_cov is None else tuple(map(tuple, dev_cov)),
+            smrs=tuple(self._measure_smr(k, point, log) for k in range(2, self.n_smrs + 1)))
 
     def _remember_nests(self, contents) -> None:
         """First/last nest readings of earlier sessions (resume), so the bound refers to the run's start."""
-        for rec in getattr(contents, "points", None) or []:
-            if rec.get("set") == "nest":
-                p = np.asarray(rec["p_tracker_mm"], float)
-                self.nest_first.setdefault(str(rec["nest_id"]), p)
-                self.nest_last[str(rec["nest_id"])] = p
-            elif rec.get("p_tracker_mm") is not None:
-                self.p_last = np.asarray(rec["p_tracker_mm"], float)
+        for rec in getattr(contents, "records", lambda: [])():
+            p = np.asarray(rec.p_tracker_mm, float)
+            if isinstance(rec, NestRecord):
+                self.nest_first.setdefault(rec.nest_id, p)
+                self.nest_last[rec.nest_id] = p
+            else:
+                self.p_last = p
 
     def _nest_guess(self, nest_id: str) -> np.ndarray | None:
         """Where to aim (tracker frame, mm): the nest's last reading, else its configured ``p_tracker_mm``."""
@@ -310,7 +303,7 @@ class Runner:
         if p is not None and callable(getattr(self.tracker, "reacquire", None)):
             self.tracker.reacquire(tuple(float(v) for v in p))
 
-    def measure_nest(self, point: PlanPoint, log: RunLog) -> dict:
+    def measure_nest(self, point: PlanPoint, log: RunLog) -> NestRecord:
         """One reading of a reference nest (the robot stays where it is); returns the log record."""
         nest_id = point.point_id.rsplit("@", 1)[0]
         t_start = self.clock.now()
@@ -329,11 +322,11 @@ class Runner:
         cov = self.covariance(mean)
         rec = NestRecord(point.point_id, nest_id, tuple(mean), tuple(map(tuple, cov)), spread, len(readings),
                          t_start, self.clock.now(), retries, tuple(point.p_base_mm), env or None)
-        return rec.to_dict()
+        return rec
 
-    def _check_nest(self, record: dict) -> None:
+    def _check_nest(self, record: NestRecord) -> None:
         """Pause when the nest reads more than ``max_move_mm`` from its first reading."""
-        nest_id, p = record["nest_id"], np.asarray(record["p_tracker_mm"], float)
+        nest_id, p = record.nest_id, np.asarray(record.p_tracker_mm, float)
         first = self.nest_first.setdefault(nest_id, p)
         self.nest_last[nest_id] = p
         moved = float(np.linalg.norm(p - first))
@@ -355,7 +348,7 @@ class Runner:
             return None
         return None if values is None else [float(v) for v in values]
 
-    def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> dict:
+    def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> SmrReading:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
         self.tracker.select_smr(k)
         self._smr = k
@@ -364,8 +357,7 @@ class Runner:
         finally:
             self._smr = 1
             self.tracker.select_smr(1)
-        return {f"p{k}_tracker_mm": mean.tolist(), f"cov{k}_mm2": self.covariance(mean).tolist(),
-                f"spread{k}_mm": spread, f"retries{k}": retries}
+        return SmrReading(k, tuple(mean), tuple(map(tuple, self.covariance(mean))), spread, retries)
 
     def _approach(self, q_cmd: np.ndarray) -> np.ndarray:
         """Sign of the last motion of each joint before this stop (a joint that did not move keeps its sign)."""

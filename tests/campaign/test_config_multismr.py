@@ -132,6 +132,7 @@ def test_runner_logs_the_second_and_third_smr(tmp_path: Path) -> None:
     rec = log.points[0]
     for key in ("p_tracker_mm", "p2_tracker_mm", "p3_tracker_mm", "cov2_mm2", "cov3_mm2", "retries2", "spread3_mm"):
         assert key in rec
+    assert [r.to_dict() for r in log.records()] == log.points        # the typed records are exactly what was logged
     ds = dataset_from_log(log)
     meas = np.stack([ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm], axis=1)
     assert np.max(np.linalg.norm(meas - truth, axis=2)) < 0.25            # tracker noise + repeatability

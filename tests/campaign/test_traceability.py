@@ -74,8 +74,8 @@ def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
     d15, d25 = estimate_duration_s(plan.points, cfg, kin), estimate_duration_s(plan.points, slow, kin)
     assert d25 - d15 == pytest.approx(n * 2 * 1.0, rel=1e-9)  # samples x (2.5 - 1.5) s per point
     result = run_campaign(cfg, tmp_path / "run")
-    recs = read_log(result.run_dir).points
-    actual = np.array([r["t_end_s"] - r["t_start_s"] for r in recs])
+    recs = read_log(result.run_dir).records()
+    actual = np.array([r.t_end_s - r.t_start_s for r in recs])
     eta = RunEta(*point_times_s(plan.points, cfg, kin))
     prior_error = abs(eta.remaining_s() - actual.sum()) / actual.sum()
     k = n // 4

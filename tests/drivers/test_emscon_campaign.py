@@ -116,7 +116,7 @@ def _run(tmp_path, cell, faults, *, at=4, retries=3, predictor=True, late_s=1.0)
                         predict_p_tracker_mm=predict,
                         covariance_from_device=lambda c: device_measurement_covariance(cfg, c))
         if predict is not None:
-            runner.on_point = lambda point, record: predict.observe(record["q_read_deg"], record["p_tracker_mm"])
+            runner.on_point = lambda point, record: predict.observe(record.q_read_deg, record.p_tracker_mm)
         t0 = time.monotonic()
         outcome = runner.execute(points, log)
         elapsed = time.monotonic() - t0

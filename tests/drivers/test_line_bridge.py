@@ -190,7 +190,7 @@ def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path
         predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
         runner = Runner(MockRobot(world), tracker, cfg.tracker.measurement, world.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], predict_p_tracker_mm=predict)
-        runner.on_point = lambda point, record: (predict.observe(record["q_read_deg"], record["p_tracker_mm"]),
+        runner.on_point = lambda point, record: (predict.observe(record.q_read_deg, record.p_tracker_mm),
                                                  bridge.inject("beam_break") if point is points[2] else None)
         outcome = runner.execute(points, RunLog.create(tmp_path / "run", {"config_sha256": "t", "plan_sha256": "t"}))
         tracker.close()
