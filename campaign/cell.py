@@ -25,9 +25,8 @@ def nominal_kinematics(cfg: CampaignConfig) -> Kinematics:
 
 
 def tracker_uncertainty(cfg: CampaignConfig) -> TrackerUncertainty:
-    u = cfg.tracker.uncertainty
-    return TrackerUncertainty(u.transverse_a_um, u.transverse_b_um_per_m, u.range_a_um, u.range_b_um_per_m,
-                              u.coverage_k)
+    """The tracker's MPE model as configured (the config holds robocal's class itself)."""
+    return cfg.tracker.uncertainty
 
 
 def measurement_covariance(cfg: CampaignConfig, p_tracker_mm: np.ndarray) -> np.ndarray:

@@ -31,6 +31,9 @@ PLAN_ORDERS = ("serpentine", "random")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
 from robocal.effects import SIMULATED_EFFECTS as EFFECT_NAMES  # noqa: E402  (one owner: robocal.effects)
+# tracker.uncertainty: robocal owns the class and its numerics; the YAML section requires the four MPE terms
+# (micrometres, micrometres per metre) and takes coverage_k (default 2), see campaign.config._uncertainty
+from robocal.noise import TrackerUncertainty  # noqa: E402,F401
 MAX_JOINTS = 12
 
 _ORTHONORMAL_TOL = 1e-3
@@ -144,21 +147,6 @@ class ToolConfig:
         """Centres of every configured SMR in the flange frame (mm), the main one first."""
         extra = (self.p_flange_smr2_mm, self.p_flange_smr3_mm)
         return (self.p_flange_smr_mm,) + tuple(p for p in extra if p is not None)
-
-
-@dataclass(frozen=True, slots=True)
-class TrackerUncertainty:
-    """Tracker MPE ``a + b * distance`` per direction, expanded with ``coverage_k``.
-
-    ``*_a_um`` in micrometres (> 0), ``*_b_um_per_m`` in micrometres per metre
-    (>= 0), ``coverage_k`` > 0 (default 2).
-    """
-
-    transverse_a_um: float
-    transverse_b_um_per_m: float
-    range_a_um: float
-    range_b_um_per_m: float
-    coverage_k: float
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,7 +17,11 @@ RP_PER_SIGMA = 2.0 * np.sqrt(2.0 / np.pi) + 3.0 * np.sqrt(3.0 - 8.0 / np.pi)
 
 @dataclass(frozen=True)
 class TrackerUncertainty:
-    """MPE terms of a tracker (defaults: Leica AT960 class, transverse 15 um + 6 um/m, ADM 10 um + 0.3 um/m)."""
+    """MPE terms of a tracker (defaults: Leica AT960 class, transverse 15 um + 6 um/m, ADM 10 um + 0.3 um/m).
+
+    ``*_a_um`` micrometres (> 0), ``*_b_um_per_m`` micrometres per metre (>= 0), ``coverage_k`` > 0. Also the
+    ``tracker.uncertainty`` section of a campaign config (which requires the four terms; ``coverage_k`` default 2).
+    """
     transverse_a_um: float = 15.0
     transverse_b_um_per_m: float = 6.0
     range_a_um: float = 10.0
@@ -36,7 +40,7 @@ class TrackerUncertainty:
         p = np.atleast_2d(np.asarray(p_tracker_mm, float))
         r = np.linalg.norm(p, axis=1)
         u_r, u_t = self.sigmas_mm(r)
-        e_r = p / r[:, None]
+        e_r = p / np.where(r > 0, r, 1.0)[:, None]     # at the origin (r = 0): isotropic u_t
         # Sigma = u_t^2 I + (u_r^2 - u_t^2) e_r e_r^T (the transverse plane is isotropic)
         return (u_t**2)[:, None, None] * np.eye(3) + ((u_r**2 - u_t**2)[:, None, None]) * e_r[:, :, None] * e_r[:, None, :]
 

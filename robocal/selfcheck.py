@@ -42,7 +42,7 @@ from .kinematics import Kinematics, identification_jacobian, smr_base
 from .noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
 from .repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
 from .simulate import SimulatedCell, random_geometric_errors
-from .truth import LIBRARY_TRUTHS, TruthCampaign, TruthProtocol, simulate
+from .truth import LIBRARY_TRUTHS, CampaignShape, TruthCampaign, TruthProtocol, simulate
 
 ARCSEC = np.pi / 180.0 / 3600.0
 LABELS = ("none",) + EFFECT_NAMES
@@ -56,16 +56,8 @@ def irb2600() -> Kinematics:
 
 
 @dataclass(frozen=True)
-class Protocol:
+class Protocol(CampaignShape):
     """The simulated measurement protocol (see the module docstring)."""
-    n_calib: int = 300
-    n_test: int = 100
-    duration_s: float = 7200.0
-    payloads_kg: tuple[float, ...] = (0.0, 12.0)
-    payload_block_s: float = 900.0
-    check_poses: int = 10
-    check_repeats: int = 5
-    repeatability_rp_mm: float = 0.04
     log_time: bool = True
     log_approach: bool = True
 

@@ -65,7 +65,10 @@ class TruthEffect:
 
 
 @dataclass(frozen=True)
-class TruthProtocol:
+class CampaignShape:
+    """The size and timing of a simulated campaign: calibration/test points, duration (s), payload blocks (kg, s),
+    check poses and their repeats, robot repeatability (ISO 9283 RP, mm). Shared by ``TruthProtocol`` and
+    ``robocal.selfcheck.Protocol``."""
     n_calib: int = 300
     n_test: int = 100
     duration_s: float = 7200.0
@@ -74,6 +77,10 @@ class TruthProtocol:
     check_poses: int = 10
     check_repeats: int = 5
     repeatability_rp_mm: float = 0.04
+
+
+@dataclass(frozen=True)
+class TruthProtocol(CampaignShape):
     timestamps: bool = True
     nest_every: int = 0                   # 0: no reference nests
     nests: int = 3

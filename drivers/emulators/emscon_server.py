@@ -40,7 +40,10 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
+import numpy as np
+
 from drivers import emscon_protocol as P
+from robocal.noise import TrackerUncertainty
 
 from .faults import FaultDeck
 from .line_server import TcpServer, wait_for_shutdown
@@ -70,20 +73,18 @@ class Out:
 
 
 @dataclass(frozen=True)
-class NoiseModel:
-    """1-sigma noise of one stationary measurement: range and transverse ``a_um + b_um_per_m * distance``."""
-    range_a_um: float = 2.0
-    range_b_um_per_m: float = 0.5
+class NoiseModel(TrackerUncertainty):
+    """1-sigma noise of one stationary measurement (``coverage_k`` 1): robocal's spherical tracker model, range and
+    transverse ``a_um + b_um_per_m * distance``, with the emulator's defaults."""
     transverse_a_um: float = 3.0
     transverse_b_um_per_m: float = 1.0
+    range_a_um: float = 2.0
+    range_b_um_per_m: float = 0.5
+    coverage_k: float = 1.0
 
     def covariance_mm2(self, p_mm: Sequence[float]) -> list[list[float]]:
-        """(3, 3) covariance in mm^2 at ``p_mm`` (tracker frame): diag(t, t, r)^2 rotated onto the line of sight."""
-        r_m = math.sqrt(sum(c * c for c in p_mm)) / 1000.0
-        s_r = (self.range_a_um + self.range_b_um_per_m * r_m) * 1e-3
-        s_t = (self.transverse_a_um + self.transverse_b_um_per_m * r_m) * 1e-3
-        u = [c / (r_m * 1000.0) for c in p_mm] if r_m > 0 else [0.0, 0.0, 1.0]
-        return [[s_t ** 2 * ((i == j) - u[i] * u[j]) + s_r ** 2 * u[i] * u[j] for j in range(3)] for i in range(3)]
+        """(3, 3) covariance in mm^2 at ``p_mm`` (tracker frame), as nested lists."""
+        return self.covariance(np.asarray(p_mm, float))[0].tolist()
 
 
 def _cholesky3(c: list[list[float]]) -> list[list[float]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Iterable
 
 from .lexer import (_BINOPS, _CONTINUE_WORDS, _DECL_WORDS, _END_WORDS, _MODULE_ATTRS, _MODULE_LEVEL, _RAPID_TYPES,
@@ -21,6 +22,10 @@ class _RapidParser:
         self.types = dict(_RAPID_TYPES)
         self.types.update({t.lower(): None for t in extra_types})
         self.decls: dict[str, _Decl] = {}
+        self.module_name = ""
+        self.procs: dict[str, str] = {}               # lower-case PROC name -> its parameter text
+        self.proc_calls: dict[str, set[str]] = {}     # lower-case PROC name -> procedures it calls without arguments
+        self.proc: str | None = None                  # the PROC being read
 
     # -- token access
     def peek(self) -> _Tok:
@@ -75,6 +80,7 @@ class _RapidParser:
             return
         try:
             name = self.name("module name")
+            self.module_name = name.text
             if self.is_op("("):
                 self.module_attributes()
         except _ParseError as e:
@@ -349,9 +355,18 @@ class _RapidParser:
         if kw.up == "FUNC":
             self.type_name()
         name = self.name(f"{kw.up} name")
+        params = ""
         if kw.up != "TRAP":
-            self.skip_group(self.expect_op("(", f"after {kw.up} {name.text}"))
-        self.body(kw.up, name)
+            open_tok, start = self.expect_op("(", f"after {kw.up} {name.text}"), self.i
+            self.skip_group(open_tok)
+            params = " ".join(t.text for t in self.toks[start:self.i - 1])
+        if kw.up == "PROC":
+            self.proc = name.text.lower()
+            self.procs[self.proc], self.proc_calls[self.proc] = params, set()
+        try:
+            self.body(kw.up, name)
+        finally:
+            self.proc = None
 
     def body(self, kind: str, name: _Tok) -> None:
         """Statements up to the routine's END word, checking nested blocks and ';'."""
@@ -421,6 +436,8 @@ class _RapidParser:
         elif tok.kind == "id" and self.is_op(":") and tok.up not in _RAPID_RESERVED:
             self.next()  # a label
         else:
+            if tok.kind == "id" and self.is_op(";") and self.proc is not None:
+                self.proc_calls[self.proc].add(tok.text.lower())     # a call without arguments
             self.scan({";"}, tok, first=tok)
 
     def scan(self, terminators: set[str], start: _Tok, consume: bool = True, first: _Tok | None = None) -> str:
@@ -519,8 +536,50 @@ def parse_rapid_module(text: str, *, extra_types: Iterable[str] = ()) -> dict[st
     declaration without initial value maps to None.  Raises ValueError listing
     the syntax errors when :func:`check_rapid_syntax` finds any.
     """
+    return {name: value for _, _, name, _, value in read_rapid_module(text, extra_types=extra_types).data}
+
+
+@dataclass(frozen=True)
+class RapidModuleOutline:
+    """What a controller keeps of a module that checks: its name, module-level data (``parse_rapid_module``
+    values, in declaration order, with storage, type and dimensions) and its procedures."""
+
+    name: str
+    data: tuple[tuple[str, str, str, tuple, Any], ...]   # (storage, type, name, dims, value)
+    procs: dict[str, str]                                 # lower-case PROC name -> its parameter text
+    proc_calls: dict[str, frozenset[str]]                 # lower-case PROC name -> procedures called without arguments
+
+
+def read_rapid_module(text: str, *, extra_types: Iterable[str] = ()) -> RapidModuleOutline:
+    """The outline of a RAPID module; raises ValueError listing the syntax errors (as ``parse_rapid_module``)."""
     parser = _run_rapid_parser(text, None, extra_types)
     errors = _messages(parser)
     if errors:
         raise ValueError(f"RAPID syntax errors: {'; '.join(errors)}")
-    return {decl.name: _to_python(decl.value) for decl in parser.decls.values()}
+    data = tuple((d.storage, d.type_name, d.name, d.dims, _to_python(d.value)) for d in parser.decls.values())
+    return RapidModuleOutline(parser.module_name, data, dict(parser.procs),
+                              {k: frozenset(v) for k, v in parser.proc_calls.items()})
+
+
+def parse_rapid_literal(text: str) -> Any:
+    """A RAPID literal (number, string, TRUE/FALSE, or an aggregate of them) as ``parse_rapid_module`` gives
+    values; raises ValueError for a syntax error or a value that is not a literal (a name, an expression)."""
+    parser = _RapidParser(text)
+    node = None
+    try:
+        node = parser.expression()
+        if parser.peek().kind != "eof":
+            raise _ParseError(parser.peek().line, f"text after the literal: '{parser.peek().text}'")
+    except _ParseError as e:
+        parser.err(e.line, e.message)
+    errors = _messages(parser)
+    if errors:
+        raise ValueError(f"RAPID syntax errors: {'; '.join(errors)}")
+    value = _to_python(node)
+    if _has_expr(value):
+        raise ValueError(f"not a RAPID literal: {text.strip()[:40]!r}")
+    return value
+
+
+def _has_expr(value: Any) -> bool:
+    return isinstance(value, RapidExpr) or (isinstance(value, list) and any(map(_has_expr, value)))

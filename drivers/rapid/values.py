@@ -1,52 +1,33 @@
 """RAPID data as the controller holds it: literals parsed to nested lists, rendered back as RobotWare prints them,
-and a light module reader (name, main, routines, module-level data) -- the model the RWS emulator runs on.
-The strict module checker is ``parser``; both share the type table in ``lexer``."""
+and the module model (name, main, routines, module-level data) the RWS emulator runs on. Reading goes through the
+strict lexer and parser (``parser``), so the emulator refuses what the write-back checker refuses."""
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
 from .lexer import _RAPID_TYPES
+from .parser import _has_expr, parse_rapid_literal, read_rapid_module
+
 
 class RapidSyntaxError(ValueError):
     """A RAPID literal or module that does not parse."""
 
 
-_TOKEN = re.compile(r'\s*(?:(?P<open>\[)|(?P<close>\])|(?P<comma>,)|(?P<str>"(?:[^"]|"")*")'
-                    r'|(?P<bool>TRUE\b|FALSE\b)|(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?))', re.I)
-
-
 def parse_literal(text: str) -> Any:
-    """RAPID literal -> nested lists of float / str / bool (aggregates are lists)."""
-    value, pos = _parse_value(text, 0)
-    if text[pos:].strip():
-        raise RapidSyntaxError(f"trailing text after literal: {text[pos:pos + 20]!r}")
-    return value
+    """RAPID literal -> nested lists of float / str / bool (aggregates are lists); read by the strict parser."""
+    try:
+        return _as_num(parse_rapid_literal(text))
+    except ValueError as exc:
+        raise RapidSyntaxError(str(exc)) from None
 
 
-def _parse_value(text: str, pos: int) -> tuple[Any, int]:
-    m = _TOKEN.match(text, pos)
-    if not m or m.lastgroup in ("close", "comma"):
-        raise RapidSyntaxError(f"unexpected text at {pos}: {text[pos:pos + 20]!r}")
-    if m.lastgroup == "num":
-        return float(m.group("num")), m.end()
-    if m.lastgroup == "str":
-        return m.group("str")[1:-1].replace('""', '"'), m.end()
-    if m.lastgroup == "bool":
-        return m.group("bool").upper() == "TRUE", m.end()
-    items, pos = [], m.end()
-    while True:
-        item, pos = _parse_value(text, pos)
-        items.append(item)
-        m = _TOKEN.match(text, pos)
-        if m and m.lastgroup == "comma":
-            pos = m.end()
-        elif m and m.lastgroup == "close":
-            return items, m.end()
-        else:
-            raise RapidSyntaxError(f"expected ',' or ']' at {pos}")
+def _as_num(value: Any) -> Any:
+    """Integer literals as float (the controller holds num as float); bool, str and lists as they are."""
+    if isinstance(value, list):
+        return [_as_num(v) for v in value]
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
 
 
 N, S, B = "num", "string", "bool"
@@ -107,64 +88,35 @@ class Module:
     routines: dict[str, str] = field(default_factory=dict)   # lower-case PROC name -> its parameter text
     main_calls: frozenset[str] = frozenset()                  # lower-case procedures main calls without arguments
 
-    def calls(self, routine: str, callee: str) -> bool:
-        """Whether PROC ``routine`` of this module calls ``callee`` (a procedure call statement)."""
-        code = _strip_comments(self.text)
-        m = re.search(rf"^\s*(?:LOCAL\s+)?PROC\s+{routine}\s*\(.*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
-        return bool(m and re.search(rf"^\s*{callee}\s*;", m.group(0), re.I | re.M))
-
-
-_ROUTINE = re.compile(r"^\s*(?:LOCAL\s+)?(PROC|FUNC|TRAP)\b.*?^\s*END(?:PROC|FUNC|TRAP)\b", re.I | re.M | re.S)
-_DECL = re.compile(r"^\s*(?:LOCAL\s+|TASK\s+)?(PERS|VAR|CONST)\s+(\w+)\s+(\w+)\s*(\{[^}]*\})?\s*(?::=\s*(.*?))?;",
-                   re.I | re.M | re.S)
-
-
-def _strip_comments(text: str) -> str:
-    """Remove ``!`` comments (outside string literals)."""
-    out = []
-    for line in text.splitlines():
-        quoted = False
-        for i, ch in enumerate(line):
-            if ch == '"':
-                quoted = not quoted
-            elif ch == "!" and not quoted:
-                line = line[:i]
-                break
-        out.append(line)
-    return "\n".join(out)
-
 
 def parse_module(text: str) -> Module:
-    """Parse a module's name, ``main`` and module-level data declarations (types checked for known types)."""
-    code = _strip_comments(text)
-    head = re.match(r"\s*MODULE\s+([A-Za-z]\w*)", code, re.I)
-    if not head or not re.search(r"^\s*ENDMODULE\b", code, re.I | re.M):
-        raise RapidSyntaxError("not a RAPID module (MODULE name ... ENDMODULE)")
-    has_main = bool(re.search(r"^\s*PROC\s+main\s*\(\s*\)", code, re.I | re.M))
-    routines = {name.lower(): params.strip() for name, params in
-                re.findall(r"^\s*(?:LOCAL\s+)?PROC\s+(\w+)\s*\(([^)]*)\)", code, re.I | re.M)}
-    data = _ROUTINE.sub("", code)
+    """A module as the controller loads it: the strict checker (``parser``) must pass; then its name, ``main``,
+    procedures and module-level data (initial values rendered; zero/empty when a VAR has none)."""
+    try:
+        outline = read_rapid_module(text)
+    except ValueError as exc:
+        raise RapidSyntaxError(str(exc)) from None
     symbols = {}
-    for storage, dtype, name, dims, init in _DECL.findall(data):
+    for storage, dtype, name, dims, init in outline.data:
         value = _initial_value(dtype, init, bool(dims), name)
-        symbols[name.lower()] = Symbol(head.group(1), name, storage.upper(), dtype.lower(), value, bool(dims))
-    main = re.search(r"^\s*PROC\s+main\s*\(\s*\).*?^\s*ENDPROC\b", code, re.I | re.M | re.S)
-    calls = frozenset(c.lower() for c in re.findall(r"^\s*(\w+)\s*;", main.group(0), re.M)) if main else frozenset()
-    return Module(head.group(1), text, symbols, has_main, routines, calls - RAPID_KEYWORDS)
+        symbols[name.lower()] = Symbol(outline.name, name, storage, dtype, value, bool(dims))
+    has_main = outline.procs.get("main") == ""
+    calls = outline.proc_calls.get("main", frozenset()) if has_main else frozenset()
+    return Module(outline.name, text, symbols, has_main, dict(outline.procs), calls - RAPID_KEYWORDS)
 
 
 RAPID_KEYWORDS = frozenset({"stop", "exit", "return", "break", "endproc", "endwhile", "endif", "endfor", "endtest",
                             "else", "retry", "trynext"})
 
-def _initial_value(dtype: str, init: str, array: bool, name: str) -> str:
-    """Rendered initial value; zero/empty default when a VAR has no initialiser."""
-    shape = SHAPES.get(dtype.lower())
-    if not init.strip():
+
+def _initial_value(dtype: str, init: Any, array: bool, name: str) -> str:
+    """Rendered initial value; zero/empty default when a VAR has no initialiser (types were checked by the parser)."""
+    if init is None:
+        shape = SHAPES.get(dtype)
         return render(_zero(shape)) if shape is not None and not array else "[]"
-    value = parse_literal(init)
-    if shape is not None and not array and not matches(value, shape):
-        raise RapidSyntaxError(f"initial value of {name} is not a {dtype}")
-    return render(value)
+    if _has_expr(init):
+        raise RapidSyntaxError(f"initial value of {name} is not a literal")
+    return render(_as_num(init))
 
 
 def _zero(shape: Any) -> Any:

@@ -120,6 +120,24 @@ def minimal_dict() -> dict[str, Any]:
 
 
 @pytest.mark.unit
+def test_tracker_uncertainty_is_robocals_model_with_the_file_terms(tmp_path: Path) -> None:
+    """One TrackerUncertainty: the config section is robocal's class, carrying the YAML terms (not its defaults)."""
+    from robocal.noise import TrackerUncertainty
+
+    terms = {"transverse_a_um": 20.0, "transverse_b_um_per_m": 8.0, "range_a_um": 12.0, "range_b_um_per_m": 0.5,
+             "coverage_k": 3.0}
+    data = minimal_dict()
+    data["tracker"]["uncertainty"] = terms
+    path = tmp_path / "u.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    u = load_config(path).tracker.uncertainty
+    assert type(u) is TrackerUncertainty and u != TrackerUncertainty()
+    assert {k: getattr(u, k) for k in terms} == terms
+    u_r, u_t = u.sigmas_mm(2000.0)
+    assert (u_r, u_t) == pytest.approx(((12.0 + 2 * 0.5) / 3.0 / 1000.0, (20.0 + 2 * 8.0) / 3.0 / 1000.0))
+
+
+@pytest.mark.unit
 def test_minimal_config_takes_documented_defaults(tmp_path: Path) -> None:
     path = tmp_path / "minimal.yaml"
     path.write_text(yaml.safe_dump(minimal_dict()), encoding="utf-8")

@@ -4,14 +4,14 @@
     campaign export MODEL.json [--urdf robot.urdf] [--dh-csv dh.csv] [--robodk robodk.txt] [--name NAME]
     campaign iso9283 CONFIG [--model MODEL.json] [--out RUN_DIR]
 
-Imported at the end of :mod:`campaign.cli`, which registers them.
+Imported by :mod:`campaign.cli`, which registers them.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from campaign.cli_common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
 

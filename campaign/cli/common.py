@@ -1,7 +1,7 @@
 """What every subcommand module shares: exit codes, the command registry, consoles, plausibility lines.
 
-``campaign.cli`` builds the parser from the registry; the subcommand modules (``cli``, ``cli_diagnose``,
-``cli_report``) register into it. They import this module, never each other.
+:mod:`campaign.cli.entry` builds the parser from the registry; the subcommand modules (``commands``,
+``diagnose``, ``report``) register into it. They import this module, never each other.
 """
 from __future__ import annotations
 

@@ -1,33 +1,21 @@
-"""Command-line interface: ``campaign <command> ...``.
+"""``campaign validate|run|plan|reprocess|correct|verify``: the campaign's own subcommands.
 
-Subcommands register themselves with :func:`command`; each handler receives
-the parsed ``argparse.Namespace`` and returns the exit code. Operator-facing
-errors are printed as one red line on stderr, never as a traceback:
-
-* ``ConfigError`` / ``DataError`` / ``PlausibilityError`` -> exit 2 (same as a command-line usage error)
-* any other ``CampaignError`` or ``DriverError`` (e.g. a lost connection) -> exit 1
-* ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
-* Ctrl-C, SIGTERM, SIGHUP -> exit 130
-* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)
+Each registers itself with :func:`campaign.cli.common.command`; each handler receives the parsed
+``argparse.Namespace`` and returns the exit code.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
 
+from campaign.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command, print_plausibility
 from campaign.config import load_config
+from campaign.errors import DataError
 from campaign.plausibility import forced
-from campaign.errors import CampaignError, ConfigError, DataError
-from campaign.cli_common import (COMMANDS, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Command,  # noqa: F401
-                                 command, print_plausibility, _stderr, _stdout)
-from drivers.base import DriverConfigError, DriverError
 
-# --------------------------------------------------------------------------- commands
 
 
 def _config_argument(parser: argparse.ArgumentParser) -> None:
@@ -202,49 +190,3 @@ def _force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
                              "implausible deltas); the report says they were overridden")
-
-
-# --------------------------------------------------------------------------- entry point
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every registered subcommand."""
-    parser = argparse.ArgumentParser(
-        prog="campaign",
-        description="Industrial-robot accuracy campaigns with a laser tracker.",
-    )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for cmd in COMMANDS.values():
-        child = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
-        cmd.configure(child)
-        child.set_defaults(func=cmd.run)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI and return the process exit code (console scripts pass it to ``sys.exit``)."""
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
-        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    from campaign.boundary import guarded
-
-    argv_text = list(argv) if argv is not None else sys.argv[1:]
-    return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
-
-
-def _run_dir_hint(args: argparse.Namespace) -> Path | None:
-    """The run directory a crash report should go to, if the command names one."""
-    for name in ("resume", "run_dir", "out"):
-        value = getattr(args, name, None)
-        if isinstance(value, Path) and value.is_dir():
-            return value
-    return None
-
-
-def _fail(message: str, code: int) -> int:
-    """Print one red line on stderr; return ``code``."""
-    _stderr().print(" ".join(message.split()), style="red", markup=False)
-    return code
-import campaign.cli_diagnose  # noqa: E402,F401  (registers "diagnose")
-import campaign.cli_report  # noqa: E402,F401  (registers "report", "export", "iso9283")

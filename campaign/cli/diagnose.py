@@ -3,14 +3,14 @@
     campaign diagnose RUN_DIR_OR_CSV --config CONFIG [--json OUT.json] [--plots DIR] [--html FILE]
     campaign diagnose --self-check [--seeds N] [--json OUT.json]
 
-Imported at the end of :mod:`campaign.cli` (after ``command`` and the consoles exist), which registers it.
+Imported by :mod:`campaign.cli`, which registers it.
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from campaign.cli_common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli.common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
 from campaign.errors import DataError
 
 MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
@@ -56,7 +56,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from campaign.diagnose import diagnose_source, render, write_json, write_plots
 
     cfg = load_config(args.config)
-    from campaign.cli_common import print_plausibility
+    from campaign.cli.common import print_plausibility
     from campaign.plausibility import forced
 
     with forced(args.force):

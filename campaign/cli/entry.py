@@ -1,0 +1,60 @@
+"""The entry point: build the parser from the registered subcommands, run one, translate its errors.
+
+Operator-facing errors are printed as one red line on stderr, never as a traceback:
+
+* ``ConfigError`` / ``DataError`` / ``PlausibilityError`` -> exit 2 (same as a command-line usage error)
+* any other ``CampaignError`` or ``DriverError`` (e.g. a lost connection) -> exit 1
+* ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
+* Ctrl-C, SIGTERM, SIGHUP -> exit 130
+* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from campaign.cli.common import COMMANDS, EXIT_BAD_INPUT, _stderr
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="campaign",
+        description="Industrial-robot accuracy campaigns with a laser tracker.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for cmd in COMMANDS.values():
+        child = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
+        cmd.configure(child)
+        child.set_defaults(func=cmd.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI and return the process exit code (console scripts pass it to ``sys.exit``)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    from campaign.boundary import guarded
+
+    argv_text = list(argv) if argv is not None else sys.argv[1:]
+    return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
+
+
+def _run_dir_hint(args: argparse.Namespace) -> Path | None:
+    """The run directory a crash report should go to, if the command names one."""
+    for name in ("resume", "run_dir", "out"):
+        value = getattr(args, name, None)
+        if isinstance(value, Path) and value.is_dir():
+            return value
+    return None
+
+
+def _fail(message: str, code: int) -> int:
+    """Print one red line on stderr; return ``code``."""
+    _stderr().print(" ".join(message.split()), style="red", markup=False)
+    return code
