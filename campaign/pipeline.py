@@ -22,7 +22,7 @@ from .interchange import read_csv, write_csv
 from .log_dataset import dataset_from_log
 from .plan import Plan, build_plan, write_plan_csv
 from .html_report import write_report
-from .process import Processed, process, write_outputs
+from .processing_lazy import Processed, process, write_outputs   # the numerics load on first use, not at start-up
 from .records import PointRecord
 from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log

@@ -132,7 +132,9 @@ def test_sigint_stops_cleanly_with_exit_130(tmp_path):
     import subprocess
     import sys
     import time
-    cfg = small_config(tmp_path, **{"simulation.motion_time_s": 0.02})
+    # 0.1 s per move: the run is interrupted after 5 points, and under load (parallel workers) the rest of the plan
+    # still takes seconds, so the signal cannot arrive after the measuring has ended
+    cfg = small_config(tmp_path, **{"simulation.motion_time_s": 0.1})
     run = tmp_path / "r"
     proc = subprocess.Popen([sys.executable, "-m", "campaign", "run", str(cfg), "--out", str(run)], cwd=ROOT,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

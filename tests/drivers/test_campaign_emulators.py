@@ -49,10 +49,11 @@ def test_campaign_against_ur_emulator_with_the_real_library(tmp_path, monkeypatc
     from drivers.base import MotionLimits
     from drivers.ur import URRobot
     monkeypatch.setattr(URRobot, "DEFAULT_LIMITS", MotionLimits(5000.0, 100.0))   # caps that do not bind here
+    # nor does the config's TCP cap (250 mm/s would make this a minute of emulated motion)
     emu = start_emulator()
     try:
         cfg = small_config(tmp_path, "ur10", **dict(SMALL, **{"plan.grid.step_mm": 300}), **{
-            "robot.url": f"ur-rtde://{emu.host}",
+            "robot.url": f"ur-rtde://{emu.host}", "robot.max_tcp_speed_mm_s": 3000,   # the datasheet maximum
             "robot.options": {"speed_rad_s": 3.0, "acceleration_rad_s2": 20.0, "settle_hold_s": 0.02}})
         run = tmp_path / "run"
         assert main(["run", str(cfg), "--out", str(run)]) == 0
