@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,7 +23,6 @@ from .interchange import read_csv, write_csv
 from .log_dataset import dataset_from_log
 from .plan import Plan, build_plan, write_plan_csv
 from .html_report import write_report
-from .processing_lazy import Processed, process, write_outputs   # the numerics load on first use, not at start-up
 from .records import PointRecord
 from .resume_checks import check_resume
 from .runlog import RunLog, completed_point_ids, read_log
@@ -31,6 +31,9 @@ from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
 from .traceability import device_identity, identification, identity_changes, run_logging
+
+if TYPE_CHECKING:
+    from .process import Processed
 
 
 logger = logging.getLogger(__name__)
@@ -100,17 +103,20 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     contents = read_log(run_dir)
     dataset = dataset_from_log(contents)
     write_csv(run_dir / "data.csv", dataset)
-    processed = process(dataset, cfg)
-    processed = replace(processed, report=processed.report.with_identification(identification(contents)))
-    write_outputs(processed, run_dir)
-    write_report(run_dir)                       # report.html from report.json
-    return RunResult(run_dir, outcome, processed)
+    return RunResult(run_dir, outcome, _calibrate(dataset, cfg, run_dir, contents))
 
 
 def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file."""
     contents = read_log(source) if source.is_dir() else None
     dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
+    return _calibrate(dataset, cfg, out_dir, contents)
+
+
+def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path, contents=None) -> Processed:
+    """Calibrate ``dataset``, write model/report files and report.html into ``out_dir``; ``contents``: the log it
+    came from (its hardware identification goes into the report)."""
+    from .process import process, write_outputs     # the numerics load when calibrating, not at every start-up
     processed = process(dataset, cfg)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
