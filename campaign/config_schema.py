@@ -19,13 +19,12 @@ from campaign.errors import ConfigError
 from campaign.yaml_limits import load_limited, read_limited
 
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES  # noqa: E402  (the registry owns the url schemes)
+from robocal.effects import MODEL_EFFECTS as MODEL_EFFECT_NAMES  # noqa: E402  (robocal owns the effect names)
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
 RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
 OUTLIER_SCREENS = ("local", "none")
-MODEL_EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
-                      "axis_coupling")
 JOINT_SETS = ("auto", "commanded", "readback")
 PLAN_ORDERS = ("serpentine", "random")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")

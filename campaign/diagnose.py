@@ -157,7 +157,7 @@ def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
     return diagnose_dataset(load_dataset(source), cfg, options)
 
 
-def write_json(path: str | os.PathLike, data: dict) -> Path:
+def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:
     """The report as JSON (atomic, no NaN); a missing directory is bad input."""
     path = Path(path)
     if path.parent and not path.parent.exists():

@@ -26,6 +26,9 @@ G_MM_S2 = 9.80665
 EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
                 "axis_coupling", "registration_drift")     # every effect the diagnosis names, in report order
 SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag")   # what ``by_name`` builds
+# the effects a calibrated model may carry as parameters (read-back lag is a joint-set choice, registration drift
+# the nests' drift model)
+MODEL_EFFECTS = tuple(name for name in EFFECT_NAMES if name not in ("readback_lag", "registration_drift"))
 
 
 @dataclass(frozen=True)

@@ -21,14 +21,12 @@ from typing import Mapping
 import numpy as np
 
 from .lm import levenberg_marquardt
-from .effects import Effect, by_name, effect_regressor, gravity_torques, DEFAULT_LINK_MASSES_KG
+from .effects import MODEL_EFFECTS, Effect, by_name, effect_regressor, gravity_torques, DEFAULT_LINK_MASSES_KG
 from .identify import (CalibrationOptions, Unidentifiable, analyse_identifiability, whitening, _whiten)
 from .kinematics import Kinematics, ParamLayout, apply_update, chain, identification_jacobian
 from .frames import transform_points
 from .stats import paired_gain
 
-MODEL_EFFECTS = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "thermal_drift",
-                 "axis_coupling")
 
 
 @dataclass(frozen=True)

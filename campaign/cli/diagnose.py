@@ -53,7 +53,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.source is None or not args.config:
         raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
     from campaign.config import load_config
-    from campaign.diagnose import diagnose_source, render, write_json, write_plots
+    from campaign.diagnose import diagnose_source, render, write_diagnosis_json, write_plots
 
     cfg = load_config(args.config)
     from campaign.cli.common import print_plausibility
@@ -65,7 +65,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     render(out, result.report)
     print_plausibility(out, result.report.get("plausibility"))
     if args.json:
-        write_json(args.json, result.report)
+        write_diagnosis_json(args.json, result.report)
         out.print(f"wrote {args.json}", markup=False)
     if args.plots:
         files = write_plots(result.report, args.plots)
@@ -78,7 +78,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
 def _write_html(source: Path, html: Path | None, report: dict) -> Path | None:
     """The diagnosis as diagnosis.json beside the HTML report (in the run directory unless --html names a file)."""
-    from campaign.diagnose import write_json
+    from campaign.diagnose import write_diagnosis_json
     from campaign.html_report import write_report
 
     if html is None and not source.is_dir():
@@ -86,14 +86,14 @@ def _write_html(source: Path, html: Path | None, report: dict) -> Path | None:
     folder = source if html is None else html.parent
     if not folder.is_dir():
         raise DataError(str(html), "the directory does not exist")
-    write_json(folder / "diagnosis.json", report)
+    write_diagnosis_json(folder / "diagnosis.json", report)
     return write_report(folder, html)
 
 
 def _self_check(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from campaign.diagnose import render_self_check, write_json
+    from campaign.diagnose import render_self_check, write_diagnosis_json
     from robocal.selfcheck import run_self_check, trial_plan
 
     out = _stdout()
@@ -106,7 +106,7 @@ def _self_check(args: argparse.Namespace) -> int:
         result = run_self_check(args.seeds, progress=lambda i, n, trial: bar.update(task, completed=i))
     render_self_check(out, result)
     if args.json:
-        write_json(args.json, result.to_dict())
+        write_diagnosis_json(args.json, result.to_dict())
         out.print(f"wrote {args.json}", markup=False)
     if not result.passed():
         _stderr().print("self-check below target: < 95 % of single effects named right, < 95 % of controls clean, "
