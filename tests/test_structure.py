@@ -20,11 +20,12 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("campaign", "robocal", "drivers")
 RANK = {"robocal": 0, "drivers": 1, "campaign": 2}        # a package may import only packages of lower rank
 MAX_LINES = 600                                          # the restructure (issue 23) sets 500
-# campaign's rooms along the data flow, lowest first; a room imports only rooms listed before it. Shared leaves
-# (errors, fsutil, json_fields) sit below every room. Checked once campaign/config/ is a package (issue 23).
-CAMPAIGN_LAYERS = ("errors", "fsutil", "json_fields", "config", "plan", "run", "data", "calibrate", "correct",
-                   "report", "workflows", "cli", "__main__")
-SHARED_LEAVES = {"errors", "fsutil", "json_fields"}
+# campaign's rooms along the data flow, lowest first; a room imports only rooms listed before it. The shared
+# bottom (errors; io: durable files, JSON fields, safe CSV cells and terminal text) imports no room above it.
+# Checked once campaign/config/ is a package (issue 23).
+CAMPAIGN_LAYERS = ("errors", "io", "config", "plan", "run", "data", "calibrate", "correct", "report", "workflows",
+                   "cli", "__main__")
+SHARED_LEAVES = {"errors", "io"}
 BRIDGE = "drivers.bridge.line_bridge"
 
 # Known debt (issue 23 removes every entry). Each entry says why it is here.
@@ -171,7 +172,7 @@ def upward(edges: list[Edge]) -> set[tuple[str, str]]:
 
 def layer_violations(mods: dict[str, Path], edges: list[Edge]) -> list[str]:
     """campaign modules outside the layer table, and imports of a room at or above the importer's own room
-    (siblings inside one room are free; shared leaves import no room)."""
+    (siblings inside one room are free; the shared bottom, errors and io, imports no other room)."""
     def layer(module: str) -> int | None:
         parts = module.split(".")
         if parts[0] != "campaign" or len(parts) == 1:
@@ -332,12 +333,13 @@ def test_checker_finds_upward_arrows_private_names_and_closures(tmp_path):
     files["campaign/cli/__init__.py"] = ""
     files["campaign/cli/main.py"] = "from campaign.config.schema import E\n"
     files["campaign/oddity.py"] = ""
-    files["campaign/json_fields.py"] = "from campaign.errors import E\nfrom campaign.config.schema import E\n"
+    files["campaign/io/__init__.py"] = ""
+    files["campaign/io/json_fields.py"] = "from campaign.errors import E\nfrom campaign.config.schema import E\n"
     mods, edges = graph(_tree(tmp_path, files))
     assert upward(edges) == {("robocal.kin", "campaign.errors"), ("drivers.mock", "campaign.run.log")}
     assert private_imports(mods, edges) == {("drivers.mock", "campaign.run.log", "_x")}
-    assert layer_violations(mods, edges) == [              # json_fields, a shared leaf, may import errors only
+    assert layer_violations(mods, edges) == [              # io, the shared bottom, may import errors only
         "campaign.oddity: in no room of CAMPAIGN_LAYERS",
-        "campaign.json_fields:2 imports campaign.config.schema (a room above it)"]
+        "campaign.io.json_fields:2 imports campaign.config.schema (a room above it)"]
     assert third_party_closure(tmp_path, "drivers.mock") == {"drivers.mock": set(), "robocal.kin": {"numpy"},
                                                              "campaign.run.log": set(), "campaign.errors": set()}
