@@ -298,6 +298,14 @@ CLEAN = {"robocal/__init__.py": "", "robocal/kin.py": "import numpy\n",
          "campaign/run/log.py": "_x = 1\n"}
 
 
+def _clean_plus(tmp_path: Path, extra: dict[str, str]):
+    """The graph of CLEAN with ``extra`` text appended to (or forming) some of its files."""
+    files = dict(CLEAN)
+    for rel, text in extra.items():
+        files[rel] = files.get(rel, "") + text
+    return graph(_tree(tmp_path, files))
+
+
 @pytest.mark.unit
 def test_checker_passes_a_clean_tree(tmp_path):
     mods, edges = graph(_tree(tmp_path, CLEAN))
@@ -308,9 +316,8 @@ def test_checker_passes_a_clean_tree(tmp_path):
 
 @pytest.mark.unit
 def test_checker_finds_a_cycle_through_an_import_inside_a_function(tmp_path):
-    files = dict(CLEAN)
-    files["campaign/config/schema.py"] += "def load():\n    from campaign.run.runner import E\n    return E\n"
-    mods, edges = graph(_tree(tmp_path, files))
+    mods, edges = _clean_plus(tmp_path, {"campaign/config/schema.py":
+                                         "def load():\n    from campaign.run.runner import E\n    return E\n"})
     assert cycles(mods, edges) == [frozenset({"campaign.config.schema", "campaign.run.runner"})]
     assert "campaign/config/schema.py:3 -> campaign.run.runner" in describe(cycles(mods, edges)[0], edges, mods,
                                                                              tmp_path)
@@ -319,23 +326,19 @@ def test_checker_finds_a_cycle_through_an_import_inside_a_function(tmp_path):
 
 @pytest.mark.unit
 def test_checker_finds_a_cycle_under_type_checking_and_a_relative_one(tmp_path):
-    files = dict(CLEAN)
-    files["campaign/run/log.py"] += "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import runner\n"
-    mods, edges = graph(_tree(tmp_path, files))
+    typing_only = "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import runner\n"
+    mods, edges = _clean_plus(tmp_path, {"campaign/run/log.py": typing_only})
     assert cycles(mods, edges) == [frozenset({"campaign.run.log", "campaign.run.runner"})]
 
 
 @pytest.mark.unit
 def test_checker_finds_upward_arrows_private_names_and_closures(tmp_path):
-    files = dict(CLEAN)
-    files["robocal/kin.py"] += "def f():\n    import campaign.errors\n"
-    files["drivers/mock.py"] += "from campaign.run.log import _x\n"
-    files["campaign/cli/__init__.py"] = ""
-    files["campaign/cli/main.py"] = "from campaign.config.schema import E\n"
-    files["campaign/oddity.py"] = ""
-    files["campaign/io/__init__.py"] = ""
-    files["campaign/io/json_fields.py"] = "from campaign.errors import E\nfrom campaign.config.schema import E\n"
-    mods, edges = graph(_tree(tmp_path, files))
+    mods, edges = _clean_plus(tmp_path, {
+        "robocal/kin.py": "def f():\n    import campaign.errors\n",
+        "drivers/mock.py": "from campaign.run.log import _x\n",
+        "campaign/cli/__init__.py": "", "campaign/cli/main.py": "from campaign.config.schema import E\n",
+        "campaign/oddity.py": "", "campaign/io/__init__.py": "",
+        "campaign/io/json_fields.py": "from campaign.errors import E\nfrom campaign.config.schema import E\n"})
     assert upward(edges) == {("robocal.kin", "campaign.errors"), ("drivers.mock", "campaign.run.log")}
     assert private_imports(mods, edges) == {("drivers.mock", "campaign.run.log", "_x")}
     assert layer_violations(mods, edges) == [              # io, the shared bottom, may import errors only
