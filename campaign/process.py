@@ -18,10 +18,9 @@ import numpy as np
 
 from robocal.frames import transform_points
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import ParamLayout, smr_tracker
+from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer
 from robocal.model import CalibratedModel
 from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
@@ -36,6 +35,7 @@ from .errors import DataError
 from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
+from .effects_stage import elastic_stage, subset
 from .prepare import prepare
 from .records import CalibrationReport
 from .report_points import cell_summary, point_table
@@ -98,16 +98,6 @@ def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     return prepare(ds, cfg).dataset
 
 
-def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray) -> dict:
-    """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
-    signs of every joint (from the full measurement order), time since the start (s)."""
-    n = len(rows)
-    pay = ds.payload_kg[rows] if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
-    approach = ds.approach_sign()[rows] if len(ds) > 1 else None
-    return {"payload_kg": np.asarray(pay, float), "approach": approach,
-            "t_s": None if ds.t_s is None else np.asarray(ds.t_s[rows], float)}
-
-
 @dataclass(frozen=True, eq=False)
 class GeometricFit:
     """The geometric-only calibration of the calib rows ``rows`` (indices into the dataset): ``result`` with
@@ -165,20 +155,6 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     return _geometric(_prepare(ds, cfg), cfg).result
 
 
-def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
-    """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
-    spec = cfg.calibration.effects
-    if spec == "none":
-        return [], None
-    if spec != "auto":
-        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                           for k, v in s.params.items())) for s in spec], None
-    kin = geo.result.kinematics
-    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
-    sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
-    return list(sel.taken), sel
-
-
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
@@ -191,45 +167,13 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
-    kept_rows = geo.rows[geo.keep]
-    qk, pk = q[kept_rows], p[kept_rows]
-    cov_all, cov_source = weights_covariance(cfg, ds)
-    covk = cov_all[kept_rows]
-    meta_all = _effect_meta(ds, cfg, np.arange(len(ds)))
-    sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
-    meta_k = sub(meta_all, kept_rows)
+    cov_source = weights_covariance(cfg, ds)[1]
+    stage = elastic_stage(ds, cfg, geo)
+    meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
+    final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
+    sub = subset
+    qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)
-    choices, selection = _model_effects(ds, cfg, geo, qk, pk, covk, meta_k)
-    model_geo = CalibratedModel(result.kinematics, None, None, (), payload_model)
-    model_el, elastic = model_geo, None
-    final_screen = geo.screen
-    if choices:
-        cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified])
-
-        def fit_el(rows):
-            try:
-                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows],
-                                         sub(meta_all, rows), choices, calibration_options(cfg))
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
-        elastic = fit_el(kept_rows)
-        model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
-        if cfg.calibration.outliers == "local":
-            # screen again against the model with its effects: structure the geometry alone could not fit is no
-            # reason to exclude a point (and a fault hidden by that structure shows now)
-            rc = geo.rows
-            final_screen = screen(q[rc], p[rc], p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)),
-                                  None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
-            robust_rejected = ~geo.keep
-            robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
-            new_keep = final_screen.keep & ~robust_rejected
-            if new_keep.sum() < 10:
-                final_screen = geo.screen
-            elif not np.array_equal(new_keep, geo.keep):
-                kept_rows = rc[new_keep]
-                qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
-                elastic = fit_el(kept_rows)
-                model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
