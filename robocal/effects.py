@@ -97,22 +97,26 @@ def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_
     return tau
 
 
-def lever_torques(kin: Kinematics, q_rad: np.ndarray, joint: int, gravity_base=(0.0, 0.0, -1.0)
-                  ) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Gravity torque per kg (N, m) N·m/kg about ``joint`` (1-based) of a mass at every downstream joint origin,
-    the flange and a point beside the next link: any lumped mass fixed on those links loads the joint by a
-    combination of them (the mass distribution of ``joint_compliance(form="levers")``)."""
+def lever_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0, 0.0, -1.0)
+                  ) -> dict[int, tuple[np.ndarray, tuple[str, ...]]]:
+    """{joint: (torque per kg (N, m) N·m/kg, point names)} about each of ``joints`` (1-based) of a mass at every
+    downstream joint origin, the flange and a point beside the next link: any lumped mass fixed on those links
+    loads the joint by a combination of them (the mass distribution of ``joint_compliance(form="levers")``)."""
     q = np.atleast_2d(q_rad)
     c = chain(kin, q, full=False)
-    j = joint - 1
     flange = c.T_base_flange[:, :3, 3]
-    nxt = c.origin[:, j + 1] if j + 1 < kin.n else flange
-    pts = [(f"o{i + 1}", c.origin[:, i]) for i in range(j + 1, kin.n)] + [("flange", flange)]
-    pts.append(("beside", c.origin[:, j] + np.cross(c.axis[:, j], nxt - c.origin[:, j])))
     g = np.asarray(gravity_base, float)
     force = G_MM_S2 * g / np.linalg.norm(g)
-    cols = [np.einsum("nk,nk->n", np.cross(P - c.origin[:, j], force), c.axis[:, j]) / 1000.0 for _, P in pts]
-    return np.stack(cols, axis=1), tuple(name for name, _ in pts)
+    out = {}
+    for joint in joints:
+        j = joint - 1
+        nxt = c.origin[:, j + 1] if j + 1 < kin.n else flange
+        pts = [(f"o{i + 1}", c.origin[:, i]) for i in range(j + 1, kin.n)] + [("flange", flange)]
+        pts.append(("beside", c.origin[:, j] + np.cross(c.axis[:, j], nxt - c.origin[:, j])))
+        P = np.stack([pt for _, pt in pts], axis=1) - c.origin[:, j:j + 1]               # (N, m, 3)
+        tau = np.einsum("nmk,nk->nm", np.cross(P, force), c.axis[:, j]) / 1000.0
+        out[joint] = (tau, tuple(name for name, _ in pts))
+    return out
 
 
 DEFAULT_LINK_MASSES_KG = (0.0, 35.0, 40.0, 12.0, 4.0, 1.0)
@@ -202,10 +206,8 @@ def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
     def basis(kin, q, meta):
         pay = _meta(meta, "payload_kg", len(q))
         tau_pay = gravity_torques(kin, q, np.zeros(kin.n), pay, payload_cog_flange_mm, gravity_base)
-        cols = []
-        for j in joints:
-            lev, _ = lever_torques(kin, q, j, gravity_base)
-            cols.append((j, np.concatenate([lev, tau_pay[:, j - 1:j]], axis=1)))
+        levers = lever_torques(kin, q, joints, gravity_base)
+        cols = [(j, np.concatenate([levers[j][0], tau_pay[:, j - 1:j]], axis=1)) for j in joints]
         dq = _zeros_dq(q, sum(c.shape[1] for _, c in cols))
         at = 0
         for j, c in cols:
@@ -353,12 +355,13 @@ def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) ->
 
 
 def effect_regressor(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effect: Effect,
-                     jacobian: tuple | None = None) -> np.ndarray:
-    """Linearised tracker-frame displacement per unit effect parameter, (N, 3, K) mm."""
+                     jacobian: tuple | None = None, basis: Basis | None = None) -> np.ndarray:
+    """Linearised tracker-frame displacement per unit effect parameter, (N, 3, K) mm (``basis``: the effect's
+    basis at these points when already computed)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     _, J = identification_jacobian(kin, q) if jacobian is None else jacobian
     layout = ParamLayout.of(kin)
-    b = effect.basis(kin, q, meta)
+    b = effect.basis(kin, q, meta) if basis is None else basis
     out = np.zeros((len(q), 3, effect.k))
     theta_cols = [c for c, i, k in layout.joint_cols if k == 0]
     if b.dq is not None:

@@ -84,26 +84,37 @@ class BlockedCV:
             for f in folds:
                 rows = np.flatnonzero(b.fold == f)
                 Af = self.Aw[rows].reshape(-1, P)
-                per.append((rows, Af.T @ Af, Af.T @ yw[rows].reshape(-1)))
-            G = sum(g for _, g, _ in per)
-            c = sum(v for _, _, v in per)
+                per.append((rows, Af.T @ Af, Af.T @ yw[rows].reshape(-1), Af))
+            G = sum(p[1] for p in per)
+            c = sum(p[2] for p in per)
             self._gram.append((G, c, per))
+
+    def errors(self, cols, blocking: int = 0) -> np.ndarray:
+        """Held-out error vectors (N, 3) mm of the columns ``cols`` under one blocking."""
+        cols = np.asarray(cols, int)
+        G, c, per = self._gram[blocking]
+        out = np.empty((len(self.yw), 3))
+        GS, cS = G[np.ix_(cols, cols)], c[cols]
+        ridge = RIDGE * np.eye(len(cols))
+        for rows, Gf, cf, Af in per:
+            x = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
+            e_w = self.yw[rows] - (Af[:, cols] @ x).reshape(-1, 3)
+            out[rows] = np.einsum("nij,nj->ni", self.L[rows], e_w)
+        return out
 
     def squared_errors(self, cols) -> dict[str, np.ndarray]:
         """Per-point held-out squared errors (N,) mm^2 of the columns ``cols`` under each blocking."""
-        cols = np.asarray(cols, int)
-        out = {}
-        for b, (G, c, per) in zip(self.blockings, self._gram):
-            se = np.empty(len(b.fold))
-            GS, cS = G[np.ix_(cols, cols)], c[cols]
-            ridge = RIDGE * np.eye(len(cols))
-            for rows, Gf, cf in per:
-                x = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
-                e_w = self.yw[rows] - self.Aw[rows][:, :, cols] @ x
-                e = np.einsum("nij,nj->ni", self.L[rows], e_w)
-                se[rows] = np.sum(e**2, axis=1)
-            out[b.name] = se
-        return out
+        return {b.name: np.sum(self.errors(cols, i) ** 2, axis=1) for i, b in enumerate(self.blockings)}
+
+    def absorbed(self, cols, base_cols) -> float:
+        """Share of the (whitened, unit-norm) columns ``cols`` inside the span of ``base_cols`` (1 = the base
+        absorbs them entirely: their effect cannot be told from it)."""
+        G = self._gram[0][0]
+        cols, base = np.asarray(cols, int), np.asarray(base_cols, int)
+        Gbb = G[np.ix_(base, base)] + RIDGE * np.eye(len(base))
+        Gbc = G[np.ix_(base, cols)]
+        inside = np.einsum("ij,ij->j", Gbc, np.linalg.solve(Gbb, Gbc))
+        return float(np.clip(inside.sum() / max(float(np.trace(G[np.ix_(cols, cols)])), 1e-300), 0.0, 1.0))
 
     def fit(self, cols) -> np.ndarray:
         """Weighted least-squares parameters of the columns ``cols`` on all points (in the units of A)."""

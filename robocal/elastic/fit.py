@@ -13,18 +13,25 @@ from ..effects import effect_regressor
 from ..identify import CalibrationOptions, Unidentifiable, analyse_identifiability, whitening, _whiten
 from ..kinematics import Kinematics, ParamLayout, apply_update, identification_jacobian
 from ..lm import levenberg_marquardt
-from .model import FittedEffect, effect_state, elastic_smr_tracker
+from .model import FittedEffect, elastic_smr_tracker
 
 
 def _jacobian(kin, q, meta, built, values):
-    """(p_tracker (N, 3), J_geo (N, 3, P), R_eff (N, 3, K)) at the current model."""
-    pairs = list(zip(built, values))
-    dq, scale = effect_state(kin, q, meta, pairs) if built else (np.zeros_like(q), np.ones(len(q)))
-    _, J = identification_jacobian(kin, q + dq)
-    p = elastic_smr_tracker(kin, q, meta, pairs)
-    R = [effect_regressor(kin, q, meta, e, jacobian=(None, J)) for e in built]
+    """(p_tracker (N, 3), J_geo (N, 3, P), R_eff (N, 3, K)) at the current model (each basis evaluated once)."""
+    bases = [e.basis(kin, q, meta) for e in built]
+    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
+    for b, v in zip(bases, values):
+        dq += 0.0 if b.dq is None else b.dq @ v
+        scale += 0.0 if b.scale is None else b.scale @ v
+        dp += 0.0 if b.dp is None else b.dp @ v
+    if np.all(scale == 1.0):
+        p, J = identification_jacobian(kin, q + dq)
+    else:
+        _, J = identification_jacobian(kin, q + dq)
+        p = elastic_smr_tracker(kin, q, meta, list(zip(built, values))) - dp
+    R = [effect_regressor(kin, q, meta, e, jacobian=(None, J), basis=b) for e, b in zip(built, bases)]
     R = np.concatenate(R, axis=2) if R else np.zeros((len(q), 3, 0))
-    return p, J, R
+    return p + dp, J, R
 
 
 @dataclass(frozen=True, eq=False)

@@ -92,35 +92,44 @@ class FittedEffect:
         return cls(choice, vals, std, eff.param_names, eff.unit)
 
 
-def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> tuple[np.ndarray, np.ndarray]:
-    """Joint deviation dq (N, n) rad and link-length scale (N,) of ``effects`` [(Effect, values (K,)), ...]."""
+def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint deviation dq (N, n) rad, link-length scale (N,) and tracker-frame displacement dp (N, 3) mm (a drift
+    of the measurement, not of the robot) of ``effects`` [(Effect, values (K,)), ...]."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    dq, scale = np.zeros_like(q), np.ones(len(q))
+    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
     for eff, values in effects:
         b = eff.basis(kin, q, meta)
+        v = np.asarray(values, float)
         if b.dq is not None:
-            dq += b.dq @ np.asarray(values, float)
+            dq += b.dq @ v
         if b.scale is not None:
-            scale += b.scale @ np.asarray(values, float)
+            scale += b.scale @ v
         if b.dp is not None:
-            raise ValueError(f"effect {eff.name!r} acts on the measurement, not on the robot")
-    return dq, scale
+            dp += b.dp @ v
+    return dq, scale, dp
 
 
-def elastic_flange(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
-    """T_base_flange (N, 4, 4) of the robot with geometry ``kin`` and ``effects`` (exact, not linearised)."""
-    q = np.atleast_2d(np.asarray(q_rad, float))
-    if not effects:
-        return chain(kin, q, full=False).T_base_flange
-    dq, scale = effect_state(kin, q, meta, effects)
+def _flange(kin, q, dq, scale) -> np.ndarray:
     if np.all(scale == 1.0):
         return chain(kin, q + dq, full=False).T_base_flange
     return chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False).T_base_flange
 
 
+def elastic_flange(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
+    """T_base_flange (N, 4, 4) of the robot with geometry ``kin`` and ``effects`` (exact, not linearised; a drift
+    of the measurement does not move the robot)."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    if not effects:
+        return chain(kin, q, full=False).T_base_flange
+    dq, scale, _ = effect_state(kin, q, meta, effects)
+    return _flange(kin, q, dq, scale)
+
+
 def elastic_smr_tracker(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
-    """SMR positions (N, 3) mm in the tracker frame of the elasto-geometric model."""
-    T = elastic_flange(kin, q_rad, meta, effects)
-    return transform_points(kin.T_tracker_base, transform_points(T, kin.p_flange_smr_mm))
-
-
+    """SMR positions (N, 3) mm in the tracker frame of the elasto-geometric model (drift of the measurement
+    included)."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    dq, scale, dp = effect_state(kin, q, meta, effects)
+    T = _flange(kin, q, dq, scale)
+    return transform_points(kin.T_tracker_base, transform_points(T, kin.p_flange_smr_mm)) + dp

@@ -84,6 +84,7 @@ class EffectSelection:
     folds: int
     blockings: tuple[str, ...]
     candidates: tuple[str, ...]
+    absorbed: dict = field(default_factory=dict)     # label -> share of the candidate inside the geometry's span
 
     def to_dict(self) -> dict:
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
@@ -93,7 +94,7 @@ class EffectSelection:
                 "taken": [c.label for c in self.taken], "geometric_cv_rms_mm": self.geometric_cv_rms_mm,
                 "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
-                "dropped": [{"effect": lb, "t": t} for lb, t in self.dropped],
+                "dropped": [{"effect": lb, "t": t} for lb, t in self.dropped], "absorbed_by_geometry": self.absorbed,
                 "trials": [t.to_dict() for t in self.trials]}
 
 
@@ -183,9 +184,10 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], c, full, step, n)
         model[i] = (reduced, design.sub(full, reduced, n), full)
         step.choice = reduced
+    absorbed = {c.label: cv.absorbed(design.cols[c], design.geo) for c in candidates}
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
-                           tuple(c.label for c in candidates))
+                           tuple(c.label for c in candidates), absorbed)
 
 
 def _supported(g) -> bool:

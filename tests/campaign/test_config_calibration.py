@@ -29,7 +29,11 @@ def test_effect_list_is_parsed(tmp_path):
 @pytest.mark.unit
 @pytest.mark.parametrize("key, value, path, words", [
     ("effects", "some", "calibration.effects", "auto, none"),
-    ("effects", [{"name": "registration_drift"}], "calibration.effects[0].name", "not a robot effect"),
+    ("effects", [{"name": "link_bending"}], "calibration.effects[0].name", "joint_compliance"),
+    ("effects", [{"name": "gear_cyclic", "params": {"joint": 2, "order": 3}}], "calibration.effects[0].params.order",
+     "unknown parameter of gear_cyclic (expected one of: harmonics, joint)"),
+    ("effects", [{"name": "axis_coupling", "params": {"joints": [4]}}], "calibration.effects[0].params.joints",
+     "expected one of: none"),
     ("effects", [{"name": "backlash", "scale": 2}], "calibration.effects[0].scale", "simulated effects only"),
     ("outliers", "igg3", "calibration.outliers", "local, none"),
     ("residual", "krige", "calibration.residual", "auto"),
