@@ -93,6 +93,7 @@ class TruthProtocol(CampaignShape):
     kg_per_mm: float = 0.12               # link mass per mm of link length
     stiffness_nm_per_rad: tuple | None = None   # ((J2 lo, hi), (J3 lo, hi)) instead of the industrial-arm ranges
     gear_joints: tuple[int, ...] = (1, 2, 3, 4, 5, 6)   # joints a gear error is drawn on
+    gear_arcsec: float = 20.0             # typical first-harmonic amplitude of a gear error on J1-J3 (x3 on the wrist)
 
 
 @dataclass(frozen=True, eq=False)
@@ -252,7 +253,7 @@ def draw_effect(name: str, rng: np.random.Generator, kin: Kinematics, scale: flo
         joint = int(rng.integers(1, 7)) if len(protocol.gear_joints) == 6 else int(rng.choice(protocol.gear_joints))
         sets = [(1,), (2,), (1, 2), (2, 3), (1, 3)]
         hs = sets[int(rng.integers(len(sets)))]
-        base = (20.0 if joint <= 3 else 60.0) / 3600.0 * np.pi / 180.0
+        base = protocol.gear_arcsec * (1.0 if joint <= 3 else 3.0) / 3600.0 * np.pi / 180.0
         amps = {h: base * scale * u(0.7, 1.3) * (1.0 if h == hs[0] else 0.6) for h in hs}
         return TruthEffect(name, (joint,), f"harmonics {','.join(map(str, hs))}",
                            {"amplitude_rad": amps, "phase_rad": {h: u(-np.pi, np.pi) for h in hs}})

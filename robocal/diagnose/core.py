@@ -19,7 +19,9 @@ from ..elastic import run_engine
 from ..identify import CalibrationOptions, calibrate, whitening
 from ..kinematics import ParamLayout, identification_jacobian, smr_tracker
 from ..model import CalibratedModel
+from .evidence import joints_following_order
 from .findings import accepted_findings, other_findings
+from .prose import DRIFT_EXPERIMENT
 from .leftover import leftover, where_stages
 from .records import Diagnosis, DiagnosisInput, DiagnosisOptions
 
@@ -104,18 +106,19 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
     for fe in effects:
         eff_cols.append(np.arange(at, at + fe.values.size))
         at += fe.values.size
-    cv_vec = [cv.errors(np.concatenate([geo_cols] + eff_cols[:k])) for k in range(len(models))]
+    prefix = [np.concatenate([geo_cols] + eff_cols[:k]) for k in range(len(models))]
+    cv_vec = [cv.errors(c) for c in prefix]
+    cv_steps = [math.sqrt(float(np.mean(np.mean(np.stack(list(cv.squared_errors(c).values())), axis=0))))
+                for c in prefix]               # mean over the blockings, as the engine's selection
     evaluation = "test" if len(test) else "cv"
     key = "test_rms_mm" if evaluation == "test" else "cv_rms_mm"
     sel = engine.selection
-    cv_steps = [sel.geometric_cv_rms_mm] + [s.after_mm for s in sel.steps]
     stages = []
     for k, (m, r) in enumerate(zip(models, resid)):
         stages.append({"added": "geometric model" if k == 0 else effects[k - 1].choice.label,
                        "effects": [fe.choice.label for fe in effects[:k]], "test_rms_mm": _rms(r[test]),
-                       "cv_rms_mm": cv_steps[k] if k < len(cv_steps) else sel.final_cv_rms_mm,
-                       "calib_rms_mm": _rms(r[fit]), "n_params": len(cols) + sum(fe.values.size for fe in effects[:k])})
-    stages[-1]["cv_rms_mm"] = sel.final_cv_rms_mm if effects else sel.geometric_cv_rms_mm
+                       "cv_rms_mm": cv_steps[k], "calib_rms_mm": _rms(r[fit]),
+                       "n_params": len(cols) + sum(fe.values.size for fe in effects[:k])})
     T = kin_geo.T_tracker_base
     pb = (p0 - T[:3, 3]) @ T[:3, :3]
     reach = np.hypot(pb[:, 0], pb[:, 1])
@@ -123,11 +126,19 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
     if m_fit.get("order") is not None:
         o = np.asarray(m_fit["order"], float)
         halves["the first and second half of the run"] = o < np.median(o)
-    ctx = {"floor": inp.noise_floor_mm, "n": n, "kin": models[-1].kinematics, "q": q[fit], "meta": m_fit,
+    ctx = {"floor": inp.noise_floor_mm, "n": n, "kin": models[-1].kinematics, "kin_geo": kin_geo, "q": q[fit], "meta": m_fit,
            "gravity": inp.gravity, "R": R, "J_geo": J[:, :, cols], "A_w": cv.Aw, "y_w": cv.yw, "cols": eff_cols,
            "geo_cols": geo_cols, "halves": halves}
     findings = accepted_findings(engine, effects, stages, key, ctx, opt)
     others, cannot = other_findings(engine, stages[-1][key], opt, n)
+    order = meta.get("order")
+    follow = [] if order is None else joints_following_order(q[fit], np.asarray(order)[fit], opt.confound_r)
+    if follow:                 # a property of the data, whatever was accepted
+        js = ", ".join(f"J{j} (r = {r:+.2f})" for j, r in follow)
+        cannot.append({"effect": "registration_drift", "joints": [j for j, _ in follow], "remedy": DRIFT_EXPERIMENT,
+                       "reason": f"{js} follow{'s' if len(follow) == 1 else ''} the measurement order: a drift in time "
+                                 f"and an effect of {'that joint' if len(follow) == 1 else 'those joints'} cannot be "
+                                 "told apart in these data (one confounded class)"})
     where, maps = where_stages(inp, opt, fit, test, (kin_geo, models[-1]), (resid[0], resid[-1]),
                                (cv_vec[0], cv_vec[-1]), (stages[0], stages[-1]), meta)
     unexplained, structure, notes = leftover(inp, opt, fit, test, models[-1], resid[-1], cv_vec[-1], stages[-1],

@@ -22,18 +22,28 @@ def _project_out(X: np.ndarray, G: np.ndarray) -> np.ndarray:
     return X - (G / nrm) @ beta
 
 
-def order_share(d_mm: np.ndarray, J_geo: np.ndarray, order: np.ndarray, degree: int = 3) -> float:
-    """r in [0, 1]: how closely the visible part of a displacement d (N, 3) mm (geometry ``J_geo`` (N, 3, P)
-    projected out) follows a smooth function (polynomial of ``degree``) of the measurement order."""
+def follows_order(x: np.ndarray, order: np.ndarray, window: int | None = None) -> float:
+    """r in [0, 1]: how closely x (N,) or (N, k) follows a smooth function of the measurement order: the share of
+    its variance that a running mean over ``window`` neighbours in the order (default N / 20) reproduces, square
+    root. Random order gives about 1 / sqrt(window); a sweep that follows the order gives close to 1."""
+    x = np.asarray(x, float).reshape(len(x), -1)
+    n = len(x)
+    w = max(5, n // 20) if window is None else window
+    xs = x[np.argsort(np.asarray(order, float), kind="stable")]
+    xs = xs - xs.mean(axis=0)
+    tot = float(np.sum(xs**2))
+    if tot <= 0 or n < 2 * w:
+        return 0.0
+    c = np.cumsum(np.vstack([np.zeros((1, xs.shape[1])), xs]), axis=0)
+    lo = np.clip(np.arange(n) - w // 2, 0, n - w)
+    smooth = (c[lo + w] - c[lo]) / w
+    return math.sqrt(max(0.0, 1.0 - float(np.sum((xs - smooth) ** 2)) / tot))
+
+
+def visible(d_mm: np.ndarray, J_geo: np.ndarray) -> np.ndarray:
+    """The part of a displacement d (N, 3) mm that the geometry (``J_geo`` (N, 3, P)) cannot absorb."""
     N = len(d_mm)
-    G = J_geo.reshape(3 * N, -1)
-    v = _project_out(d_mm.reshape(-1, 1), G)[:, 0].reshape(N, 3)
-    u = np.asarray(order, float)
-    u = (u - u.min()) / max(float(np.ptp(u)), 1e-12)
-    B = np.stack([u**k for k in range(degree + 1)], axis=1)
-    fit = B @ np.linalg.lstsq(B, v, rcond=None)[0]
-    tot = float(np.sum((v - v.mean(axis=0)) ** 2))
-    return math.sqrt(max(0.0, 1.0 - float(np.sum((v - fit) ** 2)) / tot)) if tot > 0 else 0.0
+    return _project_out(d_mm.reshape(-1, 1), J_geo.reshape(3 * N, -1))[:, 0].reshape(N, 3)
 
 
 def joints_following_order(q_rad: np.ndarray, order: np.ndarray, r_min: float) -> list[tuple[int, float]]:
@@ -47,11 +57,12 @@ def joints_following_order(q_rad: np.ndarray, order: np.ndarray, r_min: float) -
     return out
 
 
-def confound(name: str, label: str, joints, d_mm, J_geo, q_rad, order, clock: str | None, r_min: float
+def confound(name: str, label: str, signal: np.ndarray, q_rad, order, clock: str | None, r_min: float
              ) -> dict | None:
-    """The effect and a drift in measurement order as one class, when the effect's displacement follows the order
-    (r > ``r_min``), or, for the drift itself, when joint angles follow the order: then which joints' effects
-    it may be. None when the data tell them apart."""
+    """The effect and a drift in measurement order as one class when the effect's regressor (``signal``: its joint
+    deviations, or its visible displacement) follows the order (r > ``r_min``), or, for the drift itself, when
+    joint angles follow the order (then the drift may be those joints' effects). None when the data tell them
+    apart."""
     if order is None:
         return None
     if name == DRIFT:
@@ -64,7 +75,7 @@ def confound(name: str, label: str, joints, d_mm, J_geo, q_rad, order, clock: st
                 "text": f"the drift {'in time' if clock == 't_s' else 'in measurement order'} is confounded with "
                         f"effects of {js}: the poses were measured in an order that follows those joints",
                 "experiment": DRIFT_EXPERIMENT}
-    r = order_share(d_mm, J_geo, order)
+    r = follows_order(signal, order)
     if r <= r_min:
         return None
     return {"class": [label, "drift in measurement order (registration_drift)"], "r_order": r,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..elastic import EngineResult, reading
-from .evidence import confound, consistency, rival_class
-from .prose import REMEDY, best_available
+from .evidence import confound, consistency, rival_class, visible
+from .prose import REMEDY, best_available, separating_experiment
 from .records import DiagnosisOptions, Finding
 
 
@@ -15,16 +15,18 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
     """One finding per accepted effect (``effects``: FittedEffect of the final model, in step order)."""
     sel = engine.selection
     floor = ctx["floor"]
-    geo_excess = max(sel.geometric_cv_rms_mm**2 - floor**2, 1e-12)
+    geo_excess = max(stages[0]["cv_rms_mm"] ** 2 - floor**2, 1e-12)
     out = []
     for k, (fe, step) in enumerate(zip(effects, sel.steps)):
         eff = fe.choice.build(ctx["n"])
         phys = reading(fe, ctx["kin"], ctx["q"], ctx["meta"], ctx["gravity"], opt.engine.library)
+        before_cv, after_cv = stages[k]["cv_rms_mm"], stages[k + 1]["cv_rms_mm"]
         ev = {"diagnosable": True, "label": fe.choice.label, "step": k + 1,
-              "cv_rms_before_mm": step.before_mm, "cv_rms_after_mm": step.after_mm,
-              "cv_rms_by_blocking_mm": step.by_blocking_mm, "cv_gain_t": step.t, "cv_gain": step.gain,
-              "cv_blocking": " and ".join(sel.blockings),
-              "excess_explained": (step.before_mm**2 - step.after_mm**2) / geo_excess,
+              "cv_rms_before_mm": before_cv, "cv_rms_after_mm": after_cv,
+              "cv_blocking": " and ".join(sel.blockings), "cv_gain_t": step.t, "cv_gain": step.gain,
+              "selection": {"round": step.round, "cv_rms_before_mm": step.before_mm, "cv_rms_after_mm": step.after_mm,
+                            "cv_rms_by_blocking_mm": step.by_blocking_mm, "t": step.t, "gain": step.gain},
+              "excess_explained": (before_cv**2 - after_cv**2) / geo_excess,
               "parameters": fe.to_dict()["params"], "physical": phys["quantities"], "plausible": phys["plausible"]}
         if not phys["plausible"]:
             ev["outside_range"] = phys["outside"]
@@ -32,9 +34,16 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
         if step.pruned:
             ev["pruned_parts"] = [{"part": lb, "t": t} for lb, t in step.pruned]
         conf = rival_class(step)
-        d = ctx["R"][k] @ fe.values
-        c = confound(fe.choice.name, fe.choice.label, eff.joints, d, ctx["J_geo"], ctx["q"],
-                     ctx["meta"].get("order"), dict(fe.choice.options).get("clock"), opt.confound_r)
+        conf += [{"effect": lb.split("(")[0], "label": lb, "share_explained": share,
+                  "experiment": separating_experiment(fe.choice.name, lb.split("(")[0]),
+                  "why": f"{fe.choice.label} explains {100 * share:.0f} % of its signature beyond the geometry"}
+                 for lb, (by, share) in sel.shadowed.items() if by == fe.choice.label
+                 and lb.split("(")[0] != fe.choice.name and all(lb != x["label"] for x in conf)]
+        basis = eff.basis(ctx["kin_geo"], ctx["q"], ctx["meta"])
+        signal = (basis.dq @ fe.values)[:, list(np.array(eff.joints) - 1)] if basis.dq is not None and eff.joints \
+            else visible(ctx["R"][k] @ fe.values, ctx["J_geo"])
+        c = confound(fe.choice.name, fe.choice.label, signal, ctx["q"], ctx["meta"].get("order"),
+                     dict(fe.choice.options).get("clock"), opt.confound_r)
         if c is not None:
             ev["order_confound"] = c
             conf.append({"effect": "registration_drift" if fe.choice.name != "registration_drift" else
@@ -80,7 +89,11 @@ def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n:
         if t is not None:
             ev.update(cv_rms_with_mm=t.cv_rms_mm, cv_rms_without_mm=t.base_cv_rms_mm, cv_gain=t.gain, cv_gain_t=t.t,
                       cv_rms_by_blocking_mm=t.by_blocking_mm)
-        if c.label in dropped:
+        if c.label in sel.shadowed:
+            by, share = sel.shadowed[c.label]
+            ev["reason"] = (f"cannot be told from {by}, which is in the model: it explains {100 * share:.0f} % of this "
+                            "candidate's signature beyond the geometry (one class)")
+        elif c.label in dropped:
             ev["reason"] = (f"taken, then dropped: once the other effects were in, removing it cost only "
                             f"t = {dropped[c.label]:.1f}")
         elif absorbed > opt.absorbed_limit and ever.get(c.label, -np.inf) < 3.0:

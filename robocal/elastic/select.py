@@ -28,6 +28,8 @@ from .model import EffectChoice
 TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a held-out RMS gain > 2 % ...
 LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain concentrated on few poses has a
 #                                    heavy-tailed per-point difference: its t understates how unlikely it is)
+SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) lies >= 90 % inside a taken effect's
+#                         span cannot be told from that effect: one class
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
 
@@ -85,6 +87,8 @@ class EffectSelection:
     blockings: tuple[str, ...]
     candidates: tuple[str, ...]
     absorbed: dict = field(default_factory=dict)     # label -> share of the candidate inside the geometry's span
+    shadowed: dict = field(default_factory=dict)     # label -> (taken label, share of the candidate's visible part
+    #                                                  inside the taken effect's span): one class with it
 
     def to_dict(self) -> dict:
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
@@ -95,6 +99,7 @@ class EffectSelection:
                 "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
                 "dropped": [{"effect": lb, "t": t} for lb, t in self.dropped], "absorbed_by_geometry": self.absorbed,
+                "shadowed": {k: {"by": v[0], "share": v[1]} for k, v in self.shadowed.items()},
                 "trials": [t.to_dict() for t in self.trials]}
 
 
@@ -185,9 +190,20 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         model[i] = (reduced, design.sub(full, reduced, n), full)
         step.choice = reduced
     absorbed = {c.label: cv.absorbed(design.cols[c], design.geo) for c in candidates}
+    shadowed = {}
+    for c in candidates:
+        if any(c is e[2] or c.label == e[0].label for e in model):
+            continue
+        for taken, cols, _ in model:
+            share = cv.absorbed(design.cols[c], np.concatenate([design.geo, cols]))
+            geo = absorbed[c.label]
+            visible = (share - geo) / max(1.0 - geo, 1e-12)      # of what the geometry leaves visible
+            if visible >= SHADOW_SHARE:
+                shadowed[c.label] = (taken.label, visible)
+                break
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
-                           tuple(c.label for c in candidates), absorbed)
+                           tuple(c.label for c in candidates), absorbed, shadowed)
 
 
 def _supported(g) -> bool:
