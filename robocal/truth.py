@@ -94,6 +94,7 @@ class TruthProtocol(CampaignShape):
     stiffness_nm_per_rad: tuple | None = None   # ((J2 lo, hi), (J3 lo, hi)) instead of the industrial-arm ranges
     gear_joints: tuple[int, ...] = (1, 2, 3, 4, 5, 6)   # joints a gear error is drawn on
     gear_arcsec: float = 20.0             # typical first-harmonic amplitude of a gear error on J1-J3 (x3 on the wrist)
+    gravity_base: tuple[float, float, float] = (0.0, 0.0, -1.0)   # gravity in the base frame (floor mount: -z)
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,9 +195,9 @@ def random_mass_model(kin: Kinematics, rng: np.random.Generator, kg_per_mm: floa
 
 
 def gravity_torque_nm(kin: Kinematics, q_rad: np.ndarray, mm: MassModel, payload_kg: np.ndarray,
-                      arm: bool = True) -> np.ndarray:
+                      arm: bool = True, down=(0.0, 0.0, -1.0)) -> np.ndarray:
     """Gravity torque (N, n) N*m about every joint axis: sum over the downstream centres of mass of
-    (r x m g) . axis; gravity along -z of the base frame."""
+    (r x m g) . axis; gravity along ``down`` in the base frame (-z: floor mount)."""
     c = chain(kin, q_rad, full=False)
     N, n = q_rad.shape
     R_fl = c.T_base_flange[:, :3, :3]
@@ -212,7 +213,7 @@ def gravity_torque_nm(kin: Kinematics, q_rad: np.ndarray, mm: MassModel, payload
                               np.asarray(payload_kg, float).reshape(N, 1)], axis=1) * G_M_S2   # N
     pts = np.concatenate([com, p_pay[:, None, :]], axis=1)                                # (N, n+1, 3)
     tau = np.zeros((N, n))
-    force = np.array([0.0, 0.0, -1.0])
+    force = np.asarray(down, float) / np.linalg.norm(down)
     for j in range(n):
         r = pts[:, j:] - c.origin[:, j:j + 1]                                             # links j.. and payload
         tau[:, j] = np.einsum("nmk,nk,nm->n", np.cross(r, force), c.axis[:, j], weights[:, j:]) / 1000.0
@@ -338,7 +339,7 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     for te in truths:
         v = te.values
         if te.name in ("joint_compliance", "payload_deflection"):
-            tau = gravity_torque_nm(truth, q_cmd, mass, payload, arm=te.name == "joint_compliance")
+            tau = gravity_torque_nm(truth, q_cmd, mass, payload, te.name == "joint_compliance", pr.gravity_base)
             for j, k in v["stiffness_nm_per_rad"].items():
                 if j in pr.compliance_joints:
                     q_link[:, j - 1] += tau[:, j - 1] / k

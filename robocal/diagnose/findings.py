@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..elastic import EngineResult, reading
+from ..elastic.select import alternatives
 from .evidence import confound, consistency, rival_class, visible
 from .prose import REMEDY, best_available, separating_experiment
 from .records import DiagnosisOptions, Finding
@@ -72,7 +73,7 @@ def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n:
                    ) -> tuple[list[Finding], list[dict]]:
     """(findings of the candidates not taken, the list of what these data cannot tell)."""
     sel = engine.selection
-    taken = {c.label for c in sel.taken}
+    taken = {c.label for c in sel.taken} | set(sel.offered)
     last, ever = {}, {}
     for t in sel.trials:
         last[t.label] = t
@@ -89,7 +90,10 @@ def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n:
         if t is not None:
             ev.update(cv_rms_with_mm=t.cv_rms_mm, cv_rms_without_mm=t.base_cv_rms_mm, cv_gain=t.gain, cv_gain_t=t.t,
                       cv_rms_by_blocking_mm=t.by_blocking_mm)
-        if c.label in sel.shadowed:
+        alt = next((o for o in engine.candidates if o.label in sel.offered and alternatives(c, o)), None)
+        if alt is not None:
+            ev["reason"] = f"the same effect as {alt.label} (taken), which predicted the held-out points better"
+        elif c.label in sel.shadowed:
             by, share = sel.shadowed[c.label]
             ev["reason"] = (f"cannot be told from {by}, which is in the model: it explains {100 * share:.0f} % of this "
                             "candidate's signature beyond the geometry (one class)")
@@ -105,7 +109,7 @@ def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n:
             ev["reason"] = (f"held-out RMS {t.base_cv_rms_mm:.4f} -> {t.cv_rms_mm:.4f} mm (gain {100 * t.gain:+.1f} %, "
                             f"t = {t.t:.1f}): not a significant gain")
         else:
-            ev["reason"] = "not tried: an alternative of the same effect was taken"
+            continue                     # never tried: an alternative (time constant, degree) of a taken effect
         rest.append((np.inf if t is None else t.cv_rms_mm, Finding(c.name, tuple(eff.joints), False, final, final, ev)))
     for u in engine.cannot_tell:
         cannot.append({**u, "remedy": REMEDY[u["effect"]]})

@@ -29,7 +29,12 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
     sd = q.std(axis=0)
     x = q[:, sd > 0] / sd[sd > 0] if np.any(sd > 0) else np.zeros((n, 1))
     rng = np.random.default_rng(seed)
-    centres = x[rng.choice(n, size=min(k, n), replace=False)]
+    first = int(rng.integers(n))
+    idx, dist = [first], ((x - x[first]) ** 2).sum(axis=1)
+    for _ in range(min(k, n) - 1):                  # farthest-point start: every separate group gets a centre
+        idx.append(int(np.argmax(dist)))
+        dist = np.minimum(dist, ((x - x[idx[-1]]) ** 2).sum(axis=1))
+    centres = x[idx].copy()
     label = np.zeros(n, int)
     for _ in range(iterations):
         d = (x**2).sum(axis=1)[:, None] - 2.0 * x @ centres.T + (centres**2).sum(axis=1)[None, :]

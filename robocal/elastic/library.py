@@ -102,6 +102,9 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
     out += _time(meta, N, opt, cannot)
     if n >= 6 and np.ptp(q[:, 3]) > 0 and np.ptp(q[:, 4]) > 0:
         out.append(EffectChoice("axis_coupling"))
+    else:
+        cannot.append({"effect": "axis_coupling", "joints": [4, 5, 6], "reason": "needs a 6-axis wrist whose J4 and J5 "
+                       "move" if n >= 6 else "needs a 6-axis wrist"})
     return out, cannot
 
 

@@ -87,6 +87,7 @@ class EffectSelection:
     blockings: tuple[str, ...]
     candidates: tuple[str, ...]
     absorbed: dict = field(default_factory=dict)     # label -> share of the candidate inside the geometry's span
+    offered: tuple[str, ...] = ()                    # per taken effect: the candidate it was offered as (unpruned)
     shadowed: dict = field(default_factory=dict)     # label -> (taken label, share of the candidate's visible part
     #                                                  inside the taken effect's span): one class with it
 
@@ -203,7 +204,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
                 break
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
-                           tuple(c.label for c in candidates), absorbed, shadowed)
+                           tuple(c.label for c in candidates), absorbed, tuple(e[2].label for e in model), shadowed)
 
 
 def _supported(g) -> bool:
