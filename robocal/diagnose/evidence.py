@@ -109,7 +109,7 @@ def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict
     return out
 
 
-def rival_class(step, floor_free: bool = False) -> list[dict]:
+def rival_class(step) -> list[dict]:
     """Rivals of a taken effect with another name that predicted held-out points as well (the winner's paired t
     over them < 2): one confusable class, with the experiment that separates each."""
     out = []
@@ -117,5 +117,5 @@ def rival_class(step, floor_free: bool = False) -> list[dict]:
         if name == step.choice.name:
             continue
         out.append({"effect": name, "label": label, "cv_rms_mm": rms, "t_winner_over_it": t,
-                    "experiment": separating_experiment(step.choice.name, name)})
+                    "experiment": separating_experiment(step.choice.name, name, f"{step.choice.label} {label}")})
     return out

@@ -36,7 +36,7 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
             ev["pruned_parts"] = [{"part": lb, "t": t} for lb, t in step.pruned]
         conf = rival_class(step)
         conf += [{"effect": lb.split("(")[0], "label": lb, "share_explained": share,
-                  "experiment": separating_experiment(fe.choice.name, lb.split("(")[0]),
+                  "experiment": separating_experiment(fe.choice.name, lb.split("(")[0], f"{fe.choice.label} {lb}"),
                   "why": f"{fe.choice.label} explains {100 * share:.0f} % of its signature beyond the geometry"}
                  for lb, (by, share) in sel.shadowed.items() if by == fe.choice.label
                  and lb.split("(")[0] != fe.choice.name and all(lb != x["label"] for x in conf)]

@@ -1,8 +1,8 @@
 """Where the residual lies (geometric and final model, held-out residuals) and what is left unexplained.
 
 Unexplained structure has one definition (``leftover``): the excess of the final model's held-out RMS over the
-noise floor, sqrt(max(R^2 - F^2, 0)), and how much a non-parametric layer (IDW over the workspace, fitted on the
-calibration residuals) removes of it on held-out points. The terminal, the JSON and the HTML report print these
+noise floor, sqrt(max(R^2 - F^2, 0)), and how much a non-parametric layer (GPR over the joints, reprocess's residual
+layer, fitted on the calibration residuals) removes of it on held-out points. The terminal, the JSON and the HTML report print these
 same numbers; ``unexplained`` is true when R exceeds the floor (inflated for the fitted parameters) by more than
 ``unexplained_ratio`` (and, for a floor from repeats, significantly: F test with the floor's degrees of freedom). The neighbour test (``structure_test``) then says along which inputs the leftover lies.
 """
@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from ..kinematics import ParamLayout, identification_jacobian
-from ..residual import IDWResidual
+from ..layers import fit_layer
 from .records import DiagnosisInput, DiagnosisOptions
 from .regions import structure_test, where_analysis
 
@@ -52,18 +52,20 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
     return out, maps
 
 
-def _idw_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray, str]:
-    """Residual vectors (M, 3) mm left on held-out points once an IDW layer on the final model's calibration
-    residuals is added: on the test rows, or cross-validated over the fit rows' pose blocks without test rows."""
+def _layer_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray, str]:
+    """Residual vectors (M, 3) mm left on held-out points once the non-parametric layer of the calibration (GPR over
+    the joints, ``robocal.layers.fit_layer``) is fitted on the final model's calibration residuals (at most
+    ``layer_max_points`` of them, a seeded subset): on the test rows, or over the fit rows' pose blocks."""
     kin = model.kinematics
+    rng = np.random.default_rng(opt.seed)
     sub = lambda rows: {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}  # noqa: E731
 
     def layer_errors(tr, te):
-        pm_tr = _base(kin, model.smr_tracker(q[tr], sub(tr)))
-        pm_te = _base(kin, model.smr_tracker(q[te], sub(te)))
-        pb_tr, pb_te = _base(kin, p[tr]), _base(kin, p[te])
-        lay = IDWResidual.fit(pb_tr, pb_tr - pm_tr, opt.idw_power, opt.idw_k_nearest)
-        return pb_te - pm_te - lay.predict(None, pm_te)
+        if len(tr) > opt.layer_max_points:
+            tr = np.sort(rng.choice(tr, opt.layer_max_points, replace=False))
+        lay = fit_layer("gpr", model, q[tr], p[tr], sub(tr), seed=opt.seed)
+        pm = model.kinematic_smr_base(q[te], sub(te))
+        return _base(kin, p[te]) - pm - lay.predict(q[te], pm)
     if len(test):
         return layer_errors(fit, test), "test"
     out = np.empty((len(fit), 3))
@@ -77,7 +79,7 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     F = float(inp.noise_floor_mm)
     held = resid[test] if len(test) else cv_final
     R = float(np.sqrt(np.mean(np.sum(held**2, axis=1))))
-    lay, where = _idw_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit, test,
+    lay, where = _layer_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit, test,
                               fold, meta)
     R_lay = float(np.sqrt(np.mean(np.sum(lay**2, axis=1))))
     inflate = math.sqrt(1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit)))
@@ -103,12 +105,12 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     along = sorted((s for s in tests if tests[s]["z"] >= opt.structure_z), key=lambda s: -tests[s]["z"])
     evaluated = "held-out test points" if where == "test" else "cross-validated calibration points"
     text = (f"unexplained structure: {excess:.3f} mm RMS over the noise floor after the final model (held-out "
-            f"{R:.3f} mm vs floor {F:.3f} mm, {evaluated}); a non-parametric layer (IDW over the workspace) removes "
+            f"{R:.3f} mm vs floor {F:.3f} mm, {evaluated}); a non-parametric layer (GPR over the joints) removes "
             f"{removes:.3f} mm of it ({R:.3f} -> {R_lay:.3f} mm on the same points)")
     if along:
         text += f"; strongest along {', '.join(along[:4])}"
     out = {"unexplained": flagged, "heldout_rms_mm": R, "floor_mm": F, "excess_over_floor_mm": excess,
-           "layer": f"IDW over the workspace (power {opt.idw_power:g}, {opt.idw_k_nearest} nearest)",
+           "layer": "GPR over the joints (the residual layer of reprocess)",
            "layer_heldout_rms_mm": R_lay, "layer_removes_mm": removes, "evaluation": where, "along": along,
            "text": text if flagged else f"nothing unexplained: held-out {R:.3f} mm vs floor {F:.3f} mm "
                                           f"(a non-parametric layer gives {R_lay:.3f} mm)"}

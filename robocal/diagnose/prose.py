@@ -32,7 +32,12 @@ SEPARATING_EXPERIMENT = {
 }
 
 
-def separating_experiment(a: str, b: str) -> str:
+def separating_experiment(a: str, b: str, labels: str = "") -> str:
+    """The experiment that tells effect ``a`` from ``b`` (``labels``: their labels, e.g. "gear_cyclic(J5 h1)",
+    when the experiment depends on the joints)."""
+    if {a, b} == {"joint_compliance", "gear_cyclic"} and not any(f"gear_cyclic(J{j}" in labels for j in (2, 3)):
+        return ("measure with a second payload (compliance changes with the load, a gear error does not) and cover "
+                "the gear joint's whole range")
     return SEPARATING_EXPERIMENT.get(frozenset({a, b}),
                                      "widen the range of the inputs where they differ (joints, time, payload) "
                                      "or add a second SMR for orientation")

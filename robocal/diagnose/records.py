@@ -32,8 +32,7 @@ class DiagnosisOptions:
     unexplained_ratio: float = 1.12   # held-out RMS above this x the (parameter-inflated) floor: unexplained ...
     floor_f_alpha: float = 1e-3       # ... and, with a floor from repeats, significantly so (F test at this level)
     cv_param_inflation: float = 1.25  # floor inflation per parameter share (held-out prediction with p parameters)
-    idw_power: float = 2.0            # the non-parametric layer that measures the structure left over
-    idw_k_nearest: int = 8
+    layer_max_points: int = 2000      # the GPR layer that measures the structure left over: at most this many rows
     seed: int = 0
 
 

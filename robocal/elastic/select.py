@@ -30,6 +30,7 @@ LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain 
 #                                    heavy-tailed per-point difference: its t understates how unlikely it is)
 SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) lies >= 90 % inside a taken effect's
 #                         span cannot be told from that effect: one class
+SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
 
@@ -199,7 +200,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
             share = cv.absorbed(design.cols[c], np.concatenate([design.geo, cols]))
             geo = absorbed[c.label]
             visible = (share - geo) / max(1.0 - geo, 1e-12)      # of what the geometry leaves visible
-            if visible >= SHADOW_SHARE:
+            if visible >= SHADOW_SHARE and 1.0 - geo >= SHADOW_MIN_VISIBLE:
                 shadowed[c.label] = (taken.label, visible)
                 break
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
