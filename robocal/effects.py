@@ -335,20 +335,35 @@ def registration_drift(clock: str = "t_s", degree: int = 1, span: float = 3600.0
 
 
 # ---------------------------------------------------------------- use of the bases
+def combine(q_rad: np.ndarray, bases, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint deviation dq (N, n) rad, link-length scale (N,) and tracker-frame displacement dp (N, 3) mm of
+    effect bases [Basis, ...] at the points ``q_rad`` (N, n) with their parameter values [(K,), ...]."""
+    q = np.atleast_2d(q_rad)
+    dq, scale, dp = np.zeros(q.shape), np.ones(len(q)), np.zeros((len(q), 3))
+    for b, v in zip(bases, values):
+        v = np.asarray(v, float)
+        if b.dq is not None:
+            dq += b.dq @ v
+        if b.scale is not None:
+            scale += b.scale @ v
+        if b.dp is not None:
+            dp += b.dp @ v
+    return dq, scale, dp
+
+
+def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``combine`` of ``effects`` [(Effect, values (K,)), ...] at the points ``q_rad`` with their metadata: dq
+    (robot), scale (links), dp (a drift of the measurement, not of the robot)."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    return combine(q, [eff.basis(kin, q, meta) for eff, _ in effects], [v for _, v in effects])
+
+
 def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
     """Exact SMR positions in the tracker frame (N, 3) mm of a robot with geometry ``kin`` and the
     given ``[(Effect, params (K,)), ...]``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
-    for eff, params in effects:
-        b = eff.basis(kin, q, meta)
-        params = np.asarray(params, float)
-        if b.dq is not None:
-            dq += b.dq @ params
-        if b.scale is not None:
-            scale += b.scale @ params
-        if b.dp is not None:
-            dp += b.dp @ params
+    dq, scale, dp = effect_state(kin, q, meta, effects)
     c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None])
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     return transform_points(kin.T_tracker_base, p_base) + dp

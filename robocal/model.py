@@ -14,7 +14,8 @@ import numpy as np
 
 from .frames import transform_points
 from .kinematics import Kinematics, fk
-from .elastic import FittedEffect, effect_state, elastic_flange
+from .effects import effect_state
+from .elastic import FittedEffect, elastic_flange
 from .gp import GPRResidual
 from .residual import IDWResidual
 

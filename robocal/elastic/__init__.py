@@ -18,11 +18,11 @@ from .cv import BlockedCV, Blocking, kfold, order_blocks, pose_blocks
 from .engine import EngineOptions, EngineResult, run_engine, select
 from .fit import ElasticResult, calibrate_elastic
 from .library import LibraryOptions, candidates, parts, refinements
-from .model import EffectChoice, FittedEffect, effect_state, elastic_flange, elastic_smr_tracker
+from .model import EffectChoice, FittedEffect, elastic_flange, elastic_smr_tracker
 from .physical import reading
 from .select import EffectSelection, Step, Trial, select_effects
 
 __all__ = ["BlockedCV", "Blocking", "EffectChoice", "EffectSelection", "ElasticResult", "EngineOptions",
            "EngineResult", "FittedEffect", "LibraryOptions", "Step", "Trial", "calibrate_elastic", "candidates",
-           "effect_state", "elastic_flange", "elastic_smr_tracker", "kfold", "order_blocks", "parts", "pose_blocks",
+           "elastic_flange", "elastic_smr_tracker", "kfold", "order_blocks", "parts", "pose_blocks",
            "reading", "refinements", "run_engine", "select", "select_effects"]

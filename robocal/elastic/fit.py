@@ -9,7 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..effects import effect_regressor
+from ..effects import combine, effect_regressor
 from ..identify import CalibrationOptions, Unidentifiable, analyse_identifiability, whitening, _whiten
 from ..kinematics import Kinematics, ParamLayout, apply_update, identification_jacobian
 from ..lm import levenberg_marquardt
@@ -19,11 +19,7 @@ from .model import FittedEffect, elastic_smr_tracker
 def _jacobian(kin, q, meta, built, values):
     """(p_tracker (N, 3), J_geo (N, 3, P), R_eff (N, 3, K)) at the current model (each basis evaluated once)."""
     bases = [e.basis(kin, q, meta) for e in built]
-    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
-    for b, v in zip(bases, values):
-        dq += 0.0 if b.dq is None else b.dq @ v
-        scale += 0.0 if b.scale is None else b.scale @ v
-        dp += 0.0 if b.dp is None else b.dp @ v
+    dq, scale, dp = combine(q, bases, values)
     if np.all(scale == 1.0):
         p, J = identification_jacobian(kin, q + dq)
     else:

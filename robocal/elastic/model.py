@@ -11,7 +11,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..effects import MODEL_EFFECTS, Effect, by_name
+from ..effects import MODEL_EFFECTS, Effect, by_name, effect_state
 from ..frames import transform_points
 from ..kinematics import Kinematics, chain
 
@@ -90,24 +90,6 @@ class FittedEffect:
         std = np.array([np.nan if d["params"][n].get("std") is None else float(d["params"][n]["std"])
                         for n in eff.param_names])
         return cls(choice, vals, std, eff.param_names, eff.unit)
-
-
-def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Joint deviation dq (N, n) rad, link-length scale (N,) and tracker-frame displacement dp (N, 3) mm (a drift
-    of the measurement, not of the robot) of ``effects`` [(Effect, values (K,)), ...]."""
-    q = np.atleast_2d(np.asarray(q_rad, float))
-    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
-    for eff, values in effects:
-        b = eff.basis(kin, q, meta)
-        v = np.asarray(values, float)
-        if b.dq is not None:
-            dq += b.dq @ v
-        if b.scale is not None:
-            scale += b.scale @ v
-        if b.dp is not None:
-            dp += b.dp @ v
-    return dq, scale, dp
 
 
 def _flange(kin, q, dq, scale) -> np.ndarray:

