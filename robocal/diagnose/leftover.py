@@ -90,17 +90,20 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
         from scipy import stats
         ratio = max(ratio, math.sqrt(float(stats.f.isf(opt.floor_f_alpha, 3 * len(held), 3 * inp.noise_floor_dof))))
     flagged = bool(R > ratio * F * inflate)
-    # along which inputs the leftover lies (in-sample residuals of the fit rows, whitened to the floor)
-    cov = inp.cov_mm2[fit] * _floor_scale(inp)
-    w = np.linalg.solve(np.linalg.cholesky(cov), resid[fit][:, :, None])[:, :, 0]
-    pb = _base(model.kinematics, inp.p_mm[fit] - resid[fit])
-    q = np.asarray(inp.q_rad, float)[fit]
+    # along which inputs the leftover lies (in-sample residuals of the fit rows, whitened to the floor; at most
+    # ``structure_max_points`` of them, a seeded subset: the permutation test holds N x 3 x permutations numbers)
+    rows = fit if len(fit) <= opt.structure_max_points else \
+        np.sort(np.random.default_rng(opt.seed).choice(fit, opt.structure_max_points, replace=False))
+    cov = inp.cov_mm2[rows] * _floor_scale(inp)
+    w = np.linalg.solve(np.linalg.cholesky(cov), resid[rows][:, :, None])[:, :, 0]
+    pb = _base(model.kinematics, inp.p_mm[rows] - resid[rows])
+    q = np.asarray(inp.q_rad, float)[rows]
     spaces = {"joint space": q, "workspace": pb, "reach": np.hypot(pb[:, 0], pb[:, 1]), "height": pb[:, 2]}
     spaces.update({f"J{j + 1}": q[:, j] for j in range(q.shape[1])})
     for key, name in (("t_s", "time"), ("order", "measurement order")):
         v = meta.get(key)
-        if v is not None and np.ptp(np.asarray(v, float)[fit]) > 0:
-            spaces[name] = np.asarray(v, float)[fit]
+        if v is not None and np.ptp(np.asarray(v, float)[rows]) > 0:
+            spaces[name] = np.asarray(v, float)[rows]
     tests = structure_test(w, spaces, np.random.default_rng(opt.seed), opt.neighbours, opt.permutations)
     along = sorted((s for s in tests if tests[s]["z"] >= opt.structure_z), key=lambda s: -tests[s]["z"])
     evaluated = "held-out test points" if where == "test" else "cross-validated calibration points"

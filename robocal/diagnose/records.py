@@ -28,6 +28,7 @@ class DiagnosisOptions:
     max_regions: int = 12
     structure_z: float = 4.0          # neighbour test: structure along an input at this z
     neighbours: int = 10
+    structure_max_points: int = 4000  # the neighbour test runs on at most this many rows (seeded subset)
     permutations: int = 200
     unexplained_ratio: float = 1.12   # held-out RMS above this x the (parameter-inflated) floor: unexplained ...
     floor_f_alpha: float = 1e-3       # ... and, with a floor from repeats, significantly so (F test at this level)

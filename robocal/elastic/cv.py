@@ -37,14 +37,18 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
     centres = x[idx].copy()
     label = np.zeros(n, int)
     for _ in range(iterations):
-        d = (x**2).sum(axis=1)[:, None] - 2.0 * x @ centres.T + (centres**2).sum(axis=1)[None, :]
-        label = np.argmin(d, axis=1)
+        label = np.concatenate([_nearest(x[s:s + 20000], centres) for s in range(0, n, 20000)])   # bounded memory
         for c in range(len(centres)):
             members = label == c
             if members.any():
                 centres[c] = x[members].mean(axis=0)
     deal = rng.permutation(len(centres)) % folds
     return deal[label]
+
+
+def _nearest(x: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    d = (x**2).sum(axis=1)[:, None] - 2.0 * x @ centres.T + (centres**2).sum(axis=1)[None, :]
+    return np.argmin(d, axis=1)
 
 
 def order_blocks(order: np.ndarray, folds: int, segments_per_fold: int = 4) -> np.ndarray:
@@ -74,25 +78,34 @@ class BlockedCV:
     def __init__(self, A: np.ndarray, y: np.ndarray, W: np.ndarray, blockings: list[Blocking]):
         N, _, P = A.shape
         Aw = np.einsum("nij,njk->nik", W, A)
-        yw = np.einsum("nij,nj->ni", W, y)
+        self.yw = np.einsum("nij,nj->ni", W, y)
         self.scale = np.sqrt(np.einsum("nik,nik->k", Aw, Aw))
         self.scale[self.scale == 0] = 1.0
-        self.Aw = Aw / self.scale
-        self.yw = yw
+        Aw /= self.scale
         self.L = np.linalg.inv(W)
         self.blockings = blockings
         self.P = P
-        self._gram = []
-        for b in blockings:
-            folds = np.unique(b.fold)
+        self._gram, self._sorted = [], []
+        for b in blockings:                    # rows sorted by fold: every fold's rows are a view of one copy
+            perm = np.argsort(b.fold, kind="stable")
+            Ab = Aw[perm]
+            edges = np.flatnonzero(np.diff(b.fold[perm])) + 1
             per = []
-            for f in folds:
-                rows = np.flatnonzero(b.fold == f)
-                Af = self.Aw[rows].reshape(-1, P)
-                per.append((rows, Af.T @ Af, Af.T @ yw[rows].reshape(-1), Af))
-            G = sum(p[1] for p in per)
-            c = sum(p[2] for p in per)
-            self._gram.append((G, c, per))
+            for s, e in zip(np.concatenate([[0], edges]), np.concatenate([edges, [N]])):
+                rows = perm[s:e]
+                Af = Ab[s:e].reshape(-1, P)
+                per.append((rows, Af.T @ Af, Af.T @ self.yw[rows].reshape(-1), Af))
+            self._gram.append((sum(p[1] for p in per), sum(p[2] for p in per), per))
+            self._sorted.append((perm, Ab))
+        del Aw
+
+    @property
+    def Aw(self) -> np.ndarray:
+        """The whitened, unit-norm design (N, 3, P) in row order (a copy)."""
+        perm, Ab = self._sorted[0]
+        out = np.empty_like(Ab)
+        out[perm] = Ab
+        return out
 
     def errors(self, cols, blocking: int = 0) -> np.ndarray:
         """Held-out error vectors (N, 3) mm of the columns ``cols`` under one blocking."""
