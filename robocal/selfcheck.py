@@ -107,8 +107,9 @@ class Trial:
 
     @property
     def lag_as_backlash(self) -> bool:
-        """A read-back lag in the truth and backlash accepted."""
-        return "readback_lag" in self.truth_names and "backlash" in self.diagnosed
+        """A read-back lag in the truth and backlash accepted though backlash is not."""
+        return ("readback_lag" in self.truth_names and "backlash" in self.diagnosed
+                and "backlash" not in self.truth_names)
 
     @property
     def spurious(self) -> int:
