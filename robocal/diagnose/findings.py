@@ -32,6 +32,8 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
         if not phys["plausible"]:
             ev["outside_range"] = phys["outside"]
             ev["description"] = best_available(fe.choice.label, phys)
+        if step.note:
+            ev["chosen_among_equals"] = step.note
         if step.pruned:
             ev["pruned_parts"] = [{"part": lb, "t": t} for lb, t in step.pruned]
         conf = rival_class(step)

@@ -9,7 +9,8 @@ order blocks), and the gain positive under each blocking on its own. An effect j
 data do not need (a joint, a harmonic, a memory term: removing the part must cost t >= 2); refinements of it
 (compliance's free mass distribution) join the candidates. At the end every taken effect must still be needed
 given the others (removing it costs t >= 2 and >= 1 % of RMS), else it is dropped.
-Held-out prediction is the only arbiter: plausibility and consistency are reported, never used here.
+Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a
+plausible one before an implausible best), and never drops an effect; consistency is reported, never used here.
 """
 from __future__ import annotations
 
@@ -67,13 +68,14 @@ class Step:
     gain: float
     rivals: list = field(default_factory=list)      # [(label, name, cv_rms_mm, t_winner_over_it)]
     pruned: list = field(default_factory=list)      # [(part label, t of removing it)]
+    note: str = ""                                  # why it was taken before a slightly better predictor
 
     def to_dict(self) -> dict:
         return {"effect": self.choice.label, "name": self.choice.name, "round": self.round,
                 "cv_rms_before_mm": self.before_mm, "cv_rms_after_mm": self.after_mm,
                 "cv_rms_by_blocking_mm": self.by_blocking_mm, "t": self.t, "gain": self.gain,
                 "rivals": [{"effect": lb, "name": nm, "cv_rms_mm": r, "t_over": t} for lb, nm, r, t in self.rivals],
-                "pruned": [{"part": lb, "t": t} for lb, t in self.pruned]}
+                "pruned": [{"part": lb, "t": t} for lb, t in self.pruned], "note": self.note}
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,9 +141,11 @@ def _rms(se) -> float:
 
 def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
                    cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
-                   max_effects: int = 6) -> EffectSelection:
+                   max_effects: int = 6, plausible=None) -> EffectSelection:
     """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
-    columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking."""
+    columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
+    values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
+    over them < 2) a plausible one is preferred to an implausible best."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     pool = list(dict.fromkeys(candidates))
@@ -174,11 +178,15 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         if not scored:
             break
         scored.sort(key=lambda s: (s[0], s[1]))
+        pick = _plausible_pick(scored, cv, design, model, plausible) if plausible else 0
+        note = "" if pick == 0 else (f"taken before {scored[0][2].label} (held-out RMS {scored[0][0]:.4f} mm, as "
+                                     "good): its values are outside their physical range")
+        scored.insert(0, scored.pop(pick))
         _, i, c, se, g = scored[0]
         trials[i] = Trial(**{**trials[i].__dict__, "taken": True})
         rivals = [(o.label, o.name, r, paired_gain(_mean(s), _mean(se)).t) for r, _, o, s, _ in scored[1:]]
         step = Step(c, rnd, g.rms_base_mm, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.t, g.gain,
-                    [rv for rv in rivals if rv[3] < KEEP_T])
+                    [rv for rv in rivals if rv[3] < KEEP_T], note=note)
         pool = [o for o in pool if not alternatives(o, c)]
         reduced, base = _prune(errors, design, model, c, c, step, n)
         model.append((reduced, design.sub(c, reduced, n), c))
@@ -206,6 +214,21 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
                            tuple(c.label for c in candidates), absorbed, tuple(e[2].label for e in model), shadowed)
+
+
+def _plausible_pick(scored, cv, design, model, plausible) -> int:
+    """Index of the candidate to take: the best held-out one, unless its values are outside their physical range
+    and another that predicts as well (the best one's paired t over it < KEEP_T) is inside."""
+    def values(c):
+        cols = np.concatenate([design.geo] + [e[1] for e in model] + [design.cols[c]])
+        return cv.fit(cols)[-len(design.cols[c]):]
+    best = scored[0]
+    if plausible(best[2], values(best[2])):
+        return 0
+    for k, s in enumerate(scored[1:], start=1):
+        if paired_gain(_mean(s[3]), _mean(best[3])).t < KEEP_T and plausible(s[2], values(s[2])):
+            return k
+    return 0
 
 
 def _supported(g) -> bool:
