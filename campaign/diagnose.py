@@ -121,7 +121,8 @@ def _identified(result) -> np.ndarray:
 
 
 def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions | None = None) -> DiagnosisReport:
-    """Diagnose one dataset; the report dict leads with the JSON contract."""
+    """Diagnose one dataset; the report dict leads with the JSON contract. ``options`` None: the defaults with the
+    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage)."""
     _check(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
@@ -143,7 +144,9 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
 
 
 def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
-                    options: DiagnosisOptions = DiagnosisOptions()) -> DiagnosisReport:
+                    options: DiagnosisOptions | None = None) -> DiagnosisReport:
+    """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
+    ``calibration.cv_folds``, as in reprocess)."""
     return diagnose_dataset(load_dataset(source), cfg, options)
 
 

@@ -37,7 +37,8 @@ SMALL_ARM_JOINTS = [  # robocal.truth.small_arm_nominal (the published UR5 DH ta
 
 def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.csv", **overrides) -> tuple[Path, Path]:
     """A truth campaign (robocal.truth) as an interchange CSV (read-back joints, rows in measurement order, time and
-    payload when logged) and a config of its robot with the nominal SMR offset and no calibration section."""
+    payload when logged) and a config of its robot with the nominal SMR offset and no calibration section (only
+    the ``calibration.*`` keys given as overrides)."""
     import numpy as np
 
     from campaign.interchange import Dataset, write_csv
@@ -51,8 +52,11 @@ def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.c
             "tool.payload_kg": float(camp.payload_kg[0]), "robot.repeatability_mm": camp.protocol.repeatability_rp_mm}
     if small_arm:
         over.update({"robot.joints": SMALL_ARM_JOINTS, "robot.hayati_joints": [2, 3]})
-    cfg = small_config(tmp_path, base, **{**over, **overrides})
+    cal = {k: v for k, v in overrides.items() if k.startswith("calibration.")}
+    cfg = small_config(tmp_path, base, **{**over, **{k: v for k, v in overrides.items() if k not in cal}})
     doc = yaml.safe_load(cfg.read_text())
-    doc.pop("calibration", None)
+    doc.pop("calibration", None)                    # the defaults, unless the caller sets a calibration key
+    for key, value in cal.items():
+        doc.setdefault("calibration", {})[key.split(".", 1)[1]] = value
     cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
     return csv, cfg
