@@ -14,7 +14,7 @@ import numpy as np
 
 from ..kinematics import ParamLayout, identification_jacobian
 from ..layers import fit_layer
-from .records import DiagnosisInput, DiagnosisOptions
+from .records import DiagnosisInput
 from .regions import structure_test, where_analysis
 
 

@@ -3,14 +3,13 @@ payload above the noise floor (``where_analysis``), maps for plots, and the neig
 inputs a leftover lies (``structure_test``)."""
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import numpy as np
 from scipy import sparse, stats
 from scipy.spatial import cKDTree
 
-from .records import DiagnosisInput, DiagnosisOptions, Region
+from .records import DiagnosisOptions, Region
 
 
 def _region_stats(r_b, w, floor_pt, idx):
