@@ -19,7 +19,7 @@ from robocal.model import CalibratedModel
 from robocal.repeats import repeat_groups
 from robocal.screen import ScreenResult, screen
 
-from .cell import calibration_options
+from .cell import calibration_options, weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .interchange import Dataset
@@ -68,8 +68,6 @@ class ElasticStage:
 
 def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo) -> ElasticStage:
     """The effects of the model on top of the geometric fit ``geo`` (``campaign.process.GeometricFit``)."""
-    from .cell import weights_covariance
-
     result = geo.result
     q, p = np.radians(ds.q_deg), ds.p_tracker_mm
     cov_all = weights_covariance(cfg, ds)[0]

@@ -71,91 +71,111 @@ def _rms(r) -> float:
     return float(np.sqrt(np.mean(np.sum(np.asarray(r).reshape(-1, 3) ** 2, axis=1)))) if len(r) else float("nan")
 
 
+def _step_models(kin_geo, cols, q, p, cov, meta, effects, elastic) -> list[CalibratedModel]:
+    """The geometric model, then the taken effects added one at a time (exact joint fits of the prefixes; the last
+    is the engine's own fit)."""
+    models = [CalibratedModel(kin_geo)]
+    for k in range(1, len(effects)):
+        el = calibrate_elastic(kin_geo, cols, q, p, cov, meta, [fe.choice for fe in effects[:k]])
+        models.append(CalibratedModel(el.kinematics, None, None, el.effects))
+    if elastic is not None:
+        models.append(CalibratedModel(elastic.kinematics, None, None, elastic.effects))
+    return models
+
+
+def _linear_design(kin_geo, cols, q, p, cov, meta, effects, opt):
+    """Blocked CV of the linearised design of the fit rows (geometry + the final effects) with the engine's
+    blockings; the regressors (N, 3, K) per effect, the geometric Jacobian and the effects' column ranges."""
+    p0, J = identification_jacobian(kin_geo, q)
+    R = [effect_regressor(kin_geo, q, meta, fe.choice.build(kin_geo.n), jacobian=(p0, J)) for fe in effects]
+    blockings = [Blocking("pose blocks", pose_blocks(q, opt.engine.folds, opt.engine.seed))]
+    if meta.get("order") is not None:
+        blockings.append(Blocking("order blocks", order_blocks(meta["order"], opt.engine.folds)))
+    cv = BlockedCV(np.concatenate([J[:, :, cols]] + R, axis=2), p - p0, whitening(cov, len(q)), blockings)
+    at, eff_cols = len(cols), []
+    for fe in effects:
+        eff_cols.append(np.arange(at, at + fe.values.size))
+        at += fe.values.size
+    return cv, R, J[:, :, cols], p0, eff_cols
+
+
+def _stages(models, resid, cv, eff_cols, n_geo, fit, test, effects) -> list[dict]:
+    """Test and cross-validated RMS (mean over the blockings, as the engine's selection) after each step."""
+    out = []
+    for k, (m, r) in enumerate(zip(models, resid)):
+        se = cv.squared_errors(np.concatenate([np.arange(n_geo)] + eff_cols[:k]))
+        out.append({"added": "geometric model" if k == 0 else effects[k - 1].choice.label,
+                    "effects": [fe.choice.label for fe in effects[:k]], "test_rms_mm": _rms(r[test]),
+                    "cv_rms_mm": math.sqrt(float(np.mean(np.mean(np.stack(list(se.values())), axis=0)))),
+                    "calib_rms_mm": _rms(r[fit]), "n_params": n_geo + sum(fe.values.size for fe in effects[:k])})
+    return out
+
+
+def _halves(kin_geo, p0, meta) -> dict[str, np.ndarray]:
+    """Splits of the fit rows for the consistency evidence: near/far horizontal reach, first/second half."""
+    T = kin_geo.T_tracker_base
+    pb = (p0 - T[:3, 3]) @ T[:3, :3]
+    reach = np.hypot(pb[:, 0], pb[:, 1])
+    out = {"near and far reach": reach < np.median(reach)}
+    if meta.get("order") is not None:
+        o = np.asarray(meta["order"], float)
+        out["the first and second half of the run"] = o < np.median(o)
+    return out
+
+
+def _order_cannot_tell(q, order, r_min) -> list[dict]:
+    """Joints that follow the measurement order: a drift in time and their effects are one class (a property of
+    the data, whatever was accepted)."""
+    follow = [] if order is None else joints_following_order(q, order, r_min)
+    if not follow:
+        return []
+    js = ", ".join(f"J{j} (r = {r:+.2f})" for j, r in follow)
+    return [{"effect": "registration_drift", "joints": [j for j, _ in follow], "remedy": DRIFT_EXPERIMENT,
+             "reason": f"{js} follow{'s' if len(follow) == 1 else ''} the measurement order: a drift in time and an "
+                       f"effect of {'that joint' if len(follow) == 1 else 'those joints'} cannot be told apart in "
+                       "these data (one confounded class)"}]
+
+
 def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions(),
              stage: FittedStage | None = None) -> Diagnosis:
     """The whole diagnosis of one dataset (see the module docstring); ``stage``: the engine's answer when the
     caller already has it (else it is computed here on the calibration rows)."""
     opt = options
-    q, p = np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float)
+    q, p, cov = np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), np.asarray(inp.cov_mm2, float)
     kin_geo, cols = _baseline(inp)
     meta = inp.meta() if stage is None else stage.meta
     stage = _own_stage(inp, opt, kin_geo, cols, meta) if stage is None else stage
     fit, test = np.asarray(stage.fit_rows, int), np.flatnonzero(inp.test)
-    engine, elastic = stage.engine, stage.elastic
-    effects = () if elastic is None else elastic.effects
+    effects = () if stage.elastic is None else stage.elastic.effects
     m_fit = _sub(meta, fit)
-    n = kin_geo.n
-    # ---- step by step: the taken effects added one at a time (the last step is the engine's final fit)
-    models = [CalibratedModel(kin_geo)]
-    for k in range(1, len(effects)):
-        el = calibrate_elastic(kin_geo, cols, q[fit], p[fit], inp.cov_mm2[fit], m_fit, [fe.choice for fe in effects[:k]])
-        models.append(CalibratedModel(el.kinematics, None, None, el.effects))
-    if elastic is not None:
-        models.append(CalibratedModel(elastic.kinematics, None, None, elastic.effects))
+    models = _step_models(kin_geo, cols, q[fit], p[fit], cov[fit], m_fit, effects, stage.elastic)
     resid = [p - m.smr_tracker(q, meta) for m in models]
-    # ---- linearised design of the fit rows (held-out residuals, consistency, confounds)
-    p0, J = identification_jacobian(kin_geo, q[fit])
-    R = [effect_regressor(kin_geo, q[fit], m_fit, fe.choice.build(n), jacobian=(p0, J)) for fe in effects]
-    A = np.concatenate([J[:, :, cols]] + R, axis=2)
-    blockings = [Blocking("pose blocks", pose_blocks(q[fit], opt.engine.folds, opt.engine.seed))]
-    if m_fit.get("order") is not None:
-        blockings.append(Blocking("order blocks", order_blocks(m_fit["order"], opt.engine.folds)))
-    cv = BlockedCV(A, p[fit] - p0, whitening(inp.cov_mm2[fit], len(fit)), blockings)
-    geo_cols = np.arange(len(cols))
-    eff_cols, at = [], len(cols)
-    for fe in effects:
-        eff_cols.append(np.arange(at, at + fe.values.size))
-        at += fe.values.size
-    prefix = [np.concatenate([geo_cols] + eff_cols[:k]) for k in range(len(models))]
-    cv_vec = [cv.errors(c) for c in prefix]
-    cv_steps = [math.sqrt(float(np.mean(np.mean(np.stack(list(cv.squared_errors(c).values())), axis=0))))
-                for c in prefix]               # mean over the blockings, as the engine's selection
+    cv, R, J_geo, p0, eff_cols = _linear_design(kin_geo, cols, q[fit], p[fit], cov[fit], m_fit, effects, opt)
     evaluation = "test" if len(test) else "cv"
     key = "test_rms_mm" if evaluation == "test" else "cv_rms_mm"
-    sel = engine.selection
-    stages = []
-    for k, (m, r) in enumerate(zip(models, resid)):
-        stages.append({"added": "geometric model" if k == 0 else effects[k - 1].choice.label,
-                       "effects": [fe.choice.label for fe in effects[:k]], "test_rms_mm": _rms(r[test]),
-                       "cv_rms_mm": cv_steps[k], "calib_rms_mm": _rms(r[fit]),
-                       "n_params": len(cols) + sum(fe.values.size for fe in effects[:k])})
-    T = kin_geo.T_tracker_base
-    pb = (p0 - T[:3, 3]) @ T[:3, :3]
-    reach = np.hypot(pb[:, 0], pb[:, 1])
-    halves = {"near and far reach": reach < np.median(reach)}
-    if m_fit.get("order") is not None:
-        o = np.asarray(m_fit["order"], float)
-        halves["the first and second half of the run"] = o < np.median(o)
-    ctx = {"floor": inp.noise_floor_mm, "n": n, "kin": models[-1].kinematics, "kin_geo": kin_geo, "q": q[fit], "meta": m_fit,
-           "gravity": inp.gravity, "R": R, "J_geo": J[:, :, cols], "A_w": cv.Aw, "y_w": cv.yw, "cols": eff_cols,
-           "geo_cols": geo_cols, "halves": halves}
-    findings = accepted_findings(engine, effects, stages, key, ctx, opt)
-    others, cannot = other_findings(engine, stages[-1][key], opt, n)
-    order = meta.get("order")
-    follow = [] if order is None else joints_following_order(q[fit], np.asarray(order)[fit], opt.confound_r)
-    if follow:                 # a property of the data, whatever was accepted
-        js = ", ".join(f"J{j} (r = {r:+.2f})" for j, r in follow)
-        cannot.append({"effect": "registration_drift", "joints": [j for j, _ in follow], "remedy": DRIFT_EXPERIMENT,
-                       "reason": f"{js} follow{'s' if len(follow) == 1 else ''} the measurement order: a drift in time "
-                                 f"and an effect of {'that joint' if len(follow) == 1 else 'those joints'} cannot be "
-                                 "told apart in these data (one confounded class)"})
-    where, maps = where_stages(inp, opt, fit, test, (kin_geo, models[-1]), (resid[0], resid[-1]),
-                               (cv_vec[0], cv_vec[-1]), (stages[0], stages[-1]), meta)
+    stages = _stages(models, resid, cv, eff_cols, len(cols), fit, test, effects)
+    ctx = {"floor": inp.noise_floor_mm, "n": kin_geo.n, "kin": models[-1].kinematics, "kin_geo": kin_geo,
+           "q": q[fit], "meta": m_fit, "gravity": inp.gravity, "R": R, "J_geo": J_geo, "A_w": cv.Aw, "y_w": cv.yw,
+           "cols": eff_cols, "geo_cols": np.arange(len(cols)), "halves": _halves(kin_geo, p0, m_fit)}
+    findings = accepted_findings(stage.engine, effects, stages, key, ctx, opt)
+    others, cannot = other_findings(stage.engine, stages[-1][key], opt, kin_geo.n)
+    cannot += _order_cannot_tell(q[fit], m_fit.get("order"), opt.confound_r)
+    cv_vec = [cv.errors(np.concatenate([np.arange(len(cols))] + eff_cols[:k])) for k in (0, len(effects))]
+    where, maps = where_stages(inp, opt, fit, test, (kin_geo, models[-1]), (resid[0], resid[-1]), cv_vec,
+                               (stages[0], stages[-1]), meta)
     unexplained, structure, notes = leftover(inp, opt, fit, test, models[-1], resid[-1], cv_vec[-1], stages[-1],
-                                             blockings[0].fold, meta)
+                                             cv.blockings[0].fold, meta)
     for f in findings:
-        for k in ("description", "consistency_note"):
-            if k in f.evidence:
-                notes.append(f"{f.evidence['label']}: {f.evidence[k]}")
+        notes += [f"{f.evidence['label']}: {f.evidence[k]}" for k in ("description", "consistency_note")
+                  if k in f.evidence]
         if "order_confound" in f.evidence:
-            c = f.evidence["order_confound"]
-            notes.append(f"{c['text']}; to separate them: {c['experiment']}")
+            notes.append(f"{f.evidence['order_confound']['text']}; to separate them: "
+                         f"{f.evidence['order_confound']['experiment']}")
+    final_regions = maps.pop("_final_regions")
     if unexplained["unexplained"]:
-        where += [r for r in maps.pop("_final_regions") if r.kind != "all"]
-    else:
-        maps.pop("_final_regions")
+        where += [r for r in final_regions if r.kind != "all"]
     outliers = tuple(int(i) for i in np.setdiff1d(np.flatnonzero(inp.calib), fit))
     return Diagnosis(float(inp.noise_floor_mm), inp.noise_floor_source, stages[0][key], stages[-1][key],
                      unexplained["unexplained"], tuple(findings + others), tuple(where), tuple(cannot), evaluation,
                      unexplained, structure, maps, tuple(notes), int(inp.calib.sum()), len(test), outliers,
-                     models[-1].kinematics, tuple(effects), tuple(stages), sel.to_dict())
+                     models[-1].kinematics, tuple(effects), tuple(stages), stage.engine.selection.to_dict())
