@@ -30,7 +30,8 @@ from .runner import RunOutcome, Runner, closing_on_error, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
-from .traceability import device_identity, identification, identity_changes, run_logging
+from .plausibility import is_forced
+from .traceability import check_identity, device_identity, identification, identity_changes, run_logging
 
 if TYPE_CHECKING:
     from .process import Processed
@@ -76,6 +77,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
         identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # a mismatch: exit 2, nothing moved
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
@@ -142,8 +144,10 @@ def verify(run_dir: Path, console: Console | None = None):
         logging_ = stack.enter_context(run_logging(console))
         cell = stack.enter_context(open_cell(cfg))
         robot, tracker = cell.robot, cell.tracker
+        identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
-                                      "software_version": software_version()} | device_identity(robot, tracker))
+                                      "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
         logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,

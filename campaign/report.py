@@ -51,6 +51,8 @@ def render_identity(console: Console, report: CalibrationReport) -> None:
         console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
                       f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
                       f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
+    for reason in (ident.get("identity_check") or {}).get("overridden", []):
+        console.print(f"identity check overridden with --force: {reason}", style="yellow", markup=False)
 
 
 def render_preparation(console: Console, prep: dict | None) -> None:
