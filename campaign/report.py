@@ -65,7 +65,10 @@ def render_preparation(console: Console, prep: dict | None) -> None:
         move = d["translation_at_end_mm"]
         console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
                       f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
-                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
+                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm"
+                      + (f"; CV RMS {d['cv_rms_mm']:.4f} mm" if d.get("cv_rms_mm") is not None else ""), markup=False)
+        for e in d.get("excluded", []):
+            console.print(f"  nest reading {e['point_id']} set aside: {e['reason']}", markup=False)
 
 
 def render_choices(console: Console, report: CalibrationReport) -> None:

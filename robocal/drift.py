@@ -72,7 +72,7 @@ class DriftModel:
                 "residual_rms_mm": self.residual_rms_mm, "nest_ids": list(self.nest_ids)}
 
 
-def _rounds(nest: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+def nest_rounds(nest: np.ndarray, t_s: np.ndarray) -> np.ndarray:
     """Round number of each reading: its occurrence count among readings of the same nest, in time order."""
     order = np.argsort(t_s, kind="stable")
     r = np.zeros(len(nest), int)
@@ -112,11 +112,12 @@ def _unpack(x: np.ndarray, k: int, degree: int, rotation: bool) -> tuple[np.ndar
 
 
 def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_ids=(),
-              max_degree: int = MAX_DEGREE) -> DriftModel:
+              max_degree: int = MAX_DEGREE, rounds: np.ndarray | None = None) -> DriftModel:
     """Drift model from nest readings: times t_s (M,) s, nest index nest (M,) int in 0..K-1, readings
     p_tracker_mm (M, 3) mm. Degree 0..max_degree by leave-one-round-out CV over the interior rounds (robot points
     always lie between the first and the last round, so interpolation is what counts; the lowest CV RMS wins,
-    ties to the lower degree); with fewer than 3 rounds the model is degree 0 (no drift)."""
+    ties to the lower degree); with fewer than 3 rounds the model is degree 0 (no drift). ``rounds`` (M,) the
+    round number of each reading when some were set aside (default: counted per nest in time order)."""
     t = np.asarray(t_s, float)
     nest = np.asarray(nest, int)
     p = np.asarray(p_tracker_mm, float)
@@ -126,7 +127,9 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
     can_rotate = bool(k >= 3 and len(spread) >= 2 and spread[1] > MIN_SPREAD_MM)
     scale = float(max(np.ptp(t), 1.0)) if len(t) else 1.0
     tau = t / scale
-    rounds = _rounds(nest, t) if len(t) else np.zeros(0, int)
+    if rounds is None:
+        rounds = nest_rounds(nest, t) if len(t) else np.zeros(0, int)
+    rounds = np.asarray(rounds, int)
     n_rounds = int(rounds.max()) + 1 if len(rounds) else 0
     top = min(max_degree, n_rounds - 2)
     cv: dict = {}
@@ -135,7 +138,7 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
         err = []
         for r in range(1, n_rounds - 1):
             tr, te = rounds != r, rounds == r
-            if len(np.unique(nest[tr])) < k:
+            if not te.any() or len(np.unique(nest[tr])) < k:
                 continue
             x = _solve(nest[tr], tau[tr], p[tr], p_mean, degree, rotation)
             p0, v, w = _unpack(x, k, degree, rotation)

@@ -15,6 +15,7 @@ large too) the model is incomplete, which ``structure_note`` says. Everything is
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,3 +124,71 @@ def screen(q_rad: np.ndarray, p_work_mm: np.ndarray, r_mm: np.ndarray, sigma_mm:
         _, nn = cKDTree(Xs).query(Xs[large], k=min(k, n - 1) + 1)
         clustered = float(np.mean(large[nn[:, 1:]]))
     return ScreenResult(keep, tuple(sorted(out, key=lambda x: x.index)), z_q, z_p, large, clustered)
+
+
+# ------------------------------------------------------------------------------------------------ reference nests
+NEST_WINDOW = 3                # readings on each side a nest reading is compared with
+NEST_FLOOR_MM = 0.1            # a jump below this is never called a misread (tracker noise, SMR reseating)
+NEST_Z_MAX = 10.0              # the jump statistic (nearer of two sides, anisotropic noise) has a long tail
+
+
+@dataclass(frozen=True, eq=False)
+class NestScreen:
+    """``keep`` (M,) bool over the nest readings given; ``excluded`` the misreads (row index, reason, robust z);
+    ``jump_mm`` (M,) each reading's distance from the nearer of its two one-sided neighbour medians."""
+    keep: np.ndarray
+    excluded: tuple[Excluded, ...]
+    jump_mm: np.ndarray
+
+
+def _one_sided_medians(p: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """(before, after) (M, 3): component-wise medians of the up to ``w`` readings before / after each reading of
+    one nest in time order (NaN where a side is empty)."""
+    m = len(p)
+    pad = np.full((w, 3), np.nan)
+    ext = np.concatenate([pad, p, pad])
+    idx = np.arange(m)[:, None]
+    before = ext[idx + np.arange(w)[None, :]]                    # rows i-w .. i-1
+    after = ext[idx + w + 1 + np.arange(w)[None, :]]             # rows i+1 .. i+w
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)           # an empty side (first / last readings)
+        return np.nanmedian(before, axis=1), np.nanmedian(after, axis=1)
+
+
+def nest_misreads(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, z_max: float = NEST_Z_MAX,
+                  floor_mm: float = NEST_FLOOR_MM, window: int = NEST_WINDOW) -> NestScreen:
+    """Readings of fixed reference nests that jump against their time neighbours (the tracker locked onto
+    something else, a misread distance): times t_s (M,) s, nest index nest (M,), readings p_tracker_mm (M, 3) mm.
+
+    Per nest in time order, a reading's jump is its distance from the *nearer* of the medians of the ``window``
+    readings before and after it, so a nest that really moved (a step that persists) is not a misread, an
+    isolated reading off both sides is. Scores are robust z against the nest's median jump (all nests' when it
+    has fewer than 10 readings; chi_3 median -> sigma): the tracker noise grows with the distance of the nest.
+    A misread has z > ``z_max`` and a jump > ``floor_mm``. Nests read fewer than 3 times are not screened (two
+    readings cannot say which one is wrong)."""
+    t = np.asarray(t_s, float)
+    nest = np.asarray(nest, int)
+    p = np.asarray(p_tracker_mm, float)
+    jump, scale = np.zeros(len(p)), np.full(len(p), np.nan)
+    screened = np.zeros(len(p), bool)
+    for k in np.unique(nest):
+        rows = np.flatnonzero(nest == k)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        if len(rows) < 3:
+            continue
+        before, after = _one_sided_medians(p[rows], window)
+        d = np.stack([np.linalg.norm(p[rows] - before, axis=1), np.linalg.norm(p[rows] - after, axis=1)])
+        jump[rows] = np.nanmin(d, axis=0)
+        screened[rows] = True
+        if len(rows) >= 10:
+            scale[rows] = np.median(jump[rows])
+    keep = np.ones(len(p), bool)
+    if not screened.any():
+        return NestScreen(keep, (), jump)
+    scale = np.where(np.isnan(scale), np.median(jump[screened]), scale)
+    z = jump / np.maximum(scale / CHI3_MEDIAN, 1e-9)
+    bad = screened & (z > z_max) & (jump > floor_mm)
+    keep[bad] = False
+    out = tuple(Excluded(int(i), f"reading jumps {jump[i]:.3f} mm against the same nest's readings before and "
+                                 f"after it (robust z {z[i]:.0f}): a misread", float(z[i])) for i in np.flatnonzero(bad))
+    return NestScreen(keep, out, jump)
