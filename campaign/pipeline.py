@@ -132,13 +132,16 @@ def verify(run_dir: Path, console: Console | None = None):
     in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
     from .correction import verify_run
     from .config import load_config
+    from .multi_smr import pose_estimator
     from .process import load_model
 
     cfg = load_config(run_dir / "config.yaml")
     model = load_model(run_dir / "model.json")
-    tests = [p for p in read_log(run_dir).records() if p.set == "test"]
+    records = read_log(run_dir).records()
+    tests = [p for p in records if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
+    estimator = pose_estimator(cfg, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
@@ -153,9 +156,10 @@ def verify(run_dir: Path, console: Console | None = None):
         runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
-        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).records())
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, records)
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir)
+        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir,
+                            estimator)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
 

@@ -162,3 +162,8 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
     for p in rep.passes:
         for why, count in p["held"].items():
             console.print(f"{p['stage']}: {count} held: {why}", markup=False)
+    for p in rep.passes:
+        a = p.get("orientation_error_arcsec")
+        if a:
+            console.print(f"{p['stage']}: tool orientation error {a['rms']:.1f} arcsec RMS, max {a['max']:.1f} "
+                          f"({a['source']})", markup=False)
