@@ -195,7 +195,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     approach = ds.approach_sign() if len(ds) > 1 else None      # from the full measurement order
-    smr_keep, smr_excluded = screen_smrs(ds, cfg)                     # SMR-triangle faults: calib, test and check rows
+    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
     if not smr_keep.all():
         ds, approach = ds.subset(smr_keep), None if approach is None else approach[smr_keep]
         _check_dataset(ds, cfg)

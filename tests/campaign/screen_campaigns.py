@@ -14,7 +14,7 @@ from campaign.interchange import Dataset
 from campaign.plan import build_plan
 from robocal.effects import joint_compliance
 from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import smr_tracker
+from robocal.kinematics import smr_base, smr_tracker
 from robocal.simulate import random_geometric_errors
 from tests.campaign.helpers import ROOT
 
@@ -45,15 +45,17 @@ def _grid() -> tuple[np.ndarray, list[str]]:
 
 
 def sparse_campaign(seed: int, fault_fraction: float = 0.0, compliance_scale: float = 4.0, n_sparse: int = 10,
-                    n_sparse_test: int = 6) -> Campaign:
+                    n_sparse_test: int = 6, sag_mm_at_1m: float = 0.0) -> Campaign:
     """The plan's grid of the IRB 2600 config + ``n_sparse`` calib and ``n_sparse_test`` test poses at extreme
-    configurations; truth: new random geometry per seed and J2/J3 compliance x ``compliance_scale``;
-    ``fault_fraction`` of the grid's calib rows get a 1-3 mm error in a random direction."""
+    configurations; truth: new random geometry per seed, J2/J3 compliance x ``compliance_scale`` and optionally a
+    sag outside the effect library (``sag_mm_at_1m`` x (horizontal reach / 1 m)^2, down); ``fault_fraction`` of
+    the grid's calib rows get a 1-3 mm error in a random direction."""
     rng = np.random.default_rng(seed)
     base = simulated_cell(CFG)
     truth = random_geometric_errors(KIN0, rng).with_(T_tracker_base=base.truth.T_tracker_base,
                                                       p_flange_smr_mm=base.truth.p_flange_smr_mm)
-    cell = replace(base, truth=truth, effects=((joint_compliance((2, 3)), compliance_scale * COMPLIANCE),))
+    effects = ((joint_compliance((2, 3)), compliance_scale * COMPLIANCE),) if compliance_scale else ()
+    cell = replace(base, truth=truth, effects=effects)
     q_grid, sets = _grid()
     ns = n_sparse + n_sparse_test
     side = rng.choice([-1.0, 1.0])
@@ -63,6 +65,9 @@ def sparse_campaign(seed: int, fault_fraction: float = 0.0, compliance_scale: fl
     q = np.vstack([q_grid, q_sparse])
     sets = sets + ["calib"] * n_sparse + ["test"] * n_sparse_test
     p, _ = cell.measure(q, rng, {"payload_kg": np.zeros(len(q))})
+    if sag_mm_at_1m:
+        reach_m = np.hypot(*smr_base(truth, q)[:, :2].T) / 1000.0
+        p -= sag_mm_at_1m * reach_m[:, None] ** 2 * truth.T_tracker_base[:3, 2][None, :]
     fault = np.zeros(len(q), bool)
     grid_calib = np.flatnonzero(np.array(sets[:len(q_grid)]) == "calib")
     k = int(round(fault_fraction * len(grid_calib)))
