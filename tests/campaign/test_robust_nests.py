@@ -69,11 +69,14 @@ def with_misreads(ds: Dataset, fraction: float, rng) -> tuple[Dataset, np.ndarra
 def test_misread_nests_are_set_aside_and_the_drift_and_result_stay():
     """Three floor nests read after every pose (~880 readings), 0.5 % of them misread by 400, 10 or 2 mm: every
     misread is excluded and listed, no clean reading is, the drift is recovered within 10 um RMS and the held-out
-    RMS equals the run without misreads within 2 %."""
+    RMS equals the run without misreads within 2 % (the truth has no effect but the drift: the geometric model is
+    the whole pipeline here, effect selection and residual layer are switched off to keep the test short)."""
     pr = TruthProtocol(n_calib=200, n_test=80, check_poses=4, check_repeats=3, nest_every=1, payloads_kg=(0.0,))
+    calibration = replace(CFG.calibration, effects="none", residual="none")
     for seed in (0, 1):
         camp = simulate(["registration_drift"], seed, pr)
-        cfg = replace(CFG, tool=replace(CFG.tool, p_flange_smr_mm=tuple(map(float, camp.nominal.p_flange_smr_mm))))
+        cfg = replace(CFG, calibration=calibration,
+                      tool=replace(CFG.tool, p_flange_smr_mm=tuple(map(float, camp.nominal.p_flange_smr_mm))))
         clean = truth_dataset(camp)
         bad_ds, bad = with_misreads(clean, 0.005, np.random.default_rng(seed))
         true = true_drift_mm(camp, clean)
