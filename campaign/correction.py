@@ -190,7 +190,8 @@ def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Target
                     T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
                     allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
     """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
-    The tool point (default ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
+    The tool point (default ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot
+    (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
     absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     kin = nominal_kinematics(cfg)
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
