@@ -92,7 +92,9 @@ class JointConfig:
 class RobotConfig:
     """The robot arm and how to reach its controller.
 
-    ``url`` scheme selects the driver (one of ``ROBOT_SCHEMES``).
+    ``url`` scheme selects the driver (one of ``ROBOT_SCHEMES``). ``model`` (required, e.g. "ABB IRB
+    2600-12/1.65") is compared with the model the controller reports at connect (a different model stops the run
+    before the first move; vendor formatting is tolerated).
     ``hayati_joints``: 1-based joints whose axis is parallel to the next one
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
@@ -171,7 +173,8 @@ class TrackerConfig:
     """The laser tracker.
 
     ``url`` scheme selects the driver (one of ``TRACKER_SCHEMES``).
-    ``model`` defaults to ``""``; ``position_in_base_mm`` (rough tracker
+    ``model`` defaults to ``""`` (then not compared with the model the tracker reports at connect; a different
+    model stops the run before the first move); ``position_in_base_mm`` (rough tracker
     position in the robot base frame, for aiming) defaults to ``None``;
     ``measurement`` takes the ``MeasurementConfig`` defaults; ``options``
     (default empty) are passed to the driver unchanged.

@@ -30,7 +30,8 @@ from .runner import RunOutcome, Runner, closing_on_error, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
-from .traceability import device_identity, identification, identity_changes, run_logging
+from .plausibility import is_forced
+from .traceability import check_identity, device_identity, identification, identity_changes, run_logging
 
 if TYPE_CHECKING:
     from .process import Processed
@@ -76,6 +77,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
         identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # a mismatch: exit 2, nothing moved
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
@@ -130,28 +132,34 @@ def verify(run_dir: Path, console: Console | None = None):
     in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
     from .correction import verify_run
     from .config import load_config
+    from .multi_smr import pose_estimator
     from .process import load_model
 
     cfg = load_config(run_dir / "config.yaml")
     model = load_model(run_dir / "model.json")
-    tests = [p for p in read_log(run_dir).records() if p.set == "test"]
+    records = read_log(run_dir).records()
+    tests = [p for p in records if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
+    estimator = pose_estimator(cfg, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
         cell = stack.enter_context(open_cell(cfg))
         robot, tracker = cell.robot, cell.tracker
+        identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
-                                      "software_version": software_version()} | device_identity(robot, tracker))
+                                      "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
         logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
-        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).records())
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, records)
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir)
+        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir,
+                            estimator)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
 

@@ -47,6 +47,11 @@ def forced(flag: bool = True) -> Iterator[None]:
         _FORCE.reset(token)
 
 
+def is_forced() -> bool:
+    """Whether the current command runs under ``--force`` (:func:`forced`)."""
+    return _FORCE.get()
+
+
 @dataclass(frozen=True)
 class Plausibility:
     """What was checked: unit guess, nominal RMS vs its bound, rows rejected, notes, overridden failures."""

@@ -289,7 +289,7 @@ class _ReportMapping(Mapping):
         return len(self.to_dict())
 
 
-_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version")
+_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 

@@ -51,6 +51,8 @@ def render_identity(console: Console, report: CalibrationReport) -> None:
         console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
                       f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
                       f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
+    for reason in (ident.get("identity_check") or {}).get("overridden", []):
+        console.print(f"identity check overridden with --force: {reason}", style="yellow", markup=False)
 
 
 def render_preparation(console: Console, prep: dict | None) -> None:
@@ -63,7 +65,10 @@ def render_preparation(console: Console, prep: dict | None) -> None:
         move = d["translation_at_end_mm"]
         console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
                       f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
-                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
+                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm"
+                      + (f"; CV RMS {d['cv_rms_mm']:.4f} mm" if d.get("cv_rms_mm") is not None else ""), markup=False)
+        for e in d.get("excluded", []):
+            console.print(f"  nest reading {e['point_id']} set aside: {e['reason']}", markup=False)
 
 
 def render_choices(console: Console, report: CalibrationReport) -> None:
@@ -157,3 +162,8 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
     for p in rep.passes:
         for why, count in p["held"].items():
             console.print(f"{p['stage']}: {count} held: {why}", markup=False)
+    for p in rep.passes:
+        a = p.get("orientation_error_arcsec")
+        if a:
+            console.print(f"{p['stage']}: tool orientation error {a['rms']:.1f} arcsec RMS, max {a['max']:.1f} "
+                          f"({a['source']})", markup=False)

@@ -169,6 +169,7 @@ def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
 
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="a finished run (with model.json)")
+    _force_argument(parser)
 
 
 @command("verify", "measure the run's test points after correction (closed loop) and report before/after",
@@ -177,7 +178,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.pipeline import verify
     from campaign.report import render_verify
 
-    result = verify(args.run_dir, _stdout())
+    with forced(args.force):
+        result = verify(args.run_dir, _stdout())
     render_verify(_stdout(), result.report)
     _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
@@ -189,4 +191,5 @@ def cmd_verify(args: argparse.Namespace) -> int:
 def _force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
-                             "implausible deltas); the report says they were overridden")
+                             "implausible deltas, a controller or tracker reporting another model than the "
+                             "config's); the report says they were overridden")
