@@ -115,6 +115,20 @@ def block_ends(cfg: CampaignConfig, n: int, identifiable: int) -> tuple[int, ...
     return tuple(range(first, n, cfg.plan.block_points)) + (n,)
 
 
+def _test_set(cfg: CampaignConfig, kin: Kinematics, R0: np.ndarray, guard: PathGuard | None):
+    """The grid plan's test set exactly: its targets solved in one batch with the grid vertices (the IK re-seeds
+    a failed target from its nearest solved neighbour). (p (T, 3) mm, ids, q (T, n) rad, plannable indices,
+    skipped)."""
+    g = cfg.plan.grid
+    p_grid, _ = grid_points(g.center_mm, g.size_mm, g.step_mm)
+    p_test, test_ids = test_targets(cfg)
+    ids = [""] * len(p_grid) + test_ids
+    q, ok, skipped = solve_targets(cfg, kin, np.vstack([p_grid, p_test]), ids,
+                                   ["calib"] * len(p_grid) + ["test"] * len(p_test), R0, guard)
+    k = len(p_grid)
+    return p_test, test_ids, q[k:], np.flatnonzero(ok[k:]), [s for s in skipped if s.set == "test"]
+
+
 def optimal_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     """The optimal plan of ``cfg`` for the nominal model ``kin`` (ConfigError on bad counts, nothing moves)."""
     pl = cfg.plan
@@ -125,9 +139,7 @@ def optimal_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     chosen = d_optimal(pool.criterion.A, n, pool.criterion.spread).chosen
     q_ref = np.radians(pl.q_ref_deg)
     R0 = tool_rotation(pl.tool_direction)
-    p_test, test_ids = test_targets(cfg)
-    q_test, ok_test, skipped = solve_targets(cfg, kin, p_test, test_ids, ["test"] * len(p_test), R0, guard)
-    test_ok = np.flatnonzero(ok_test)
+    p_test, test_ids, q_test, test_ok, skipped = _test_set(cfg, kin, R0, guard)
     blocks = block_ends(cfg, n, pool.criterion.identifiable) if pl.stop == "auto" else (n,)
     order, start = [], q_ref
     for lo, hi in zip((0,) + blocks[:-1], blocks):        # each block a short tour from where the last ended
