@@ -61,7 +61,7 @@ def stop_checks(contents: LogContents | None) -> list[dict]:
     return [e for e in (getattr(contents, "events", None) or []) if e.get("type") == STOP_EVENT]
 
 
-def _rows(cfg, kin, q, meta, effects, p_J=None):
+def _rows(kin, q, meta, effects, p_J=None):
     """Columns (N, 3, P) mm: identified geometric columns and the effect regressors at q (N, n) rad."""
     p, J = identification_jacobian(kin, q) if p_J is None else p_J
     cols, eff = effects
@@ -95,7 +95,7 @@ def evaluate(cfg: CampaignConfig, plan: Plan, contents: LogContents, elapsed_s: 
     choices, _ = effect_choices(cfg, kin, cols, q, p, cov, meta)
     effects = (cols, [c.build(kin.n) for c in choices])
     p_J = identification_jacobian(kin, q)
-    J = _rows(cfg, kin, q, meta, effects, p_J)
+    J = _rows(kin, q, meta, effects, p_J)
     r0 = p - p_J[0]
     Gw, rw0 = whiten_rows(J, cov), whiten_rows(r0[:, :, None], cov)[:, :, 0]
     P = J.shape[2]
@@ -104,12 +104,12 @@ def evaluate(cfg: CampaignConfig, plan: Plan, contents: LogContents, elapsed_s: 
     planned = [pt for pt in plan.points if pt.set == "calib"]
     q_plan_deg = np.array([pt.q_deg for pt in planned])
     q_plan = np.radians(q_plan_deg)
-    J_plan = _rows(cfg, kin, q_plan, _plan_meta(cfg, q_plan_deg, meta.get("t_s")), effects)
+    J_plan = _rows(kin, q_plan, _plan_meta(cfg, q_plan_deg, meta.get("t_s")), effects)
     G_plan = whiten_rows(J_plan, measurement_covariance(cfg, smr_tracker(kin, q_plan)))
     q_test = np.radians([pt.q_deg for pt in plan.points if pt.set == "test"]).reshape(-1, kin.n)
     if not len(q_test):                                    # no test set: judge at the planned poses
         q_test = q_plan
-    J_test = _rows(cfg, kin, q_test, _plan_meta(cfg, np.degrees(q_test), None), effects)
+    J_test = _rows(kin, q_test, _plan_meta(cfg, np.degrees(q_test), None), effects)
     pred = prediction(G_plan, len(cal), np.array(plan.blocks), Gw, whiten_rows(r[:, :, None], cov)[:, :, 0], J, r,
                       cov, J_test, measurement_covariance(cfg, smr_tracker(kin, q_test)))
     return _decide(cfg, plan, len(cal), pred, elapsed_s)

@@ -1,6 +1,8 @@
 """Terminal rendering of plans and reports with rich (nothing here computes a figure)."""
 from __future__ import annotations
 
+import math
+
 from rich.console import Console
 from rich.table import Table
 
@@ -146,8 +148,9 @@ def render_stop(console: Console, report: CalibrationReport) -> None:
 def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
     """``campaign plan``: the parameter uncertainty the plan's calibration points predict, the calibrated model's
     own error at the test poses from it (AP(theta) RMS) and the held-out RMS to expect with the noise floor."""
-    worst = sorted(zip(fc.std, fc.names, fc.names), key=lambda t: -_scaled(t[0], t[1]))[:4]
-    text = ", ".join(f"{name} {_scaled(s, name):.4f} {'deg' if _is_angle(name) else 'mm'}" for s, name, _ in worst)
+    shown = [(n, math.degrees(s) if u == "rad" else float(s), "deg" if u == "rad" else u)
+             for n, u, s in zip(fc.names, fc.units, fc.std)]
+    text = ", ".join(f"{n} {v:.4f} {u}" for n, v, u in sorted(shown, key=lambda t: -t[1])[:4])
     console.print(f"forecast (unit-weight error 1): {len(fc.names)} geometric parameters identifiable, largest std "
                   f"{text}; O1 {fc.O1:.3g}, condition number {fc.condition_number:.0f}", markup=False)
     held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
@@ -156,16 +159,6 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
                   f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
     if blocks:
         console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
-
-
-def _is_angle(name: str) -> bool:
-    return name.rstrip("0123456789") in ("theta", "alpha", "beta") or name in ("base_rx", "base_ry", "base_rz")
-
-
-def _scaled(std: float, name: str) -> float:
-    """A parameter std in display units (deg for angles, mm otherwise)."""
-    import math
-    return math.degrees(std) if _is_angle(name) else float(std)
 
 
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:

@@ -376,10 +376,11 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
 
 @dataclass(frozen=True, eq=False)
 class Forecast:
-    """Before measuring: the std (P,) of the identifiable geometric parameters ``names`` (mm or rad), the RMS of
+    """Before measuring: the std (P,) of the identifiable geometric parameters ``names`` (``units``: mm or rad), the RMS of
     the calibrated model's own error at the test poses (AP(theta), from the parameter covariance; geometry only
     and with the pose-dependent effects), the noise floor there, and the observability O1 / condition number."""
     names: tuple[str, ...]
+    units: tuple[str, ...]
     std: np.ndarray
     model_rms_mm: float
     model_rms_effects_mm: float
@@ -413,5 +414,6 @@ def forecast(kin: Kinematics, q_cal: np.ndarray, cov_cal: np.ndarray, q_test: np
         return cov, float(np.sqrt(max(np.sum(cov * H), 0.0)))
     cov_geo, rms_geo = model_rms(geo)
     _, rms_eff = model_rms(cols)
-    return Forecast(tuple(layout.names[c] for c in geo), np.sqrt(np.diag(cov_geo)), rms_geo, rms_eff, floor,
+    return Forecast(tuple(layout.names[c] for c in geo), tuple(layout.unit(layout.names[c]) for c in geo),
+                    np.sqrt(np.diag(cov_geo)), rms_geo, rms_eff, floor,
                     float(ident.observability["O1"]), float(ident.condition_number))
