@@ -87,3 +87,24 @@ def test_optimal_keys_are_checked_by_validate(tmp_path, capsys):
                          ({"plan.order": "random"}, "plan.order"), ({"plan.pool": {"step_mm": 1}}, "plan.pool.step_mm")):
         code, out, err = cli(capsys, "validate", _config(tmp_path, **over))
         assert_one_line(code, out, err, 2, needle)
+
+
+def test_stop_rule_decisions(tmp_path):
+    """The decision after a refit: the gain of the next block against stop_gain_pct % of the floor, the time
+    budget, the last block."""
+    from campaign.adaptive import _decide
+    from campaign.plan import Plan
+    from robocal.design import Prediction
+
+    cfg = load_config(_config(tmp_path, **{"plan.stop": "auto", "plan.max_minutes": 30.0}))
+    plan = Plan((), (), "x", (60, 80, 100))
+    pred = lambda rms: Prediction(np.array(plan.blocks), np.array(rms), 0.03, 0.0, 1.0, 0.031)  # noqa: E731
+    stop = _decide(cfg, plan, 60, pred([0.0330, 0.0327, 0.0326]), 600.0)     # gains 0.3 um < 0.6 um
+    assert stop.decision == "stop" and "less than 2 % of the noise floor" in stop.reason
+    assert stop.predicted_rms_mm == 0.0330 and stop.gain_next_mm == pytest.approx(0.0003)
+    go = _decide(cfg, plan, 60, pred([0.0340, 0.0330, 0.0326]), 600.0)
+    assert go.decision == "continue" and go.curve[0] == (60, 0.0340)
+    late = _decide(cfg, plan, 80, pred([0.0340, 0.0330, 0.0326]), 28 * 60.0)  # 20 more points need ~7 min
+    assert late.decision == "stop" and "max_minutes" in late.reason
+    last = _decide(cfg, plan, 100, pred([0.0340, 0.0330, 0.0326]), 600.0)
+    assert last.decision == "stop" and last.gain_next_mm is None
