@@ -4,8 +4,9 @@ The IRB 2600 cell of configs/irb2600.yaml with gravity compliance of J2/J3 (c2 1
 cyclic gear error of J2 (first and second harmonic, 0.008 / 0.004 deg); the truth geometry changes with the seed.
   A. Held-out RMS of the final model (`process`, default calibration settings) for the grid plan, an optimal plan
      of a third of the grid's points (`plan.kind: optimal`), and a seeded random third of the grid; every design
-     is judged on the same measured test set (same poses, same noise) of its seed. Plan durations from the
-     motion caps (`campaign.eta`).
+     is judged on the same measured test set (same poses, same noise) of its seed. Then held-out RMS vs number
+     of points: coarser grids (step 400 / 300 / 250 mm), optimal plans and random subsets of the grid of the same
+     sizes. Plan durations from the motion caps (`campaign.eta`).
   B. `plan.stop: auto` runs on the mock cell (`campaign run`, max_points = the grid's count): where each run
      stopped, the held-out RMS it predicted there and the one measured on its test set.
   C. Time to choose 100 of 3000 candidates (the criterion's rows prepared), median of 3, against greedy forward
@@ -35,6 +36,7 @@ from rich.console import Console  # noqa: E402
 from campaign.cell import nominal_kinematics, simulated_cell  # noqa: E402
 from campaign.config import load_config  # noqa: E402
 from campaign.dataset import Dataset  # noqa: E402
+from campaign.errors import ConfigError  # noqa: E402
 from campaign.eta import estimate_duration_s  # noqa: E402
 from campaign.motion_safety import PathGuard  # noqa: E402
 from campaign.pipeline import run_campaign  # noqa: E402
@@ -72,42 +74,75 @@ def held_out_rms(cfg, cell, q_cal, q_test, p_test, rng) -> float:
     return float(process(ds, cfg).report.stages["compensated"]["test"]["rms_mm"])
 
 
+GRID_STEPS_MM = (400, 300, 250)       # coarser grids: the grid design at fewer points (the plan's own step is 200)
+
+
 def part_a(tmp: Path, seeds: list[int], out: Console) -> None:
     cfg_grid = load_config(write_config(tmp, seeds[0]))
     kin = nominal_kinematics(cfg_grid)
     grid = build_plan(cfg_grid, kin)
     q_grid, q_test = calib_test_q(grid)
     n_third = int(round(len(q_grid) / 3))
+    designs: dict[tuple[str, int], np.ndarray] = {("grid", len(q_grid)): q_grid}
+    for step in GRID_STEPS_MM:
+        q = calib_test_q(build_plan(load_config(write_config(tmp, seeds[0], grid=_grid(step))), kin))[0]
+        designs[("grid", len(q))] = q
+    counts = sorted({n for _, n in designs} | {n_third})
+    plans, t_build = {}, {}
+    for n in counts:
+        if n == len(q_grid):
+            continue
+        cfg_opt = load_config(write_config(tmp, seeds[0], kind="optimal", points=n))
+        t0 = time.perf_counter()
+        try:
+            plans[n] = build_plan(cfg_opt, kin)
+        except ConfigError as exc:                     # fewer points than the parameters need
+            out.print(f"   optimal plan of {n} points refused: {exc}")
+            continue
+        t_build[n] = time.perf_counter() - t0
+        q_opt, q_test_opt = calib_test_q(plans[n])
+        assert np.allclose(q_test, q_test_opt), "grid and optimal plans must share the test set"
+        designs[("optimal", n)] = q_opt
     cfg_opt = load_config(write_config(tmp, seeds[0], kind="optimal", points=n_third))
-    t0 = time.perf_counter()
-    opt = build_plan(cfg_opt, kin)
-    t_build = time.perf_counter() - t0
-    q_opt, q_test_opt = calib_test_q(opt)
-    assert np.allclose(q_test, q_test_opt), "grid and optimal plans must share the test set"
     cal_only = lambda plan: [p for p in plan.points if p.set == "calib"]  # noqa: E731
-    d_grid, d_opt = estimate_duration_s(grid.points, cfg_grid, kin), estimate_duration_s(opt.points, cfg_opt, kin)
-    c_grid, c_opt = estimate_duration_s(cal_only(grid), cfg_grid, kin), estimate_duration_s(cal_only(opt), cfg_opt, kin)
-    out.print(f"A. grid {len(q_grid)} calibration points, optimal {len(q_opt)} (plan built in {t_build:.1f} s), "
-              f"test set {len(q_test)} points")
-    out.print(f"   duration: whole plan grid {d_grid / 60:.1f} min, optimal {d_opt / 60:.1f} min "
+    d_grid = estimate_duration_s(grid.points, cfg_grid, kin)
+    d_opt = estimate_duration_s(plans[n_third].points, cfg_opt, kin)
+    c_grid = estimate_duration_s(cal_only(grid), cfg_grid, kin)
+    c_opt = estimate_duration_s(cal_only(plans[n_third]), cfg_opt, kin)
+    out.print(f"A. grid {len(q_grid)} calibration points, optimal third {n_third} (plan built in "
+              f"{t_build[n_third]:.1f} s), test set {len(q_test)} points")
+    out.print(f"   duration: whole plan grid {d_grid / 60:.1f} min, optimal third {d_opt / 60:.1f} min "
               f"({100 * (1 - d_opt / d_grid):.0f} % saved); calibration points only {c_grid / 60:.1f} -> "
               f"{c_opt / 60:.1f} min ({100 * (1 - c_opt / c_grid):.0f} % saved)")
-    rows = []
+    res: dict[tuple[str, int], list[float]] = {}
+    floors = []
     for seed in seeds:
         cfg = load_config(write_config(tmp, seed))
         cell = simulated_cell(cfg)
         p_test, _ = cell.measure(q_test, np.random.default_rng(10_000 + seed))
-        rand = np.sort(np.random.default_rng(seed).choice(len(q_grid), n_third, replace=False))
-        r = [held_out_rms(cfg, cell, q, q_test, p_test, np.random.default_rng(seed))
-             for q in (q_grid, q_opt, q_grid[rand])]
-        floor = float(cell.noise_floor(q_test))
-        rows.append(r + [floor])
-        out.print(f"   seed {seed}: held-out RMS grid {r[0]:.4f}  optimal third {r[1]:.4f} ({r[1] / r[0]:.3f} x grid)  "
-                  f"random third {r[2]:.4f} ({r[2] / r[0]:.3f} x grid)  noise floor {floor:.4f} mm")
-    m = np.mean(rows, axis=0)
-    out.print(f"   mean: grid {m[0]:.4f}  optimal third {m[1]:.4f} ({m[1] / m[0]:.3f} x grid, "
-              f"{'within' if m[1] <= 1.05 * m[0] else 'NOT within'} 5 %)  random third {m[2]:.4f} "
-              f"({m[2] / m[0]:.3f} x grid)  floor {m[3]:.4f} mm")
+        floors.append(float(cell.noise_floor(q_test)))
+        for n in counts:
+            designs[("random", n)] = q_grid[np.sort(np.random.default_rng(seed).choice(len(q_grid), n, replace=False))]
+        for key, q in designs.items():
+            res.setdefault(key, []).append(held_out_rms(cfg, cell, q, q_test, p_test, np.random.default_rng(seed)))
+        g, o, r = res[("grid", len(q_grid))][-1], res[("optimal", n_third)][-1], res[("random", n_third)][-1]
+        out.print(f"   seed {seed}: held-out RMS grid {g:.4f}  optimal third {o:.4f} ({o / g:.3f} x grid)  "
+                  f"random third {r:.4f} ({r / g:.3f} x grid)  noise floor {floors[-1]:.4f} mm")
+    m = {k: float(np.mean(v)) for k, v in res.items()}
+    g, o, r = m[("grid", len(q_grid))], m[("optimal", n_third)], m[("random", n_third)]
+    verdict = "within" if o <= 1.05 * g else "NOT within"
+    out.print(f"   mean: grid {g:.4f}  optimal third {o:.4f} ({o / g:.3f} x grid, {verdict} 5 %)  random third "
+              f"{r:.4f} ({r / g:.3f} x grid)  floor {np.mean(floors):.4f} mm")
+    out.print(f"   held-out RMS (mm, mean of {len(seeds)} seeds) vs calibration points:")
+    out.print("   points    grid  optimal   random")
+    fmt = lambda k: f"{m[k]:8.4f}" if k in m else "       -"  # noqa: E731
+    for n in counts:
+        out.print(f"   {n:6d}{fmt(('grid', n))}{fmt(('optimal', n))}{fmt(('random', n))}")
+
+
+def _grid(step_mm: float) -> dict:
+    d = yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text())["plan"]["grid"]
+    return {**d, "step_mm": step_mm}
 
 
 def part_b(tmp: Path, seeds: list[int], out: Console) -> None:

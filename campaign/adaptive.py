@@ -53,7 +53,8 @@ class StopCheck:
     reason: str
 
     def to_event(self) -> dict:
-        return {"type": STOP_EVENT, **{k: (list(map(list, v)) if k == "curve" else v) for k, v in self.__dict__.items()}}
+        fields = {k: (list(map(list, v)) if k == "curve" else v) for k, v in self.__dict__.items()}
+        return {"type": STOP_EVENT, **fields}
 
 
 def stop_checks(contents: LogContents | None) -> list[dict]:

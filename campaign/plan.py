@@ -186,7 +186,8 @@ def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets
 
 
 def finish_plan(cfg: CampaignConfig, guard: PathGuard | None, points: list[PlanPoint], q_calib: np.ndarray,
-                p_calib: np.ndarray, calib_ids: list[str], skipped: list[Skipped], blocks: tuple[int, ...] = ()) -> Plan:
+                p_calib: np.ndarray, calib_ids: list[str], skipped: list[Skipped],
+                blocks: tuple[int, ...] = ()) -> Plan:
     """The measurement sequence ``points`` with check-pose repeats (chosen among the calibration points q_calib
     rad, p_calib mm), nest rounds and via poses, hashed."""
     points = _with_check_poses(points, q_calib, p_calib, calib_ids, cfg.plan.check_poses)

@@ -301,8 +301,9 @@ class CalibrationReport(_ReportMapping):
     ``noise_floor_mm`` with its source ("repeats" or "specs") and both candidates; the identified ``parameters``
     and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm); the method and effect choices; optional
     ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
-    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (HTML figures); the hardware ``identification``
-    of the run log (robot/tracker identity, driver and software versions) when processed from a log.
+    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (HTML figures); the
+    hardware ``identification`` of the run log (robot/tracker identity, driver and software versions) when processed
+    from a log.
     """
 
     format: str
@@ -361,8 +362,8 @@ class CalibrationReport(_ReportMapping):
                             (_num, "noise_floor_mm"), (_get, "T_tracker_base")):
             check(data, name)
         args = {name: _get(data, name, optional=True) for name in _REPORT_KEYS}
-        return cls(**args, multi_smr=_obj(data, "multi_smr", True), stop=_obj(data, "stop", True), cell=data.get("cell"),
-                   points=data.get("points"),
+        return cls(**args, multi_smr=_obj(data, "multi_smr", True), stop=_obj(data, "stop", True),
+                   cell=data.get("cell"), points=data.get("points"),
                    identification=tuple((k, data[k]) for k in _IDENTIFICATION if k in data))
 
 

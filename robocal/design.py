@@ -215,7 +215,10 @@ def short_tour(q: np.ndarray, start: np.ndarray | None = None, weights: np.ndarr
     if N <= 2:
         return np.arange(N)
     D = move_cost(q[:, None, :], q[None, :, :], weights)
-    d0 = move_cost(np.asarray(start, float), q, weights) if start is not None else np.where(np.arange(N) == 0, 0, np.inf)
+    if start is None:
+        d0 = np.where(np.arange(N) == 0, 0.0, np.inf)
+    else:
+        d0 = move_cost(np.asarray(start, float), q, weights)
     order = [int(np.argmin(d0))]
     left = np.ones(N, bool)
     left[order[0]] = False
@@ -376,9 +379,10 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
 
 @dataclass(frozen=True, eq=False)
 class Forecast:
-    """Before measuring: the std (P,) of the identifiable geometric parameters ``names`` (``units``: mm or rad), the RMS of
-    the calibrated model's own error at the test poses (AP(theta), from the parameter covariance; geometry only
-    and with the pose-dependent effects), the noise floor there, and the observability O1 / condition number."""
+    """Before measuring: the std (P,) of the identifiable geometric parameters ``names`` (``units``: mm or rad),
+    the RMS of the calibrated model's own error at the test poses (AP(theta), from the parameter covariance;
+    geometry only and with the pose-dependent effects), the noise floor there, and the observability O1 / condition
+    number."""
     names: tuple[str, ...]
     units: tuple[str, ...]
     std: np.ndarray

@@ -82,9 +82,11 @@ def test_bad_counts_and_an_emptied_pool_exit_2_before_anything_moves(tmp_path, c
 
 
 def test_optimal_keys_are_checked_by_validate(tmp_path, capsys):
-    for over, needle in (({"plan.points": None}, "plan.points"), ({"plan.kind": "grid", "plan.stop": "auto"}, "plan.stop"),
+    for over, needle in (({"plan.points": None}, "plan.points"),
+                         ({"plan.kind": "grid", "plan.stop": "auto"}, "plan.stop"),
                          ({"plan.pool": {"wrist_flip": "yes"}}, "plan.pool.wrist_flip"),
-                         ({"plan.order": "random"}, "plan.order"), ({"plan.pool": {"step_mm": 1}}, "plan.pool.step_mm")):
+                         ({"plan.order": "random"}, "plan.order"),
+                         ({"plan.pool": {"step_mm": 1}}, "plan.pool.step_mm")):
         code, out, err = cli(capsys, "validate", _config(tmp_path, **over))
         assert_one_line(code, out, err, 2, needle)
 
