@@ -196,8 +196,8 @@ class AdaptivePasses:
         if n in self.checked:
             return False
         contents = read_log(self.run_dir)
-        recs = contents.records()
-        elapsed = float(recs[-1].t_end_s - recs[0].t_start_s) if recs else 0.0
+        # robot time: the sum of the points' own durations (a pause or a resume between sessions does not count)
+        elapsed = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in contents.records())
         try:
             check = evaluate(self.cfg, self.plan, contents, elapsed)
         except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:   # keep measuring as planned

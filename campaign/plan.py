@@ -149,7 +149,7 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     q_all, ok, skipped = solve_targets(cfg, kin, p_all, ids, sets, R, guard)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
-    order = _interleave(p_all, grid_ok, test_ok)
+    order = interleave_tests(p_all, grid_ok, test_ok)
     if pl.order == "random":
         order = [order[i] for i in np.random.default_rng(pl.order_seed).permutation(len(order))]
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
@@ -209,8 +209,9 @@ def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -
     return [replace(points[i], via_deg=v) if v else points[i] for i, v in zip(order, vias)]
 
 
-def _interleave(p, grid_ok, test_ok) -> list[int]:
-    """Grid points in serpentine order, each test point right after its nearest grid point."""
+def interleave_tests(p, grid_ok, test_ok) -> list[int]:
+    """The calibration points ``grid_ok`` in the given order (a grid's serpentine, an optimal plan's tour), each
+    test point of ``test_ok`` right after its nearest calibration point (positions p, mm)."""
     if len(grid_ok) == 0:
         return list(test_ok)
     nearest = np.argmin(np.linalg.norm(p[test_ok][:, None] - p[grid_ok][None], axis=2), axis=1) if len(test_ok) else []

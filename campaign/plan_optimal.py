@@ -26,7 +26,7 @@ from .cell import measurement_covariance
 from .config import CampaignConfig
 from .errors import ConfigError
 from .motion_safety import PathGuard
-from .plan import (WRIST_MARGIN_DEG, Plan, PlanPoint, _interleave, finish_plan, grid_points, solve_targets,
+from .plan import (WRIST_MARGIN_DEG, Plan, PlanPoint, finish_plan, grid_points, interleave_tests, solve_targets,
                    test_targets, tool_rotation)
 
 
@@ -154,7 +154,7 @@ def optimal_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
         points = calib + [tests[i] for i in short_tour(q_test[test_ok], pool.q_rad[order[-1]])] if tests else calib
     else:                                              # each test point after its nearest calibration point
         p_all = np.vstack([pool.p_base_mm[order], p_test[test_ok]]) if len(test_ok) else pool.p_base_mm[order]
-        seq = _interleave(p_all, np.arange(len(order)), len(order) + np.arange(len(test_ok)))
+        seq = interleave_tests(p_all, np.arange(len(order)), len(order) + np.arange(len(test_ok)))
         points = [(calib + tests)[i] for i in seq]
     return finish_plan(cfg, guard, points, pool.q_rad[order], pool.p_base_mm[order], [pool.ids[i] for i in order],
                        skipped, blocks if pl.stop == "auto" else ())
