@@ -1,15 +1,17 @@
 """Optimal calibration experiments: which poses to measure, in which order, and what accuracy to expect.
 
-* ``information_rows``: per candidate pose the identification Jacobian of the geometry plus the regressors of
-  the physical effects, whitened by the measurement covariance and with every column scaled by the parameter's
-  prior standard deviation (so mm, rad and rad/(N*m) compare), shape (M, 3, L).
+* ``criterion`` / ``information_rows``: per candidate pose the identification Jacobian of the geometry plus the
+  regressors of the pose-dependent physical effects, whitened by the measurement covariance and with every column
+  scaled by the parameter's prior standard deviation (so mm, rad and rad/(N*m) compare), shape (M, 3, L).
 * ``d_optimal``: N of M candidates maximising log det(I + sum A_i^T A_i) (Bayesian D-optimality: the prior
   I regularises the parameters no pose can see, whose columns then do not steer the choice), by greedy forward
-  selection and Fedorov exchange with rank-3 updates of every candidate's quadratic form at once.
+  selection and an exchange pass with rank-3 updates of every candidate's quadratic form at once; every prefix
+  spreads the major joints over their ranges (a nested Latin hypercube over the candidates).
 * ``short_tour``: a measurement order (nearest neighbour + 2-opt) that keeps the joint moves short.
-* ``predicted_mse_mm2`` / ``blocked_cv``: the held-out mean square error expected of the model fitted on the
-  first n planned points: floor^2 + unmodelled^2 + trace(Sigma_theta(n) H_test), the last from the parameter
-  covariance of exactly those points, the unmodelled part from blocked cross-validation of the data so far.
+* ``prediction`` / ``predict_rms`` / ``blocked_cv``: the held-out RMS expected of the model fitted on the first n
+  planned points, sqrt(floor^2 + unmodelled^2 + s0^2 trace(M(n)^-1 H_test)): the parameter covariance of exactly
+  those points, the unmodelled part from blocked cross-validation of the data so far.
+* ``forecast``: before measuring, the parameter std and the model's own error at the test poses of a pose set.
 
 Shapes: q (N, n) rad; Jacobians (N, 3, P) mm per unit parameter; covariances (N, 3, 3) mm^2.
 """
@@ -159,7 +161,8 @@ def d_optimal(A: np.ndarray, n: int, spread: np.ndarray | None = None, max_passe
     """N = ``n`` of the M candidates A (M, 3, L) maximising log det(I + sum A_i^T A_i): greedy forward selection
     (``greedy_order``), then exchange passes: each chosen point, weakest first, is swapped for the best
     candidate in the same bin of every spread joint (the spread stays as it is), when that raises the log det
-    by more than ``tol``; finally the set is re-ordered greedily (so that blocks of the order are good designs too)."""
+    by more than ``tol``; finally the set is re-ordered greedily (so that blocks of the order are good designs
+    too)."""
     if not 0 < n <= len(A):
         raise ValueError(f"cannot choose {n} of {len(A)} candidates")
     d = _Design(A, greedy_order(A, n, spread=spread))
