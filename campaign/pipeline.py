@@ -94,7 +94,13 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
                                                                                           record.p_tracker_mm),
                                                      advance(record))
-            outcome = runner.execute(todo, log)
+            if plan.blocks:                             # plan.stop: auto: block by block, refit after each
+                from .adaptive import AdaptivePasses
+                passes = AdaptivePasses(cfg, plan, run_dir, log, {p.point_id for p in plan.points} - {
+                    p.point_id for p in todo}, on_skip=advance.skip)
+                outcome = runner.execute_passes(passes, log)
+            else:
+                outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
     from .iso_run import finish, is_iso_plan
@@ -122,6 +128,10 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path, contents=None) -> Pr
     processed = process(dataset, cfg)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
+        from .adaptive import stop_summary
+        stop = stop_summary(contents, processed.report)
+        if stop is not None:
+            processed = replace(processed, report=replace(processed.report, stop=stop))
     write_outputs(processed, out_dir)
     write_report(out_dir)                       # report.html from report.json
     return processed
@@ -222,6 +232,13 @@ class _progress:
             if self.eta is not None and record is not None:
                 self.eta.observe(record)
             self.bar.update(task, advance=1, eta=self.eta.text() if self.eta else "")
+
+        def skip(n: int) -> None:                       # points a stop rule dropped from the plan
+            self.total -= n
+            if self.eta is not None:
+                self.eta.skip(n)
+            self.bar.update(task, total=self.total, eta=self.eta.text() if self.eta else "")
+        advance.skip = skip
         return advance
 
     def __exit__(self, *exc):

@@ -98,7 +98,7 @@ def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     return prepare(ds, cfg).dataset
 
 
-def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray, approach: np.ndarray | None = None) -> dict:
+def effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray, approach: np.ndarray | None = None) -> dict:
     """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
     signs of every joint (from the full measurement order, or ``approach`` (N, n) computed before rows were set
     aside), time since the start (s)."""
@@ -177,14 +177,20 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
     """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
+    kin = geo.result.kinematics
+    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
+    return effect_choices(cfg, kin, cols, q, p, cov, meta)
+
+
+def effect_choices(cfg: CampaignConfig, kin, cols, q, p, cov, meta):
+    """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
+    ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``."""
     spec = cfg.calibration.effects
     if spec == "none":
         return [], None
     if spec != "auto":
         return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                            for k, v in s.params.items())) for s in spec], None
-    kin = geo.result.kinematics
-    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
     sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
     return list(sel.taken), sel
 
@@ -210,7 +216,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     qk, pk = q[kept_rows], p[kept_rows]
     cov_all, cov_source = weights_covariance(cfg, ds)
     covk = cov_all[kept_rows]
-    meta_all = _effect_meta(ds, cfg, np.arange(len(ds)), approach)
+    meta_all = effect_meta(ds, cfg, np.arange(len(ds)), approach)
     sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
     meta_k = sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)

@@ -1,6 +1,8 @@
 """Terminal rendering of plans and reports with rich (nothing here computes a figure)."""
 from __future__ import annotations
 
+import math
+
 from rich.console import Console
 from rich.table import Table
 
@@ -129,6 +131,39 @@ def render_parameters(console: Console, report: CalibrationReport) -> None:
 def _vias(plan: Plan) -> str:
     n = sum(len(p.via_deg) for p in plan.points)
     return f", {n} via poses around keep-out boxes" if n else ""
+
+
+def render_stop(console: Console, report: CalibrationReport) -> None:
+    """``plan.stop: auto``: the predicted held-out RMS curve of the last refit, where the run stopped and why,
+    and the held-out RMS the final model reached."""
+    stop = report.stop
+    if not stop:
+        return
+    t = Table(title="Predicted held-out RMS vs calibration points (last refit), mm")
+    t.add_column("calibration points", justify="right")
+    t.add_column("predicted RMS", justify="right")
+    for n, rms in stop["checks"][-1]["curve"]:
+        t.add_row(str(n) + (" (stop)" if n == stop["n_calib_at_stop"] else ""), f"{rms:.4f}")
+    console.print(t)
+    console.print(f"stopped after {stop['n_calib_at_stop']} calibration points ({stop['reason']}): predicted "
+                  f"held-out RMS {stop['predicted_rms_mm']:.4f} mm, measured {_mm(stop['measured_rms_mm'])} mm "
+                  "(final model, test set)", markup=False)
+
+
+def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
+    """``campaign plan``: the parameter uncertainty the plan's calibration points predict, the calibrated model's
+    own error at the test poses from it (AP(theta) RMS) and the held-out RMS to expect with the noise floor."""
+    shown = [(n, math.degrees(s) if u == "rad" else float(s), "deg" if u == "rad" else u)
+             for n, u, s in zip(fc.names, fc.units, fc.std)]
+    text = ", ".join(f"{n} {v:.4f} {u}" for n, v, u in sorted(shown, key=lambda t: -t[1])[:4])
+    console.print(f"forecast (unit-weight error 1): {len(fc.names)} geometric parameters identifiable, largest std "
+                  f"{text}; O1 {fc.O1:.3g}, condition number {fc.condition_number:.0f}", markup=False)
+    held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
+    console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
+                  f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
+                  f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
+    if blocks:
+        console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
 
 
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
