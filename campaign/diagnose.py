@@ -42,8 +42,7 @@ from .fsutil import write_json as _write_json
 from .interchange import Dataset, read_csv
 from .log_dataset import dataset_from_log
 from .plausibility import check_dataset
-from .prepare import prepare
-from .process import _geometric
+from .process import fit_stages
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -127,13 +126,11 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
-        prep = prepare(ds, cfg)            # the same joints and drift compensation as reprocess
-        geo = _geometric(prep.dataset, cfg)
-        stage = elastic_stage(prep.dataset, cfg, geo)
-        inp, fitted, info = diagnosis_input(prep.dataset, cfg, stage, geo.result)
+        fitted = fit_stages(ds, cfg)        # the same preparation, fits and effect engine as reprocess
+        inp, stage, info = diagnosis_input(fitted.dataset, cfg, fitted.stage, fitted.geo.result)
         info["plausibility"] = plaus.to_dict()
-        info["preparation"] = prep.report
-        d = diagnose(inp, options, fitted)
+        info["preparation"] = fitted.prep.report
+        d = diagnose(inp, options, stage)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"diagnosis failed: {exc}") from None
     body = d.to_dict()

@@ -16,8 +16,7 @@ from robocal.effects import GravityModel
 from robocal.elastic import EffectChoice, EngineOptions, EngineResult, calibrate_elastic, select
 from robocal.kinematics import ParamLayout
 from robocal.model import CalibratedModel
-from robocal.repeats import repeat_groups
-from robocal.screen import ScreenResult, screen
+from robocal.screen import ScreenResult
 
 from .cell import calibration_options, weights_covariance
 from .config import CampaignConfig
@@ -33,22 +32,46 @@ def gravity_model(cfg: CampaignConfig) -> GravityModel:
                                  r.gravity_direction_base)
 
 
-def effect_meta(ds: Dataset, cfg: CampaignConfig) -> dict:
-    """Per-row metadata of the physical effects (N rows of the prepared dataset, rows in measurement order, as the
-    interchange CSV defines them): payload (kg; the tool's when the data has none), approach signs, the last
-    move and the one before (rad), the position in the measurement order, time (s) and temperature (deg C)."""
+def order_meta(ds: Dataset) -> dict:
+    """What the measurement order gives each row of ``ds`` (rows in measurement order, as the interchange CSV
+    defines them): approach signs, the signed last move and the move before (rad), the position in the order.
+    Computed before any row is set aside, then subset with the rows."""
     n = len(ds)
     q = np.radians(ds.q_deg)
-    pay = ds.payload_kg if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
     move, prev = moves_from_order(q)
-    return {"payload_kg": np.asarray(pay, float), "approach": approach_signs(q) if n > 1 else None,
-            "move": move, "prev_move": prev, "order": np.arange(n, dtype=float),
-            "t_s": None if ds.t_s is None else np.asarray(ds.t_s, float),
-            "temp_c": None if ds.temp_c is None else np.asarray(ds.temp_c, float)}
+    return {"approach": approach_signs(q) if n > 1 else None, "move": move, "prev_move": prev,
+            "order": np.arange(n, dtype=float)}
+
+
+def effect_meta(ds: Dataset, cfg: CampaignConfig, rows=None, order: dict | None = None) -> dict:
+    """Per-row metadata of the physical effects of the rows ``rows`` (default all): payload (kg; the tool's when
+    the data has none), time (s) and temperature (deg C), and the ``order_meta`` (given, or from ``ds``)."""
+    rows = np.arange(len(ds)) if rows is None else np.asarray(rows)
+    n = len(ds)
+    pay = ds.payload_kg if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
+    meta = {"payload_kg": np.asarray(pay, float), "t_s": None if ds.t_s is None else np.asarray(ds.t_s, float),
+            "temp_c": None if ds.temp_c is None else np.asarray(ds.temp_c, float),
+            **(order_meta(ds) if order is None else order)}
+    return subset(meta, rows)
+
+
+def effect_choices(cfg: CampaignConfig, kin, cols, q, p, cov, meta) -> tuple[list[EffectChoice], object]:
+    """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
+    ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``: the
+    configured list, or what the effect engine takes under ``auto``."""
+    spec = cfg.calibration.effects
+    if spec == "none":
+        return [], None
+    if spec != "auto":
+        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
+                                           for k, v in s.params.items())) for s in spec], None
+    eng = select(kin, cols, q, p, cov, meta, gravity_model(cfg), EngineOptions(folds=cfg.calibration.cv_folds))
+    return list(eng.taken), eng
 
 
 def subset(meta: dict, rows) -> dict:
-    return {k: (None if v is None else v[rows]) for k, v in meta.items()}
+    """The per-row metadata ``meta`` of the rows ``rows`` (index or mask)."""
+    return {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,25 +89,18 @@ class ElasticStage:
     meta: dict
 
 
-def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo) -> ElasticStage:
-    """The effects of the model on top of the geometric fit ``geo`` (``campaign.process.GeometricFit``)."""
+def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo, order: dict, rescreen) -> ElasticStage:
+    """The effects of the model on top of the geometric fit ``geo`` (``campaign.process.GeometricFit``) of ``ds``,
+    ``order`` its ``order_meta``; ``rescreen(rows, residual_mm)`` the measurement-fault screen of calib rows."""
     result = geo.result
     q, p = np.radians(ds.q_deg), ds.p_tracker_mm
     cov_all = weights_covariance(cfg, ds)[0]
-    meta_all = effect_meta(ds, cfg)
+    meta_all = effect_meta(ds, cfg, order=order)
     kept = geo.rows[geo.keep]
     payload = float(cfg.tool.payload_kg or 0.0)
     cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified], int)
-    spec, engine = cfg.calibration.effects, None
-    if spec == "none":
-        choices = ()
-    elif spec == "auto":
-        engine = select(result.kinematics, cols, q[kept], p[kept], cov_all[kept], subset(meta_all, kept),
-                        gravity_model(cfg), EngineOptions(folds=cfg.calibration.cv_folds))
-        choices = engine.taken
-    else:
-        choices = tuple(EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                                   for k, v in s.params.items())) for s in spec)
+    choices, engine = effect_choices(cfg, result.kinematics, cols, q[kept], p[kept], cov_all[kept],
+                                     subset(meta_all, kept))
     model = CalibratedModel(result.kinematics, None, None, (), payload)
     if not choices:
         return ElasticStage((), engine, None, model, kept, geo.screen, meta_all)
@@ -102,8 +118,7 @@ def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo) -> ElasticStage:
         # screen again against the model with its effects: structure the geometry alone could not fit is no
         # reason to exclude a point (and a fault hidden by that structure shows now)
         rc = geo.rows
-        final_screen = screen(q[rc], p[rc], p[rc] - model.smr_tracker(q[rc], subset(meta_all, rc)),
-                              None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
+        final_screen = rescreen(rc, p[rc] - model.smr_tracker(q[rc], subset(meta_all, rc)))
         robust_rejected = ~geo.keep
         robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
         new_keep = final_screen.keep & ~robust_rejected

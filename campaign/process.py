@@ -23,19 +23,19 @@ from robocal.identify import CalibrationResult, IdentificationError, calibrate, 
 from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer
 from robocal.model import CalibratedModel
-from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
-from robocal.screen import ScreenResult, screen
+from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, nominal_kinematics, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
-from .effects_stage import elastic_stage, subset
+from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
+from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
 from .records import CalibrationReport
 from .report_points import cell_summary, point_table
@@ -130,10 +130,8 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     keep = np.ones(len(rows), bool)
     sc = None
     if cfg.calibration.outliers == "local":
-        sigma = None if ds.sigma_mm is None else ds.sigma_mm[rows]
-        groups = repeat_groups(ds.q_deg[rows])
         for _ in range(4):
-            sc = screen(q, p, p - smr_tracker(result.kinematics, q), sigma, groups)
+            sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
             if np.array_equal(new_keep, keep):
                 break
@@ -147,28 +145,62 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     return GeometricFit(result, sc, rows)
 
 
+def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResult:
+    """The measurement-fault screen of the calib rows ``rows`` with residuals r_mm (nominal levers and reach)."""
+    q = np.radians(ds.q_deg[rows])
+    return screen(q, ds.p_tracker_mm[rows], r_mm, joint_levers_mm(kin0, q), NEAR_FRACTION * reach_mm(kin0),
+                  None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
+
+
 def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
     ds, _ = check_dataset(ds, cfg)
-    return _geometric(_prepare(ds, cfg), cfg).result
+    ds = _prepare(ds, cfg)
+    keep, _ = screen_smrs(ds, cfg)
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg).result
+
+
+@dataclass(frozen=True, eq=False)
+class Fitted:
+    """What reprocess and diagnose share: the preparation, the dataset the fits saw (SMR-triangle faults set
+    aside), those set-aside rows, the geometric fit and the elastic stage (the effect engine's answer)."""
+    prep: object
+    dataset: Dataset
+    smr_excluded: list
+    geo: GeometricFit
+    stage: ElasticStage
+
+
+def fit_stages(ds: Dataset, cfg: CampaignConfig) -> Fitted:
+    """Preparation, SMR-triangle screen, geometric fit and elastic stage of a checked dataset: one sequence for
+    ``reprocess`` and ``diagnose``, so both take the same effects with the same values."""
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
+    order = order_meta(ds)                                  # approach and moves from the full measurement order
+    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    if not smr_keep.all():
+        ds, order = ds.subset(smr_keep), subset(order, smr_keep)
+        _check_dataset(ds, cfg)
+    kin0 = nominal_kinematics(cfg)
+    geo = _geometric(ds, cfg)
+    stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+    return Fitted(prep, ds, smr_excluded, geo, stage)
 
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
+    fitted = fit_stages(ds, cfg)
+    prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
     kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
     cov_source = weights_covariance(cfg, ds)[1]
-    stage = elastic_stage(ds, cfg, geo)
     meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
     final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
     sub = subset
@@ -205,12 +237,12 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     eval_rows = test if test.any() else cal
     specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
     calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = [] if final_screen is None else [
-        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
+    excluded = smr_excluded + ([] if final_screen is None else [
+        {"point_id": str(calib_ids[e.index]), "set": "calib", "reason": e.reason} for e in final_screen.excluded])
     rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
                           key=calib_ids.tolist().index)
     listed = {e["point_id"] for e in excluded}
-    excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+    excluded += [{"point_id": pid, "set": "calib", "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
                  for pid in rejected_ids if pid not in listed]
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
@@ -237,7 +269,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test)
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
@@ -248,35 +280,6 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
                                    {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
                                     for name, m in stage_models}, used, ds.t_s)
     return Processed(CalibrationReport(**report), model, result)
-
-
-def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
-    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
-    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
-    clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
-    offsets0 = cfg.tool.smrs_mm
-    if len(offsets0) < len(clouds):
-        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
-                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
-    P = np.stack(clouds)
-    q = np.radians(ds.q_deg)
-    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
-    try:
-        res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
-                                  calibration_options(cfg))
-    except (IdentificationError, np.linalg.LinAlgError) as exc:
-        raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
-    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
-           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
-           "test": {}}
-    if test.any():
-        pred = res.predict_tracker(q[test])
-        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
-        if len(clouds) == 3:
-            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
-            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
-                                               "max": float(a.max()), "n": int(len(a))}
-    return out
 
 
 def _effects_report(selection, elastic) -> dict:
