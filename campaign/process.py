@@ -29,12 +29,12 @@ from robocal.screen import ScreenResult, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, measurement_covariance, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas
+from .plausibility import check_dataset, check_deltas, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
 from .prepare import prepare
 from .records import CalibrationReport
@@ -128,10 +128,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
-    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
-    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
-    kin0 = nominal_kinematics(cfg)
+def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+    """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
+    measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
+    faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = weights_covariance(cfg, ds)[0][rows]
@@ -161,8 +161,8 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
-    ds, _ = check_dataset(ds, cfg)
-    return _geometric(_prepare(ds, cfg), cfg).result
+    ds, plaus = check_dataset(ds, cfg)
+    return _geometric(_prepare(ds, cfg), cfg, start_kinematics(cfg, plaus)).result
 
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
@@ -184,8 +184,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
-    kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
@@ -293,7 +293,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
@@ -306,11 +306,11 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     return Processed(CalibrationReport(**report), model, result)
 
 
-def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
+def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray,
+               offsets0: tuple) -> dict:
     """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
     figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
     clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
-    offsets0 = cfg.tool.smrs_mm
     if len(offsets0) < len(clouds):
         return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
                 f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
