@@ -9,16 +9,17 @@
 (mm, robot base frame after the source's tracker-to-base set-up), ``x_dif..z_dif`` the difference between
 target and reached position (mm), ``joint_k`` the commanded joints (deg). The measured position is
 ``target + dif_sign * dif``; the source does not state the sign. :data:`DIF_SIGN` (+1: dif = reached - target) is
-the sign under which the arm sags under gravity: a geometric + gravity-compliance fit of the calibration rows gives
-a positive J2 compliance with +1 and a negative one (not physical) with -1, while the nominal residual cannot tell
-the signs apart (``bench/bench_ur5.py`` prints both; docs/results.md). ``dif_sign`` overrides it.
+the sign that gives back the recorded tracker readings: ``target + dif`` has exactly six decimals (mm) in every
+coordinate of the public files, ``target - dif`` in 0.3 % (chance). A gravity-compliance fit agrees (with +1 the
+fitted deflection lowers the SMR, the more the farther it reaches); the nominal residual cannot tell the signs apart
+(``bench/bench_ur5.py`` prints all three). ``dif_sign`` overrides it.
 
 A format-specific importer rather than a column mapping: the measured position is computed (target + sign x dif),
 the rows are re-ordered by ``step_order`` and each file is one set, none of which a renaming of columns expresses.
 
 Rows come out in measurement order: the calibration file's rows sorted by ``step_order``, then the test file's
-(measured after it); point ids carry the step: ``G0000`` .. (calib), ``R00`` .. (test). Every problem is one
-:class:`DataError` line naming the file, the line and the column.
+(the source gives no order between the files); point ids carry the step: ``G000`` .. (calib), ``R00`` .. (test).
+Every problem is one :class:`DataError` line naming the file, the line and the column.
 """
 from __future__ import annotations
 

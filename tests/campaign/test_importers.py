@@ -1,6 +1,8 @@
 """``campaign import target-dif``: the public UR5 campaign's layout -> interchange CSV, in measurement order."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -8,8 +10,6 @@ from campaign.errors import DataError
 from campaign.importers import DIF_SIGN, import_target_dif, read_target_dif_file
 from campaign.interchange import read_csv
 from tests.campaign.hostile import assert_one_line, cli, snapshot
-
-from pathlib import Path
 
 pytestmark = pytest.mark.unit
 

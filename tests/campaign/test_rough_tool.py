@@ -34,7 +34,8 @@ UR10E_JOINTS = [{"alpha_deg": al, "a_mm": a, "d_mm": d, "theta_deg": 0, "q_min_d
                 for al, a, d in zip([90, 0, 0, 90, -90, 0], [0, -613.27, -571.55, 0, 0, 0],
                                     [180.7, 0, 0, 174.15, 119.85, 116.55])]
 UR5_JOINTS = [{"alpha_deg": al, "a_mm": a, "d_mm": d, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360}
-              for al, a, d in zip([90, 0, 0, 90, -90, 0], [0, -425, -392.25, 0, 0, 0], [89.159, 0, 0, 109.15, 94.65, 82.3])]
+              for al, a, d in zip([90, 0, 0, 90, -90, 0], [0, -425, -392.25, 0, 0, 0],
+                                  [89.159, 0, 0, 109.15, 94.65, 82.3])]
 
 
 def ur10_campaign(path, n_calib=150, n_test=50, seed=0):
@@ -74,7 +75,8 @@ def test_rough_offsets_register_and_change_nothing_else(ur10_data, tmp_path):
         np.testing.assert_allclose(tool["registered_mm"], right["plausibility"]["tool"]["registered_mm"], atol=1e-6)
         for stage, figures in right["stages"].items():
             for key in ("rms_mm", "mean_mm", "max_mm"):
-                assert rough["stages"][stage]["test"][key] == pytest.approx(figures["test"][key], rel=0.01), (stage, off)
+                got = rough["stages"][stage]["test"][key]
+                assert got == pytest.approx(figures["test"][key], rel=0.01), (stage, off)
         assert not rough["plausibility"]["overridden"]
 
 
@@ -106,9 +108,9 @@ def test_another_robot_is_still_refused(case, needle, ur10_data, tmp_path, capsy
                                                    "plan.grid": IRB120_PLAN})
     else:
         data = ur10_data
+        grid = {"center_mm": [-500, -200, 300], "size_mm": [300, 300, 300], "step_mm": 150}
         cfg = small_config(tmp_path, "ur10", **{"robot.joints": UR10E_JOINTS if "ur10e" in case else UR5_JOINTS,
-                                                "plan.grid": {"center_mm": [-500, -200, 300], "size_mm": [300, 300, 300],
-                                                              "step_mm": 150}})
+                                                "plan.grid": grid})
     before = snapshot(tmp_path)
     code, out, err = cli(capsys, "reprocess", data, "--config", cfg, "--out", tmp_path / "out")
     assert_one_line(code, out, err, 2, str(data), needle)

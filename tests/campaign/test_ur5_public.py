@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from campaign.config import load_config
-from campaign.interchange import read_csv
 from campaign.process import process
 from tests.campaign.helpers import small_config
 from tests.campaign.hostile import cli
@@ -47,8 +46,9 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
         for name, s in stages.items():
             t = s["test"]
             print(f"  {name:40s} mean {t['mean_mm']:.4f}  RMS {t['rms_mm']:.4f}  max {t['max_mm']:.4f}")
-        print(f"  noise floor (specs) {report['noise_floor_mm']:.4f}; effects "
-              f"{[e['name'] + str(e['options']) for e in report['effects']['fitted']]}; layer {report['method']['residual']}")
+        effects = [e["name"] + str(e["options"]) for e in report["effects"]["fitted"]]
+        print(f"  noise floor (specs) {report['noise_floor_mm']:.4f}; effects {effects}; "
+              f"layer {report['method']['residual']}")
     assert report["n"] == {"calib": 1000, "test": 20, "check": 0, "rejected": 0}
     assert abs(raw - PUBLISHED_UNCALIBRATED_MM) < 0.01          # the published baseline is the raw |dif| mean
     final = stages["compensated"]["test"]["mean_mm"]
@@ -68,7 +68,8 @@ def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
     from campaign.plausibility import check_dataset
 
     ds = import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv", UR5 / "3D_UR5_uncalibrated_random_cleaned.csv")
-    right = [round(v, 1) for v in check_dataset(ds, load_config(ROOT / "configs" / "ur5.yaml"))[1].tool.registered_mm[0]]
+    plaus = check_dataset(ds, load_config(ROOT / "configs" / "ur5.yaml"))[1]
+    right = [round(v, 1) for v in plaus.tool.registered_mm[0]]
     reports = {}
     for off_mm in (0.0, -30.0, 90.0):
         where = tmp_path / f"off{off_mm:+.0f}"
