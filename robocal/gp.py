@@ -33,13 +33,21 @@ JITTER = 1e-10            # added to the diagonal, relative to var(y), for a saf
 
 
 # ---------------------------------------------------------------- kernel and likelihood
+NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are set to exactly 0
+
+
 def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -> np.ndarray:
-    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d)."""
+    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d).
+
+    Entries below 1e-50 sigma_f^2 are exactly 0: far below the rounding of any sum they enter, and kept they turn
+    into subnormal numbers inside the Cholesky factor and its inverse at short length scales, which made the
+    hyperparameter search about 1.6x slower."""
     A, B = Xa / length, Xb / length
     d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :]
     d2 -= 2.0 * A @ B.T                                   # in place from here: one (Na, Nb) array, no temporaries
     np.maximum(d2, 0.0, out=d2)
     d2 *= -0.5
+    np.putmask(d2, d2 < NEGLIGIBLE_LOG, -np.inf)
     np.exp(d2, out=d2)
     d2 *= sigma_f**2
     return d2
