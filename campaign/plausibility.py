@@ -36,6 +36,7 @@ ANGLE_DELTA_DEG = 2.0           # identified angle change bound (theta, alpha, b
 MAX_ABS_MM = 1.0e6              # |xyz| beyond 1 km is not a tracker reading
 LIMIT_TOL_DEG = 1e-6
 TOOL_NOTE_MM = 3.0              # a registered SMR offset this far from the config is reported with the value to use
+ON_AXIS_START_MM = 5.0          # fits start with an SMR offset this close to the flange axis on the axis
 _UNITS = (("mm", 1.0), ("m", 1e-3), ("cm", 0.1), ("inch", 1 / 25.4))
 
 _FORCE: ContextVar[bool] = ContextVar("campaign_plausibility_force", default=False)
@@ -49,29 +50,6 @@ def forced(flag: bool = True) -> Iterator[None]:
         yield
     finally:
         _FORCE.reset(token)
-
-
-@dataclass(frozen=True)
-class Plausibility:
-    """What was checked: unit guess, nominal RMS vs its bound, rows rejected, notes, overridden failures."""
-    unit: str = "mm"
-    scale: float | None = None
-    nominal_rms_mm: float | None = None
-    bound_mm: float | None = None
-    rejected_rows: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
-    overridden: tuple[str, ...] = ()
-    forced: bool = False
-    max_length_delta_mm: float | None = None
-    max_angle_delta_deg: float | None = None
-    tool: ToolCheck | None = None
-
-    def to_dict(self) -> dict:
-        return {"unit": self.unit, "scale": self.scale, "nominal_rms_mm": self.nominal_rms_mm,
-                "bound_mm": self.bound_mm, "rejected_rows": list(self.rejected_rows), "notes": list(self.notes),
-                "overridden": list(self.overridden), "forced": self.forced,
-                "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg,
-                "tool": None if self.tool is None else self.tool.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -104,6 +82,29 @@ def _vec(v) -> str:
     return "[" + ", ".join(f"{x:.1f}" for x in v) + "]"
 
 
+@dataclass(frozen=True)
+class Plausibility:
+    """What was checked: unit guess, nominal RMS vs its bound, rows rejected, notes, overridden failures."""
+    unit: str = "mm"
+    scale: float | None = None
+    nominal_rms_mm: float | None = None
+    bound_mm: float | None = None
+    rejected_rows: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    overridden: tuple[str, ...] = ()
+    forced: bool = False
+    max_length_delta_mm: float | None = None
+    max_angle_delta_deg: float | None = None
+    tool: ToolCheck | None = None
+
+    def to_dict(self) -> dict:
+        return {"unit": self.unit, "scale": self.scale, "nominal_rms_mm": self.nominal_rms_mm,
+                "bound_mm": self.bound_mm, "rejected_rows": list(self.rejected_rows), "notes": list(self.notes),
+                "overridden": list(self.overridden), "forced": self.forced,
+                "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg,
+                "tool": None if self.tool is None else self.tool.to_dict()}
+
+
 def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
     """Raise unless forced; when forced, record the overridden failure."""
     if not _FORCE.get():
@@ -111,9 +112,11 @@ def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
     return replace(state, overridden=state.overridden + (message,), forced=True)
 
 
-def reach_mm(cfg) -> float:
-    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr|."""
-    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(cfg.tool.p_flange_smr_mm))
+def reach_mm(cfg, p_flange_smr_mm=None) -> float:
+    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr| (the configured
+    offset unless one is given)."""
+    tool = cfg.tool.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm
+    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(tool))
 
 
 def row_locations(ds) -> list[str]:
@@ -273,15 +276,26 @@ def _register_tool(ds, cfg, cal: np.ndarray) -> ToolCheck | None:
     return ToolCheck(configured, tuple(tuple(float(v) for v in r) for r in reg.p_flange_smr_mm), reg.determined)
 
 
-def start_kinematics(cfg, plaus: Plausibility | None = None):
-    """The nominal model every fit starts from: the config's geometry with the SMR offset registered by the
-    plausibility check (the configured one when it could not be registered)."""
+def registered_kinematics(cfg, plaus: Plausibility | None = None):
+    """The nominal model with the SMR offset registered by the plausibility check (the configured one when it
+    could not be registered): the model of the ``nominal`` stage."""
     from .cell import nominal_kinematics
 
     kin = nominal_kinematics(cfg)
     if plaus is None or plaus.tool is None:
         return kin
     return kin.with_(p_flange_smr_mm=np.array(plaus.tool.registered_mm[0]))
+
+
+def start_kinematics(cfg, plaus: Plausibility | None = None):
+    """The model every fit starts from: :func:`registered_kinematics`, with an SMR offset within ON_AXIS_START_MM
+    of the flange axis put on the axis. From an on-axis start the calibration admits the wrist parameters that a
+    small lateral lever makes only marginally identifiable when its solution identifies them strongly
+    (:func:`robocal.identify.calibrate`), so neither the configured lateral values nor a rough config decide which
+    parameters are fitted (the fit identifies the lateral offset itself)."""
+    kin = registered_kinematics(cfg, plaus)
+    p = kin.p_flange_smr_mm
+    return kin.with_(p_flange_smr_mm=[0.0, 0.0, p[2]]) if np.hypot(p[0], p[1]) < ON_AXIS_START_MM else kin
 
 
 def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
@@ -299,17 +313,18 @@ def _check_nominal(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plaus
     tool = _register_tool(ds, cfg, cal)
     state = replace(state, tool=tool, notes=state.notes + (() if tool is None else tool.notes()))
     try:
-        kin = register(start_kinematics(cfg, state), q, p)
+        kin = register(registered_kinematics(cfg, state), q, p)
     except (IdentificationError, np.linalg.LinAlgError):
         return state, None                  # calibration reports it with its own message
     err = p - smr_tracker(kin, q)
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    bound = REACH_FRACTION * reach_mm(cfg)
+    reach = reach_mm(cfg, kin.p_flange_smr_mm)
+    bound = REACH_FRACTION * reach
     state = replace(state, nominal_rms_mm=rms, bound_mm=bound)
     if not np.isfinite(rms) or rms > bound:
         return state, (f"does this data belong to this robot ({cfg.robot.model})? nominal error "
                        f"{rms:.0f} mm RMS after registration, more than {bound:.0f} mm (1 % of the "
-                       f"{reach_mm(cfg):.0f} mm reach)")
+                       f"{reach:.0f} mm reach)")
     return state, None
 
 

@@ -34,7 +34,7 @@ from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas, start_kinematics, start_smr_offsets_mm
+from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
 from .prepare import prepare
 from .records import CalibrationReport
@@ -247,7 +247,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+                    ("kinematic", result.kinematics)]
     if elastic is not None:
         stage_models.append(("elastic", model_el))
     stage_models.append(("compensated", model))
