@@ -18,7 +18,6 @@ trained across payloads (seed 003 §5 suggestion). Outputs in mm. ``GPRResidual`
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
@@ -30,12 +29,10 @@ from .kinematics import Kinematics, fk
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 JITTER = 1e-10            # added to the diagonal, relative to var(y), for a safe Cholesky
+NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are exactly 0 (se_ard)
 
 
 # ---------------------------------------------------------------- kernel and likelihood
-NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are set to exactly 0
-
-
 def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -> np.ndarray:
     """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d).
 
@@ -59,14 +56,9 @@ def cholesky_inverse(c: tuple[np.ndarray, bool]) -> np.ndarray:
     inv, info = dpotri(c[0], lower=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed ({info})")
-    upper = _upper_indices(len(inv))
+    upper = np.triu_indices(len(inv), 1)
     inv[upper] = inv.T[upper]                             # mirror the lower triangle potri wrote
     return inv
-
-
-@lru_cache(maxsize=8)
-def _upper_indices(m: int) -> tuple[np.ndarray, np.ndarray]:
-    return np.triu_indices(m, 1)
 
 
 def unpack(log_theta: np.ndarray) -> tuple[float, float, np.ndarray]:
