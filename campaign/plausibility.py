@@ -52,6 +52,11 @@ def forced(flag: bool = True) -> Iterator[None]:
         _FORCE.reset(token)
 
 
+def is_forced() -> bool:
+    """Whether the current command runs under ``--force`` (:func:`forced`)."""
+    return _FORCE.get()
+
+
 @dataclass(frozen=True)
 class ToolCheck:
     """The SMR offsets (flange frame, mm) registered with the base on the nominal geometry, one per SMR, against
@@ -221,7 +226,12 @@ def _check_completeness(ds, state: Plausibility) -> Plausibility:
     except (OSError, UnicodeDecodeError, csv.Error):
         return state
     notes = []
-    for name in ("calib", "test", "check"):
+    from .adaptive import stopped_after                 # plan.stop: auto runs skip blocks on purpose
+    stopped = stopped_after(src.parent)
+    if stopped is not None:
+        notes.append(f"plan.stop: auto stopped after {stopped} of {planned.count('calib')} planned calibration "
+                     "points (report.json: stop)")
+    for name in ("test",) if stopped is not None else ("calib", "test", "check"):
         want, have = planned.count(name), int(np.sum(ds.mask(name)))
         if have < want:
             notes.append(f"incomplete run: only {have} of {want} planned {name} points were measured")
