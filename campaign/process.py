@@ -28,12 +28,12 @@ from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_m
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas
+from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
 from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
@@ -131,10 +131,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
-    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
-    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
-    kin0 = nominal_kinematics(cfg)
+def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+    """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
+    measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
+    faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = weights_covariance(cfg, ds)[0][rows]
@@ -169,10 +169,10 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
-    ds, _ = check_dataset(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)
     ds = _prepare(ds, cfg)
     keep, _ = screen_smrs(ds, cfg)
-    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg).result
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
 
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
@@ -205,8 +205,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     if not smr_keep.all():
         ds, approach = ds.subset(smr_keep), None if approach is None else approach[smr_keep]
         _check_dataset(ds, cfg)
-    kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
@@ -267,7 +267,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+                    ("kinematic", result.kinematics)]
     if elastic is not None:
         stage_models.append(("elastic", model_el))
     stage_models.append(("compensated", model))
@@ -313,7 +314,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
