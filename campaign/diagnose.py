@@ -36,7 +36,7 @@ from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
-from .effects_stage import elastic_stage, gravity_model, subset
+from .effects_stage import gravity_model, subset
 from .errors import DataError
 from .fsutil import write_json as _write_json
 from .interchange import Dataset, read_csv
@@ -126,7 +126,7 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
-        fitted = fit_stages(ds, cfg)        # the same preparation, fits and effect engine as reprocess
+        fitted = fit_stages(ds, cfg, plaus)   # the same preparation, fits and effect engine as reprocess
         inp, stage, info = diagnosis_input(fitted.dataset, cfg, fitted.stage, fitted.geo.result)
         info["plausibility"] = plaus.to_dict()
         info["preparation"] = fitted.prep.report

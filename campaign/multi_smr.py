@@ -50,11 +50,13 @@ def screen_smrs(ds: Dataset, cfg: CampaignConfig) -> tuple[np.ndarray, list[dict
                       for e in tri.excluded]
 
 
-def multi_smr_report(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
-    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
-    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
+def multi_smr_report(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray,
+                     offsets0=None) -> dict:
+    """Multi-SMR identification (one robot, one flange offset per SMR, from ``offsets0``: the registered ones, by
+    default the configured ones) on the kept calib rows and its test figures per SMR; with three SMRs, the flange
+    orientation error on the test set (arc seconds)."""
     clouds = smr_clouds(ds)
-    offsets0 = cfg.tool.smrs_mm
+    offsets0 = cfg.tool.smrs_mm if offsets0 is None else offsets0
     if len(offsets0) < len(clouds):
         return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
                 f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}

@@ -27,12 +27,12 @@ from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_m
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas
+from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
 from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
@@ -118,10 +118,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
-    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
-    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
-    kin0 = nominal_kinematics(cfg)
+def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+    """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
+    measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
+    faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = weights_covariance(cfg, ds)[0][rows]
@@ -156,10 +156,10 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
-    ds, _ = check_dataset(ds, cfg)
+    ds, plaus = check_dataset(ds, cfg)
     ds = _prepare(ds, cfg)
     keep, _ = screen_smrs(ds, cfg)
-    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg).result
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,32 +169,34 @@ class Fitted:
     prep: object
     dataset: Dataset
     smr_excluded: list
+    kin0: object
     geo: GeometricFit
     stage: ElasticStage
 
 
-def fit_stages(ds: Dataset, cfg: CampaignConfig) -> Fitted:
-    """Preparation, SMR-triangle screen, geometric fit and elastic stage of a checked dataset: one sequence for
-    ``reprocess`` and ``diagnose``, so both take the same effects with the same values."""
+def fit_stages(ds: Dataset, cfg: CampaignConfig, plaus) -> Fitted:
+    """Preparation, SMR-triangle screen, geometric fit (from the registered start ``kin0`` of the plausibility
+    check ``plaus``) and elastic stage of a checked dataset: one sequence for ``reprocess`` and ``diagnose``, so
+    both take the same effects with the same values."""
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
     order = order_meta(ds)                                  # approach and moves from the full measurement order
     smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
     if not smr_keep.all():
         ds, order = ds.subset(smr_keep), subset(order, smr_keep)
         _check_dataset(ds, cfg)
-    kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
     stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
-    return Fitted(prep, ds, smr_excluded, geo, stage)
+    return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    fitted = fit_stages(ds, cfg)
+    fitted = fit_stages(ds, cfg, plaus)
     prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
-    kin0 = nominal_kinematics(cfg)
+    kin0 = fitted.kin0
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
@@ -223,7 +225,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+                    ("kinematic", result.kinematics)]
     if elastic is not None:
         stage_models.append(("elastic", model_el))
     stage_models.append(("compensated", model))
@@ -269,7 +272,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})

@@ -2,13 +2,14 @@
 section: the defaults): the same accepted effects, the same parameter values (1e-9 relative) and the same "after"
 RMS on the test rows as reprocess's elastic stage.
 
-20 simulated campaigns of robocal/truth.py (the failure classes of real campaigns and single effects) and any
-measured campaign of DATASETS. Adding a dataset is one line: ``Case(name, make)`` with ``make(tmp_path) ->
-(csv_path, config_path)``.
+20 simulated campaigns of robocal/truth.py (the failure classes of real campaigns and single effects) and the
+measured campaigns of DATASETS (the public UR5 campaign). Adding a dataset is one line: ``Case(name, make)`` with
+``make(tmp_path) -> (csv_path, config_path)``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -16,11 +17,12 @@ import pytest
 
 from campaign.config import load_config
 from campaign.diagnose import diagnose_dataset
-from campaign.interchange import read_csv
+from campaign.importers import import_target_dif
+from campaign.interchange import read_csv, write_csv
 from campaign.process import process
 from robocal.selfcheck import FORMS, trial_setting
 from robocal.truth import TruthProtocol, simulate, small_arm_nominal
-from tests.campaign.helpers import truth_csv
+from tests.campaign.helpers import ROOT, truth_csv
 
 SMALL = dict(n_calib=160, n_test=50, check_poses=6, check_repeats=4)
 
@@ -43,8 +45,18 @@ def _truth(kind: str, effects: tuple, seed: int) -> Case:
 CAMPAIGNS = [_truth(kind, FORMS[kind][0], 500 + 10 * i + s) for i, kind in enumerate(FORMS) for s in range(3)]
 CAMPAIGNS += [_truth("single", (e,), 600 + s) for s, e in enumerate(("joint_compliance", "backlash", "thermal_drift",
                                                                        "gear_cyclic", "axis_coupling"))]
-DATASETS: list[Case] = [
-    # measured campaigns, one line each, e.g. Case("ur5-public", lambda tmp: (CSV, CONFIG)) once vendored
+def _target_dif(grid: Path, test: Path, config: Path) -> Callable:
+    """A measured campaign in the target + dif layout (``campaign import target-dif``) with its config."""
+    def make(tmp_path):
+        write_csv(tmp_path / "data.csv", import_target_dif(grid, test))
+        return tmp_path / "data.csv", config
+    return make
+
+
+UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
+DATASETS: list[Case] = [       # measured campaigns, one line each
+    Case("ur5-public", _target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv",
+                                   UR5 / "3D_UR5_uncalibrated_random_cleaned.csv", ROOT / "configs" / "ur5.yaml")),
 ]
 
 
