@@ -177,13 +177,13 @@ def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
 
 
 def parts(choice: EffectChoice) -> list[tuple[str, EffectChoice]]:
-    """(label, the effect without that part) for every part the data may not need: one joint of a multi-joint
-    effect, one harmonic, a lag's memory term, a thermal zero drift, the quadratic term of a drift."""
+    """(label, the effect without that part) for every part the data may not need: one joint of backlash or a
+    read-back lag, one harmonic, a lag's memory term, a thermal zero drift, the quadratic term of a drift. The
+    joints of gravity compliance are not pruned: every loaded joint yields under its torque."""
     opts = dict(choice.options)
     out = []
     joints = tuple(opts.get("joints", ()))
-    if choice.name in ("joint_compliance", "payload_deflection", "backlash") and len(joints) > 1 \
-            and opts.get("form", "gravity") == "gravity":
+    if choice.name == "backlash" and len(joints) > 1:   # compliance: every loaded joint yields (no joint pruned)
         out += [(f"J{j}", choice.with_options(joints=tuple(x for x in joints if x != j))) for j in joints]
     if choice.name == "gear_cyclic" and len(opts.get("harmonics", ())) > 1:
         hs = tuple(opts["harmonics"])
