@@ -36,22 +36,9 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
             ev["chosen_among_equals"] = step.note
         if step.pruned:
             ev["pruned_parts"] = [{"part": lb, "t": t} for lb, t in step.pruned]
-        conf = rival_class(step)
-        conf += [{"effect": lb.split("(")[0], "label": lb, "share_explained": share,
-                  "experiment": separating_experiment(fe.choice.name, lb.split("(")[0], f"{fe.choice.label} {lb}"),
-                  "why": f"{fe.choice.label} explains {100 * share:.0f} % of its signature beyond the geometry"}
-                 for lb, (by, share) in sel.shadowed.items() if by == fe.choice.label
-                 and lb.split("(")[0] != fe.choice.name and all(lb != x["label"] for x in conf)]
-        basis = eff.basis(ctx["kin_geo"], ctx["q"], ctx["meta"])
-        signal = (basis.dq @ fe.values)[:, list(np.array(eff.joints) - 1)] if basis.dq is not None and eff.joints \
-            else visible(ctx["R"][k] @ fe.values, ctx["J_geo"])
-        c = confound(fe.choice.name, fe.choice.label, signal, ctx["q"], ctx["meta"].get("order"),
-                     dict(fe.choice.options).get("clock"), opt.confound_r)
+        conf, c = _class(fe, eff, k, step, sel, ctx, opt)
         if c is not None:
             ev["order_confound"] = c
-            conf.append({"effect": "registration_drift" if fe.choice.name != "registration_drift" else
-                         "pose effects of the joints that follow the order",
-                         "label": c["class"][-1], "experiment": c["experiment"]})
         if conf:
             ev["confusable_with"] = conf
             ev["class"] = " / ".join([fe.choice.label] + [x["label"] for x in conf])
@@ -69,6 +56,27 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
         before, after = stages[k][key], stages[k + 1][key]
         out.append(Finding(fe.choice.name, tuple(eff.joints), True, before, after, ev))
     return out
+
+
+def _class(fe, eff, k, step, sel, ctx, opt) -> tuple[list[dict], dict | None]:
+    """(the confusable class of an accepted effect: rivals that predicted as well, candidates it explains
+    entirely, a drift in measurement order it is confounded with; the confound itself or None)."""
+    conf = rival_class(step)
+    conf += [{"effect": lb.split("(")[0], "label": lb, "share_explained": share,
+              "experiment": separating_experiment(fe.choice.name, lb.split("(")[0], f"{fe.choice.label} {lb}"),
+              "why": f"{fe.choice.label} explains {100 * share:.0f} % of its signature beyond the geometry"}
+             for lb, (by, share) in sel.shadowed.items() if by == fe.choice.label
+             and lb.split("(")[0] != fe.choice.name and all(lb != x["label"] for x in conf)]
+    basis = eff.basis(ctx["kin_geo"], ctx["q"], ctx["meta"])
+    signal = (basis.dq @ fe.values)[:, list(np.array(eff.joints) - 1)] if basis.dq is not None and eff.joints \
+        else visible(ctx["R"][k] @ fe.values, ctx["J_geo"])
+    c = confound(fe.choice.name, fe.choice.label, signal, ctx["q"], ctx["meta"].get("order"),
+                 dict(fe.choice.options).get("clock"), opt.confound_r)
+    if c is not None:
+        conf.append({"effect": "registration_drift" if fe.choice.name != "registration_drift" else
+                     "pose effects of the joints that follow the order", "label": c["class"][-1],
+                     "experiment": c["experiment"]})
+    return conf, c
 
 
 def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n: int
