@@ -23,6 +23,7 @@ from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
 from .cell import measurement_covariance, nominal_kinematics
+from .csv_cells import restore
 from .config import CampaignConfig
 from .errors import DataError
 from .plan import PlanPoint
@@ -447,7 +448,8 @@ def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:
     """(target_id, reason) rows of OUT_DIR/rejected.csv (empty when the file is absent)."""
     try:
         with open(Path(out_dir) / "rejected.csv", newline="", encoding="utf-8") as fh:
-            return [(row[0], row[1] if len(row) > 1 else "") for row in list(csv.reader(fh))[1:] if row]
+            return [(restore(row[0]), restore(row[1]) if len(row) > 1 else "") for row in list(csv.reader(fh))[1:]
+                    if row]
     except OSError:
         return []
 

@@ -19,9 +19,19 @@ from pathlib import Path
 from campaign.cli.common import COMMANDS, EXIT_BAD_INPUT, _stderr
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line usage error (``campaign run: error: ... (see campaign run --help)``), exit 2."""
+
+    def error(self, message: str):
+        _fail(f"{self.prog}: error: {message} (see {self.prog} --help)", EXIT_BAD_INPUT)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
-    parser = argparse.ArgumentParser(
+    from campaign.cli import commands, diagnose, report  # noqa: F401  (registration order = help order)
+
+    parser = _Parser(
         prog="campaign",
         description="Industrial-robot accuracy campaigns with a laser tracker.",
     )
