@@ -130,7 +130,9 @@ def _guarded(run, argv, run_dir_hint, fail) -> int:
     try:
         try:
             with warnings.catch_warnings(record=True) as caught:
+                errors = [f for f in warnings.filters if f[0] == "error"]     # -W error::X (the test suite) stays
                 warnings.simplefilter("default")
+                warnings.filters[:0] = errors
                 code = run()
         finally:
             signals.disarm()                    # the exit code is being decided: a signal is recorded, not raised

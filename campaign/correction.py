@@ -48,9 +48,12 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
     the plan's fixed SMR orientation is used. Errors name the file, line and column."""
     src = str(path)
     try:
-        rows = list(csv.reader(open(path, newline="", encoding="utf-8-sig")))
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
     except OSError as exc:
         raise DataError(src, f"cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(src, f"not a readable CSV text file ({exc})") from None
     rows = [(i + 1, r) for i, r in enumerate(rows) if r and not r[0].lstrip().startswith("#")]
     if not rows:
         raise DataError(src, "empty file")
