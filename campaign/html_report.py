@@ -24,6 +24,8 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from markupsafe import Markup
 
 from .errors import DataError
+from drivers.redact import redact
+
 from .fsutil import atomic_write
 from .outputs import Claim, check_campaign_dir, check_dir, check_file
 from .records import CalibrationReport, RecordError, VerifyReport
@@ -187,5 +189,5 @@ def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = N
     for fs in figures.values():
         for f in fs:
             atomic_write(png_dir / f"{f.name}.png", f.png)
-    atomic_write(html, render_html(src, figures).encode())
+    atomic_write(html, redact(render_html(src, figures)).encode())
     return html

@@ -56,10 +56,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run_dir_hint(args: argparse.Namespace) -> Path | None:
-    """The run directory a crash report should go to, if the command names one."""
+    """The run directory a crash report should go to, if the command names one written by campaign (never a
+    directory of the user's: the report then goes to a temporary file)."""
+    from campaign.outputs import LOG_NAME, read_marker
+
     for name in ("resume", "run_dir", "out"):
         value = getattr(args, name, None)
-        if isinstance(value, Path) and value.is_dir():
+        if isinstance(value, Path) and value.is_dir() and (read_marker(value) or (value / LOG_NAME).exists()):
             return value
     return None
 
