@@ -189,9 +189,9 @@ def _short(exc: BaseException, limit: int = 160) -> str:
 
 def _unique_warnings(caught, limit: int = 3) -> list[str]:
     """Python warnings raised during a command as short one-line texts (no file/line/source dump)."""
-    seen: list[str] = []
     from .errors import DataWarning
 
+    seen: list[str] = []
     for w in caught:
         message = " ".join(str(w.message).split())
         text = message if issubclass(w.category, DataWarning) else f"{w.category.__name__}: {message}"

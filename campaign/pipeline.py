@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from drivers.base import SystemClock
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from .devices import open_cell
