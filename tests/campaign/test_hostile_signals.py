@@ -131,15 +131,16 @@ def test_sigterm_at_random_moments_exit_130_with_complete_or_absent_outputs(comm
     assert code == 0 and not err.strip(), err
     rng = np.random.default_rng([SEED, COMMANDS.index(command)])
     done, finished_first, failures = 0, 0, []
-    for k in range(n_signals + 10):
+    for k in range(3 * n_signals):
         if done == n_signals:
             break
         work = tmp_path / f"t{k:03d}"
         work.mkdir()
         delay = float(rng.uniform(0.0, duration))
-        code, err, _ = _trial(command, prepared, work, delay)
-        if code == 0 and not err.strip():            # the command ended before the signal: draw again
-            finished_first += 1
+        code, err, seconds = _trial(command, prepared, work, delay)
+        if code == 0 and not err.strip():            # the command ended before the signal (the machine is less
+            finished_first += 1                      # loaded than during the reference run): shorter, draw again
+            duration = min(duration, seconds)
             shutil.rmtree(work)
             continue
         done += 1
@@ -154,5 +155,5 @@ def test_sigterm_at_random_moments_exit_130_with_complete_or_absent_outputs(comm
         shutil.rmtree(work)
     print(f"{command}: {done} SIGTERMs within {duration:.2f} s of the handler, {finished_first} runs ended before "
           "their signal")
-    assert done == n_signals and finished_first <= 10
+    assert done == n_signals
     assert not failures, f"{len(failures)} of {done} failed:\n" + "\n".join(failures[:10])
