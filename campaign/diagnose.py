@@ -207,8 +207,9 @@ def render(console: Console, report: dict) -> None:
     floor = report["noise_floor_mm"]
     n = report["n"]
     ev = "test set" if report.get("evaluation") == "test" else "cross-validation (no test rows)"
-    console.print(Text.assemble(("Sim-to-real gap", "bold"), f" of {clean(str(report['source']))} ({n['calib']} "
-                                f"calib, {n['test']} test, {n['check']} check rows; config {clean(str(report['config']))})"))
+    console.print(Text.assemble(("Sim-to-real gap", "bold"), clean(
+        f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
+        f"{report['config']})")))
     console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)

@@ -31,8 +31,8 @@ unknown or repeated columns are errors.  Blank lines and lines starting with
 ``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
 when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
 Fields may be double-quoted but not span lines.  A text cell (``point_id``, ``nest_id``) that a spreadsheet would
-run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.csv_cells`).  Numbers are plain decimal
-(``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
+run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.csv_cells`).
+Numbers are plain decimal (``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
 
 Every input problem raises :class:`campaign.errors.DataError` with a single
 line naming the file and the line/column, e.g.

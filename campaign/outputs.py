@@ -25,7 +25,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .errors import DataError
-from .fsutil import fsync_dir, write_json
+from .fsutil import write_json
 
 MARKER = ".campaign-owner.json"
 FORMAT = "campaign-owner/1"
@@ -50,7 +50,6 @@ class Claim:
         if read_marker(self.path) != _marker_fields(self.kind, self.source):
             write_json(self.path / MARKER, {"format": FORMAT, "kind": self.kind, "source": self.source,
                                             "created_utc": datetime.now(timezone.utc).isoformat()})
-            fsync_dir(self.path)
         return self.path
 
 
@@ -121,7 +120,7 @@ def check_campaign_dir(path: str | Path, what: str) -> Path:
         raise DataError(str(path), f"not a directory ({what})")
     if read_marker(path) is None and not (path / LOG_NAME).exists():
         raise DataError(str(path), f"not a directory written by campaign (no {MARKER} or {LOG_NAME}): {what} does "
-                                   "not write into it; name the output file instead")
+                                   "not write into it; name the output file, or give --overwrite to write there anyway")
     return path
 
 

@@ -75,8 +75,8 @@ def _plan_csv(run_dir: Path) -> list:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
         n = sum(1 for h in rows[0] if h[:1] == "q" and h[1:].isdigit())
-        return [PlanPoint(restore(r[0]), restore(r[1]), tuple(float(v) for v in r[2:2 + n]), tuple(float(v) for v in r[2 + n:5 + n]))
-                for r in rows[1:]]
+        return [PlanPoint(restore(r[0]), restore(r[1]), tuple(float(v) for v in r[2:2 + n]),
+                          tuple(float(v) for v in r[2 + n:5 + n])) for r in rows[1:]]
     except (OSError, UnicodeDecodeError, IndexError, ValueError, csv.Error):
         raise RunLogError(str(path), "missing or unreadable plan.csv: not a resumable run directory") from None
 

@@ -167,7 +167,8 @@ def test_nothing_rejected_is_written_by_any_writer(tmp_path):
             assert r.target_id not in text, (path.name, r.target_id)
         for t in accepted:
             assert t.target_id in text
-    assert {r["target_id"] for r in csv.DictReader((tmp_path / "rejected.csv").read_text().splitlines())} == {"T03", "T05", "T08"}
+    rows = csv.DictReader((tmp_path / "rejected.csv").read_text().splitlines())
+    assert {r["target_id"] for r in rows} == {"T03", "T05", "T08"}
 
 
 @pytest.mark.parametrize("writer", ["rapid", "ur_json", "urscript", "csv"])
