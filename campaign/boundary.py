@@ -143,6 +143,8 @@ def _guarded(run, argv, run_dir_hint, fail) -> int:
         signals.disarm()
         if isinstance(exc, SystemExit):
             raise
+        if signals.received() is not None:      # the signal's exception, or what a library made of it
+            return fail(_signal_line(signals.received()), EXIT_INTERRUPTED)
         known = classify(exc)
         if known is not None:
             return fail(*known)

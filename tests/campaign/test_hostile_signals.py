@@ -32,6 +32,7 @@ pytestmark = [pytest.mark.system,
 SEED = 20261126
 COMMANDS = ("reprocess", "diagnose", "report")
 PNG_END = b"IEND\xaeB`\x82"
+LEAN = {"calibration.effects": "none", "calibration.residual": "none"}     # every phase, fewer CV fits: cheaper
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +41,7 @@ def prepared(tmp_path_factory):
     from campaign.cli import main
 
     root = tmp_path_factory.mktemp("signals")
-    cfg = small_config(root)
+    cfg = small_config(root, **LEAN)
     assert main(["run", str(cfg), "--out", str(root / "run")]) == 0
     return {"config": cfg, "run": root / "run"}
 
