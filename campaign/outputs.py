@@ -26,11 +26,11 @@ from pathlib import Path
 
 from .errors import DataError
 from .fsutil import write_json
+from .runlog import LOG_NAME
 
 MARKER = ".campaign-owner.json"
 FORMAT = "campaign-owner/1"
 RUN = "run"
-LOG_NAME = "log.jsonl"
 OVERWRITE_HINT = "give a new path, or --overwrite to write there anyway"
 
 
