@@ -29,7 +29,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
-    from campaign.cli import commands, diagnose, report  # noqa: F401  (registration order = help order)
+    from campaign.cli import commands, diagnose, importing, report  # noqa: F401  (registration order = help order)
 
     parser = _Parser(
         prog="campaign",
