@@ -19,7 +19,8 @@ Format (one row per measurement, rows in measurement order)::
   third only with the second).
 * optional ``t_s`` (s), ``temp_c`` (deg C), ``payload_kg`` (kg); when a
   column is present every row needs a value (leave the column out if unknown),
-  except nest rows (may be empty).  Optional ``env_temp_c`` (deg C),
+  except nest rows (may be empty). ``t_s`` is >= 0 and never decreases (rows
+  are in measurement order); ``payload_kg`` is >= 0.  Optional ``env_temp_c`` (deg C),
   ``env_pressure_hpa`` (hPa), ``env_humidity_pct`` (%): the tracker's weather
   station; an empty cell means not read (NaN).
 * There is no approach column: approach directions come from row order
@@ -29,8 +30,9 @@ Header names are matched case-insensitively and may come in any order;
 unknown or repeated columns are errors.  Blank lines and lines starting with
 ``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
 when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
-Fields may be double-quoted but not span lines.  Numbers are plain decimal
-(``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
+Fields may be double-quoted but not span lines.  A text cell (``point_id``, ``nest_id``) that a spreadsheet would
+run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.csv_cells`).
+Numbers are plain decimal (``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
 
 Every input problem raises :class:`campaign.errors.DataError` with a single
 line naming the file and the line/column, e.g.
@@ -53,6 +55,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .dataset import _ENV, _SCALARS, SETS, Dataset  # noqa: F401  (Dataset is re-exported)
+from .csv_cells import neutralise, restore
 from .fsutil import atomic_write
 
 from campaign.errors import DataError
@@ -309,7 +312,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     layout = _parse_header(lines[header_idx], src, header_idx + 1)
     table = _data_table(lines, header_idx + 1, layout, src)
     line_nos = table.line_nos
-    ids = table.column(layout.index("point_id"))
+    ids = [restore(v) for v in table.column(layout.index("point_id"))]
     sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
     nest_ids = _nest_ids(table, layout, sets, src)
     blanks = _blank_cells(table, layout, sets)
@@ -333,6 +336,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
     for j, name in enumerate(layout.scalars):
         extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
+    _check_scalars(extra, layout, line_nos, src)
     m = len(names)
     if layout.has_qc:
         extra["qc_deg"] = values[:, m : m + n]
@@ -340,6 +344,28 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[name] = values[:, m + n * layout.has_qc + j]
     return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
                    **extra)
+
+
+def _check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -> None:
+    """What the config would refuse or the physics cannot be: a negative ``payload_kg``; a negative ``t_s``, or
+    one that goes back in time (rows are in measurement order)."""
+    def where(name: str, i: int) -> dict:
+        return {"line": line_nos[i], "column": f"'{layout.shown[layout.index(name)]}'"}
+
+    payload = extra.get("payload_kg")
+    if payload is not None and (bad := np.flatnonzero(payload < 0)).size:   # NaN (nest rows) compares False
+        raise DataError(src, f"payload_kg {payload[bad[0]]:g} is negative (a payload is a mass >= 0 kg)",
+                        **where("payload_kg", bad[0]))
+    t = extra.get("t_s")
+    if t is None:
+        return
+    if (bad := np.flatnonzero(t < 0)).size:
+        raise DataError(src, f"t_s {t[bad[0]]:g} is negative (seconds since the start of the measurement)",
+                        **where("t_s", bad[0]))
+    if (back := np.flatnonzero(np.diff(t) < 0)).size:
+        i = back[0] + 1
+        raise DataError(src, f"t_s goes back in time ({t[i]:g} s after {t[i - 1]:g} s on line {line_nos[i - 1]}): "
+                             "rows must be in measurement order", **where("t_s", i))
 
 
 def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
@@ -353,7 +379,7 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
     if first is not None and "t_s" not in layout.names:
         raise DataError(src, "nest rows need a 't_s' column (drift is a function of time)",
                         line=table.line_nos[first], column="'t_s'")
-    col = table.column(layout.index("nest_id"))
+    col = [restore(v) for v in table.column(layout.index("nest_id"))]
     for i, (nid, s) in enumerate(zip(col, sets)):
         if (s == "nest") != bool(nid):
             what = ("nest row without a nest id" if s == "nest"
@@ -466,6 +492,6 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     nest_ids = dataset.nest_id if dataset.nest_id is not None else None
     cell = (lambda v: "" if v != v else repr(v)) if np.isnan(numbers).any() else repr  # noqa: E731
     for i, (pid, set_name, row) in enumerate(zip(dataset.point_id, dataset.set, numbers.tolist())):
-        tail = [nest_ids[i]] if nest_ids is not None else []
-        lines.append(",".join([pid, set_name, *map(cell, row), *tail]))
+        tail = [neutralise(nest_ids[i])] if nest_ids is not None else []
+        lines.append(",".join([neutralise(pid), set_name, *map(cell, row), *tail]))
     atomic_write(path, ("\n".join(lines) + "\n").encode("utf-8"))

@@ -11,6 +11,7 @@ Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated pos
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -31,7 +32,7 @@ from robocal.stats import error_stats
 from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
-from .errors import DataError
+from .errors import DataError, DataWarning
 from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
@@ -41,6 +42,7 @@ from .records import CalibrationReport
 from .report_points import cell_summary, point_table
 
 REPORT_FORMAT = "campaign-report/1"
+NO_TEST_ROWS = "no test rows: nothing is held out, so no figure is a held-out accuracy; give some rows set 'test'"
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,6 +214,9 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
+    if not test.any():
+        plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
+        warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
     kept_rows = geo.rows[geo.keep]
     qk, pk = q[kept_rows], p[kept_rows]
     cov_all, cov_source = weights_covariance(cfg, ds)

@@ -18,18 +18,21 @@ def _mm(v) -> str:
 
 
 def render_stages(console: Console, report: CalibrationReport) -> None:
-    """Seed 000 Table 3 rows on the held-out test set, with the noise floor."""
-    t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
-    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
-        t.add_column(col, justify="left" if col == "stage" else "right")
+    """Seed 000 Table 3 rows on the held-out test set, with the noise floor ("none" without test rows)."""
     floor = report.noise_floor_mm
-    for key, label in STAGE_LABELS:
-        if key not in report.stages:
-            continue
-        s = report.stages[key]["test"]
-        ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
-        t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
-    console.print(t)
+    if not report.n["test"]:
+        console.print("Position error on the held-out test set: none (no test rows)", style="yellow")
+    else:
+        t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
+        for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+            t.add_column(col, justify="left" if col == "stage" else "right")
+        for key, label in STAGE_LABELS:
+            if key not in report.stages:
+                continue
+            s = report.stages[key]["test"]
+            ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
+            t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
+        console.print(t)
     render_choices(console, report)
     cv = report.residual_cv
     if cv and report.residual_choice is None:
