@@ -22,7 +22,7 @@ from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, 
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
 from robocal.kinematics import ParamLayout, smr_tracker
-from robocal.layers import LayerChoice, choose_layer, fit_layer
+from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
 from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
 from robocal.screen import ScreenResult, screen
@@ -38,7 +38,7 @@ from .plausibility import check_dataset, check_deltas
 from .interchange import Dataset
 from .prepare import prepare
 from .records import CalibrationReport
-from .report_points import cell_summary, point_table
+from .report_points import PointTable, cell_summary, point_table, report_points_value
 
 REPORT_FORMAT = "campaign-report/1"
 
@@ -48,6 +48,7 @@ class Processed:
     report: CalibrationReport
     model: CalibratedModel
     calibration: CalibrationResult
+    points: PointTable | None = None       # the per-point rows (report.json's ``points``, or points.csv beyond a size)
 
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
@@ -233,7 +234,12 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
-    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest)
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    eval_rows = test if test.any() else cal
+    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    floor = repeats if repeats is not None else specs
+    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
+                  noise_floor_mm=floor)
     if c.residual == "auto":
         choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
     elif c.residual == "none":
@@ -257,9 +263,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     if isinstance(model.residual, GPRResidual):
         stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
                                                               np.array(ds.point_id)[test].tolist())
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
-    eval_rows = test if test.any() else cal
-    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    if choice.layer is not None:
+        stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
     calib_ids = np.array(ds.point_id)[geo.rows]
     excluded = [] if final_screen is None else [
         {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
@@ -273,7 +278,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
               "rejected": len(rejected_ids)},
         "stages": stages,
-        "noise_floor_mm": repeats if repeats is not None else specs,
+        "noise_floor_mm": floor,
         "noise_floor_source": "repeats" if repeats is not None else "specs",
         "noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
         "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
@@ -300,10 +305,11 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
     used[geo.rows], used[kept_rows] = 0.0, 1.0
     report["cell"] = cell_summary(cfg)
-    report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
-                                   {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
-                                    for name, m in stage_models}, used, ds.t_s)
-    return Processed(CalibrationReport(**report), model, result)
+    table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
+                        {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
+                         for name, m in stage_models}, used, ds.t_s)
+    report["points"] = report_points_value(table)
+    return Processed(CalibrationReport(**report), model, result, table)
 
 
 def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
@@ -384,9 +390,13 @@ def _parameters(result: CalibrationResult) -> list[dict]:
 
 
 def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
-    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
+    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units); DIR/points.csv first when
+    the report's per-point rows are too many to keep inline (``campaign.report_points``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    ref = processed.report.points
+    if isinstance(ref, dict) and "file" in ref:
+        processed.points.write_csv(out / ref["file"])
     write_json(out / "report.json", processed.report.to_dict())
     write_json(out / "model.json", processed.model.to_dict())
     return out / "report.json"
