@@ -24,8 +24,8 @@ from scipy.linalg import cho_solve, solve_triangular
 from .gp import fit_shared_hyperparameters, noise_floor_bound, se_ard, unpack
 
 EXACT_MAX_POINTS = 3000         # the exact GP up to this many training points, the inducing-point one above
-INDUCING_POINTS = 400           # m
-CHUNK_ROWS = 4096
+INDUCING_POINTS = 300           # m
+CHUNK_ROWS = 2048
 KZZ_JITTER = 1e-6               # relative to sigma_f^2: K_ZZ of random inputs is nearly singular
 
 
