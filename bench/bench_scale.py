@@ -3,12 +3,13 @@
 A seeded simulated campaign of the IRB 2600 cell (configs/irb2600.yaml: its simulated truth, tracker noise and
 robot repeatability) is written as an interchange CSV of N rows: random joint configurations in the middle of
 the joint ranges, 85 % calib / 15 % test, three check poses repeated every 50 points, 2 s per point. Each command
-runs as a subprocess (``python3 -m campaign ...`` from this checkout) on 2 threads at most; printed: wall time and
-the child's peak resident memory (``resource.getrusage(RUSAGE_CHILDREN)``: one child per measurement, each run
-in a fresh interpreter), the exit code, and the 200 000-row figures against the targets (reprocess <= 90 s and
-<= 2 GB; diagnose <= 120 s and <= 2 GB).
+runs as a subprocess (``python3 -m campaign ...`` from this checkout); printed: wall time, CPU time and the
+child's peak resident memory (``resource.getrusage(RUSAGE_CHILDREN)``: one child per measurement, each run in a
+fresh interpreter), the exit code, and the 200 000-row figures against the targets (reprocess <= 90 s and
+<= 2 GB; diagnose <= 120 s and <= 2 GB), with the machine's load average (wall times on a shared machine grow
+with it).
 
-    python bench/bench_scale.py [--rows 1000,20000,200000] [--no-diagnose] [--keep DIR]
+    python bench/bench_scale.py [--rows 1000,20000,200000] [--no-diagnose] [--keep DIR] [--threads 1]
 """
 from __future__ import annotations
 
@@ -60,19 +61,20 @@ def simulated_dataset(n_rows: int, seed: int = 0, config: Path = CONFIG) -> Data
                    source="bench_scale")
 
 
-def run_measured(args: list[str], env: dict) -> tuple[int, float, float, str]:
-    """(exit code, wall s, peak RSS MiB, last stderr line) of ``python3 -m campaign ARGS`` in a fresh child
-    (measured through a tiny wrapper so each child's peak is its own)."""
+def run_measured(args: list[str], env: dict) -> tuple[int, float, float, float, str]:
+    """(exit code, wall s, CPU s (user + system), peak RSS MiB, last stderr line) of ``python3 -m campaign ARGS``
+    in a fresh child (measured through a tiny wrapper so each child's figures are its own)."""
     wrapper = ("import resource, subprocess, sys\n"
                "rc = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL).returncode\n"
-               "print(rc, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")
+               "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+               "print(rc, u.ru_maxrss, u.ru_utime + u.ru_stime)\n")
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "campaign", *args], cwd=ROOT,
                          env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
-    rc, rss_kib = out.stdout.split()[-2:]
+    rc, rss_kib, cpu = out.stdout.split()[-3:]
     err = [ln for ln in out.stderr.splitlines() if ln.strip()]
-    return int(rc), wall, int(rss_kib) / 1024.0, err[-1] if err else ""
+    return int(rc), wall, float(cpu), int(rss_kib) / 1024.0, err[-1] if err else ""
 
 
 def main() -> None:
@@ -80,13 +82,17 @@ def main() -> None:
     ap.add_argument("--rows", default="1000,20000,200000", help="comma-separated row counts")
     ap.add_argument("--no-diagnose", action="store_true", help="time reprocess only")
     ap.add_argument("--keep", type=Path, help="keep the CSVs and outputs in this directory")
+    ap.add_argument("--threads", default="1", help="BLAS threads of the children (default 1: the batched small "
+                    "products gain nothing from threads, and a shared machine makes threaded BLAS spin)")
     a = ap.parse_args()
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", OMP_NUM_THREADS="2", MKL_NUM_THREADS="2",
+    env = dict(os.environ, OPENBLAS_NUM_THREADS=a.threads, OMP_NUM_THREADS=a.threads, MKL_NUM_THREADS=a.threads,
                PYTHONPATH=str(ROOT))
+    print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (wall times grow with the load; CPU "
+          f"times much less), BLAS threads {a.threads}")
     with tempfile.TemporaryDirectory() as tmp:
         base = a.keep or Path(tmp)
         base.mkdir(parents=True, exist_ok=True)
-        print(f"{'rows':>8} {'command':<10} {'exit':>4} {'wall s':>8} {'peak MiB':>9}  target")
+        print(f"{'rows':>8} {'command':<10} {'exit':>4} {'wall s':>8} {'CPU s':>8} {'peak MiB':>9}  target")
         for n in (int(s) for s in a.rows.split(",")):
             csv = base / f"scale_{n}.csv"
             write_csv(csv, simulated_dataset(n))
@@ -95,12 +101,12 @@ def main() -> None:
                 cmds.append(("diagnose", ["diagnose", str(csv), "--config", str(CONFIG),
                                           "--json", str(base / f"diag_{n}.json")]))
             for name, args in cmds:
-                rc, wall, mib, last = run_measured(args, env)
+                rc, wall, cpu, mib, last = run_measured(args, env)
                 t_s, t_mib = TARGETS[name]
                 verdict = "" if n != 200_000 else (
                     f"<= {t_s:.0f} s, <= {t_mib:.0f} MiB: "
                     + ("met" if rc == 0 and wall <= t_s and mib <= t_mib else "NOT met"))
-                print(f"{n:>8} {name:<10} {rc:>4} {wall:>8.1f} {mib:>9.0f}  {verdict}", flush=True)
+                print(f"{n:>8} {name:<10} {rc:>4} {wall:>8.1f} {cpu:>8.1f} {mib:>9.0f}  {verdict}", flush=True)
                 if rc != 0:
                     print(f"{'':>8} {name} stderr: {last}")
 

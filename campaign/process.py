@@ -84,13 +84,14 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
-    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point."""
+def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[dict, np.ndarray]:
+    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
+    report entry and the values (M,)."""
     if len(q) == 0:
-        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}
+        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}, np.zeros(0)
     s = np.linalg.norm(layer.predict_std(q, None, payload), axis=1)
     return {"max_mm": float(s.max()), "mean_mm": float(s.mean()), "rms_mm": float(np.sqrt(np.mean(s**2))),
-            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}
+            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}, s
 
 
 def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
@@ -260,16 +261,19 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     stages = {name: {"test": _stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
                      "calib": _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal))}
               for name, m in stage_models}
+    pred_std = None                                       # (N,) GPR predictive std of the test rows, else NaN
     if isinstance(model.residual, GPRResidual):
-        stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
-                                                              np.array(ds.point_id)[test].tolist())
+        pred_std = np.full(len(ds), np.nan)
+        stages["compensated"]["test_pred_std_mm"], pred_std[test] = _pred_std(
+            model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
     if choice.layer is not None:
         stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
     calib_ids = np.array(ds.point_id)[geo.rows]
     excluded = [] if final_screen is None else [
         {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
-    rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
-                          key=calib_ids.tolist().index)
+    in_fit = np.zeros(len(ds), bool)
+    in_fit[kept_rows] = True
+    rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
     listed = {e["point_id"] for e in excluded}
     excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
                  for pid in rejected_ids if pid not in listed]
@@ -307,8 +311,11 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     report["cell"] = cell_summary(cfg)
     table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
                         {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
-                         for name, m in stage_models}, used, ds.t_s)
+                         for name, m in stage_models}, used, ds.t_s, pred_std)
     report["points"] = report_points_value(table)
+    if "file" in report["points"] and pred_std is not None:     # per test point: in points.csv too
+        stages["compensated"]["test_pred_std_mm"]["per_point_mm"] = {"file": report["points"]["file"],
+                                                                     "column": "pred_std_mm"}
     return Processed(CalibrationReport(**report), model, result, table)
 
 

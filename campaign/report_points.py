@@ -8,7 +8,8 @@ and 1e-4 deg, which is far below any figure the report shows.
 Up to ``POINTS_INLINE_MAX`` rows the table is inline in report.json (lists, null for missing). Beyond, report.json
 holds a reference ``{"file": "points.csv", "format": "campaign-points/1", "n": N, "columns": [...]}`` and the
 rows go to ``points.csv`` beside it: one row per point, columns ``set, used, t_s, q1..qn, x, y, z`` then
-``<stage>_ex, <stage>_ey, <stage>_ez`` per stage, ``point_id`` last (CSV-quoted), ``nan`` for missing.
+``<stage>_ex, <stage>_ey, <stage>_ez`` per stage, ``pred_std_mm`` with a GPR layer (test rows; the report's
+``test_pred_std_mm.per_point_mm`` then points here), ``point_id`` last (CSV-quoted), ``nan`` for missing.
 :meth:`PointTable.of` reads either form.
 """
 from __future__ import annotations
@@ -39,6 +40,7 @@ class PointTable:
     err_base_mm: dict
     used: np.ndarray
     t_s: np.ndarray | None = None
+    pred_std_mm: np.ndarray | None = None     # (N,) GPR predictive std of test rows (side file only)
 
     def __len__(self) -> int:
         return len(self.point_id)
@@ -58,6 +60,9 @@ class PointTable:
         for stage, e in self.err_base_mm.items():
             names += [f"{stage}_ex", f"{stage}_ey", f"{stage}_ez"]
             blocks.append(np.round(e, 4))
+        if self.pred_std_mm is not None:
+            names.append("pred_std_mm")
+            blocks.append(np.round(self.pred_std_mm, 6)[:, None])
         return names, np.hstack(blocks)
 
     def reference(self) -> dict:
@@ -70,9 +75,11 @@ class PointTable:
         """points.csv (atomic): header, then one row per point (a formatted line per row: no per-value calls)."""
         names, values = self._columns()
         fmt = ",".join(["%.10g"] * values.shape[1])
+        ids = self.point_id
+        if any(c in "\x00".join(ids) for c in ',"\r\n'):              # quote only when some id needs it
+            ids = [_csv_text(pid) for pid in ids]
         lines = [",".join(["set", *names, "point_id"])]
-        lines += [f"{s},{fmt % tuple(row)},{_csv_text(pid)}"
-                  for s, row, pid in zip(self.set, values.tolist(), self.point_id)]
+        lines += [f"{s},{fmt % tuple(row)},{pid}" for s, row, pid in zip(self.set, values.tolist(), ids)]
         return atomic_write(path, ("\n".join(lines) + "\n").encode())
 
     @classmethod
@@ -97,7 +104,8 @@ class PointTable:
         err = {s: values[:, [at[f"{s}_ex"], at[f"{s}_ey"], at[f"{s}_ez"]]] for s in ref["stages"]}
         return cls(tuple(r[-1] for r in body), tuple(r[0] for r in body), values[:, at["q1"]:at["q1"] + nq],
                    values[:, [at["x"], at["y"], at["z"]]], err, values[:, at["used"]],
-                   values[:, at["t_s"]] if ref.get("t_s") else None)
+                   values[:, at["t_s"]] if ref.get("t_s") else None,
+                   values[:, at["pred_std_mm"]] if "pred_std_mm" in at else None)
 
     @classmethod
     def of(cls, points, directory: str | Path | None = None) -> "PointTable | None":
@@ -117,12 +125,12 @@ class PointTable:
 
 def point_table(point_ids, sets, q_deg: np.ndarray, p_tracker_mm: np.ndarray, T_tracker_base: np.ndarray,
                 predictions_tracker_mm: Mapping[str, Callable[[np.ndarray], np.ndarray]], used: np.ndarray,
-                t_s: np.ndarray | None = None) -> PointTable:
+                t_s: np.ndarray | None = None, pred_std_mm: np.ndarray | None = None) -> PointTable:
     """The per-point table (``report_points_value`` gives report.json's ``points``).
 
     ``predictions_tracker_mm[stage](rows)`` -> predicted SMR positions (len(rows), 3) mm in the tracker frame for
     row indices ``rows``; ``used`` (N,): 1 = the row is in the fit, 0 = an excluded calib row, NaN = not a calib
-    row."""
+    row; ``pred_std_mm`` (N,) the GPR predictive std of test rows (NaN elsewhere), kept in the side file."""
     q = np.asarray(q_deg, float)
     has_q = np.all(np.isfinite(q), axis=1)
     rows = np.flatnonzero(has_q)
@@ -135,7 +143,8 @@ def point_table(point_ids, sets, q_deg: np.ndarray, p_tracker_mm: np.ndarray, T_
         e[rows] = (p_tracker_mm[rows] - predict(rows)) @ R
         err[stage] = e
     return PointTable(tuple(point_ids), tuple(sets), q, p_base, err, np.asarray(used, float),
-                      None if t_s is None else np.asarray(t_s, float))
+                      None if t_s is None else np.asarray(t_s, float),
+                      None if pred_std_mm is None else np.asarray(pred_std_mm, float))
 
 
 def report_points_value(table: PointTable) -> dict:

@@ -30,7 +30,7 @@ def simulated_csv(cfg_path, path, n=240, seed=0):
 
 @pytest.mark.system
 def test_points_beyond_the_inline_size_go_to_points_csv_and_read_back_identically(tmp_path, monkeypatch):
-    cfg = small_config(tmp_path, "irb2600", **{"calibration.residual": "none", "calibration.effects": "none"})
+    cfg = small_config(tmp_path, "irb2600", **{"calibration.residual": "gpr", "calibration.effects": "none"})
     csv = simulated_csv(cfg, tmp_path / "data.csv")
     assert main(["reprocess", str(csv), "--config", str(cfg), "--out", str(tmp_path / "inline")]) == 0
     monkeypatch.setattr(rp, "POINTS_INLINE_MAX", 100)
@@ -47,6 +47,13 @@ def test_points_beyond_the_inline_size_go_to_points_csv_and_read_back_identicall
     assert list(b.err_base_mm) == list(a.err_base_mm)
     for stage in a.err_base_mm:
         np.testing.assert_allclose(b.err_base_mm[stage], a.err_base_mm[stage], atol=1e-12)
+    std_inline = inline["stages"]["compensated"]["test_pred_std_mm"]["per_point_mm"]
+    assert side["stages"]["compensated"]["test_pred_std_mm"]["per_point_mm"] == {"file": "points.csv",
+                                                                                  "column": "pred_std_mm"}
+    test = np.array(b.set) == "test"
+    assert len(std_inline) == test.sum() > 0 and a.pred_std_mm is None
+    np.testing.assert_allclose(b.pred_std_mm[test], [std_inline[i] for i in np.array(b.point_id)[test]], atol=1e-6)
+    assert np.isnan(b.pred_std_mm[~test]).all()
     figures = sorted(p.name for p in (tmp_path / "side" / "figures").glob("*.png"))
     assert figures and figures == sorted(p.name for p in (tmp_path / "inline" / "figures").glob("*.png"))
     assert (tmp_path / "side" / "report.html").read_text().count("<img") == \
