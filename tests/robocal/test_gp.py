@@ -10,12 +10,13 @@ from campaign.cli import main
 from campaign.interchange import read_csv, write_csv
 from campaign.process import load_model
 from robocal.effects import joint_compliance
-from robocal.gp import (GaussianProcess, GPRResidual, MultiOutputGP, RBFNetwork, fit_gpr_layer, gp_inputs,
+from robocal.gp import (GaussianProcess, GPRResidual, MultiOutputGP, fit_gpr_layer, gp_inputs,
                         neg_log_marginal_likelihood, se_ard)
 from robocal.identify import calibrate
 from robocal.kinematics import fk, smr_tracker
 from robocal.model import CalibratedModel
 from robocal.payload import DeflectionModel, HeavyPayloadCell, deflected_flange, irb4600, random_configurations
+from robocal.rbf import RBFNetwork
 from robocal.stats import error_stats
 from tests.campaign.helpers import small_config
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
