@@ -373,18 +373,6 @@ def _residual_cv_summary(choice: LayerChoice) -> dict | None:
             "t": cands[kind]["t"], "significant": cands[kind]["significant"]}
 
 
-def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
-    """The configured residual layer (IDW or GPR) fitted on calibration points of a geometric model, or None."""
-    c = cfg.calibration
-    keep = np.ones(len(q), bool) if weights is None else np.asarray(weights) > 0
-    if c.residual not in ("idw", "gpr"):
-        return None
-    model = CalibratedModel(kin)
-    layer = fit_layer(c.residual, model, q[keep], p[keep], None, None if payload is None else payload[keep],
-                      c.idw_power, c.idw_k_nearest)
-    return layer.with_payload(cfg.tool.payload_kg) if getattr(layer, "uses_payload", False) else layer
-
-
 def _parameters(result: CalibrationResult) -> list[dict]:
     """Parameter table with angles converted to degrees for people."""
     rows = []
