@@ -9,7 +9,7 @@ fresh interpreter), the exit code, and the 200 000-row figures against the targe
 <= 2 GB; diagnose <= 120 s and <= 2 GB), with the machine's load average (wall times on a shared machine grow
 with it).
 
-    python bench/bench_scale.py [--rows 1000,20000,200000] [--no-diagnose] [--keep DIR] [--threads 1]
+    python bench/bench_scale.py [--rows 1000,20000,200000] [--no-diagnose] [--keep DIR] [--threads N]
 """
 from __future__ import annotations
 
@@ -82,13 +82,15 @@ def main() -> None:
     ap.add_argument("--rows", default="1000,20000,200000", help="comma-separated row counts")
     ap.add_argument("--no-diagnose", action="store_true", help="time reprocess only")
     ap.add_argument("--keep", type=Path, help="keep the CSVs and outputs in this directory")
-    ap.add_argument("--threads", default="1", help="BLAS threads of the children (default 1: the batched small "
-                    "products gain nothing from threads, and a shared machine makes threaded BLAS spin)")
+    ap.add_argument("--threads", help="BLAS threads of the children (default: the campaign's own default, one "
+                    "thread, unless this environment sets OPENBLAS_NUM_THREADS / OMP_NUM_THREADS / MKL_NUM_THREADS)")
     a = ap.parse_args()
-    env = dict(os.environ, OPENBLAS_NUM_THREADS=a.threads, OMP_NUM_THREADS=a.threads, MKL_NUM_THREADS=a.threads,
-               PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    if a.threads:
+        env.update(OPENBLAS_NUM_THREADS=a.threads, OMP_NUM_THREADS=a.threads, MKL_NUM_THREADS=a.threads)
+    blas = {k: env[k] for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS") if k in env}
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (wall times grow with the load; CPU "
-          f"times much less), BLAS threads {a.threads}")
+          f"times much less), BLAS threads {blas or 'campaign default (1)'}")
     with tempfile.TemporaryDirectory() as tmp:
         base = a.keep or Path(tmp)
         base.mkdir(parents=True, exist_ok=True)
