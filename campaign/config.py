@@ -33,6 +33,7 @@ from campaign.yaml_limits import load_limited, read_limited
 from campaign.config_schema import *  # noqa: F401,F403  (the schema; re-exported)
 from campaign.config_schema import _NAME_RE, _ORTHONORMAL_TOL, _to_plain  # noqa: F401
 from campaign.config_reader import *  # noqa: F401,F403
+from campaign.config_plan import optimal_keys
 from campaign.config_reader import (_REQUIRED, _ListPath, _Reader, _check_integer, _check_number,  # noqa: F401
                                     _check_vector, _describe, _fmt, _freeze, _keys)
 
@@ -58,6 +59,7 @@ __all__ = [
     "NestsConfig",
     "OutputConfig",
     "PlanConfig",
+    "PoolConfig",
     "RobotConfig",
     "SimulationConfig",
     "TestSetConfig",
@@ -259,6 +261,8 @@ def _tracker(r: _Reader) -> TrackerConfig:
         uncertainty=_uncertainty(r.section("uncertainty", TrackerUncertainty)),
         measurement=_measurement(r.section("measurement", MeasurementConfig, required=False)),
         options=r.mapping("options", {}),
+        max_range_mm=None if r.data.get("max_range_mm") is None else r.number("max_range_mm", positive=True),
+        max_incidence_deg=r.number("max_incidence_deg", 30.0, positive=True, hi=90.0),
     )
 
 
@@ -303,8 +307,8 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         keep_out=_keep_out(r),
         envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
-        kind=r.choice("kind", ("grid", "iso9283"), "grid"),
         iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
+        **optimal_keys(r),
     )
 
 

@@ -30,7 +30,8 @@ from .runner import RunOutcome, Runner, closing_on_error, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
 from .tracker_quality import SmrPredictor
-from .traceability import device_identity, identification, identity_changes, run_logging
+from .plausibility import is_forced
+from .traceability import check_identity, device_identity, identification, identity_changes, run_logging
 
 if TYPE_CHECKING:
     from .process import Processed
@@ -76,6 +77,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         _safety(runner, cfg, kin, first_pass=resume is None)
         times = point_times_s(plan.points, cfg, kin)
         identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # a mismatch: exit 2, nothing moved
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
@@ -92,7 +94,13 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
                                                                                           record.p_tracker_mm),
                                                      advance(record))
-            outcome = runner.execute(todo, log)
+            if plan.blocks:                             # plan.stop: auto: block by block, refit after each
+                from .adaptive import AdaptivePasses
+                passes = AdaptivePasses(cfg, plan, run_dir, log, {p.point_id for p in plan.points} - {
+                    p.point_id for p in todo}, on_skip=advance.skip)
+                outcome = runner.execute_passes(passes, log)
+            else:
+                outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
     from .iso_run import finish, is_iso_plan
@@ -120,6 +128,10 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path, contents=None) -> Pr
     processed = process(dataset, cfg)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
+        from .adaptive import stop_summary
+        stop = stop_summary(contents, processed.report)
+        if stop is not None:
+            processed = replace(processed, report=replace(processed.report, stop=stop))
     write_outputs(processed, out_dir)
     write_report(out_dir)                       # report.html from report.json
     return processed
@@ -130,28 +142,34 @@ def verify(run_dir: Path, console: Console | None = None):
     in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
     from .correction import verify_run
     from .config import load_config
+    from .multi_smr import pose_estimator
     from .process import load_model
 
     cfg = load_config(run_dir / "config.yaml")
     model = load_model(run_dir / "model.json")
-    tests = [p for p in read_log(run_dir).records() if p.set == "test"]
+    records = read_log(run_dir).records()
+    tests = [p for p in records if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
+    estimator = pose_estimator(cfg, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
     out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
         cell = stack.enter_context(open_cell(cfg))
         robot, tracker = cell.robot, cell.tracker
+        identity = device_identity(robot, tracker)
+        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
-                                      "software_version": software_version()} | device_identity(robot, tracker))
+                                      "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
         logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
         _safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
-        runner.predict_p_tracker_mm = _smr_predictor(cfg, read_log(run_dir).records())
+        runner.predict_p_tracker_mm = _smr_predictor(cfg, records)
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir)
+        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir,
+                            estimator)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
 
@@ -214,6 +232,13 @@ class _progress:
             if self.eta is not None and record is not None:
                 self.eta.observe(record)
             self.bar.update(task, advance=1, eta=self.eta.text() if self.eta else "")
+
+        def skip(n: int) -> None:                       # points a stop rule dropped from the plan
+            self.total -= n
+            if self.eta is not None:
+                self.eta.skip(n)
+            self.bar.update(task, total=self.total, eta=self.eta.text() if self.eta else "")
+        advance.skip = skip
         return advance
 
     def __exit__(self, *exc):

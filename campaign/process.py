@@ -24,18 +24,18 @@ from robocal.identify import CalibrationResult, IdentificationError, calibrate, 
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
-from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
-from robocal.screen import ScreenResult, screen
+from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
 from .errors import DataError
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas
+from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
+from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
 from .records import CalibrationReport
 from .report_points import PointTable, cell_summary, point_table, report_points_value
@@ -100,12 +100,15 @@ def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     return prepare(ds, cfg).dataset
 
 
-def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray) -> dict:
+def effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray, approach: np.ndarray | None = None) -> dict:
     """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
-    signs of every joint (from the full measurement order), time since the start (s)."""
+    signs of every joint (from the full measurement order, or ``approach`` (N, n) computed before rows were set
+    aside), time since the start (s)."""
     n = len(rows)
     pay = ds.payload_kg[rows] if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
-    approach = ds.approach_sign()[rows] if len(ds) > 1 else None
+    if approach is None and len(ds) > 1:
+        approach = ds.approach_sign()
+    approach = None if approach is None else approach[rows]
     return {"payload_kg": np.asarray(pay, float), "approach": approach,
             "t_s": None if ds.t_s is None else np.asarray(ds.t_s[rows], float)}
 
@@ -130,10 +133,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
-    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
-    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
-    kin0 = nominal_kinematics(cfg)
+def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+    """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
+    measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
+    faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = weights_covariance(cfg, ds)[0][rows]
@@ -142,10 +145,8 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     keep = np.ones(len(rows), bool)
     sc = None
     if cfg.calibration.outliers == "local":
-        sigma = None if ds.sigma_mm is None else ds.sigma_mm[rows]
-        groups = repeat_groups(ds.q_deg[rows])
         for _ in range(4):
-            sc = screen(q, p, p - smr_tracker(result.kinematics, q), sigma, groups)
+            sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
             if np.array_equal(new_keep, keep):
                 break
@@ -159,24 +160,39 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     return GeometricFit(result, sc, rows)
 
 
+def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResult:
+    """The measurement-fault screen of the calib rows ``rows`` with residuals r_mm (nominal levers and reach)."""
+    q = np.radians(ds.q_deg[rows])
+    return screen(q, ds.p_tracker_mm[rows], r_mm, joint_levers_mm(kin0, q), NEAR_FRACTION * reach_mm(kin0),
+                  None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
+
+
 def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
-    ds, _ = check_dataset(ds, cfg)
-    return _geometric(_prepare(ds, cfg), cfg).result
+    ds, plaus = check_dataset(ds, cfg)
+    ds = _prepare(ds, cfg)
+    keep, _ = screen_smrs(ds, cfg)
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
 
 
 def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
     """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
+    kin = geo.result.kinematics
+    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
+    return effect_choices(cfg, kin, cols, q, p, cov, meta)
+
+
+def effect_choices(cfg: CampaignConfig, kin, cols, q, p, cov, meta):
+    """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
+    ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``."""
     spec = cfg.calibration.effects
     if spec == "none":
         return [], None
     if spec != "auto":
         return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                            for k, v in s.params.items())) for s in spec], None
-    kin = geo.result.kinematics
-    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
     sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
     return list(sel.taken), sel
 
@@ -186,8 +202,13 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
     prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
-    kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
+    approach = ds.approach_sign() if len(ds) > 1 else None      # from the full measurement order
+    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    if not smr_keep.all():
+        ds, approach = ds.subset(smr_keep), None if approach is None else approach[smr_keep]
+        _check_dataset(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
@@ -197,7 +218,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     qk, pk = q[kept_rows], p[kept_rows]
     cov_all, cov_source = weights_covariance(cfg, ds)
     covk = cov_all[kept_rows]
-    meta_all = _effect_meta(ds, cfg, np.arange(len(ds)))
+    meta_all = effect_meta(ds, cfg, np.arange(len(ds)), approach)
     sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
     meta_k = sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)
@@ -220,8 +241,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
             # screen again against the model with its effects: structure the geometry alone could not fit is no
             # reason to exclude a point (and a fault hidden by that structure shows now)
             rc = geo.rows
-            final_screen = screen(q[rc], p[rc], p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)),
-                                  None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
+            final_screen = _screen(ds, kin0, rc, p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)))
             robust_rejected = ~geo.keep
             robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
             new_keep = final_screen.keep & ~robust_rejected
@@ -254,7 +274,8 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+                    ("kinematic", result.kinematics)]
     if elastic is not None:
         stage_models.append(("elastic", model_el))
     stage_models.append(("compensated", model))
@@ -269,13 +290,13 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     if choice.layer is not None:
         stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
     calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = [] if final_screen is None else [
-        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
+    excluded = smr_excluded + ([] if final_screen is None else [
+        {"point_id": str(calib_ids[e.index]), "set": "calib", "reason": e.reason} for e in final_screen.excluded])
     in_fit = np.zeros(len(ds), bool)
     in_fit[kept_rows] = True
     rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
     listed = {e["point_id"] for e in excluded}
-    excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+    excluded += [{"point_id": pid, "set": "calib", "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
                  for pid in rejected_ids if pid not in listed]
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
@@ -302,7 +323,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
@@ -317,35 +338,6 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         stages["compensated"]["test_pred_std_mm"]["per_point_mm"] = {"file": report["points"]["file"],
                                                                      "column": "pred_std_mm"}
     return Processed(CalibrationReport(**report), model, result, table)
-
-
-def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
-    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
-    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
-    clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
-    offsets0 = cfg.tool.smrs_mm
-    if len(offsets0) < len(clouds):
-        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
-                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
-    P = np.stack(clouds)
-    q = np.radians(ds.q_deg)
-    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
-    try:
-        res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
-                                  calibration_options(cfg))
-    except (IdentificationError, np.linalg.LinAlgError) as exc:
-        raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
-    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
-           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
-           "test": {}}
-    if test.any():
-        pred = res.predict_tracker(q[test])
-        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
-        if len(clouds) == 3:
-            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
-            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
-                                               "max": float(a.max()), "n": int(len(a))}
-    return out
 
 
 def _effects_report(selection, elastic) -> dict:

@@ -289,7 +289,7 @@ class _ReportMapping(Mapping):
         return len(self.to_dict())
 
 
-_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version")
+_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
@@ -300,8 +300,10 @@ class CalibrationReport(_ReportMapping):
     ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test rows (mm);
     ``noise_floor_mm`` with its source ("repeats" or "specs") and both candidates; the identified ``parameters``
     and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm); the method and effect choices; optional
-    ``multi_smr``; ``cell`` summary and per-point ``points`` table (HTML figures); the hardware ``identification``
-    of the run log (robot/tracker identity, driver and software versions) when processed from a log.
+    ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
+    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (HTML figures); the
+    hardware ``identification`` of the run log (robot/tracker identity, driver and software versions) when processed
+    from a log.
     """
 
     format: str
@@ -331,6 +333,7 @@ class CalibrationReport(_ReportMapping):
     residual_cv: dict | None
     preparation: dict | None
     multi_smr: dict | None = None
+    stop: dict | None = None
     cell: Any = None
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
@@ -340,6 +343,8 @@ class CalibrationReport(_ReportMapping):
         out = {name: getattr(self, name) for name in _REPORT_KEYS}
         if self.multi_smr is not None:
             out["multi_smr"] = self.multi_smr
+        if self.stop is not None:
+            out["stop"] = self.stop
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
         return out
@@ -357,8 +362,8 @@ class CalibrationReport(_ReportMapping):
                             (_num, "noise_floor_mm"), (_get, "T_tracker_base")):
             check(data, name)
         args = {name: _get(data, name, optional=True) for name in _REPORT_KEYS}
-        return cls(**args, multi_smr=_obj(data, "multi_smr", True), cell=data.get("cell"),
-                   points=data.get("points"),
+        return cls(**args, multi_smr=_obj(data, "multi_smr", True), stop=_obj(data, "stop", True),
+                   cell=data.get("cell"), points=data.get("points"),
                    identification=tuple((k, data[k]) for k in _IDENTIFICATION if k in data))
 
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.linalg.lapack import dpotri
 from scipy.optimize import minimize
 
 from .frames import transform_points
@@ -28,14 +29,36 @@ from .kinematics import Kinematics, fk
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 JITTER = 1e-10            # added to the diagonal, relative to var(y), for a safe Cholesky
+NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are exactly 0 (se_ard)
 
 
 # ---------------------------------------------------------------- kernel and likelihood
 def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -> np.ndarray:
-    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d)."""
+    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d).
+
+    Entries below 1e-50 sigma_f^2 are exactly 0: far below the rounding of any sum they enter, and kept they turn
+    into subnormal numbers inside the Cholesky factor and its inverse at short length scales (slow arithmetic in
+    the hyperparameter search)."""
     A, B = Xa / length, Xb / length
-    d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :] - 2.0 * A @ B.T
-    return sigma_f**2 * np.exp(-0.5 * np.maximum(d2, 0.0))
+    d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :]
+    d2 -= 2.0 * A @ B.T                                   # in place from here: one (Na, Nb) array, no temporaries
+    np.maximum(d2, 0.0, out=d2)
+    d2 *= -0.5
+    np.putmask(d2, d2 < NEGLIGIBLE_LOG, -np.inf)
+    np.exp(d2, out=d2)
+    d2 *= sigma_f**2
+    return d2
+
+
+def cholesky_inverse(c: tuple[np.ndarray, bool]) -> np.ndarray:
+    """H^-1 (m, m) from the lower Cholesky factor ``c`` of ``cho_factor(H, lower=True)`` (LAPACK potri: a third
+    of the work of solving against the identity)."""
+    inv, info = dpotri(c[0], lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"potri failed ({info})")
+    upper = np.triu_indices(len(inv), 1)
+    inv[upper] = inv.T[upper]                             # mirror the lower triangle potri wrote
+    return inv
 
 
 def unpack(log_theta: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -66,7 +89,7 @@ def neg_log_marginal_likelihood(log_theta: np.ndarray, X: np.ndarray, y: np.ndar
     L = 0.5 * y @ alpha + np.sum(np.log(np.diag(c[0]))) + 0.5 * m * LOG_2PI
     if not grad:
         return float(L)
-    W = np.outer(alpha, alpha) - cho_solve(c, np.eye(m), check_finite=False)
+    W = np.outer(alpha, alpha) - cholesky_inverse(c)
     M = W * K
     r = M.sum(axis=1)
     quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)       # = 1/2 sum_ab M_ab (x_ai - x_bi)^2
@@ -84,20 +107,26 @@ def nlml_shared(log_theta: np.ndarray, X: np.ndarray, Y: np.ndarray, jitter: flo
     sf, sn, lam = unpack(log_theta)
     m, k = Y.shape
     K = se_ard(X, X, lam, sf)
-    H = K + (sn**2 + jitter) * np.eye(m)
+    H = K.copy()
+    H.flat[::m + 1] += sn**2 + jitter
     try:
-        c = cho_factor(H, lower=True, check_finite=False)
+        c = cho_factor(H, lower=True, overwrite_a=True, check_finite=False)
     except np.linalg.LinAlgError:
         return np.inf, np.zeros_like(log_theta)
     A = cho_solve(c, Y, check_finite=False)
     L = 0.5 * np.sum(Y * A) + k * np.sum(np.log(np.diag(c[0]))) + 0.5 * m * k * LOG_2PI
-    W = A @ A.T - k * cho_solve(c, np.eye(m), check_finite=False)
-    M = W * K
+    Hinv = cholesky_inverse(c)
+    Hinv *= k
+    W = A @ A.T
+    W -= Hinv
+    trace_W = np.trace(W)
+    M = W
+    M *= K                                                # in place: W is not needed after its trace
     r = M.sum(axis=1)
     quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)
     g = np.empty(len(log_theta))
     g[0] = -np.sum(M)
-    g[1] = -sn**2 * np.trace(W)
+    g[1] = -sn**2 * trace_W
     g[2:] = -quad / lam**2
     return float(L), g
 
@@ -165,9 +194,9 @@ class GaussianProcess:
         put("_alpha", cho_solve((L, True), self.y - self.y_mean, check_finite=False))
 
     @classmethod
-    def from_factor(cls, X, y, sigma_f, sigma_n, length, y_mean, x_centre, chol) -> "GaussianProcess":
+    def from_factor(cls, X, y, sigma_f, sigma_n, length, y_mean, x_centre, chol, alpha=None) -> "GaussianProcess":
         """A GP whose Cholesky factor of K + (sigma_n^2 + jitter) I is already known (shared by outputs that differ
-        only by scale): no O(m^3) work here."""
+        only by scale), and optionally its alpha = H^-1 (y - y_mean): no O(m^3) work here."""
         gp = object.__new__(cls)
         put = lambda k, v: object.__setattr__(gp, k, v)  # noqa: E731
         put("X", np.atleast_2d(np.asarray(X, float)))
@@ -178,7 +207,8 @@ class GaussianProcess:
         put("y_mean", float(y_mean))
         put("x_centre", np.asarray(x_centre, float))
         put("_chol", chol)
-        put("_alpha", cho_solve((chol, True), gp.y - gp.y_mean, check_finite=False))
+        put("_alpha", cho_solve((chol, True), gp.y - gp.y_mean, check_finite=False) if alpha is None
+            else np.asarray(alpha, float))
         return gp
 
     def _jitter(self) -> float:
@@ -304,9 +334,13 @@ class MultiOutputGP:
         sf, sn, lam = unpack(t)
         centre = X.mean(axis=0)
         Xc = X - centre
-        L0 = np.linalg.cholesky(se_ard(Xc, Xc, lam, sf) + (sn**2 + JITTER) * np.eye(len(X)))   # standardised units
+        H0 = se_ard(Xc, Xc, lam, sf)                                  # standardised units
+        H0.flat[::len(X) + 1] += sn**2 + JITTER                        # in place: no (m, m) identity
+        L0 = np.linalg.cholesky(H0)
+        A0 = cho_solve((L0.T, False), Y - mu, check_finite=False)      # all outputs at once; L0.T is Fortran-ordered
         return cls(tuple(GaussianProcess.from_factor(X, Y[:, j], sf * sd[j], sn * sd[j], lam, float(mu[j]), centre,
-                                                     sd[j] * L0) for j in range(Y.shape[1])), noise_floor_mm)
+                                                     sd[j] * L0, A0[:, j] / sd[j] ** 2) for j in range(Y.shape[1])),
+                   noise_floor_mm)
 
     @property
     def shared_log_theta(self) -> np.ndarray:
@@ -336,8 +370,14 @@ class MultiOutputGP:
         return np.stack([g.kfold_errors(fold) for g in self.models], axis=1)
 
     def predict(self, Xs: np.ndarray) -> np.ndarray:
-        """Predictive means (N, k)."""
-        return np.stack([g.predict(Xs) for g in self.models], axis=1)
+        """Predictive means (N, k); one kernel matrix for all outputs when they share inputs and length scales
+        (``fit_subset``: their kernels differ by the factor sigma_f^2 only)."""
+        g0 = self.models[0]
+        if len(self.models) == 1 or not all(_same_inputs(g0, g) for g in self.models[1:]):
+            return np.stack([g.predict(Xs) for g in self.models], axis=1)
+        Xs = np.atleast_2d(np.asarray(Xs, float)) - g0.x_centre
+        K0 = se_ard(Xs, g0.X - g0.x_centre, g0.length, 1.0)
+        return K0 @ np.stack([g.sigma_f**2 * g._alpha for g in self.models], axis=1) + [g.y_mean for g in self.models]
 
     def predict_std(self, Xs: np.ndarray, include_noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mean (N, k), predictive standard deviation (N, k))."""
@@ -361,6 +401,12 @@ class MultiOutputGP:
     def from_dict(cls, d: dict) -> "MultiOutputGP":
         floor = d.get("noise_floor_mm")
         return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]), None if floor is None else float(floor))
+
+
+def _same_inputs(a: GaussianProcess, b: GaussianProcess) -> bool:
+    """Same training inputs, centre and length scales (then the kernels differ by sigma_f^2 only)."""
+    return ((a.X is b.X or np.array_equal(a.X, b.X)) and np.array_equal(a.x_centre, b.x_centre)
+            and np.array_equal(a.length, b.length))
 
 
 def gp_inputs(q_rad: np.ndarray, payload_kg=None) -> np.ndarray:

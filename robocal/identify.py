@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .lm import levenberg_marquardt
-from .frames import fit_rigid
-from .kinematics import (Kinematics, ParamLayout, apply_update, identification_jacobian_t, parameter_difference,
+from .frames import fit_rigid, make_T, rotvec_to_matrix, skew
+from .kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian_t, parameter_difference,
                          smr_base, smr_tracker)
 
 
@@ -90,6 +90,88 @@ def register(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weigh
     if len(p_nom) < 3 or np.linalg.matrix_rank(p_nom - p_nom.mean(0), tol=1.0) < 2:
         raise IdentificationError("registration needs at least 3 non-collinear points")
     return kin.with_(T_tracker_base=fit_rigid(p_nom, p_tracker_mm, weights))
+
+
+TOOL_DIRECTION_TOL = 0.01      # an SMR-offset direction is registered when the poses' orientations turn it by
+                               # more than ~0.6 deg RMS (its residual then exceeds 1 % of the offset error)
+HUBER_C = 2.5                  # robust registration: points beyond 2.5 x the median residual are down-weighted
+
+
+@dataclass(frozen=True, eq=False)
+class ToolRegistration:
+    """Base frame and SMR offsets registered together on a fixed (nominal) geometry.
+
+    ``T_tracker_base`` (4, 4) mm; ``p_flange_smr_mm`` (k, 3) mm, one row per SMR; ``determined`` how many of the
+    3k offset directions the pose set determines (the others keep their start values: with one SMR orientation
+    an offset cannot be told from a base translation); ``weights`` (N,) the final robust point weights."""
+    T_tracker_base: np.ndarray
+    p_flange_smr_mm: np.ndarray
+    determined: int
+    weights: np.ndarray
+
+
+def _registered_points(R_flange, t_flange, offsets, R, t):
+    """(k, N, 3): SMR centres in the tracker frame for offsets (k, 3), flange poses (N, 3, 3) / (N, 3)."""
+    return (np.einsum("nij,kj->kni", R_flange, offsets) + t_flange) @ R.T + t
+
+
+def register_tool(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, p_flange_smr_mm=None,
+                  max_iter: int = 30) -> ToolRegistration:
+    """Register T_tracker_base and the SMR offsets together on the geometry of ``kin``: a small robust
+    (Huber) Gauss-Newton fit of 6 + 3k parameters from the closed-form registration at the start offsets.
+
+    ``p_tracker_mm`` (N, 3) for one SMR or (k, N, 3) for k SMRs; ``p_flange_smr_mm`` (3,) or (k, 3) start
+    offsets (default ``kin.p_flange_smr_mm``). Offset directions the poses' orientations do not turn by more
+    than ``TOOL_DIRECTION_TOL`` (rad RMS) keep their start values."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    P = np.asarray(p_tracker_mm, float)
+    P = P[None] if P.ndim == 2 else P
+    k, N = P.shape[0], P.shape[1]
+    offs = np.array(kin.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm, float).reshape(k, 3)
+    T_flange = fk(kin, q)
+    Rf, tf = T_flange[:, :3, :3], T_flange[:, :3, 3]
+    a = np.einsum("nij,kj->kni", Rf, offs) + tf
+    if N < 3 or np.linalg.matrix_rank(a[0] - a[0].mean(0), tol=1.0) < 2:
+        raise IdentificationError("registration needs at least 3 non-collinear points")
+    T = fit_rigid(a.reshape(-1, 3), P.reshape(-1, 3))
+    R, t = T[:3, :3], T[:3, 3]
+    w = np.ones(N)
+    basis = None
+    for _ in range(max_iter):
+        pred = _registered_points(Rf, tf, offs, R, t)
+        r = P - pred                                                         # (k, N, 3)
+        J = np.zeros((k, N, 3, 6 + 3 * k))
+        J[..., :3] = -skew(pred - t)
+        J[..., 3:6] = np.eye(3)
+        for s in range(k):
+            J[s, :, :, 6 + 3 * s:9 + 3 * s] = R @ Rf
+        sw = np.sqrt(np.broadcast_to(w[None, :, None], r.shape)).reshape(-1)
+        A, b = J.reshape(-1, 6 + 3 * k) * sw[:, None], r.reshape(-1) * sw
+        if basis is None:                                                    # fixed at the start offsets
+            basis = _determined_tool_directions(A, np.sqrt(np.sum(w)))
+        A = np.column_stack([A[:, :6], A[:, 6:] @ basis])
+        D = np.maximum(np.linalg.norm(A, axis=0), 1e-12)
+        x = np.linalg.lstsq(A / D, b, rcond=None)[0] / D
+        R, t = rotvec_to_matrix(x[:3]) @ R, t + x[3:6]
+        offs = offs + (basis @ x[6:]).reshape(k, 3)
+        e = np.linalg.norm(P - _registered_points(Rf, tf, offs, R, t), axis=2).max(axis=0)     # (N,)
+        scale = max(float(np.median(e)), 1e-9)
+        w_new = np.minimum(1.0, HUBER_C * scale / np.maximum(e, 1e-300))
+        done = np.max(np.abs(x[3:])) < 1e-7 and np.max(np.abs(x[:3])) < 1e-10 and np.max(np.abs(w_new - w)) < 1e-4
+        w = w_new
+        if done:
+            break
+    return ToolRegistration(make_T(R, t), offs, int(basis.shape[1]), w)
+
+
+def _determined_tool_directions(A: np.ndarray, tool_norm: float) -> np.ndarray:
+    """(3k, m) orthonormal offset directions whose effect on the points is not a rigid motion: the SVD of the
+    offset columns of A (M, 6 + 3k) projected off the registration columns, kept above TOOL_DIRECTION_TOL."""
+    reg = A[:, :6] / np.maximum(np.linalg.norm(A[:, :6], axis=0), 1e-12)
+    Q = np.linalg.qr(reg)[0]
+    tool = A[:, 6:] - Q @ (Q.T @ A[:, 6:])
+    _, s, Vt = np.linalg.svd(tool, full_matrices=False)
+    return Vt[s / tool_norm > TOOL_DIRECTION_TOL].T
 
 
 # ---------------------------------------------------------------- weighting

@@ -7,7 +7,7 @@ lives in :mod:`campaign.report`.
 """
 from __future__ import annotations
 
-from campaign.cli import commands, diagnose, report  # noqa: F401  (registration order = help order)
+from campaign.cli import commands, diagnose, importing, report  # noqa: F401  (registration order = help order)
 from campaign.cli.common import (COMMANDS, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, Command,
                                  command)
 from campaign.cli.entry import build_parser, main

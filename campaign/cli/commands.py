@@ -1,4 +1,4 @@
-"""``campaign validate|run|plan|reprocess|correct|verify``: the campaign's own subcommands.
+"""``campaign validate|run|plan|reprocess|select|correct|verify``: the campaign's own subcommands.
 
 Each registers itself with :func:`campaign.cli.common.command`; each handler receives the parsed
 ``argparse.Namespace`` and returns the exit code.
@@ -45,7 +45,7 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
 def cmd_run(args: argparse.Namespace) -> int:
     from campaign.pipeline import run_campaign
-    from campaign.report import render_parameters, render_stages
+    from campaign.report import render_parameters, render_stages, render_stop
 
     cfg = load_config(args.config)
     out = _stdout()
@@ -63,6 +63,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
+    render_stop(out, result.processed.report)
     print_plausibility(out, result.processed.report.get("plausibility"))
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
@@ -82,8 +83,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.report import render_plan
 
     cfg = load_config(args.config)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, nominal_kinematics(cfg)))
+    kin = nominal_kinematics(cfg)
+    plan = build_plan(cfg, kin)
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, kin))
+    if cfg.plan.kind != "iso9283" and plan.count("calib"):
+        from campaign.plan_optimal import plan_forecast
+        from campaign.report import render_forecast
+        render_forecast(_stdout(), plan_forecast(cfg, kin, plan), plan.blocks)
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -99,7 +105,7 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
 def cmd_reprocess(args: argparse.Namespace) -> int:
     from campaign.pipeline import reprocess
-    from campaign.report import render_parameters, render_stages
+    from campaign.report import render_parameters, render_stages, render_stop
 
     cfg = load_config(args.config)
     if not args.source.exists():
@@ -109,8 +115,37 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
+    render_stop(out, processed.report)
     print_plausibility(out, processed.report.get("plausibility"))
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
+    return EXIT_OK
+
+
+def _select_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", metavar="DATA.csv", type=Path, help="an interchange CSV of a measured campaign")
+    parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise)")
+    parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
+    parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
+
+
+@command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
+         _select_arguments)
+def cmd_select(args: argparse.Namespace) -> int:
+    from campaign.interchange import read_csv, write_csv
+    from campaign.select import select_rows
+
+    cfg = load_config(args.config)
+    if args.points < 1:
+        raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
+    if args.out.resolve() == args.data.resolve():
+        raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
+    ds = read_csv(args.data)
+    keep = select_rows(ds, cfg, args.points)
+    write_csv(args.out, ds.subset(keep))
+    n_cal = int(ds.mask("calib").sum())
+    _stdout().print(f"selected {args.points} of {n_cal} calibration rows by the optimal-plan criterion (D-optimal, "
+                    f"joints spread), kept the {int((~ds.mask('calib')).sum())} other rows; wrote {args.out}",
+                    markup=False)
     return EXIT_OK
 
 
@@ -169,6 +204,7 @@ def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
 
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="a finished run (with model.json)")
+    _force_argument(parser)
 
 
 @command("verify", "measure the run's test points after correction (closed loop) and report before/after",
@@ -177,7 +213,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.pipeline import verify
     from campaign.report import render_verify
 
-    result = verify(args.run_dir, _stdout())
+    with forced(args.force):
+        result = verify(args.run_dir, _stdout())
     render_verify(_stdout(), result.report)
     _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
@@ -189,4 +226,5 @@ def cmd_verify(args: argparse.Namespace) -> int:
 def _force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
-                             "implausible deltas); the report says they were overridden")
+                             "implausible deltas, a controller or tracker reporting another model than the "
+                             "config's); the report says they were overridden")
