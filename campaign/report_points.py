@@ -118,8 +118,11 @@ class PointTable:
                 raise DataError(POINTS_FILE, "the report's per-point rows are in a side file: give its directory")
             return cls.read_csv(Path(directory) / Path(points["file"]).name, points)
         arr = lambda rows: np.array(rows, dtype=float) if len(rows) else np.zeros((0, 3))  # noqa: E731 (None -> nan)
+        n = len(points["point_id"])
+        used = points.get("used")                                   # absent from reports of older versions
         return cls(tuple(points["point_id"]), tuple(points["set"]), arr(points["q_deg"]), arr(points["p_base_mm"]),
-                   {k: arr(v) for k, v in points["err_base_mm"].items()}, np.array(points["used"], dtype=float),
+                   {k: arr(v) for k, v in points["err_base_mm"].items()},
+                   np.full(n, np.nan) if used is None else np.array(used, dtype=float),
                    None if points.get("t_s") is None else np.array(points["t_s"], dtype=float))
 
 
