@@ -88,13 +88,18 @@ class PointTable:
         cols = list(ref["columns"])
         try:
             with open(path, newline="") as f:
-                rows = list(csv.reader(f))
+                text = f.read()
             values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(1, len(cols) - 1), quotechar='"',
                                 dtype=float, ndmin=2)
         except OSError as exc:
             raise DataError(str(path), f"cannot read the report's per-point file: {exc.strerror}") from None
         except ValueError:
             raise DataError(str(path), "a value is not a number") from None
+        if '"' in text:                                  # quoted ids: the csv module's parser
+            rows = list(csv.reader(text.splitlines(keepends=True)))
+        else:                                            # only set (first) and point_id (last) are text
+            rows = [[ln.split(",", 1)[0], ln.rsplit(",", 1)[-1]] for ln in text.split("\n") if ln]
+            rows[0] = text.split("\n", 1)[0].split(",")
         body = rows[1:]
         if not rows or rows[0] != cols or len(body) != int(ref["n"]) or len(values) != len(body):
             raise DataError(str(path), f"does not match report.json (expected {ref['n']} rows of {cols})")
