@@ -29,6 +29,7 @@ from drivers.redact import redact
 from .fsutil import atomic_write
 from .outputs import Claim, check_campaign_dir, check_dir, check_file
 from .records import CalibrationReport, RecordError, VerifyReport
+from .report_points import PointTable
 from .report import STAGE_LABELS
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
@@ -75,6 +76,8 @@ def collect(directory: str | os.PathLike) -> ReportSources:
             raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
         if kind == "calibration":
             _checked(doc, d / "report.json", CalibrationReport)
+            if isinstance(doc.get("points"), dict) and "file" in doc["points"]:
+                doc["points"] = PointTable.of(doc["points"], d)        # the per-point rows of a large run
         found[kind], files[kind] = doc, "report.json"
     if (d / "diagnosis.json").exists():
         found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"

@@ -4,7 +4,7 @@ Format (one row per measurement, rows in measurement order)::
 
     point_id,set,q1,q2,q3,q4,q5,q6,x,y,z[,x2,y2,z2[,x3,y3,z3]][,t_s][,temp_c][,payload_kg]
 
-* ``point_id``: non-empty text, unique; only ``check`` rows may repeat an id
+* ``point_id``: non-empty text of at most 256 characters, unique; only ``check`` rows may repeat an id
   (the same check pose measured again), and never an id of a calib/test row.
 * ``set``: ``calib`` | ``test`` | ``check`` | ``nest`` (case-insensitive).
   ``nest`` rows are readings of a fixed reference nest (column ``nest_id``,
@@ -69,6 +69,7 @@ _NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUM_RE = re.compile(_NUM)
 _COLUMN_RE = re.compile(rf"(?>{_NUM}\n)*+")  # a whole column joined with "\n"
 _BAD_ID_CHARS = frozenset(',;"\r\n')
+MAX_ID_CHARS = 256  # point_id / nest_id length bound (ids end up in file names, terminal lines and reports)
 
 
 # --------------------------------------------------------------------------
@@ -292,6 +293,8 @@ def _check_ids(
     for i, (pid, set_name) in enumerate(zip(ids, sets)):
         if not pid:
             raise fail(i, "point_id is empty")
+        if len(pid) > MAX_ID_CHARS:
+            raise fail(i, f"point_id {pid[:40]!r}... is {len(pid)} characters long (at most {MAX_ID_CHARS})")
         k = first.setdefault(pid, i)
         if k != i and not (set_name in ("check", "nest") and sets[k] == set_name):
             raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
@@ -381,6 +384,9 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
                         line=table.line_nos[first], column="'t_s'")
     col = [restore(v) for v in table.column(layout.index("nest_id"))]
     for i, (nid, s) in enumerate(zip(col, sets)):
+        if len(nid) > MAX_ID_CHARS:
+            raise DataError(src, f"nest_id {nid[:40]!r}... is {len(nid)} characters long (at most {MAX_ID_CHARS})",
+                            line=table.line_nos[i], column=f"'{layout.shown[layout.index('nest_id')]}'")
         if (s == "nest") != bool(nid):
             what = ("nest row without a nest id" if s == "nest"
                     else f"nest_id {_show(nid)} on a {s} row (only nest rows have one)")
@@ -463,8 +469,8 @@ def _check_writable(ds: Dataset, src: str, numbers: np.ndarray, blank_ok: np.nda
     if ds.p3_tracker_mm is not None and ds.p2_tracker_mm is None:
         raise DataError(src, "p3_tracker_mm needs p2_tracker_mm")
     for i, pid in enumerate(ds.point_id):
-        if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid):
-            raise DataError(src, f"row {i + 1}: point_id {pid!r} cannot be written to CSV")
+        if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid) or len(pid) > MAX_ID_CHARS:
+            raise DataError(src, f"row {i + 1}: point_id {pid[:40]!r}{'...' * (len(pid) > 40)} cannot be written to CSV")
     for i, nid in enumerate(ds.nest_id or ()):
         if nid != nid.strip() or _BAD_ID_CHARS & set(nid):
             raise DataError(src, f"row {i + 1}: nest_id {nid!r} cannot be written to CSV")
