@@ -31,7 +31,8 @@ from campaign.errors import ConfigError
 from campaign.yaml_limits import load_limited, read_limited
 
 from campaign.config_schema import *  # noqa: F401,F403  (the schema; re-exported)
-from campaign.config_schema import _NAME_RE, _ORTHONORMAL_TOL, _to_plain  # noqa: F401
+from campaign.config_schema import (_NAME_RE, _ORTHONORMAL_TOL, FILE_NAME_MAX, MAX_NAME_CHARS,  # noqa: F401
+                                    _to_plain)
 from campaign.config_reader import *  # noqa: F401,F403
 from campaign.config_plan import optimal_keys
 from campaign.config_reader import (_REQUIRED, _ListPath, _Reader, _check_integer, _check_number,  # noqa: F401
@@ -153,6 +154,9 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
     name = r.string("name")
     if not _NAME_RE.match(name):
         raise r.error("name", f"expected letters, digits, '_', '.' or '-' (it names run directories), got {_describe(name)}")
+    if len(name) > MAX_NAME_CHARS:
+        raise r.error("name", f"{len(name)} characters: at most {MAX_NAME_CHARS} (it names run directories, "
+                              f"NAME-TIMESTAMP, and a file name holds {FILE_NAME_MAX} bytes)")
     robot = _robot(r.section("robot", RobotConfig))
     tool = _tool(r.section("tool", ToolConfig))
     tracker = _tracker(r.section("tracker", TrackerConfig))

@@ -39,6 +39,8 @@ MAX_JOINTS = 12
 
 _ORTHONORMAL_TOL = 1e-3
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*\Z")
+FILE_NAME_MAX = 255                                      # bytes in one path component (ext4, XFS, APFS, NTFS)
+MAX_NAME_CHARS = FILE_NAME_MAX - len("-YYYYmmdd-HHMMSS-NNNN")   # the name + a run directory's timestamp fit
 
 Vec3 = tuple[float, float, float]
 Matrix4 = tuple[tuple[float, float, float, float], ...]

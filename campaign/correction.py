@@ -23,6 +23,7 @@ from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
 from .cell import measurement_covariance, nominal_kinematics
+from .csv_cells import restore
 from .config import CampaignConfig
 from .errors import DataError
 from .plan import PlanPoint
@@ -48,9 +49,12 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
     the plan's fixed SMR orientation is used. Errors name the file, line and column."""
     src = str(path)
     try:
-        rows = list(csv.reader(open(path, newline="", encoding="utf-8-sig")))
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
     except OSError as exc:
         raise DataError(src, f"cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(src, f"not a readable CSV text file ({exc})") from None
     rows = [(i + 1, r) for i, r in enumerate(rows) if r and not r[0].lstrip().startswith("#")]
     if not rows:
         raise DataError(src, "empty file")
@@ -469,7 +473,8 @@ def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:
     """(target_id, reason) rows of OUT_DIR/rejected.csv (empty when the file is absent)."""
     try:
         with open(Path(out_dir) / "rejected.csv", newline="", encoding="utf-8") as fh:
-            return [(row[0], row[1] if len(row) > 1 else "") for row in list(csv.reader(fh))[1:] if row]
+            return [(restore(row[0]), restore(row[1]) if len(row) > 1 else "") for row in list(csv.reader(fh))[1:]
+                    if row]
     except OSError:
         return []
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, FittedStage, diagnose
 from robocal.elastic import EngineOptions, run_engine
@@ -40,6 +41,8 @@ from .effects_stage import gravity_model, subset
 from .errors import DataError
 from .fsutil import write_json as _write_json
 from .interchange import Dataset, read_csv
+from .outputs import Claim
+from .terminal import clean
 from .log_dataset import dataset_from_log
 from .plausibility import check_dataset
 from .process import fit_stages
@@ -192,8 +195,9 @@ def render(console: Console, report: dict) -> None:
     floor = report["noise_floor_mm"]
     n = report["n"]
     ev = "test set" if report.get("evaluation") == "test" else "cross-validation (no test rows)"
-    console.print(f"[bold]Sim-to-real gap[/bold] of {report['source']} ({n['calib']} calib, {n['test']} test, "
-                  f"{n['check']} check rows; config {report['config']})", highlight=False)
+    console.print(Text.assemble(("Sim-to-real gap", "bold"), clean(
+        f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
+        f"{report['config']})")))
     console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
@@ -220,12 +224,12 @@ def render(console: Console, report: dict) -> None:
     else:
         console.print("where: no region of the geometric model's residual is significantly above the noise floor")
     for u in report.get("undiagnosable", []):
-        console.print(f"[yellow]cannot tell from these data:[/yellow] {u['effect']}"
-                      f"{' J' + ','.join(map(str, u['joints'])) if u.get('joints') else ''}: {u['reason']} "
-                      f"(to reveal it: {u['remedy']})", highlight=False)
+        js = " J" + ",".join(map(str, u["joints"])) if u.get("joints") else ""
+        console.print(Text.assemble(("cannot tell from these data:", "yellow"),
+                                    clean(f" {u['effect']}{js}: {u['reason']} (to reveal it: {u['remedy']})")))
     us = report.get("unexplained_structure", {})
     if us:
-        console.print(f"[red]{us['text']}[/red]" if report["unexplained"] else us["text"], highlight=False)
+        console.print(clean(us["text"]), style="red" if report["unexplained"] else None)
     for note in report.get("notes", []):
         if not note.startswith("unexplained structure"):
             console.print(f"note: {note}", highlight=False)
@@ -239,7 +243,7 @@ def render_self_check(console: Console, result: SelfCheckResult) -> None:
         t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
-            t.add_row(SHORT[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
+            t.add_row(SHORT[a], *[(Text(str(m[a][b]), style="bold") if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
     console.print(t)
     s = result.summary()
@@ -272,8 +276,9 @@ def _pct(x) -> str:
 
 
 # ============================================================================ plots (optional extra)
-def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
-    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect. Returns the
+def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] | str:
+    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect into ``out_dir``
+    (a checked output directory is taken, i.e. created and marked, only once matplotlib imports). Returns the
     files written, or a one-line note when matplotlib is not importable."""
     try:
         import matplotlib
@@ -281,7 +286,7 @@ def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
         import matplotlib.pyplot as plt
     except ImportError:
         return PLOTS_MISSING
-    out = Path(out_dir)
+    out = out_dir.take() if isinstance(out_dir, Claim) else Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     maps = report["maps"]
     files = [_plot_workspace(plt, maps, report, out / "where_workspace.png"),
@@ -290,6 +295,17 @@ def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
     if "time" in maps.get("geometric", {}):
         files.append(_plot_time(plt, maps, report, out / "where_time.png"))
     return files
+
+
+def _save_png(fig, path: Path) -> None:
+    """The figure as a PNG file written atomically (complete or absent)."""
+    import io
+
+    from .fsutil import atomic_write
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    atomic_write(path, buf.getvalue())
 
 
 def plot_floor(report: dict) -> tuple[float, str, float | None]:
@@ -338,7 +354,7 @@ def _plot_workspace(plt, maps, report, path):
         ax.set_ylabel("height z (mm)")
     fig.colorbar(im, ax=axes, label="residual RMS (mm)")
     fig.suptitle(f"Residual RMS over the workspace; {label}; hatched cells: no points", fontsize=11)
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -369,7 +385,7 @@ def _plot_joints(plt, maps, report, path):
     axes.ravel()[0].legend(fontsize=8)
     gaps = any(v is None for m in maps["geometric"]["joints"] for v in m["rms_mm"])
     fig.suptitle("Residual RMS over each joint's range" + ("; gaps: bins without points" if gaps else ""))
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -387,7 +403,7 @@ def _plot_time(plt, maps, report, path):
     ax.legend(fontsize=8)
     gaps = any(v is None for v in maps["geometric"]["time"]["rms_mm"])
     ax.set_title("Residual RMS over time" + ("; gaps: intervals without points" if gaps else ""))
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -404,6 +420,6 @@ def _plot_shrinkage(plt, report, path):
     ax.set_ylabel(("test" if key == "test_rms_mm" else "cross-validated") + " RMS (mm)")
     ax.set_title("How far the error shrinks, step by step")
     ax.legend()
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path

@@ -1,8 +1,8 @@
 """The whole campaign in one place: config -> plan -> drivers -> durable log -> calibration -> report."""
 from __future__ import annotations
 
+import hashlib
 import logging
-import shutil
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from datetime import datetime, timezone
@@ -15,20 +15,25 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+from drivers.base import SystemClock
+
 from .cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from .devices import open_cell
 from .config import CampaignConfig
 from .errors import CampaignError, ConfigError
+from .fsutil import atomic_write
 from .interchange import read_csv, write_csv
 from .log_dataset import dataset_from_log
-from .plan import Plan, build_plan, write_plan_csv
-from .html_report import write_report
+from .plan import Plan, build_plan, plan_csv_text
+from .html_report import report_targets, write_report
 from .records import PointRecord
-from .resume_checks import check_resume
+from .outputs import RUN, Claim, check_dir, source_key
+from .resume_checks import check_resume, check_unchanged
 from .runlog import RunLog, completed_point_ids, read_log
 from .runner import RunOutcome, Runner, closing_on_error, pending, start_record
 from .eta import RunEta, point_times_s
 from .motion_safety import PathGuard, motion_limits, payload
+from .terminal import stdout_console
 from .tracker_quality import SmrPredictor
 from .plausibility import is_forced
 from .traceability import check_identity, device_identity, identification, identity_changes, run_logging
@@ -56,11 +61,14 @@ def software_version() -> str:
 
 
 def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path | None = None,
-                 console: Console | None = None, plan: Plan | None = None) -> RunResult:
-    """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report."""
-    console = console or Console()
+                 console: Console | None = None, plan: Plan | None = None, overwrite: bool = False) -> RunResult:
+    """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report. ``run_dir`` must
+    be new or empty (any directory but a run's with ``overwrite``: see :mod:`campaign.outputs`)."""
+    console = console or stdout_console()
     if resume is not None:
         check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
+    else:
+        run_dir = check_dir(default_run_dir(cfg) if run_dir is None else run_dir, RUN, overwrite)
     kin = nominal_kinematics(cfg)
     plan = build_plan(cfg, kin) if plan is None else plan      # given: campaign iso9283 with corrected cycles
     if not plan.points:
@@ -81,6 +89,8 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
+        if resume is not None:
+            _continue_clock(clock, log.contents)
         for change in identity_changes(log.contents.start, identity) if resume else ():
             logger.warning("resuming on different hardware: %s", change)   # also in the devices event
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
@@ -114,16 +124,18 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     return RunResult(run_dir, outcome, _calibrate(dataset, cfg, run_dir, contents))
 
 
-def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path) -> Processed:
-    """Offline: calibrate and report from a run directory (its log) or an interchange CSV file."""
+def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path, overwrite: bool = False) -> Processed:
+    """Offline: calibrate and report from a run directory (its log) or an interchange CSV file into ``out_dir``:
+    new, empty, or written by reprocess from the same source (any but a run's with ``overwrite``)."""
+    claim = check_dir(out_dir, "reprocess", overwrite, source=source_key(source))
     contents = read_log(source) if source.is_dir() else None
     dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
-    return _calibrate(dataset, cfg, out_dir, contents)
+    return _calibrate(dataset, cfg, claim, contents)
 
 
-def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path, contents=None) -> Processed:
-    """Calibrate ``dataset``, write model/report files and report.html into ``out_dir``; ``contents``: the log it
-    came from (its hardware identification goes into the report)."""
+def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path | Claim, contents=None) -> Processed:
+    """Calibrate ``dataset``, write model/report files and report.html into ``out_dir`` (a run's directory, or a
+    claim taken once the model exists); ``contents``: the log it came from (hardware identification)."""
     from .process import process, write_outputs     # the numerics load when calibrating, not at every start-up
     processed = process(dataset, cfg)
     if contents is not None:
@@ -132,6 +144,8 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path, contents=None) -> Pr
         stop = stop_summary(contents, processed.report)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+    if isinstance(out_dir, Claim):
+        out_dir = out_dir.take()
     write_outputs(processed, out_dir)
     write_report(out_dir)                       # report.html from report.json
     return processed
@@ -152,7 +166,10 @@ def verify(run_dir: Path, console: Console | None = None):
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
     estimator = pose_estimator(cfg, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
-    out_dir = run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"
+    report_targets(run_dir)                                 # report.html and its figures are the run's to rewrite
+    claim = check_dir(_new_path(run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"),
+                      "verify")
+    out_dir = claim.path
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
         cell = stack.enter_context(open_cell(cfg))
@@ -162,6 +179,7 @@ def verify(run_dir: Path, console: Console | None = None):
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
+        claim.take()
         logging_.to_file(out_dir)
         runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
                         lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
@@ -191,27 +209,61 @@ def _smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
     return predictor
 
 
-def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | None, resume: Path | None,
+def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | Claim | None, resume: Path | None,
              identity: dict | None = None) -> tuple[RunLog, Path]:
-    """A new run directory with its log, config copy and plan CSV; or the resumed one after checking that
-    neither the config nor the plan changed."""
+    """A new run directory (checked by :func:`campaign.outputs.check_dir` unless ``run_dir`` is a claim already)
+    with its log, owner marker, config copy and plan CSV (its sha256 in the start record); or the resumed one
+    after checking that neither the config nor the plan changed."""
     if resume is not None:
-        start = read_log(resume).start                      # check before touching the log
-        if start.get("config_sha256") != cfg.sha256:
-            raise CampaignError(f"{resume}: the config file changed since the run started; resume with the same config")
-        if start.get("plan_sha256") != plan.sha256:
-            raise CampaignError(f"{resume}: the plan differs from the one the run started with")
+        check_unchanged(resume, read_log(resume).start, cfg, plan)      # before touching the log
         return RunLog.open_for_resume(resume), Path(resume)
-    if run_dir is None:
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(cfg.output.dir) / f"{cfg.name}-{stamp}"
-    run_dir = Path(run_dir)
+    claim = run_dir if isinstance(run_dir, Claim) else check_dir(run_dir or default_run_dir(cfg), RUN)
+    run_dir = claim.path
+    plan_text = plan_csv_text(plan).encode("utf-8")
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
-                                              datetime.now(timezone.utc).isoformat()) | (identity or {}))
+                                              datetime.now(timezone.utc).isoformat())
+                        | {"plan_csv_sha256": hashlib.sha256(plan_text).hexdigest()} | (identity or {}))
     with closing_on_error(log):                             # the log never stays open without a stop record
-        shutil.copyfile(cfg.source_path, run_dir / "config.yaml")
-        write_plan_csv(plan, run_dir / "plan.csv")
+        claim.take()
+        copy_config(cfg, run_dir / "config.yaml")
+        atomic_write(run_dir / "plan.csv", plan_text)
     return log, run_dir
+
+
+def default_run_dir(cfg: CampaignConfig) -> Path:
+    """output.dir/NAME-TIMESTAMP (UTC), see :func:`_new_path`."""
+    return _new_path(Path(cfg.output.dir) / f"{cfg.name}-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}")
+
+
+def _new_path(base: Path) -> Path:
+    """``base``, or ``base-2``, ``base-3``, ... when it exists already (two runs in the same second)."""
+    path, k = base, 1
+    while path.exists():
+        k += 1
+        path = base.with_name(f"{base.name}-{k}")
+    return path
+
+
+def copy_config(cfg: CampaignConfig, path: Path) -> None:
+    """The run's copy of its config file (URL user-info and known secrets masked); ConfigError if the file changed
+    since it was read."""
+    from drivers.redact import redact
+
+    data = Path(cfg.source_path).read_bytes()
+    if hashlib.sha256(data).hexdigest() != cfg.sha256:
+        raise ConfigError(cfg.source_path, "", "the file changed while the run started; start it again")
+    atomic_write(path, redact(data.decode("utf-8-sig")).encode("utf-8"))
+
+
+def _continue_clock(clock, contents) -> None:
+    """A simulated cell's clock restarts at 0: move it on to the last time the resumed log holds, so that times
+    keep increasing across sessions (a real cell's clock is the wall clock and needs nothing)."""
+    if isinstance(clock, SystemClock) or contents is None:
+        return
+    times = [p.get("t_end_s") for p in contents.points] + [e.get("t_s") for e in contents.events]
+    last = max((t for t in times if isinstance(t, (int, float))), default=0.0)
+    if last > clock.now():
+        clock.sleep(last - clock.now())
 
 
 class _progress:

@@ -10,7 +10,6 @@ readings (``plan.nests``; set ``nest``; the robot waits, the tracker aims at the
 """
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 from dataclasses import dataclass, replace
@@ -277,14 +276,25 @@ def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
 
 
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
+    """Write :func:`plan_csv_text` atomically."""
+    from .fsutil import atomic_write
+
+    atomic_write(path, plan_csv_text(plan).encode("utf-8"))
+
+
+def plan_csv_text(plan: Plan) -> str:
     """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
     (id ``POINT.viaK``, no position) before the point they lead to; nest rows: where the
     robot waits, the nest's approximate position."""
+    from .csv_cells import render_rows
+
     n = len(plan.points[0].q_deg) if plan.points else 0
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
+
+    def rows():
         for p in plan.points:
             for k, via in enumerate(p.via_deg):              # via poses (keep-out): passed through, not measured
-                w.writerow([f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""])
-            w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])
+                yield [f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""]
+            yield [p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)]
+
+    header = ["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"]
+    return render_rows(header, rows(), text_columns=(0, 1))

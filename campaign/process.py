@@ -11,6 +11,7 @@ Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated pos
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from robocal.repeats import noise_floor_from_repeats, repeat_groups
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
 from robocal.kinematics import smr_tracker
-from robocal.layers import LayerChoice, choose_layer, fit_layer
+from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
 from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.noise import noise_floor_mm
@@ -30,7 +31,7 @@ from robocal.stats import error_stats
 from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
-from .errors import DataError
+from .errors import DataError, DataWarning
 from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
@@ -38,9 +39,10 @@ from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
 from .records import CalibrationReport
-from .report_points import cell_summary, point_table
+from .report_points import PointTable, cell_summary, point_table, report_points_value
 
 REPORT_FORMAT = "campaign-report/1"
+NO_TEST_ROWS = "no test rows: nothing is held out, so no figure is a held-out accuracy; give some rows set 'test'"
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,6 +50,7 @@ class Processed:
     report: CalibrationReport
     model: CalibratedModel
     calibration: CalibrationResult
+    points: PointTable | None = None       # the per-point rows (report.json's ``points``, or points.csv beyond a size)
 
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
@@ -83,13 +86,14 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
-    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point."""
+def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[dict, np.ndarray]:
+    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
+    report entry and the values (M,)."""
     if len(q) == 0:
-        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}
+        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}, np.zeros(0)
     s = np.linalg.norm(layer.predict_std(q, None, payload), axis=1)
     return {"max_mm": float(s.max()), "mean_mm": float(s.mean()), "rms_mm": float(np.sqrt(np.mean(s**2))),
-            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}
+            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}, s
 
 
 def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
@@ -202,6 +206,9 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
+    if not test.any():
+        plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
+        warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
     cov_source = weights_covariance(cfg, ds)[1]
     meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
     final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
@@ -211,7 +218,12 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
-    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest)
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    eval_rows = test if test.any() else cal
+    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    floor = repeats if repeats is not None else specs
+    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
+                  noise_floor_mm=floor)
     if c.residual == "auto":
         choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
     elif c.residual == "none":
@@ -233,17 +245,19 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     stages = {name: {"test": _stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
                      "calib": _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal))}
               for name, m in stage_models}
+    pred_std = None                                       # (N,) GPR predictive std of the test rows, else NaN
     if isinstance(model.residual, GPRResidual):
-        stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
-                                                              np.array(ds.point_id)[test].tolist())
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
-    eval_rows = test if test.any() else cal
-    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+        pred_std = np.full(len(ds), np.nan)
+        stages["compensated"]["test_pred_std_mm"], pred_std[test] = _pred_std(
+            model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
+    if choice.layer is not None:
+        stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
     calib_ids = np.array(ds.point_id)[geo.rows]
     excluded = smr_excluded + ([] if final_screen is None else [
         {"point_id": str(calib_ids[e.index]), "set": "calib", "reason": e.reason} for e in final_screen.excluded])
-    rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
-                          key=calib_ids.tolist().index)
+    in_fit = np.zeros(len(ds), bool)
+    in_fit[kept_rows] = True
+    rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
     listed = {e["point_id"] for e in excluded}
     excluded += [{"point_id": pid, "set": "calib", "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
                  for pid in rejected_ids if pid not in listed]
@@ -252,7 +266,7 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
               "rejected": len(rejected_ids)},
         "stages": stages,
-        "noise_floor_mm": repeats if repeats is not None else specs,
+        "noise_floor_mm": floor,
         "noise_floor_source": "repeats" if repeats is not None else "specs",
         "noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
         "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
@@ -279,10 +293,14 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
     used[geo.rows], used[kept_rows] = 0.0, 1.0
     report["cell"] = cell_summary(cfg)
-    report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
-                                   {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
-                                    for name, m in stage_models}, used, ds.t_s)
-    return Processed(CalibrationReport(**report), model, result)
+    table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
+                        {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
+                         for name, m in stage_models}, used, ds.t_s, pred_std)
+    report["points"] = report_points_value(table)
+    if "file" in report["points"] and pred_std is not None:     # per test point: in points.csv too
+        stages["compensated"]["test_pred_std_mm"]["per_point_mm"] = {"file": report["points"]["file"],
+                                                                     "column": "pred_std_mm"}
+    return Processed(CalibrationReport(**report), model, result, table)
 
 
 def _effects_report(selection, elastic) -> dict:
@@ -310,18 +328,6 @@ def _residual_cv_summary(choice: LayerChoice) -> dict | None:
             "t": cands[kind]["t"], "significant": cands[kind]["significant"]}
 
 
-def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
-    """The configured residual layer (IDW or GPR) fitted on calibration points of a geometric model, or None."""
-    c = cfg.calibration
-    keep = np.ones(len(q), bool) if weights is None else np.asarray(weights) > 0
-    if c.residual not in ("idw", "gpr"):
-        return None
-    model = CalibratedModel(kin)
-    layer = fit_layer(c.residual, model, q[keep], p[keep], None, None if payload is None else payload[keep],
-                      c.idw_power, c.idw_k_nearest)
-    return layer.with_payload(cfg.tool.payload_kg) if getattr(layer, "uses_payload", False) else layer
-
-
 def _parameters(result: CalibrationResult) -> list[dict]:
     """Parameter table with angles converted to degrees for people."""
     rows = []
@@ -334,9 +340,13 @@ def _parameters(result: CalibrationResult) -> list[dict]:
 
 
 def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
-    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
+    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units); DIR/points.csv first when
+    the report's per-point rows are too many to keep inline (``campaign.report_points``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    ref = processed.report.points
+    if isinstance(ref, dict) and "file" in ref:
+        processed.points.write_csv(out / ref["file"])
     write_json(out / "report.json", processed.report.to_dict())
     write_json(out / "model.json", processed.model.to_dict())
     return out / "report.json"

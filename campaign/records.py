@@ -201,9 +201,10 @@ class PointRecord:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping) -> "PointRecord":
-        """Check and convert a point record's data; RecordError names the first bad field."""
-        n = len(_vec(data, "q_cmd_deg"))
+    def from_dict(cls, data: Mapping, n_joints: int | None = None) -> "PointRecord":
+        """Check and convert a point record's data; RecordError names the first bad field. The joint vectors
+        have ``n_joints`` values (the robot's, when known), else as many as ``q_cmd_deg``."""
+        n = len(_vec(data, "q_cmd_deg", n_joints))
         smrs = tuple(s for s in (SmrReading.from_dict(data, k) for k in (2, 3)) if s is not None)
         return cls(
             _str(data, "point_id"), _str(data, "set"), _vec(data, "q_cmd_deg"), _vec(data, "q_read_deg", n),
@@ -262,11 +263,12 @@ class NestRecord:
                    _vec(data, "p_nest_base_mm", 3), _obj(data, "temperatures", True))
 
 
-def point_from_dict(data: Mapping) -> PointRecord | NestRecord:
-    """A log ``point`` record's data as the typed record its ``set`` says (nest or robot point)."""
+def point_from_dict(data: Mapping, n_joints: int | None = None) -> PointRecord | NestRecord:
+    """A log ``point`` record's data as the typed record its ``set`` says (nest or robot point with ``n_joints``
+    joint values, when known)."""
     if not isinstance(data, Mapping):
         raise RecordError("data", f"expected an object, got {repr(data)[:80]}")
-    return NestRecord.from_dict(data) if data.get("set") == "nest" else PointRecord.from_dict(data)
+    return NestRecord.from_dict(data) if data.get("set") == "nest" else PointRecord.from_dict(data, n_joints)
 
 
 # --------------------------------------------------------------------------

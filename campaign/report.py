@@ -18,18 +18,24 @@ def _mm(v) -> str:
 
 
 def render_stages(console: Console, report: CalibrationReport) -> None:
-    """Seed 000 Table 3 rows on the held-out test set, with the noise floor."""
-    t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
-    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
-        t.add_column(col, justify="left" if col == "stage" else "right")
+    """Seed 000 Table 3 rows on the held-out test set, with the noise floor ("none" without test rows)."""
     floor = report.noise_floor_mm
-    for key, label in STAGE_LABELS:
-        if key not in report.stages:
-            continue
-        s = report.stages[key]["test"]
-        ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
-        t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
-    console.print(t)
+    if not report.n["test"]:
+        console.print("Position error on the held-out test set: none (no test rows)", style="yellow")
+    else:
+        t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
+        for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+            t.add_column(col, justify="left" if col == "stage" else "right")
+        for key, label in STAGE_LABELS:
+            if key not in report.stages:
+                continue
+            s = report.stages[key]["test"]
+            ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
+            t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
+        console.print(t)
+    layer = report.stages.get("compensated", {}).get("layer")
+    if layer:
+        console.print(layer_line(layer), markup=False)
     render_choices(console, report)
     cv = report.residual_cv
     if cv and report.residual_choice is None:
@@ -43,6 +49,18 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                   f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
                   f"sigma0 {report.sigma0:.2f}   rejected points {report.n['rejected']}")
     render_identity(console, report)
+
+
+def layer_line(lay: dict) -> str:
+    """The fitted residual layer's calibration RMS next to its CV-predicted held-out RMS, labelled."""
+    gp = ""
+    if "approximation" in lay:
+        how = "exact GP" if lay["approximation"] == "exact" else f"inducing-point GP, {lay['n_inducing']} inputs"
+        gp = (f" ({how} on {lay['n_train']} points, noise {_mm(lay['noise_mm'])} mm, "
+              f"floor {_mm(lay['noise_floor_mm'])} mm)")
+    return (f"residual layer {lay['kind']}{gp}: calibration RMS {_mm(lay['calib_rms_mm'])} mm is a fit to its own "
+            f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay['cv_predicted_rms_mm'])} mm "
+            f"({lay['folds']}-fold), test set {_mm(lay['test_rms_mm'])} mm")
 
 
 def render_identity(console: Console, report: CalibrationReport) -> None:

@@ -21,6 +21,7 @@ from typing import Iterator, Mapping, Sequence
 from drivers.base import DriverError, TrackerReading
 
 from .errors import PlausibilityError
+from .terminal import CleanLogRecords
 
 ROBOT_KEYS = ("vendor", "model", "controller_type", "serial", "software_version")
 TRACKER_KEYS = ("vendor", "model", "serial", "firmware")
@@ -89,12 +90,14 @@ class RunLogging:
     def __init__(self, console=None, level: int = logging.INFO) -> None:
         self.buffer = logging.handlers.MemoryHandler(capacity=100000, flushLevel=logging.CRITICAL + 1)
         self.buffer.setLevel(level)
+        self.buffer.addFilter(CleanLogRecords())          # control characters escaped, URL user-info masked
         self.file: logging.FileHandler | None = None
         self.console = None
         if console is not None:
             from rich.logging import RichHandler
             self.console = RichHandler(console=console, show_path=False, markup=False)
             self.console.setLevel(logging.WARNING)
+            self.console.addFilter(CleanLogRecords())
         self.level = level
         self._saved: list[tuple[logging.Logger, int, bool]] = []
 
@@ -114,6 +117,7 @@ class RunLogging:
         self.file = logging.FileHandler(path, encoding="utf-8")
         self.file.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
         self.file.setLevel(self.level)
+        self.file.addFilter(CleanLogRecords())
         self.buffer.setTarget(self.file)
         self.buffer.flush()
         for lg, _, _ in self._saved:

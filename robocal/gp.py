@@ -1,4 +1,4 @@
-"""Gaussian-process regression of robot errors (seed 003 §1.2, eq. 4-9) and an RBF-network baseline.
+"""Gaussian-process regression of robot errors (seed 003 §1.2, eq. 4-9); the RBF-network baseline is robocal/rbf.py.
 
 One output per model: ``e = Omega(x) + eps`` with a squared-exponential ARD kernel
 
@@ -131,14 +131,26 @@ def nlml_shared(log_theta: np.ndarray, X: np.ndarray, Y: np.ndarray, jitter: flo
     return float(L), g
 
 
+def noise_floor_bound(noise_floor_mm: float | None, y_std: np.ndarray) -> float | None:
+    """Lower bound of the standardised shared sigma_n so that the model's noise, as a 3-D RMS over the outputs
+    (sqrt(sum_j (sigma_n y_std_j)^2), mm), is at least the measurement noise floor (a 3-D RMS, mm): a GP never
+    explains its own points more closely than the instrument measures them. None without a floor."""
+    if noise_floor_mm is None or not noise_floor_mm > 0:
+        return None
+    return float(noise_floor_mm / max(float(np.sqrt(np.sum(np.square(y_std)))), 1e-12))
+
+
 def fit_shared_hyperparameters(X: np.ndarray, Y: np.ndarray, *, log_theta0: np.ndarray | None = None,
-                               n_restarts: int = 0, seed: int = 0, max_iter: int = 150) -> np.ndarray:
+                               n_restarts: int = 0, seed: int = 0, max_iter: int = 150,
+                               sn_min: float | None = None) -> np.ndarray:
     """Shared log-hyperparameters (log sigma_f, log sigma_n, log lambda) of standardised outputs Y (m, k),
-    by L-BFGS-B on ``nlml_shared`` from a heuristic (or given) start plus ``n_restarts`` seeded starts."""
+    by L-BFGS-B on ``nlml_shared`` from a heuristic (or given) start plus ``n_restarts`` seeded starts;
+    ``sn_min`` bounds sigma_n below (``noise_floor_bound``)."""
     Xc = X - X.mean(axis=0)
     s_x = np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
     start = np.log(np.concatenate([[1.0, 0.3], s_x])) if log_theta0 is None else np.asarray(log_theta0, float)
-    bounds = [(np.log(1e-3), np.log(1e2)), (np.log(1e-4), np.log(10.0))]
+    sn_lo = np.log(max(1e-4, sn_min or 0.0))
+    bounds = [(np.log(1e-3), np.log(1e2)), (sn_lo, max(np.log(10.0), sn_lo + np.log(10.0)))]
     bounds += [(np.log(1e-2 * s), np.log(1e3 * s)) for s in s_x]
     lo, hi = np.array(bounds).T
     rng = np.random.default_rng(seed)
@@ -291,6 +303,9 @@ class GaussianProcess:
 class MultiOutputGP:
     """Independent GPs on the same inputs, one per output column (seed 003: one model per axis)."""
     models: tuple[GaussianProcess, ...]
+    noise_floor_mm: float | None = None      # the bound of sigma_n a ``fit_subset`` model was fitted with
+
+    kind = "exact"
 
     @classmethod
     def fit(cls, X: np.ndarray, Y: np.ndarray, *, n_restarts: int = 3, seed: int = 0) -> "MultiOutputGP":
@@ -301,11 +316,13 @@ class MultiOutputGP:
 
     @classmethod
     def fit_subset(cls, X: np.ndarray, Y: np.ndarray, *, hyper_points: int = 300, n_restarts: int = 1,
-                   seed: int = 0, max_iter: int = 150, log_theta0: np.ndarray | None = None) -> "MultiOutputGP":
+                   seed: int = 0, max_iter: int = 150, log_theta0: np.ndarray | None = None,
+                   noise_floor_mm: float | None = None) -> "MultiOutputGP":
         """Fast fit: every output standardised, one shared set of hyperparameters (length scales and
         signal-to-noise ratio) by marginal likelihood on a seeded random subset of at most ``hyper_points``
         points, then the exact GP of every output on all points with sigma_f, sigma_n scaled back by the
-        output's standard deviation. ``log_theta0`` (standardised units) warm-starts the search."""
+        output's standard deviation. ``log_theta0`` (standardised units) warm-starts the search;
+        ``noise_floor_mm`` (3-D RMS) bounds the noise below (``noise_floor_bound``)."""
         X = np.atleast_2d(np.asarray(X, float))
         Y = np.asarray(Y, float).reshape(len(X), -1)
         mu, sd = Y.mean(axis=0), np.maximum(Y.std(axis=0), 1e-12)
@@ -313,7 +330,7 @@ class MultiOutputGP:
         sub = np.arange(len(X)) if len(X) <= hyper_points else \
             np.sort(np.random.default_rng(seed).choice(len(X), hyper_points, replace=False))
         t = fit_shared_hyperparameters(X[sub], Z[sub], log_theta0=log_theta0, n_restarts=n_restarts, seed=seed,
-                                       max_iter=max_iter)
+                                       max_iter=max_iter, sn_min=noise_floor_bound(noise_floor_mm, sd))
         sf, sn, lam = unpack(t)
         centre = X.mean(axis=0)
         Xc = X - centre
@@ -322,7 +339,8 @@ class MultiOutputGP:
         L0 = np.linalg.cholesky(H0)
         A0 = cho_solve((L0.T, False), Y - mu, check_finite=False)      # all outputs at once; L0.T is Fortran-ordered
         return cls(tuple(GaussianProcess.from_factor(X, Y[:, j], sf * sd[j], sn * sd[j], lam, float(mu[j]), centre,
-                                                     sd[j] * L0, A0[:, j] / sd[j] ** 2) for j in range(Y.shape[1])))
+                                                     sd[j] * L0, A0[:, j] / sd[j] ** 2) for j in range(Y.shape[1])),
+                   noise_floor_mm)
 
     @property
     def shared_log_theta(self) -> np.ndarray:
@@ -341,7 +359,8 @@ class MultiOutputGP:
         for k in np.unique(fold):
             tr, te = fold != k, fold == k
             gk = MultiOutputGP.fit_subset(X[tr], Y[tr], hyper_points=hyper_points, n_restarts=0, seed=seed,
-                                          max_iter=max_iter, log_theta0=self.shared_log_theta)
+                                          max_iter=max_iter, log_theta0=self.shared_log_theta,
+                                          noise_floor_mm=self.noise_floor_mm)
             err[te] = Y[te] - gk.predict(X[te])
         return err
 
@@ -365,12 +384,23 @@ class MultiOutputGP:
         out = [g.predict(Xs, return_var=True, include_noise=include_noise) for g in self.models]
         return np.stack([m for m, _ in out], 1), np.sqrt(np.stack([v for _, v in out], 1))
 
+    @property
+    def sigma_n_mm(self) -> np.ndarray:
+        """Noise standard deviation (k,) per output, mm."""
+        return np.array([g.sigma_n for g in self.models])
+
+    @property
+    def n_train(self) -> int:
+        return len(self.models[0].y)
+
     def to_dict(self) -> dict:
-        return {"models": [g.to_dict() for g in self.models]}
+        return {"approximation": self.kind, "models": [g.to_dict() for g in self.models],
+                "noise_floor_mm": self.noise_floor_mm}
 
     @classmethod
     def from_dict(cls, d: dict) -> "MultiOutputGP":
-        return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]))
+        floor = d.get("noise_floor_mm")
+        return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]), None if floor is None else float(floor))
 
 
 def _same_inputs(a: GaussianProcess, b: GaussianProcess) -> bool:
@@ -393,7 +423,7 @@ class GPRResidual:
     """GPR residual layer: one GP per base-frame axis on the residual ``p_measured - p_model`` (mm) as a
     function of the joint angles (+ payload when ``uses_payload``). ``payload_kg`` is the payload assumed when
     ``predict`` is given none (the tool the robot carries now; see ``with_payload``)."""
-    gp: MultiOutputGP
+    gp: "MultiOutputGP | SparseGP"          # exact, or inducing points beyond a size (robocal.sparse_gp)
     uses_payload: bool = False
     payload_kg: float | None = None
 
@@ -426,9 +456,13 @@ class GPRResidual:
 
     @classmethod
     def from_dict(cls, d: dict) -> "GPRResidual":
+        from .sparse_gp import SparseGP           # lazy: sparse_gp builds on this module
         pay = d.get("payload_kg")
-        return cls(MultiOutputGP.from_dict(d["gp"]), bool(d.get("uses_payload", False)),
-                   None if pay is None else float(pay))
+        kind = d["gp"].get("approximation", "exact")
+        if kind not in ("exact", SparseGP.kind):
+            raise ValueError(f"unknown GP approximation {kind!r}")
+        gp = SparseGP.from_dict(d["gp"]) if kind == SparseGP.kind else MultiOutputGP.from_dict(d["gp"])
+        return cls(gp, bool(d.get("uses_payload", False)), None if pay is None else float(pay))
 
 
 def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weights: np.ndarray | None = None,
@@ -447,69 +481,3 @@ def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, 
     else:
         gp = MultiOutputGP.fit(gp_inputs(q, pay), p_meas_base - p_kin, n_restarts=n_restarts, seed=seed)
     return GPRResidual(gp, pay is not None, None)
-
-
-# ---------------------------------------------------------------- RBF-network baseline (seed 003 Fig. 8)
-RBF_WIDTHS = (0.25, 0.5, 1.0, 2.0, 4.0)       # x the median distance between centres
-RBF_RIDGES = (1e-8, 1e-5, 1e-2)
-
-
-@dataclass(frozen=True, eq=False)
-class RBFNetwork:
-    """Gaussian radial-basis-function network: inputs standardised, centres by seeded k-means (``n_centres``,
-    default half the training points), one common width, linear output layer with bias by ridge least
-    squares. Width (a multiple of the median distance between centres) and ridge are chosen by seeded
-    5-fold cross-validation on the training set unless given: a fair baseline, not a strawman."""
-    centres: np.ndarray
-    width: float
-    weights: np.ndarray
-    x_mean: np.ndarray
-    x_std: np.ndarray
-
-    @classmethod
-    def fit(cls, X: np.ndarray, Y: np.ndarray, n_centres: int | None = None, width: float | None = None,
-            ridge: float | None = None, seed: int = 0) -> "RBFNetwork":
-        from scipy.cluster.vq import kmeans2
-        X = np.atleast_2d(np.asarray(X, float))
-        Y = np.asarray(Y, float).reshape(len(X), -1)
-        mu, sd = X.mean(0), np.where(X.std(0) > 1e-12, X.std(0), 1.0)
-        Z = (X - mu) / sd
-        k = min(len(X), n_centres or max(2, len(X) // 2))
-        C = Z.copy() if k == len(X) else kmeans2(Z, k, minit="++", seed=np.random.default_rng(seed))[0]
-        dc = np.sqrt(np.sum((C[:, None] - C[None]) ** 2, -1))
-        scale = float(np.median(dc[np.triu_indices(len(C), 1)])) if len(C) > 1 else 1.0
-        widths = [scale * f for f in RBF_WIDTHS] if width is None else [width]
-        ridges = list(RBF_RIDGES) if ridge is None else [ridge]
-        if len(widths) * len(ridges) > 1:
-            width, ridge = cls._cross_validate(Z, Y, C, widths, ridges, seed)
-        else:
-            width, ridge = widths[0], ridges[0]
-        return cls(C, width, cls._solve(cls._design(Z, C, width), Y, ridge), mu, sd)
-
-    @classmethod
-    def _cross_validate(cls, Z, Y, C, widths, ridges, seed, folds=5):
-        fold = np.random.default_rng(seed).permutation(len(Z)) % folds
-        best, arg = np.inf, (widths[0], ridges[0])
-        for w in widths:
-            Phi = cls._design(Z, C, w)
-            for r in ridges:
-                sse = sum(np.sum((Y[fold == f] - Phi[fold == f] @ cls._solve(Phi[fold != f], Y[fold != f], r)) ** 2)
-                          for f in range(folds))
-                if sse < best:
-                    best, arg = sse, (w, r)
-        return arg
-
-    @staticmethod
-    def _solve(Phi, Y, ridge):
-        A = Phi.T @ Phi + ridge * len(Phi) * np.eye(Phi.shape[1])
-        return np.linalg.solve(A, Phi.T @ Y)
-
-    @staticmethod
-    def _design(Z, C, width):
-        d2 = np.sum((Z[:, None, :] - C[None]) ** 2, -1)
-        return np.column_stack([np.exp(-0.5 * d2 / width**2), np.ones(len(Z))])
-
-    def predict(self, Xs: np.ndarray) -> np.ndarray:
-        """Predicted outputs (N, k)."""
-        Z = (np.atleast_2d(np.asarray(Xs, float)) - self.x_mean) / self.x_std
-        return self._design(Z, self.centres, self.width) @ self.weights

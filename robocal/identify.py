@@ -16,8 +16,8 @@ import numpy as np
 
 from .lm import levenberg_marquardt
 from .frames import fit_rigid, make_T, rotvec_to_matrix, skew
-from .kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian, parameter_difference,
-                         smr_base)
+from .kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian_t, parameter_difference,
+                         smr_base, smr_tracker)
 
 
 class IdentificationError(ValueError):
@@ -184,10 +184,33 @@ def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
 
 
 def _whiten(W, x):
-    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays."""
+    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays (batched 3x3 products: matmul, not einsum, which
+    is several times slower at 10^5 points)."""
     if W is None:
         return x
+    x = np.asarray(x, float)
+    if x.ndim == 2:
+        return np.matmul(W, x[:, :, None])[:, :, 0]
+    if x.ndim == 3:
+        return np.matmul(W, x)
     return np.einsum("nij,nj...->ni...", W, x)
+
+
+def _whiten_t(W, Jt):
+    """Per-point whitening of parameter-major Jacobian columns Jt (K, N, 3) -> (K, N, 3)."""
+    if W is None:
+        return Jt
+    return np.matmul(Jt[:, :, None, :], np.swapaxes(W, 1, 2))[:, :, 0, :]
+
+
+def r_factor(A: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """Triangular factor R (P, P) of A (m, P) = Q R by QR of row blocks, then of their stacked factors: every
+    norm, projection, least-squares fit and singular value of A's columns is R's, at O(m P^2) time in cache-sized
+    blocks (a single QR of a 10^5-row A is several times slower). A itself when it has few rows."""
+    if len(A) <= 4 * A.shape[1] + chunk:
+        return A
+    blocks = [np.linalg.qr(A[i:i + chunk], mode="r") for i in range(0, len(A), chunk)]
+    return np.linalg.qr(np.vstack(blocks), mode="r")
 
 
 def igg3_weight(v_std: np.ndarray, k0: float = 1.5, k1: float = 2.5) -> np.ndarray:
@@ -236,7 +259,9 @@ def observability_indices(A: np.ndarray) -> dict:
 def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[int], rank_tol: float,
                             fixed: tuple[str, ...] = ()) -> Identifiability:
     """Admit columns of A (m, P) in ``order`` when their part orthogonal to the admitted ones keeps more
-    than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with."""
+    than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with.
+    Works on A's triangular factor (``r_factor``): the same answer, with no (m, P) temporaries."""
+    A = r_factor(np.asarray(A, float))
     norms = np.linalg.norm(A, axis=0)
     keep = np.zeros(A.shape[1], bool)
     rels = np.zeros(A.shape[1])
@@ -268,9 +293,11 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
 
 # ---------------------------------------------------------------- estimation
 def _linearise(kin, q, p_meas, W, cols, D):
-    p, J = identification_jacobian(kin, q)
+    """(r (3N,), A (3N, P)) whitened, A column-scaled by D; A is the transpose of a C-ordered (P, 3N) array (the
+    parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
+    p, Jt = identification_jacobian_t(kin, q)
     r = _whiten(W, p_meas - p).reshape(-1)
-    A = _whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
+    A = (_whiten_t(W, Jt[cols]).reshape(len(cols), -1) / D[:, None]).T
     return r, A
 
 
@@ -350,8 +377,8 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
         # identifiability depends on where the model is (theta6, a5, alpha5 are degenerate while the SMR estimate
         # sits on the J6 axis): re-analyse at the solution and re-solve when a parameter became clearly
         # identifiable (10x the rank tolerance, so a borderline column never enters on the way)
-        _, J = identification_jacobian(kin, q)
-        A_full = _whiten(W, J).reshape(-1, layout.size)
+        _, Jt = identification_jacobian_t(kin, q)
+        A_full = _whiten_t(W, Jt).reshape(layout.size, -1).T
         ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol,
                                         options.fixed)
         if cols is None:
@@ -381,7 +408,7 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
     cov_scaled = sigma0**2 * np.linalg.pinv(N)
     std = np.full(layout.size, np.nan)
     std[cols] = np.sqrt(np.diag(cov_scaled)) / D
-    p_model = identification_jacobian(kin, q)[0]
+    p_model = smr_tracker(kin, q)
     return CalibrationResult(
         kinematics=kin, start=start, names=layout.names, identified=tuple(layout.names[c] for c in cols),
         delta=parameter_difference(kin, start), std=std, unidentifiable=ident.unidentifiable,

@@ -11,7 +11,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from campaign.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command, print_plausibility
+from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
+                                 overwrite_argument, print_plausibility)
 from campaign.config import load_config
 from campaign.errors import DataError
 from campaign.plausibility import forced
@@ -37,9 +38,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
-    parser.add_argument("--out", metavar="RUN_DIR", type=Path, help="run directory (default: output.dir/NAME-TIMESTAMP)")
+    parser.add_argument("--out", metavar="RUN_DIR", type=Path,
+                        help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
     parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
     _force_argument(parser)
+    overwrite_argument(parser)
 
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
@@ -50,7 +53,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     out = _stdout()
     with forced(args.force):
-        result = run_campaign(cfg, args.out, args.resume, out)
+        result = run_campaign(cfg, args.out, args.resume, out, overwrite=args.overwrite)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
@@ -73,6 +76,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _plan_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
     parser.add_argument("--csv", metavar="FILE", type=Path, help="also write the plan as CSV")
+    overwrite_argument(parser)
 
 
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
@@ -82,7 +86,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.plan import build_plan, write_plan_csv
     from campaign.report import render_plan
 
+    from campaign.outputs import check_file
+
     cfg = load_config(args.config)
+    if args.csv:
+        check_file(args.csv, args.overwrite, "--csv")
     kin = nominal_kinematics(cfg)
     plan = build_plan(cfg, kin)
     render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, kin))
@@ -98,8 +106,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", metavar="RUN_DIR_OR_CSV", type=Path, help="a run directory or an interchange CSV")
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise, options)")
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where report.json and model.json go")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR",
+                        help="where report.json, model.json and report.html go: a new or empty directory (or one "
+                             "reprocess wrote from the same source); never a run's directory")
     _force_argument(parser)
+    overwrite_argument(parser)
 
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
@@ -111,7 +122,7 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
     with forced(args.force):
-        processed = reprocess(args.source, cfg, args.out)
+        processed = reprocess(args.source, cfg, args.out, args.overwrite)
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
@@ -126,6 +137,7 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise)")
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
+    overwrite_argument(parser)
 
 
 @command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
@@ -139,6 +151,9 @@ def cmd_select(args: argparse.Namespace) -> int:
         raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
     if args.out.resolve() == args.data.resolve():
         raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
+    from campaign.outputs import check_file
+
+    check_file(args.out, args.overwrite)
     ds = read_csv(args.data)
     keep = select_rows(ds, cfg, args.points)
     write_csv(args.out, ds.subset(keep))
@@ -154,7 +169,10 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", required=True, type=Path, help="model.json written by run or reprocess")
     parser.add_argument("--targets", required=True, type=Path,
                         help="CSV target_id,x,y,z[,qw,qx,qy,qz] in mm in the robot base frame (a path: one row per point)")
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where the corrected targets go")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR",
+                        help="where the corrected targets go: a new or empty directory (or one correct wrote with "
+                             "the same model)")
+    overwrite_argument(parser)
     parser.add_argument("--format", action="append", choices=("rapid", "ur", "csv"), metavar="FORMAT",
                         help="write-back format: rapid, ur or csv (repeatable; default: the configured "
                              "controller's format and csv)")
@@ -163,13 +181,14 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_rejected, read_targets_csv, recorded_identity, write_corrected
+    from campaign.correction import (check_model_fits, correct_targets, read_rejected, read_targets_csv,
+                                     recorded_identity, write_corrected)
+    from campaign.outputs import check_dir, source_key
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
-    from campaign.correction import check_model_fits
-
     cfg = load_config(args.config)
+    claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
     model = load_model(args.model)
     with forced(args.force):
         check_model_fits(cfg, model, str(args.model))
@@ -177,7 +196,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
-        paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))
+        paths = write_corrected(cfg, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
         _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]

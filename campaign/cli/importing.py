@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import EXIT_OK, _stdout, command
+from campaign.cli.common import EXIT_OK, _stdout, command, overwrite_argument
 
 
 def _import_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,13 +21,16 @@ def _import_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, metavar="FILE", help="interchange CSV to write")
     parser.add_argument("--dif-sign", choices=("+1", "-1"), default="+1",
                         help="measured = target + SIGN x dif (default +1: dif = reached - target; see docs/results.md)")
+    overwrite_argument(parser)
 
 
 @command("import", "convert a campaign measured in another layout to the interchange CSV", _import_arguments)
 def cmd_import(args: argparse.Namespace) -> int:
     from campaign.importers import import_target_dif
     from campaign.interchange import write_csv
+    from campaign.outputs import check_file
 
+    check_file(args.out, args.overwrite)
     ds = import_target_dif(args.calib, args.test, float(args.dif_sign))
     write_csv(args.out, ds)
     n_cal, n_test = int(ds.mask("calib").sum()), int(ds.mask("test").sum())

@@ -59,6 +59,8 @@ def test_the_cli_writes_the_interchange_csv(tmp_path, capsys):
     assert back.point_id == ref.point_id and back.set == ref.set
     np.testing.assert_array_equal(back.p_tracker_mm, ref.p_tracker_mm)
     code, _, err = cli(capsys, "import", "target-dif", GRID, "--out", out, "--dif-sign", "-1")
+    assert code == 2 and "--overwrite" in err                     # an existing file is not replaced silently
+    code, _, err = cli(capsys, "import", "target-dif", GRID, "--out", out, "--dif-sign", "-1", "--overwrite")
     assert code == 0, err
     np.testing.assert_allclose(read_csv(out).p_tracker_mm, import_target_dif(GRID, dif_sign=-1.0).p_tracker_mm)
 

@@ -63,7 +63,8 @@ def _killed_when(proc, log_path, ready, timeout_s=120):
     while time.monotonic() < deadline and proc.poll() is None:
         if log_path.exists() and ready(read_log(log_path)):
             proc.send_signal(signal.SIGKILL)
-            assert proc.wait(timeout=10) == -signal.SIGKILL
+            proc.communicate(timeout=10)
+            assert proc.returncode == -signal.SIGKILL
             return
         time.sleep(0.01)
     raise AssertionError(f"the run ended (exit {proc.poll()}) before it could be killed")
@@ -87,7 +88,8 @@ def test_stop_auto_resumes_inside_a_block_and_after_the_stop(tmp_path):
     _killed_when(_start(path, run_dir, True), log_path,
                  lambda c: stopped(c) and sum(p["set"] == "test" for p in c.points) >= 3)
     proc = _start(path, run_dir, True)
-    assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err.decode()
     contents = read_log(log_path)
     assert sum(e["type"] == "resume" for e in contents.events) == 2
     _check_run(run_dir)

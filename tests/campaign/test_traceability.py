@@ -67,7 +67,8 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
 @pytest.mark.system
 def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
     cfg = load_config(small_config(tmp_path, **SMALL))
-    slow = load_config(small_config(tmp_path, **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
+    (tmp_path / "slow").mkdir()                           # its own file: the run copies cfg's, unchanged
+    slow = load_config(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
     kin = nominal_kinematics(cfg)
     plan = build_plan(cfg, kin)
     n = len(plan.points)
