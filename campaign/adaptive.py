@@ -83,7 +83,7 @@ def _plan_meta(cfg: CampaignConfig, q_deg: np.ndarray, t_done: np.ndarray | None
 
 def evaluate(cfg: CampaignConfig, plan: Plan, contents: LogContents, elapsed_s: float) -> StopCheck:
     """Refit the calibration points of the log ``contents`` and decide whether the next block is worth it."""
-    from .process import effect_choices, effect_meta      # the calibration numerics load when a block ends
+    from .effects_stage import effect_choices, effect_meta   # the calibration numerics load when a block ends
     ds = dataset_from_log(contents)
     cal = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]

@@ -103,6 +103,11 @@ class RobotConfig:
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
+    Gravity model of the physical effects (``robocal.effects.GravityModel``): ``link_masses_kg`` (one lumped mass
+    per link, J1..Jn, default none), else ``mass_kg`` (the arm's datasheet mass: 70 % of it shared over the links
+    as 0/38/43/13/4/1 %, default none), else the default masses of a ~130 kg arm (stiffnesses then scale with
+    the true mass); ``gravity_direction_base`` (default [0, 0, -1], floor mount): gravity in the base frame, any
+    direction for tilted, wall or ceiling mounts.
     Motion caps the driver enforces before any command is sent: ``max_tcp_speed_mm_s`` (default 250, at most
     ``datasheet_max_tcp_speed_mm_s``, the manufacturer's maximum TCP speed, when given) and
     ``max_joint_speed_pct`` (default 100, percent of the rated joint speed). ``first_pass_speed_pct``
@@ -121,6 +126,9 @@ class RobotConfig:
     max_joint_speed_pct: float = 100.0
     datasheet_max_tcp_speed_mm_s: float | None = None
     first_pass_speed_pct: float | None = None
+    link_masses_kg: tuple[float, ...] | None = None
+    mass_kg: float | None = None
+    gravity_direction_base: Vec3 = (0.0, 0.0, -1.0)
 
     @property
     def n_joints(self) -> int:

@@ -19,10 +19,9 @@ import numpy as np
 
 from robocal.frames import transform_points
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import ParamLayout, smr_tracker
+from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
 from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
@@ -36,6 +35,7 @@ from .errors import DataError, DataWarning
 from .fsutil import write_json
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
+from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
 from .records import CalibrationReport
@@ -102,19 +102,6 @@ def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     return prepare(ds, cfg).dataset
 
 
-def effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray, approach: np.ndarray | None = None) -> dict:
-    """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
-    signs of every joint (from the full measurement order, or ``approach`` (N, n) computed before rows were set
-    aside), time since the start (s)."""
-    n = len(rows)
-    pay = ds.payload_kg[rows] if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
-    if approach is None and len(ds) > 1:
-        approach = ds.approach_sign()
-    approach = None if approach is None else approach[rows]
-    return {"payload_kg": np.asarray(pay, float), "approach": approach,
-            "t_s": None if ds.t_s is None else np.asarray(ds.t_s[rows], float)}
-
-
 @dataclass(frozen=True, eq=False)
 class GeometricFit:
     """The geometric-only calibration of the calib rows ``rows`` (indices into the dataset): ``result`` with
@@ -179,38 +166,41 @@ def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
 
 
-def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
-    """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
-    kin = geo.result.kinematics
-    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
-    return effect_choices(cfg, kin, cols, q, p, cov, meta)
+@dataclass(frozen=True, eq=False)
+class Fitted:
+    """What reprocess and diagnose share: the preparation, the dataset the fits saw (SMR-triangle faults set
+    aside), those set-aside rows, the geometric fit and the elastic stage (the effect engine's answer)."""
+    prep: object
+    dataset: Dataset
+    smr_excluded: list
+    kin0: object
+    geo: GeometricFit
+    stage: ElasticStage
 
 
-def effect_choices(cfg: CampaignConfig, kin, cols, q, p, cov, meta):
-    """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
-    ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``."""
-    spec = cfg.calibration.effects
-    if spec == "none":
-        return [], None
-    if spec != "auto":
-        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                           for k, v in s.params.items())) for s in spec], None
-    sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
-    return list(sel.taken), sel
+def fit_stages(ds: Dataset, cfg: CampaignConfig, plaus) -> Fitted:
+    """Preparation, SMR-triangle screen, geometric fit (from the registered start ``kin0`` of the plausibility
+    check ``plaus``) and elastic stage of a checked dataset: one sequence for ``reprocess`` and ``diagnose``, so
+    both take the same effects with the same values."""
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
+    order = order_meta(ds)                                  # approach and moves from the full measurement order
+    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    if not smr_keep.all():
+        ds, order = ds.subset(smr_keep), subset(order, smr_keep)
+        _check_dataset(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
+    stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+    return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
-    approach = ds.approach_sign() if len(ds) > 1 else None      # from the full measurement order
-    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
-    if not smr_keep.all():
-        ds, approach = ds.subset(smr_keep), None if approach is None else approach[smr_keep]
-        _check_dataset(ds, cfg)
-    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
-    geo = _geometric(ds, cfg, kin0)
+    fitted = fit_stages(ds, cfg, plaus)
+    prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
+    kin0 = fitted.kin0
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
@@ -219,44 +209,12 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     if not test.any():
         plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
         warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
-    kept_rows = geo.rows[geo.keep]
-    qk, pk = q[kept_rows], p[kept_rows]
-    cov_all, cov_source = weights_covariance(cfg, ds)
-    covk = cov_all[kept_rows]
-    meta_all = effect_meta(ds, cfg, np.arange(len(ds)), approach)
-    sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
-    meta_k = sub(meta_all, kept_rows)
+    cov_source = weights_covariance(cfg, ds)[1]
+    meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
+    final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
+    sub = subset
+    qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)
-    choices, selection = _model_effects(ds, cfg, geo, qk, pk, covk, meta_k)
-    model_geo = CalibratedModel(result.kinematics, None, None, (), payload_model)
-    model_el, elastic = model_geo, None
-    final_screen = geo.screen
-    if choices:
-        cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified])
-
-        def fit_el(rows):
-            try:
-                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows],
-                                         sub(meta_all, rows), choices, calibration_options(cfg))
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
-        elastic = fit_el(kept_rows)
-        model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
-        if cfg.calibration.outliers == "local":
-            # screen again against the model with its effects: structure the geometry alone could not fit is no
-            # reason to exclude a point (and a fault hidden by that structure shows now)
-            rc = geo.rows
-            final_screen = _screen(ds, kin0, rc, p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)))
-            robust_rejected = ~geo.keep
-            robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
-            new_keep = final_screen.keep & ~robust_rejected
-            if new_keep.sum() < 10:
-                final_screen = geo.screen
-            elif not np.array_equal(new_keep, geo.keep):
-                kept_rows = rc[new_keep]
-                qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
-                elastic = fit_el(kept_rows)
-                model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .effects import effect_regressor
-from .elastic import EffectChoice, candidate_effects
+from .effects import GravityModel, effect_regressor
+from .elastic import EffectChoice, candidates
 from .identify import analyse_identifiability, priority_order
 from .kinematics import Kinematics, ParamLayout, identification_jacobian
 
@@ -254,7 +254,9 @@ def criterion_effects(kin: Kinematics, q_rad: np.ndarray, payload_kg: float) -> 
     the loaded joints, gear harmonics of every joint, wrist coupling): those a choice of poses must reveal.
     Backlash and thermal terms depend on the order and time of the measurements, not on the poses."""
     meta = {"payload_kg": np.full(len(np.atleast_2d(q_rad)), float(payload_kg))}
-    return [c for c in candidate_effects(kin, q_rad, meta) if not c.build(kin.n).needs]
+    out = [c for c in candidates(kin, q_rad, meta, GravityModel())[0] if not c.build(kin.n).needs]
+    return [c.with_options(harmonics=(1, 2)) if c.name == "gear_cyclic" else c
+            for c in out]                    # the first two harmonics: what a pose set must reveal of a gear error
 
 
 def design_columns(kin: Kinematics, q_rad: np.ndarray, meta, effects) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:

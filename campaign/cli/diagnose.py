@@ -37,8 +37,8 @@ def _arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--self-check", action="store_true",
                         help="simulate campaigns with withheld effects and check the diagnosis finds them")
     parser.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
-                        help="self-check: seeds per effect (default 5; 2N controls, 2N two-effect cases, N outside the "
-                             "library)")
+                        help="self-check: seeds per effect and per failure class (default 5; 2N controls, 2N "
+                             "two-effect cases, N outside the library)")
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (the report says they were overridden)")
     overwrite_argument(parser)
@@ -130,7 +130,8 @@ def _self_check(args: argparse.Namespace) -> int:
         write_diagnosis_json(args.json, result.to_dict())
         out.print(f"wrote {args.json}", markup=False)
     if not result.passed():
-        _stderr().print("self-check below target: < 95 % of single effects named right, < 95 % of controls clean, "
-                        "or > 1 spurious acceptance per 20 datasets", style="red", markup=False)
+        _stderr().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
+                        "effect accepted on a control, a confound class not named, or a lag called backlash",
+                        style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK
