@@ -54,8 +54,8 @@ def test_points_beyond_the_inline_size_go_to_points_csv_and_read_back_identicall
     assert len(std_inline) == test.sum() > 0 and a.pred_std_mm is None
     np.testing.assert_allclose(b.pred_std_mm[test], [std_inline[i] for i in np.array(b.point_id)[test]], atol=1e-6)
     assert np.isnan(b.pred_std_mm[~test]).all()
-    figures = sorted(p.name for p in (tmp_path / "side" / "figures").glob("*.png"))
-    assert figures and figures == sorted(p.name for p in (tmp_path / "inline" / "figures").glob("*.png"))
+    figures = sorted(p.name for p in (tmp_path / "side" / "report_figures").glob("*.png"))
+    assert figures and figures == sorted(p.name for p in (tmp_path / "inline" / "report_figures").glob("*.png"))
     assert (tmp_path / "side" / "report.html").read_text().count("<img") == \
         (tmp_path / "inline" / "report.html").read_text().count("<img")
     (tmp_path / "side" / "points.csv").unlink()             # a reader without the side file: one-line error
