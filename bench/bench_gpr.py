@@ -39,7 +39,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.gp import GaussianProcess, MultiOutputGP, RBFNetwork, gp_inputs  # noqa: E402
+from robocal.gp import GaussianProcess, MultiOutputGP, gp_inputs  # noqa: E402
+from robocal.rbf import RBFNetwork  # noqa: E402
 from robocal.identify import calibrate, register  # noqa: E402
 from robocal.ik import solve_on_branch  # noqa: E402
 from robocal.kinematics import smr_tracker  # noqa: E402

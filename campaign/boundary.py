@@ -5,7 +5,8 @@
   not a directory, no permission, read-only file system), exit 1 when the system failed underneath a valid
   path (disk full, I/O error, quota)
 * other ``CampaignError``, ``DriverError`` -> exit 1 (run or device failure)
-* Ctrl-C, SIGTERM, SIGHUP -> exit 130 (the runner stops the robot and closes the log ``abort``)
+* Ctrl-C, SIGTERM, SIGHUP -> exit 130 with one line, also when the signal arrives while the command finishes
+  (the runner stops the robot and closes the log ``abort``; see :mod:`campaign.signals`)
 * anything else -> a crash report (traceback, versions, command) in the run directory or a temporary file,
   one line naming it, exit 3. A traceback never reaches the terminal.
 """
@@ -13,13 +14,8 @@ from __future__ import annotations
 
 import errno
 import os
-import platform
-import signal
 import sys
-import tempfile
-import traceback
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -34,7 +30,6 @@ EXIT_INTERRUPTED = 130
 # errno values meaning "the path you gave cannot be used" (input) rather than "the system failed" (run)
 _INPUT_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.EPERM, errno.EROFS,
                            errno.ENAMETOOLONG, errno.ELOOP, errno.EEXIST, errno.ENOTEMPTY})
-_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def os_error_line(exc: OSError) -> tuple[str, int]:
@@ -63,7 +58,14 @@ def classify(exc: BaseException) -> tuple[str, int] | None:
 
 
 def write_crash_report(exc: BaseException, argv: Sequence[str], run_dir: Path | None) -> Path:
-    """Traceback, versions and command line in RUN_DIR/crash-TIMESTAMP.txt, else a temporary file."""
+    """Traceback, versions and command line in RUN_DIR/crash-TIMESTAMP.txt, else a temporary file; URL user-info
+    and known secrets masked (:func:`drivers.redact.redact`)."""
+    import platform
+    import tempfile
+    import traceback
+
+    from drivers.redact import redact
+
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     text = "\n".join([
         f"campaign crash report {datetime.now(timezone.utc).isoformat()}",
@@ -74,6 +76,7 @@ def write_crash_report(exc: BaseException, argv: Sequence[str], run_dir: Path | 
         "",
         "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)),
     ])
+    text = redact(text)
     if run_dir is not None and run_dir.is_dir():
         try:
             path = run_dir / f"crash-{stamp}.txt"
@@ -99,47 +102,49 @@ def _versions() -> str:
     return ", ".join(out)
 
 
-@contextmanager
-def signals_as_interrupt() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, like Ctrl-C;
-    the previous handlers are restored afterwards."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise Terminated(signal.Signals(signum).name)
-
-    previous = {}
-    for sig in _SIGNALS:
-        try:
-            previous[sig] = signal.signal(sig, handler)
-        except (OSError, ValueError):
-            pass
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
 def guarded(run: Callable[[], int], argv: Sequence[str], run_dir_hint: Callable[[], Path | None],
             fail: Callable[[str, int], int]) -> int:
-    """Call ``run()`` inside the boundary; ``fail(message, code)`` prints one line and returns ``code``."""
+    """Call ``run()`` inside the boundary; ``fail(message, code)`` prints one line and returns ``code``.
+    Signals are handled by :mod:`campaign.signals` (installed here unless the process entry already did, and then
+    restored here): any signal received while the command ran makes the exit code 130."""
+    from . import signals
+
+    own = signals.install()
+    printed = stderr_prints()
+    try:
+        code = _guarded(run, argv, run_dir_hint, fail)
+        if signals.received() is not None and code != EXIT_INTERRUPTED:   # dropped by a library, or arrived late
+            code = (EXIT_INTERRUPTED if stderr_prints() > printed
+                    else fail(_signal_line(signals.received()), EXIT_INTERRUPTED))
+        return code
+    finally:
+        if own:
+            signals.restore()
+
+
+def _guarded(run, argv, run_dir_hint, fail) -> int:
     import warnings
 
+    from . import signals
+
     try:
-        with signals_as_interrupt(), warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("default")
-            code = run()
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                errors = [f for f in warnings.filters if f[0] == "error"]     # -W error::X (the test suite) stays
+                warnings.simplefilter("default")
+                warnings.filters[:0] = errors
+                code = run()
+        finally:
+            signals.disarm()                    # the exit code is being decided: a signal is recorded, not raised
         for text in (_unique_warnings(caught) if code == EXIT_OK else []):   # one line each, success only
             fail(f"warning: {text}", code)
         return code
     except BaseException as exc:  # noqa: BLE001 - this IS the boundary
+        signals.disarm()
         if isinstance(exc, SystemExit):
             raise
+        if signals.received() is not None:      # the signal's exception, or what a library made of it
+            return fail(_signal_line(signals.received()), EXIT_INTERRUPTED)
         known = classify(exc)
         if known is not None:
             return fail(*known)
@@ -151,6 +156,34 @@ def guarded(run: Callable[[], int], argv: Sequence[str], run_dir_hint: Callable[
         return fail(f"internal error: {type(exc).__name__}: {_short(exc)}; crash report {report}", EXIT_CRASH)
 
 
+def _signal_line(name: str) -> str:
+    return "interrupted" if name == "SIGINT" else f"terminated by {name}"
+
+
+def stderr_prints() -> int:
+    """Lines printed on stderr so far through :mod:`campaign.terminal` (0 before it is loaded)."""
+    terminal = sys.modules.get("campaign.terminal")
+    return 0 if terminal is None else terminal.stderr_prints()
+
+
+def run_process(main: Callable[[], int], line: Callable[[str], None]) -> None:
+    """The console script: signals handled from the first instruction to the last (see :mod:`campaign.signals`);
+    ``main()`` runs the command; ``line(text)`` prints the one line of a signal that no one reported.
+    Never returns: the process ends through :func:`campaign.signals.exit_process`."""
+    from . import signals
+
+    signals.install()
+    code = EXIT_INTERRUPTED
+    try:
+        try:
+            code = main()
+        finally:
+            signals.disarm()
+    except KeyboardInterrupt:                   # while the CLI was loading or parsing its arguments
+        pass
+    signals.exit_process(code, None if stderr_prints() else lambda name: line(_signal_line(name)))
+
+
 def _short(exc: BaseException, limit: int = 160) -> str:
     text = " ".join(str(exc).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
@@ -158,9 +191,12 @@ def _short(exc: BaseException, limit: int = 160) -> str:
 
 def _unique_warnings(caught, limit: int = 3) -> list[str]:
     """Python warnings raised during a command as short one-line texts (no file/line/source dump)."""
+    from .errors import DataWarning
+
     seen: list[str] = []
     for w in caught:
-        text = f"{w.category.__name__}: {' '.join(str(w.message).split())}"
+        message = " ".join(str(w.message).split())
+        text = message if issubclass(w.category, DataWarning) else f"{w.category.__name__}: {message}"
         if text not in seen:
             seen.append(text)
     return seen[:limit]

@@ -31,8 +31,10 @@ from campaign.errors import ConfigError
 from campaign.yaml_limits import load_limited, read_limited
 
 from campaign.config_schema import *  # noqa: F401,F403  (the schema; re-exported)
-from campaign.config_schema import _NAME_RE, _ORTHONORMAL_TOL, _to_plain  # noqa: F401
+from campaign.config_schema import (_NAME_RE, _ORTHONORMAL_TOL, FILE_NAME_MAX, MAX_NAME_CHARS,  # noqa: F401
+                                    _to_plain)
 from campaign.config_reader import *  # noqa: F401,F403
+from campaign.config_plan import optimal_keys
 from campaign.config_reader import (_REQUIRED, _ListPath, _Reader, _check_integer, _check_number,  # noqa: F401
                                     _check_vector, _describe, _fmt, _freeze, _keys)
 
@@ -58,6 +60,7 @@ __all__ = [
     "NestsConfig",
     "OutputConfig",
     "PlanConfig",
+    "PoolConfig",
     "RobotConfig",
     "SimulationConfig",
     "TestSetConfig",
@@ -151,6 +154,9 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
     name = r.string("name")
     if not _NAME_RE.match(name):
         raise r.error("name", f"expected letters, digits, '_', '.' or '-' (it names run directories), got {_describe(name)}")
+    if len(name) > MAX_NAME_CHARS:
+        raise r.error("name", f"{len(name)} characters: at most {MAX_NAME_CHARS} (it names run directories, "
+                              f"NAME-TIMESTAMP, and a file name holds {FILE_NAME_MAX} bytes)")
     robot = _robot(r.section("robot", RobotConfig))
     tool = _tool(r.section("tool", ToolConfig))
     tracker = _tracker(r.section("tracker", TrackerConfig))
@@ -191,7 +197,21 @@ def _robot(r: _Reader) -> RobotConfig:
         max_joint_speed_deg_s=r.number("max_joint_speed_deg_s", 30.0, positive=True),
         options=r.mapping("options", {}),
         **_motion_caps(r),
+        **_gravity(r, len(joints)),
     )
+
+
+def _gravity(r: _Reader, n: int) -> dict[str, Any]:
+    """Link masses (kg, >= 0), the arm's mass (kg) and the direction of gravity in the base frame (non-zero)."""
+    masses = r.vector("link_masses_kg", n, None)
+    if masses is not None and any(m < 0 for m in masses):
+        raise r.error("link_masses_kg", "masses must be >= 0 kg")
+    mass = r.data.get("mass_kg")
+    g = r.vector("gravity_direction_base", 3, [0.0, 0.0, -1.0])
+    if sum(v * v for v in g) < 1e-12:
+        raise r.error("gravity_direction_base", "expected a non-zero direction")
+    return {"link_masses_kg": masses, "mass_kg": None if mass is None else r.number("mass_kg", positive=True),
+            "gravity_direction_base": g}
 
 
 def _motion_caps(r: _Reader) -> dict[str, Any]:
@@ -259,6 +279,8 @@ def _tracker(r: _Reader) -> TrackerConfig:
         uncertainty=_uncertainty(r.section("uncertainty", TrackerUncertainty)),
         measurement=_measurement(r.section("measurement", MeasurementConfig, required=False)),
         options=r.mapping("options", {}),
+        max_range_mm=None if r.data.get("max_range_mm") is None else r.number("max_range_mm", positive=True),
+        max_incidence_deg=r.number("max_incidence_deg", 30.0, positive=True, hi=90.0),
     )
 
 
@@ -303,8 +325,8 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         keep_out=_keep_out(r),
         envelope=None if r.data.get("envelope") is None else _box(r.section("envelope", BoxConfig), "envelope"),
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
-        kind=r.choice("kind", ("grid", "iso9283"), "grid"),
         iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
+        **optimal_keys(r),
     )
 
 
@@ -416,12 +438,15 @@ def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
     value = r.data.get("effects", "auto")
     if value is None or isinstance(value, str):
         return r.choice("effects", ("auto", "none"), "auto")
-    specs = _effects(r)
+    specs = _effects(r, MODEL_EFFECT_NAMES)
     where = r.child_list("effects")
+    from robocal.effects import FACTORY_KEYS
+
     for i, spec in enumerate(specs):
-        if spec.name not in MODEL_EFFECT_NAMES:
-            raise ConfigError(r.file, where.key_path(i) + ".name", f"effect {spec.name!r} is not a robot effect "
-                              f"(expected one of: {', '.join(MODEL_EFFECT_NAMES)})")
+        for key in spec.params:
+            if key not in FACTORY_KEYS[spec.name]:
+                raise ConfigError(r.file, f"{where.key_path(i)}.params.{key}", f"unknown parameter of "
+                                  f"{spec.name} (expected one of: {', '.join(sorted(FACTORY_KEYS[spec.name])) or 'none'})")
         if spec.scale != 1.0:
             raise ConfigError(r.file, where.key_path(i) + ".scale", "scale applies to simulated effects only")
     return specs
@@ -492,21 +517,22 @@ def _det3(a: Sequence[Sequence[float]]) -> float:
     )
 
 
-def _effects(r: _Reader) -> tuple[EffectSpec, ...]:
-    """``simulation.effects``: names or ``{name, scale, params}`` mappings, no duplicates."""
+def _effects(r: _Reader, names: tuple[str, ...] = EFFECT_NAMES) -> tuple[EffectSpec, ...]:
+    """``simulation.effects`` (or ``calibration.effects`` with ``names``): names or ``{name, scale, params}``
+    mappings, no duplicates (the same name twice needs other params, e.g. gear_cyclic on two joints)."""
     where = r.child_list("effects")
     specs: list[EffectSpec] = []
     for i, item in enumerate(r.items("effects", [], what="effects")):
-        spec = _effect(where.reader(i, {"name": item} if isinstance(item, str) else item, EffectSpec))
-        if any(s.name == spec.name for s in specs):
+        spec = _effect(where.reader(i, {"name": item} if isinstance(item, str) else item, EffectSpec), names)
+        if any(s.name == spec.name and dict(s.params) == dict(spec.params) for s in specs):
             raise ConfigError(r.file, where.key_path(i) + ".name", f"duplicate effect {spec.name!r}")
         specs.append(spec)
     return tuple(specs)
 
 
-def _effect(r: _Reader) -> EffectSpec:
+def _effect(r: _Reader, names: tuple[str, ...] = EFFECT_NAMES) -> EffectSpec:
     return EffectSpec(
-        name=r.choice("name", EFFECT_NAMES),
+        name=r.choice("name", names),
         scale=r.number("scale", 1.0, lo=0.0),
         params=r.mapping("params", {}),
     )

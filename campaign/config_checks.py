@@ -15,6 +15,7 @@ from .errors import ConfigError
 SUPPORTED_JOINTS = 6            # plan (wrist singularity), IK branch, ABB confdata and UR write-back are 6R
 MAX_PLAN_POINTS = 20_000        # grid + test + check repeats: a real campaign has a few hundred
 MAX_GRID_POINTS = 10_000
+MAX_POOL_CELLS = 20_000         # candidate positions of an optimal plan (x orientations x branches)
 MAX_TEST_POINTS = 10_000
 MAX_CHECK_POSES = 100
 MAX_SAMPLES = 1_000             # tracker readings averaged per point
@@ -63,7 +64,15 @@ def _check_sizes(cfg, file: str) -> None:
     if n_grid > MAX_GRID_POINTS:
         raise ConfigError(file, "plan.grid.step_mm", f"{cfg.plan.grid.step_mm:g} mm makes {nx} x {ny} x {nz} = "
                                                       f"{n_grid} grid points (max {MAX_GRID_POINTS}): use a larger step")
+    if pl.kind == "optimal":
+        step = pl.pool.step_mm or pl.grid.step_mm / 2
+        cells = math.prod(int(min(math.floor(s / step + 1e-9), 1e9)) + 1 for s in pl.grid.size_mm)
+        if cells > MAX_POOL_CELLS:
+            raise ConfigError(file, "plan.pool.step_mm", f"{step:g} mm makes {cells} candidate positions "
+                                                         f"(max {MAX_POOL_CELLS}): use a larger step")
     bounds = [
+        ("plan.points", pl.points or 0, MAX_GRID_POINTS),
+        ("plan.max_points", pl.max_points or 0, MAX_GRID_POINTS),
         ("plan.test.count", pl.test.count, MAX_TEST_POINTS),
         ("plan.check_poses.count", pl.check_poses.count, MAX_CHECK_POSES),
         ("tracker.measurement.samples", m.samples, MAX_SAMPLES),

@@ -14,6 +14,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
+from drivers.redact import has_userinfo, redact_url
 from campaign.yaml_limits import load_limited, read_limited
 
 from campaign.config_schema import *  # noqa: F401,F403
@@ -150,9 +151,14 @@ class _Reader:
         known = ", ".join(sorted(schemes))
         scheme, sep, _ = value.partition("://")
         if not sep:
-            raise self.error(key, f"expected a driver URL like 'mock://...' (drivers: {known}), got {_describe(value)}")
+            raise self.error(key, f"expected a driver URL like 'mock://...' (drivers: {known}), got "
+                                  f"{_describe(redact_url(value))}")
+        if has_userinfo(value):
+            raise self.error(key, "credentials in the URL are refused (the URL is written to logs and reports): "
+                                  "remove 'user:password@'; credentials go in the environment (RWS_USER, RWS_PASSWORD) "
+                                  "or a file named by options.credentials.file (docs/drivers_abb.md)")
         if scheme not in schemes:
-            raise self.error(key, f"unknown driver {scheme!r} (expected one of: {known})")
+            raise self.error(key, f"unknown driver {_describe(scheme[:40])} (expected one of: {known})")
         return value
 
     # -- containers

@@ -27,6 +27,8 @@ RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
 OUTLIER_SCREENS = ("local", "none")
 JOINT_SETS = ("auto", "commanded", "readback")
 PLAN_ORDERS = ("serpentine", "random")
+PLAN_KINDS = ("grid", "optimal", "iso9283")
+STOP_RULES = ("off", "auto")
 CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 ERROR_FUNCTIONS = ("position", "pose")
 from robocal.effects import SIMULATED_EFFECTS as EFFECT_NAMES  # noqa: E402  (one owner: robocal.effects)
@@ -37,6 +39,8 @@ MAX_JOINTS = 12
 
 _ORTHONORMAL_TOL = 1e-3
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*\Z")
+FILE_NAME_MAX = 255                                      # bytes in one path component (ext4, XFS, APFS, NTFS)
+MAX_NAME_CHARS = FILE_NAME_MAX - len("-YYYYmmdd-HHMMSS-NNNN")   # the name + a run directory's timestamp fit
 
 Vec3 = tuple[float, float, float]
 Matrix4 = tuple[tuple[float, float, float, float], ...]
@@ -92,11 +96,18 @@ class JointConfig:
 class RobotConfig:
     """The robot arm and how to reach its controller.
 
-    ``url`` scheme selects the driver (one of ``ROBOT_SCHEMES``).
+    ``url`` scheme selects the driver (one of ``ROBOT_SCHEMES``). ``model`` (required, e.g. "ABB IRB
+    2600-12/1.65") is compared with the model the controller reports at connect (a different model stops the run
+    before the first move; vendor formatting is tolerated).
     ``hayati_joints``: 1-based joints whose axis is parallel to the next one
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
+    Gravity model of the physical effects (``robocal.effects.GravityModel``): ``link_masses_kg`` (one lumped mass
+    per link, J1..Jn, default none), else ``mass_kg`` (the arm's datasheet mass: 70 % of it shared over the links
+    as 0/38/43/13/4/1 %, default none), else the default masses of a ~130 kg arm (stiffnesses then scale with
+    the true mass); ``gravity_direction_base`` (default [0, 0, -1], floor mount): gravity in the base frame, any
+    direction for tilted, wall or ceiling mounts.
     Motion caps the driver enforces before any command is sent: ``max_tcp_speed_mm_s`` (default 250, at most
     ``datasheet_max_tcp_speed_mm_s``, the manufacturer's maximum TCP speed, when given) and
     ``max_joint_speed_pct`` (default 100, percent of the rated joint speed). ``first_pass_speed_pct``
@@ -115,6 +126,9 @@ class RobotConfig:
     max_joint_speed_pct: float = 100.0
     datasheet_max_tcp_speed_mm_s: float | None = None
     first_pass_speed_pct: float | None = None
+    link_masses_kg: tuple[float, ...] | None = None
+    mass_kg: float | None = None
+    gravity_direction_base: Vec3 = (0.0, 0.0, -1.0)
 
     @property
     def n_joints(self) -> int:
@@ -171,10 +185,15 @@ class TrackerConfig:
     """The laser tracker.
 
     ``url`` scheme selects the driver (one of ``TRACKER_SCHEMES``).
-    ``model`` defaults to ``""``; ``position_in_base_mm`` (rough tracker
+    ``model`` defaults to ``""`` (then not compared with the model the tracker reports at connect; a different
+    model stops the run before the first move); ``position_in_base_mm`` (rough tracker
     position in the robot base frame, for aiming) defaults to ``None``;
     ``measurement`` takes the ``MeasurementConfig`` defaults; ``options``
-    (default empty) are passed to the driver unchanged.
+    (default empty) are passed to the driver unchanged. What the tracker can see, for the poses an optimal
+    plan may choose: ``max_range_mm`` (default none: not checked) from ``position_in_base_mm`` to the SMR, and
+    ``max_incidence_deg`` (default 30, a 1.5 in SMR's acceptance half-angle) between the SMR's axis (the
+    flange z-axis) and the line of sight (a pose is never refused for facing the tracker no worse than
+    ``plan.tool_direction`` does at that position).
     """
 
     model: str
@@ -183,6 +202,8 @@ class TrackerConfig:
     uncertainty: TrackerUncertainty
     measurement: MeasurementConfig
     options: Mapping[str, Any]
+    max_range_mm: float | None = None
+    max_incidence_deg: float = 30.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,6 +277,19 @@ class Iso9283Config:
 
 
 @dataclass(frozen=True, slots=True)
+class PoolConfig:
+    """Candidate poses of an optimal plan (``plan.kind: optimal``): positions every ``step_mm`` in the grid box
+    (default half the grid step), ``tool_direction`` and ``tilts`` (default 6) directions tilted by ``tilt_deg``
+    (default 20; tilts need ``tracker.position_in_base_mm``) around it, each on ``q_ref_deg``'s IK branch and,
+    with ``wrist_flip`` (default true), on the flipped-wrist branch."""
+
+    step_mm: float | None = None
+    tilt_deg: float = 20.0
+    tilts: int = 6
+    wrist_flip: bool = True
+
+
+@dataclass(frozen=True, slots=True)
 class PlanConfig:
     """What to measure.
 
@@ -268,6 +302,11 @@ class PlanConfig:
     ``order_seed``, default 0).
     ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
     (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
+    ``kind``: ``grid`` (default), ``optimal`` (``points`` calibration poses chosen from a candidate ``pool``
+    by a D-optimal criterion, measured in a short tour) or ``iso9283``. ``stop: auto`` (optimal plans; default
+    ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS
+    would improve by less than ``stop_gain_pct`` % of the noise floor (default 2) with the next block, or at
+    ``max_points`` (default ``points``) or ``max_minutes`` (default none); then the test set is measured.
     """
 
     grid: GridConfig
@@ -281,8 +320,15 @@ class PlanConfig:
     keep_out: tuple["BoxConfig", ...] = ()
     envelope: "BoxConfig | None" = None
     clearance_mm: float = 25.0
-    kind: str = "grid"                          # grid (calibration campaign) | iso9283 (acceptance test)
+    kind: str = "grid"                          # grid | optimal (calibration campaign) | iso9283 (acceptance test)
     iso9283: Iso9283Config = Iso9283Config()
+    points: int | None = None                   # optimal: calibration points
+    pool: PoolConfig = PoolConfig()
+    stop: str = "off"                           # off | auto
+    max_points: int | None = None
+    max_minutes: float | None = None
+    block_points: int = 20
+    stop_gain_pct: float = 2.0
 
 
 @dataclass(frozen=True, slots=True)

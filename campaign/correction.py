@@ -23,11 +23,13 @@ from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
 from .cell import measurement_covariance, nominal_kinematics
+from .csv_cells import restore
 from .config import CampaignConfig
 from .errors import DataError
 from .plan import PlanPoint
 from .records import PointRecord, VerifyReport
 from .fsutil import write_json
+from .multi_smr import angle_stats, measured_flange_poses, tool_orientation_errors_arcsec
 from .writeback import (CorrectedTarget, Rejected, check_targets, write_rapid_module, write_rejected_csv,
                         write_targets_csv, write_ur_json, write_urscript)
 
@@ -47,9 +49,12 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
     the plan's fixed SMR orientation is used. Errors name the file, line and column."""
     src = str(path)
     try:
-        rows = list(csv.reader(open(path, newline="", encoding="utf-8-sig")))
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
     except OSError as exc:
         raise DataError(src, f"cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(src, f"not a readable CSV text file ({exc})") from None
     rows = [(i + 1, r) for i, r in enumerate(rows) if r and not r[0].lstrip().startswith("#")]
     if not rows:
         raise DataError(src, "empty file")
@@ -189,10 +194,11 @@ def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Target
                     T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
                     allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
     """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
-    An Absolute Accuracy robot (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
+    The tool point (default ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot
+    (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
     absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     kin = nominal_kinematics(cfg)
-    T_tool = tool_transform(cfg.tool.p_flange_smr_mm) if T_tool is None else T_tool
+    T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
     R_flange = targets.R_base @ T_tool[:3, :3].T
     q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, np.radians(cfg.plan.q_ref_deg),
                                 point_mm=T_tool[:3, 3])
@@ -354,9 +360,13 @@ class VerifyPasses:
     mm tracker frame, safe (N,), held) per measured pass."""
 
     def __init__(self, cfg: CampaignConfig, kin, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
-                 q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray):
+                 q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray,
+                 estimator=None):
         self.cfg, self.kin, self.T_tool, self.ids, self.p_d, self.q0, self.q = cfg, kin, T_tool, ids, p_d, q0, q
         self.R_d, self.T_tb, self.target_tracker = R_d, T_tb, target_tracker
+        self.estimator = estimator                   # three SMRs: seed 003's 6D pose from the measured SMR 1
+        self.R_planned = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]     # each point's planned tool orientation
+        self.orientation: dict[str, np.ndarray] = {}     # stage -> tool orientation errors (arc seconds)
         self.limit = np.radians(cfg.correction.max_joint_correction_deg)
         self.lo, self.hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
         self.p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
@@ -382,6 +392,10 @@ class VerifyPasses:
         """Record the pass measured at ``p_meas`` (N, 3) mm tracker frame; the next pass's points, or None."""
         err = p_meas - self.target_tracker
         self.results.append((self.stage, err, self.safe, self.held))
+        if self.estimator is not None:
+            pose = self.estimator.estimate(self.q, p_meas).T_tracker_flange
+            self.orientation[self.stage] = tool_orientation_errors_arcsec(pose, self.T_tb, self.R_planned,
+                                                                          self.T_tool[:3, :3])
         if self.k == self.cfg.correction.closed_loop_iterations:
             return None
         sigma = np.sqrt(np.trace(measurement_covariance(self.cfg, p_meas), axis1=1, axis2=2))
@@ -395,11 +409,15 @@ class VerifyPasses:
 
 
 def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: CalibratedModel,
-               test_points: list[PointRecord], out_dir: Path) -> VerifyResult:
+               test_points: list[PointRecord], out_dir: Path, estimator=None) -> VerifyResult:
     """Closed-loop verification on a run's test points. ``execute_passes(plan: VerifyPasses) -> RunOutcome``
-    drives the robot through the plan's passes and measures (durably logged by the caller)."""
+    drives the robot through the plan's passes and measures (durably logged by the caller). The tool point is
+    the model's SMR (its identified offset). With a three-SMR ``estimator`` (``multi_smr.pose_estimator``) every
+    pass also reports the tool orientation error against each point's planned orientation (nominal model at the
+    planned joints): measured from the three SMRs of the run before correction, estimated from SMR 1 + the two
+    predicted SMRs (seed 003) after."""
     kin = nominal_kinematics(cfg)
-    T_tool = tool_transform(cfg.tool.p_flange_smr_mm)
+    T_tool = tool_transform(model.kinematics.p_flange_smr_mm)
     ids = [p.point_id for p in test_points]
     p_d = np.array([p.p_target_base_mm for p in test_points], float)
     q0 = np.radians([p.q_cmd_deg for p in test_points])
@@ -414,13 +432,21 @@ def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: Calibr
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
     c = run_correction(cfg, model_pose_fn(model, T_tool), T_d, q0, T_tool)
-    plan = VerifyPasses(cfg, kin, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker)
+    plan = VerifyPasses(cfg, kin, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker, estimator)
+    if estimator is not None:
+        poses = measured_flange_poses(estimator.tool.p_flange_mm, test_points)
+        if poses is not None:
+            passes[0]["orientation_error_arcsec"] = angle_stats(tool_orientation_errors_arcsec(
+                poses, T_tb, plan.R_planned, T_tool[:3, :3]), "measured: the three SMRs of the run")
     outcome = execute_passes(plan)
     status, reason, safe = outcome.exit_status, outcome.reason, plan.safe
     corrected, corrected_only = [], []                    # every measurement; those of corrected points
     for stage, err, safe_k, held in plan.results:
         rows[stage] = error_stats(err).to_dict()
         passes.append(pass_summary(stage, err, safe_k, held))
+        if stage in plan.orientation:
+            passes[-1]["orientation_error_arcsec"] = angle_stats(plan.orientation[stage], "estimated (seed 003): "
+                                                                 "SMR 1 measured, SMRs 2-3 predicted, adjusted")
         corrected.append(err)
         corrected_only.append(err[safe_k])
     if corrected:
@@ -447,7 +473,8 @@ def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:
     """(target_id, reason) rows of OUT_DIR/rejected.csv (empty when the file is absent)."""
     try:
         with open(Path(out_dir) / "rejected.csv", newline="", encoding="utf-8") as fh:
-            return [(row[0], row[1] if len(row) > 1 else "") for row in list(csv.reader(fh))[1:] if row]
+            return [(restore(row[0]), restore(row[1]) if len(row) > 1 else "") for row in list(csv.reader(fh))[1:]
+                    if row]
     except OSError:
         return []
 

@@ -110,7 +110,7 @@ class Dataset:
         """Boolean (N,) array: rows whose ``set`` is ``set_name``."""
         if set_name not in SETS:
             raise ValueError(f"set_name must be one of {SETS}, got {set_name!r}")
-        return np.fromiter((s == set_name for s in self.set), dtype=bool, count=len(self))
+        return np.asarray(self.set, dtype=str) == set_name if len(self) else np.zeros(0, bool)
 
     def subset(self, mask: Sequence[bool] | np.ndarray) -> "Dataset":
         """Rows selected by a boolean (N,) mask or an integer index array.

@@ -1,9 +1,11 @@
 """Sim-to-real gap diagnosis of a dataset (run directory or interchange CSV) against a cell config.
 
-``diagnose_source`` loads the data, takes the noise floor from repeated check poses (``check`` rows) when there
-are enough, else from the tracker and robot specifications of the config, and runs
-:func:`robocal.diagnose.diagnose` on the calibration and test rows. The report is a plain dict whose leading
-keys are the JSON contract of issue 7::
+``diagnose_source`` loads the data, prepares it, fits the geometry and runs the elastic stage exactly as
+``reprocess`` does (``campaign.effects_stage``: the effect engine decides which effects the data support), takes
+the noise floor from repeated check poses (``check`` rows) when there are enough, else from the tracker and robot
+specifications of the config, and runs :func:`robocal.diagnose.diagnose` on the calibration and test rows with
+that answer: the same effects, values and "after" figures as reprocess's elastic stage. The report is a plain
+dict whose leading keys are the JSON contract of issue 7::
 
     {"noise_floor_mm", "noise_floor_source": "repeats" | "specs", "baseline_test_rms_mm", "final_test_rms_mm",
      "unexplained", "findings": [{"effect", "joints" (1-based), "accepted", "test_rms_before_mm",
@@ -22,23 +24,28 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
-from robocal.diagnose import (Diagnosis, DiagnosisInput, DiagnosisOptions, NestReadings, approach_from_order, diagnose,
-                              moves_from_order)
+from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, FittedStage, diagnose
+from robocal.elastic import EngineOptions, run_engine
 from robocal.identify import IdentificationError
+from robocal.kinematics import ParamLayout
 from robocal.noise import noise_floor_mm
+from robocal.repeats import noise_floor_from_repeats, repeat_dof
 from robocal.selfcheck import LABELS, SHORT, SelfCheckResult
 
-from .cell import measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import weights_covariance
 from .config import CampaignConfig
+from .effects_stage import gravity_model, subset
 from .errors import DataError
 from .fsutil import write_json as _write_json
 from .interchange import Dataset, read_csv
+from .outputs import Claim
+from .terminal import clean
 from .log_dataset import dataset_from_log
 from .plausibility import check_dataset
-from robocal.repeats import noise_floor_from_repeats, repeat_dof
-
-from .process import _prepare, geometric_fit
+from .process import fit_stages
 
 REPORT_FORMAT = "campaign-diagnosis/1"
 MIN_CALIB_ROWS = 40
@@ -70,79 +77,63 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
 
 
-def _rows(ds: Dataset, name: str) -> np.ndarray:
-    """(N,) bool: rows of set ``name`` (also for sets this Dataset version does not know, e.g. "nest")."""
-    return np.array([s == name for s in ds.set], dtype=bool)
-
-
-def _nests(ds: Dataset) -> NestReadings | None:
-    """Reference-nest rows (set "nest", with ``nest_id``; their joints may be empty) in measurement order."""
-    nest = _rows(ds, "nest")
-    ids = getattr(ds, "nest_id", None)
-    if not nest.any() or ids is None:
-        return None
-    idx = np.flatnonzero(nest)
-    return NestReadings(ds.p_tracker_mm[idx], tuple(str(ids[i]) for i in idx),
-                        None if ds.t_s is None else np.asarray(ds.t_s, float)[idx], idx.astype(float))
-
-
-def diagnosis_input(ds: Dataset, cfg: CampaignConfig, baseline=None, readback: Dataset | None = None
-                    ) -> tuple[DiagnosisInput, dict]:
-    """The robocal input (calib + test rows) and a dict describing the noise floor and the metadata.
-    ``baseline``: the geometric fit (``campaign.process.geometric_fit``) to start from; ``ds`` the dataset as
-    that fit saw it (prepared), ``readback`` the original (its q_deg are the read-back joints, for the direct
-    comparison with the commanded ones when the preparation chose the commanded joints)."""
+def diagnosis_input(ds: Dataset, cfg: CampaignConfig, stage, baseline) -> tuple[DiagnosisInput, FittedStage, dict]:
+    """The robocal input (calib + test rows of the prepared dataset ``ds``, in measurement order), the engine's
+    answer of reprocess's elastic stage ``stage`` mapped to those rows, and a dict describing the floor and the
+    metadata. ``baseline``: the geometric fit (reprocess's kinematic stage)."""
     _check(ds, cfg)
     check = ds.mask("check")
-    robot = ~_rows(ds, "nest")                         # rows with joints, in measurement order
-    use = ds.mask("calib") | ds.mask("test")
+    use = np.flatnonzero(ds.mask("calib") | ds.mask("test"))
     p = ds.p_tracker_mm
-    qc_deg = getattr(ds, "qc_deg", None)
-    q_rep = ds.q_deg if qc_deg is None else qc_deg     # repeated poses are repeated commands
-    repeats = noise_floor_from_repeats(q_rep[check], p[check]) if check.any() else None
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     specs = noise_floor_mm(p[use], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
     floor, source = (repeats, "repeats") if repeats is not None else (specs, "specs")
-    q_rad = np.radians(ds.q_deg)
-    approach = np.zeros_like(q_rad)
-    move, prev = np.zeros_like(q_rad), np.zeros_like(q_rad)
-    approach[robot] = approach_from_order(q_rad[robot])
-    move[robot], prev[robot] = moves_from_order(q_rad[robot])
-    meta = {name: (None if getattr(ds, name) is None else getattr(ds, name)[use])
-            for name in ("t_s", "temp_c", "payload_kg")}
-    dof = repeat_dof(q_rep[check]) if repeats is not None else None
-    kin = None if baseline is None else getattr(baseline, "kinematics", baseline)
-    identified = None if baseline is None else getattr(baseline, "identified", None)
-    inp = DiagnosisInput(nominal_kinematics(cfg), q_rad[use], p[use], measurement_covariance(cfg, p)[use],
-                         ds.mask("calib")[use], ds.mask("test")[use], floor, source, dof, approach=approach[use],
-                         move_rad=move[use], prev_move_rad=prev[use],
-                         qc_rad=None if qc_deg is None else np.radians(np.asarray(qc_deg, float)[use]),
-                         q_read_rad=None if readback is None or readback.q_deg is ds.q_deg
-                         or len(readback.q_deg) != len(ds.q_deg) else np.radians(np.asarray(readback.q_deg)[use]),
-                         baseline=kin, baseline_identified=None if identified is None else tuple(identified),
-                         nests=_nests(ds), order=np.flatnonzero(use).astype(float), **meta)
+    meta = subset(stage.meta, use)
+    inp = DiagnosisInput(nominal_kinematics(cfg), np.radians(ds.q_deg[use]), p[use], measurement_covariance(cfg, p)[use],
+                         ds.mask("calib")[use], ds.mask("test")[use], floor, source,
+                         repeat_dof(ds.q_deg[check]) if repeats is not None else None,
+                         t_s=meta["t_s"], temp_c=meta["temp_c"], payload_kg=meta["payload_kg"], order=meta["order"],
+                         approach=meta["approach"], move_rad=meta["move"], prev_move_rad=meta["prev_move"],
+                         gravity=gravity_model(cfg), baseline=baseline.kinematics,
+                         baseline_identified=tuple(baseline.identified))
+    position = np.full(len(ds), -1)
+    position[use] = np.arange(len(use))
+    engine, elastic, kept = stage.engine, stage.elastic, stage.kept_rows
+    if engine is None:                  # effects configured (or none): the diagnosis still asks the engine
+        engine = run_engine(baseline.kinematics, _identified(baseline), np.radians(ds.q_deg[kept]), p[kept],
+                            weights_covariance(cfg, ds)[0][kept], subset(stage.meta, kept), gravity_model(cfg),
+                            EngineOptions(folds=cfg.calibration.cv_folds), calibration_options(cfg))
+        elastic = engine.elastic
+    fitted = FittedStage(engine, elastic, position[kept], meta)
     payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
-    nests = inp.nests
     info = {"noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
             "n": {"calib": int(ds.mask("calib").sum()), "test": int(ds.mask("test").sum()), "check": int(check.sum())},
             "metadata": {"timestamps": ds.t_s is not None, "temperatures": ds.temp_c is not None,
-                         "payloads_kg": payloads, "approach": "from row order",
-                         "commanded_joints": qc_deg is not None,
-                         "reference_nests": 0 if nests is None else len(set(nests.nest_id))},
-            "baseline": "campaign.process.geometric_fit (the kinematic stage of reprocess)"}
-    return inp, info
+                         "payloads_kg": payloads, "measurement_order": "rows in measurement order (interchange CSV)",
+                         "mass_model": inp.gravity.source},
+            "baseline": "the kinematic stage of reprocess (same preparation, fault screen and estimator)",
+            "engine": "the elastic stage of reprocess (calibration.effects: auto)" if stage.engine is not None
+            else "the effect engine on reprocess's fitted rows (calibration.effects is not auto)"}
+    return inp, fitted, info
 
 
-def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions = DiagnosisOptions()
-                     ) -> DiagnosisReport:
-    """Diagnose one dataset; the report dict leads with the JSON contract."""
+def _identified(result) -> np.ndarray:
+    layout = ParamLayout.of(result.kinematics)
+    return np.array([layout.index(n) for n in result.identified], int)
+
+
+def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions | None = None) -> DiagnosisReport:
+    """Diagnose one dataset; the report dict leads with the JSON contract. ``options`` None: the defaults with the
+    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage)."""
     _check(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
+    options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
-        base = geometric_fit(ds, cfg)
-        prepared = _prepare(ds, cfg)       # the same joints and drift compensation as the baseline's fit
-        inp, info = diagnosis_input(prepared, cfg, base, readback=ds)
+        fitted = fit_stages(ds, cfg, plaus)   # the same preparation, fits and effect engine as reprocess
+        inp, stage, info = diagnosis_input(fitted.dataset, cfg, fitted.stage, fitted.geo.result)
         info["plausibility"] = plaus.to_dict()
-        d = diagnose(inp, options)
+        info["preparation"] = fitted.prep.report
+        d = diagnose(inp, options, stage)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"diagnosis failed: {exc}") from None
     body = d.to_dict()
@@ -153,7 +144,9 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
 
 
 def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
-                    options: DiagnosisOptions = DiagnosisOptions()) -> DiagnosisReport:
+                    options: DiagnosisOptions | None = None) -> DiagnosisReport:
+    """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
+    ``calibration.cv_folds``, as in reprocess)."""
     return diagnose_dataset(load_dataset(source), cfg, options)
 
 
@@ -176,36 +169,35 @@ def _short_evidence(f: dict) -> str:
         return f"cannot tell: {ev.get('reason', '')}"
     if not f["accepted"]:
         return ev.get("reason", "")
-    parts = [f"ΔBIC {ev['delta_bic']:.0f}", f"CV t {ev['cv_gain_t']:.1f} ({ev.get('cv_blocking')} blocks)"]
-    if ev.get("profile") not in (None, "harmonics", "approach", "wrist", "gravity levers", "gravity torque",
-                                 "signed last move"):
-        parts.append(ev["profile"])
-    if ev.get("groups"):
-        parts.append(", ".join(ev["groups"]))
-    if ev.get("lag_deg_per_deg"):
-        parts.append("lag " + ", ".join(f"{k} {v:+.2e} deg/deg" for k, v in ev["lag_deg_per_deg"].items()))
+    parts = [f"{ev['label']}", f"held-out {ev['cv_rms_before_mm']:.3f} -> {ev['cv_rms_after_mm']:.3f} mm "
+             f"(t {ev['cv_gain_t']:.1f}, {ev['cv_blocking']}; {100 * ev['excess_explained']:.0f} % of the excess)"]
     phys = ev.get("physical") or {}
     stiff = {k: v["stiffness_nm_per_rad"] for k, v in phys.items() if isinstance(v, dict) and "stiffness_nm_per_rad" in v}
     if stiff:
         parts.append("stiffness " + ", ".join(f"{k} {v:.2g} N*m/rad" for k, v in stiff.items()))
-    if ev.get("half_width_arcmin"):
-        parts.append("half-width " + ", ".join(f"{k} {v:.2f}'" for k, v in ev["half_width_arcmin"].items()))
-    if ev.get("amplitude_arcsec"):
-        parts.append("amplitude " + ", ".join(f"{k} {v:.0f}\"" for k, v in ev["amplitude_arcsec"].items()))
+    for key, unit, fmt in (("lag_deg_per_deg", "deg/deg", "{:+.2e}"), ("half_width_arcmin", "'", "{:.2f}"),
+                           ("amplitude_arcsec", '"', "{:.0f}")):
+        if phys.get(key):
+            parts.append(key.split("_")[0] + " " + ", ".join(f"{k} {fmt.format(v)}{unit}" for k, v in phys[key].items()))
+    if ev.get("description"):
+        parts.append(ev["description"])
     if ev.get("confusable_with"):
-        parts.append("one class with " + ", ".join(c["effect"] + (f" ({c['rejected_by']})" if c.get("rejected_by")
-                                                                   else "") for c in ev["confusable_with"]))
+        parts.append("one class with " + ", ".join(c["label"] for c in ev["confusable_with"]))
         parts.append("to separate them: " + ev.get("experiment", ""))
+    if ev.get("consistency_note"):
+        parts.append(ev["consistency_note"])
     return "; ".join(parts)
 
 
 def render(console: Console, report: dict) -> None:
-    """Rich tables: summary, findings (which effect, how far it shrinks), where it lies, what cannot be told."""
+    """Rich tables: summary, findings (which effect, how far it shrinks), where it lies, what cannot be told, and
+    the unexplained structure (the same figures as the JSON's ``unexplained_structure``)."""
     floor = report["noise_floor_mm"]
     n = report["n"]
     ev = "test set" if report.get("evaluation") == "test" else "cross-validation (no test rows)"
-    console.print(f"[bold]Sim-to-real gap[/bold] of {report['source']} ({n['calib']} calib, {n['test']} test, "
-                  f"{n['check']} check rows; config {report['config']})", highlight=False)
+    console.print(Text.assemble(("Sim-to-real gap", "bold"), clean(
+        f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
+        f"{report['config']})")))
     console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
@@ -232,16 +224,14 @@ def render(console: Console, report: dict) -> None:
     else:
         console.print("where: no region of the geometric model's residual is significantly above the noise floor")
     for u in report.get("undiagnosable", []):
-        console.print(f"[yellow]cannot be diagnosed from these data:[/yellow] {u['effect']}: {u['reason']} "
-                      f"(to reveal it: {u['remedy']})", highlight=False)
-    s = report.get("structure", {})
-    if not report["unexplained"]:
-        console.print(f"nothing unexplained: what is left cannot be told from the noise floor (chi2/dof "
-                      f"{s.get('chi2_per_dof', float('nan')):.2f})", highlight=False)
+        js = " J" + ",".join(map(str, u["joints"])) if u.get("joints") else ""
+        console.print(Text.assemble(("cannot tell from these data:", "yellow"),
+                                    clean(f" {u['effect']}{js}: {u['reason']} (to reveal it: {u['remedy']})")))
+    us = report.get("unexplained_structure", {})
+    if us:
+        console.print(clean(us["text"]), style="red" if report["unexplained"] else None)
     for note in report.get("notes", []):
-        if note.startswith("unexplained"):
-            console.print(f"[red]{note}[/red]", highlight=False)
-        else:
+        if not note.startswith("unexplained structure"):
             console.print(f"note: {note}", highlight=False)
 
 
@@ -253,7 +243,7 @@ def render_self_check(console: Console, result: SelfCheckResult) -> None:
         t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
-            t.add_row(SHORT[a], *[(f"[bold]{m[a][b]}[/bold]" if a == b else str(m[a][b])) if m[a][b] else "."
+            t.add_row(SHORT[a], *[(Text(str(m[a][b]), style="bold") if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
     console.print(t)
     s = result.summary()
@@ -266,6 +256,11 @@ def render_self_check(console: Console, result: SelfCheckResult) -> None:
         f"{s['combo_trials']} exact, recall {_pct(s['combo_recall'])}, precision {_pct(s['combo_precision'])}; "
         f"outside the library: {s['outside_unexplained']}/{s['outside_trials']} flagged unexplained",
         highlight=False)
+    for form, v in s["forms"].items():
+        console.print(f"{form}: named right {v['named_right']}/{v['n']}, confound class named {v['confound']}/"
+                      f"{v['n']}, lag called backlash {v['lag_as_backlash']}", highlight=False)
+    console.print(f"read-back lag called backlash: {s['lag_as_backlash']} of {s['lag_trials']} campaigns with a lag",
+                  highlight=False)
     console.print(f"spurious acceptances: {s['spurious_acceptances']} in {s['datasets']} datasets "
                   f"({s['spurious_per_20']:.2f} per 20; target <= 1)", highlight=False)
     if e["n"]:
@@ -281,8 +276,9 @@ def _pct(x) -> str:
 
 
 # ============================================================================ plots (optional extra)
-def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
-    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect. Returns the
+def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] | str:
+    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect into ``out_dir``
+    (a checked output directory is taken, i.e. created and marked, only once matplotlib imports). Returns the
     files written, or a one-line note when matplotlib is not importable."""
     try:
         import matplotlib
@@ -290,7 +286,7 @@ def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
         import matplotlib.pyplot as plt
     except ImportError:
         return PLOTS_MISSING
-    out = Path(out_dir)
+    out = out_dir.take() if isinstance(out_dir, Claim) else Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     maps = report["maps"]
     files = [_plot_workspace(plt, maps, report, out / "where_workspace.png"),
@@ -299,6 +295,17 @@ def write_plots(report: dict, out_dir: str | os.PathLike) -> list[Path] | str:
     if "time" in maps.get("geometric", {}):
         files.append(_plot_time(plt, maps, report, out / "where_time.png"))
     return files
+
+
+def _save_png(fig, path: Path) -> None:
+    """The figure as a PNG file written atomically (complete or absent)."""
+    import io
+
+    from .fsutil import atomic_write
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    atomic_write(path, buf.getvalue())
 
 
 def plot_floor(report: dict) -> tuple[float, str, float | None]:
@@ -347,7 +354,7 @@ def _plot_workspace(plt, maps, report, path):
         ax.set_ylabel("height z (mm)")
     fig.colorbar(im, ax=axes, label="residual RMS (mm)")
     fig.suptitle(f"Residual RMS over the workspace; {label}; hatched cells: no points", fontsize=11)
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -378,7 +385,7 @@ def _plot_joints(plt, maps, report, path):
     axes.ravel()[0].legend(fontsize=8)
     gaps = any(v is None for m in maps["geometric"]["joints"] for v in m["rms_mm"])
     fig.suptitle("Residual RMS over each joint's range" + ("; gaps: bins without points" if gaps else ""))
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -396,7 +403,7 @@ def _plot_time(plt, maps, report, path):
     ax.legend(fontsize=8)
     gaps = any(v is None for v in maps["geometric"]["time"]["rms_mm"])
     ax.set_title("Residual RMS over time" + ("; gaps: intervals without points" if gaps else ""))
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path
 
@@ -413,6 +420,6 @@ def _plot_shrinkage(plt, report, path):
     ax.set_ylabel(("test" if key == "test_rms_mm" else "cross-validated") + " RMS (mm)")
     ax.set_title("How far the error shrinks, step by step")
     ax.legend()
-    fig.savefig(path, dpi=110)
+    _save_png(fig, path)
     plt.close(fig)
     return path

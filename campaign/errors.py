@@ -98,6 +98,11 @@ class PlausibilityError(CampaignError):
         return (type(self), (self.source, self.message))
 
 
+class DataWarning(UserWarning):
+    """Data accepted but implausible or incomplete (e.g. no test rows): one ``warning:`` line on stderr at the end of
+    a successful command, and the same note in the report."""
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM or SIGHUP received: handled like Ctrl-C (robot stopped, log closed ``abort`` with the reason)."""
 

@@ -84,6 +84,11 @@ class RunEta:
             self.sums += (max(0.0, t1 - t0), self.move[self.done], max(0.0, t2 - t1), self.read[self.done])
         self.done += 1
 
+    def skip(self, n: int) -> None:
+        """The next ``n`` planned points will not be measured (a stop rule dropped them)."""
+        self.move = np.concatenate([self.move[: self.done], self.move[self.done + n:]])
+        self.read = np.concatenate([self.read[: self.done], self.read[self.done + n:]])
+
     def remaining_s(self) -> float:
         m, pm, r, pr = self.sums
         k_move = m / pm if pm > 0 else 1.0

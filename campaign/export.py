@@ -14,7 +14,6 @@ The tool (the SMR centre, ``p_flange_smr_mm``) is a fixed link ``tool`` on the f
 """
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -24,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from robocal.kinematics import Kinematics
 from robocal.model import CalibratedModel
 
+from .csv_cells import render_rows
 from .fsutil import atomic_write
 
 
@@ -108,15 +108,10 @@ def dh_rows(kin: Kinematics) -> list[dict]:
 def write_dh_csv(model: CalibratedModel, path: str | Path) -> Path:
     """CSV of the calibrated table (``dh_rows``) plus a ``tool`` row (SMR centre in the flange frame, mm)."""
     rows = dh_rows(model.kinematics)
-    path = Path(path)
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(rows[0]))
-        for r in rows:
-            w.writerow([r["joint"], r["convention"]] + [f"{r[k]:.9g}" for k in list(r)[2:]])
-        p = model.kinematics.p_flange_smr_mm
-        w.writerow(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""])
-    return path
+    p = model.kinematics.p_flange_smr_mm
+    table = [[r["joint"], r["convention"]] + [f"{r[k]:.9g}" for k in list(r)[2:]] for r in rows]
+    table.append(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""])
+    return atomic_write(path, render_rows(list(rows[0]), table, text_columns=(0, 1)).encode("utf-8"))
 
 
 def dhm_from_dh(kin: Kinematics) -> tuple[list[tuple[float, float, float, float]], tuple[float, float]]:

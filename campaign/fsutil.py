@@ -6,6 +6,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from drivers.redact import redact
+
 
 def fsync_dir(directory: str | os.PathLike) -> None:
     """fsync a directory so a new entry in it survives a power cut (best effort where unsupported)."""
@@ -21,23 +23,38 @@ def fsync_dir(directory: str | os.PathLike) -> None:
         os.close(fd)
 
 
+def remove_quietly(path: Path) -> None:
+    """Remove a file of ours if it is there (a failure to do so never hides the error being handled)."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
+def temp_name(path: Path) -> Path:
+    """The hidden temporary name beside ``path`` used while it is written (``.NAME.PID.tmp``)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically: temp file, fsync, os.replace, directory fsync.
-    A reader sees the old file or the new one, never a mix; nothing is left behind on failure."""
+    A reader sees the old file or the new one, never a mix; the temporary file is removed on every exit path
+    (error, signal, a directory in the way)."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+    tmp = temp_name(path)
     try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view):]
-        os.fsync(fd)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
     except BaseException:
-        os.close(fd)
-        tmp.unlink(missing_ok=True)
+        remove_quietly(tmp)
         raise
-    os.close(fd)
-    os.replace(tmp, path)
     fsync_dir(path.parent)
     return path
 
@@ -51,5 +68,5 @@ def _plain(x: Any) -> Any:
 
 def write_json(path: str | os.PathLike, data: Any) -> Path:
     """The one way the project writes a JSON file: atomically (see :func:`atomic_write`), NaN refused (missing
-    figures are null), numpy values converted."""
-    return atomic_write(path, json.dumps(data, indent=1, allow_nan=False, default=_plain).encode())
+    figures are null), numpy values converted, URL user-info and known secrets masked (``drivers.redact``)."""
+    return atomic_write(path, redact(json.dumps(data, indent=1, allow_nan=False, default=_plain)).encode())

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .report_points import PointTable
+
 STAGES = (("nominal", "nominal"), ("kinematic", "kinematic"), ("compensated", "final model"))
 COLORS = {"nominal": "tab:red", "kinematic": "tab:blue", "compensated": "tab:green"}
 SET_STYLE = {"calib": ("o", "tab:blue", "calibration"), "test": ("^", "tab:orange", "test (held out)"),
@@ -47,10 +49,6 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
-def _arr(rows) -> np.ndarray:
-    return np.array([[np.nan if v is None else v for v in r] for r in rows], float) if rows else np.zeros((0, 3))
-
-
 def _stages(err: dict) -> tuple:
     """(key, label) of the stages to draw; the final model is drawn once when it equals the kinematic one (no
     effects, no residual layer) instead of two curves on top of each other."""
@@ -61,14 +59,11 @@ def _stages(err: dict) -> tuple:
 
 def _points(report: dict):
     """(sets (N,), p_base (N, 3), q_deg (N, n), {stage: |err| (N,)}) of report.json's points section."""
-    pts = report.get("points")
-    if not pts:
+    pts = PointTable.of(report.get("points") or None)      # inline, or read from points.csv by html_report
+    if pts is None:
         return None
-    sets = np.array(pts["set"])
-    p = _arr(pts["p_base_mm"])
-    q = _arr(pts["q_deg"])
-    err = {k: np.linalg.norm(_arr(v), axis=1) for k, v in pts["err_base_mm"].items()}
-    return sets, p, q, err
+    err = {k: np.linalg.norm(v, axis=1) for k, v in pts.err_base_mm.items()}
+    return np.array(pts.set), pts.p_base_mm, pts.q_deg, err
 
 
 def _test_points(report: dict):

@@ -8,7 +8,8 @@ Sources, all optional but at least one, found in the run (or output) directory:
 
 Nothing is computed here: every number printed comes from these documents through :func:`_num`, which also
 tags it with ``data-doc``/``data-key``/``data-value`` so a browser test can compare the page with the JSON.
-Figures are drawn from the same documents (``html_figures``) and also written as PNG files next to the HTML.
+Figures are drawn from the same documents (``html_figures``) and also written as PNG files in a directory named
+after the HTML file (``report.html`` -> ``report_figures/``). Output paths are owned (:mod:`campaign.outputs`).
 """
 from __future__ import annotations
 
@@ -23,8 +24,12 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from markupsafe import Markup
 
 from .errors import DataError
+from drivers.redact import redact
+
 from .fsutil import atomic_write
+from .outputs import Claim, check_campaign_dir, check_dir, check_file
 from .records import CalibrationReport, RecordError, VerifyReport
+from .report_points import PointTable
 from .report import STAGE_LABELS
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
@@ -71,6 +76,8 @@ def collect(directory: str | os.PathLike) -> ReportSources:
             raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
         if kind == "calibration":
             _checked(doc, d / "report.json", CalibrationReport)
+            if isinstance(doc.get("points"), dict) and "file" in doc["points"]:
+                doc["points"] = PointTable.of(doc["points"], d)        # the per-point rows of a large run
         found[kind], files[kind] = doc, "report.json"
     if (d / "diagnosis.json").exists():
         found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"
@@ -151,17 +158,39 @@ def render_html(src: ReportSources, figures: dict[str, list]) -> str:
         n_figures=sum(len(v) for v in figures.values()))
 
 
-def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = None) -> Path:
-    """Write DIRECTORY/report.html (or ``out``) and its figures as PNG under ``figures/`` beside it."""
-    src = collect(directory)
-    out = Path(out) if out else Path(directory) / "report.html"
-    if not out.parent.is_dir():
-        raise DataError(str(out), "the directory does not exist")
+def figures_dir(html: Path) -> Path:
+    """Where a report's figures go as PNG: a directory named after it (``report.html`` -> ``report_figures/``)."""
+    return html.with_name(f"{html.stem}_figures")
+
+
+def report_targets(directory: str | os.PathLike, out: str | os.PathLike | None = None,
+                   overwrite: bool = False) -> tuple[Path, Claim]:
+    """The HTML file and the figures directory a report of DIRECTORY writes, checked before anything is computed:
+    DIRECTORY/report.html when DIRECTORY is a campaign directory (a run's or a command's output), else ``out``,
+    which must not exist unless ``overwrite``; the figures directory must be new, empty or this report's.
+    DataError (nothing written) otherwise (:mod:`campaign.outputs`)."""
+    directory = Path(directory)
+    default = directory / "report.html"
+    if out is None or Path(out).resolve() == default.resolve():
+        if not overwrite:
+            check_campaign_dir(directory, "report")
+        html = check_file(default, overwrite=True)           # the directory's own report, written again
+    else:
+        html = check_file(out, overwrite)
+    return html, check_dir(figures_dir(html), "figures", overwrite, source=html.name, option="figures directory")
+
+
+def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = None, overwrite: bool = False,
+                 sources: ReportSources | None = None) -> Path:
+    """Write DIRECTORY/report.html (or ``out``) from the documents in DIRECTORY (or ``sources``), and its figures as
+    PNG in the directory named after it (:func:`figures_dir`); every file atomically, after
+    :func:`report_targets` accepted the paths."""
+    src = sources if sources is not None else collect(directory)
+    html, figures_claim = report_targets(directory, out, overwrite)
     figures = build_figures(src)
-    png_dir = out.parent / "figures"
-    png_dir.mkdir(exist_ok=True)
+    png_dir = figures_claim.take()
     for fs in figures.values():
         for f in fs:
             atomic_write(png_dir / f"{f.name}.png", f.png)
-    atomic_write(out, render_html(src, figures).encode())
-    return out
+    atomic_write(html, redact(render_html(src, figures)).encode())
+    return html

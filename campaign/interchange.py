@@ -4,7 +4,7 @@ Format (one row per measurement, rows in measurement order)::
 
     point_id,set,q1,q2,q3,q4,q5,q6,x,y,z[,x2,y2,z2[,x3,y3,z3]][,t_s][,temp_c][,payload_kg]
 
-* ``point_id``: non-empty text, unique; only ``check`` rows may repeat an id
+* ``point_id``: non-empty text of at most 256 characters, unique; only ``check`` rows may repeat an id
   (the same check pose measured again), and never an id of a calib/test row.
 * ``set``: ``calib`` | ``test`` | ``check`` | ``nest`` (case-insensitive).
   ``nest`` rows are readings of a fixed reference nest (column ``nest_id``,
@@ -19,7 +19,8 @@ Format (one row per measurement, rows in measurement order)::
   third only with the second).
 * optional ``t_s`` (s), ``temp_c`` (deg C), ``payload_kg`` (kg); when a
   column is present every row needs a value (leave the column out if unknown),
-  except nest rows (may be empty).  Optional ``env_temp_c`` (deg C),
+  except nest rows (may be empty). ``t_s`` is >= 0 and never decreases (rows
+  are in measurement order); ``payload_kg`` is >= 0.  Optional ``env_temp_c`` (deg C),
   ``env_pressure_hpa`` (hPa), ``env_humidity_pct`` (%): the tracker's weather
   station; an empty cell means not read (NaN).
 * There is no approach column: approach directions come from row order
@@ -29,8 +30,9 @@ Header names are matched case-insensitively and may come in any order;
 unknown or repeated columns are errors.  Blank lines and lines starting with
 ``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
 when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
-Fields may be double-quoted but not span lines.  Numbers are plain decimal
-(``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
+Fields may be double-quoted but not span lines.  A text cell (``point_id``, ``nest_id``) that a spreadsheet would
+run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.csv_cells`).
+Numbers are plain decimal (``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
 
 Every input problem raises :class:`campaign.errors.DataError` with a single
 line naming the file and the line/column, e.g.
@@ -53,6 +55,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .dataset import _ENV, _SCALARS, SETS, Dataset  # noqa: F401  (Dataset is re-exported)
+from .csv_cells import neutralise, restore
 from .fsutil import atomic_write
 
 from campaign.errors import DataError
@@ -66,6 +69,7 @@ _NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUM_RE = re.compile(_NUM)
 _COLUMN_RE = re.compile(rf"(?>{_NUM}\n)*+")  # a whole column joined with "\n"
 _BAD_ID_CHARS = frozenset(',;"\r\n')
+MAX_ID_CHARS = 256  # point_id / nest_id length bound (ids end up in file names, terminal lines and reports)
 
 
 # --------------------------------------------------------------------------
@@ -289,6 +293,8 @@ def _check_ids(
     for i, (pid, set_name) in enumerate(zip(ids, sets)):
         if not pid:
             raise fail(i, "point_id is empty")
+        if len(pid) > MAX_ID_CHARS:
+            raise fail(i, f"point_id {pid[:40]!r}... is {len(pid)} characters long (at most {MAX_ID_CHARS})")
         k = first.setdefault(pid, i)
         if k != i and not (set_name in ("check", "nest") and sets[k] == set_name):
             raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
@@ -309,7 +315,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     layout = _parse_header(lines[header_idx], src, header_idx + 1)
     table = _data_table(lines, header_idx + 1, layout, src)
     line_nos = table.line_nos
-    ids = table.column(layout.index("point_id"))
+    ids = [restore(v) for v in table.column(layout.index("point_id"))]
     sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
     nest_ids = _nest_ids(table, layout, sets, src)
     blanks = _blank_cells(table, layout, sets)
@@ -333,6 +339,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
     for j, name in enumerate(layout.scalars):
         extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
+    _check_scalars(extra, layout, line_nos, src)
     m = len(names)
     if layout.has_qc:
         extra["qc_deg"] = values[:, m : m + n]
@@ -340,6 +347,28 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[name] = values[:, m + n * layout.has_qc + j]
     return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
                    **extra)
+
+
+def _check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -> None:
+    """What the config would refuse or the physics cannot be: a negative ``payload_kg``; a negative ``t_s``, or
+    one that goes back in time (rows are in measurement order)."""
+    def where(name: str, i: int) -> dict:
+        return {"line": line_nos[i], "column": f"'{layout.shown[layout.index(name)]}'"}
+
+    payload = extra.get("payload_kg")
+    if payload is not None and (bad := np.flatnonzero(payload < 0)).size:   # NaN (nest rows) compares False
+        raise DataError(src, f"payload_kg {payload[bad[0]]:g} is negative (a payload is a mass >= 0 kg)",
+                        **where("payload_kg", bad[0]))
+    t = extra.get("t_s")
+    if t is None:
+        return
+    if (bad := np.flatnonzero(t < 0)).size:
+        raise DataError(src, f"t_s {t[bad[0]]:g} is negative (seconds since the start of the measurement)",
+                        **where("t_s", bad[0]))
+    if (back := np.flatnonzero(np.diff(t) < 0)).size:
+        i = back[0] + 1
+        raise DataError(src, f"t_s goes back in time ({t[i]:g} s after {t[i - 1]:g} s on line {line_nos[i - 1]}): "
+                             "rows must be in measurement order", **where("t_s", i))
 
 
 def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
@@ -353,8 +382,11 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
     if first is not None and "t_s" not in layout.names:
         raise DataError(src, "nest rows need a 't_s' column (drift is a function of time)",
                         line=table.line_nos[first], column="'t_s'")
-    col = table.column(layout.index("nest_id"))
+    col = [restore(v) for v in table.column(layout.index("nest_id"))]
     for i, (nid, s) in enumerate(zip(col, sets)):
+        if len(nid) > MAX_ID_CHARS:
+            raise DataError(src, f"nest_id {nid[:40]!r}... is {len(nid)} characters long (at most {MAX_ID_CHARS})",
+                            line=table.line_nos[i], column=f"'{layout.shown[layout.index('nest_id')]}'")
         if (s == "nest") != bool(nid):
             what = ("nest row without a nest id" if s == "nest"
                     else f"nest_id {_show(nid)} on a {s} row (only nest rows have one)")
@@ -437,8 +469,8 @@ def _check_writable(ds: Dataset, src: str, numbers: np.ndarray, blank_ok: np.nda
     if ds.p3_tracker_mm is not None and ds.p2_tracker_mm is None:
         raise DataError(src, "p3_tracker_mm needs p2_tracker_mm")
     for i, pid in enumerate(ds.point_id):
-        if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid):
-            raise DataError(src, f"row {i + 1}: point_id {pid!r} cannot be written to CSV")
+        if not pid or pid != pid.strip() or pid.startswith("#") or _BAD_ID_CHARS & set(pid) or len(pid) > MAX_ID_CHARS:
+            raise DataError(src, f"row {i + 1}: point_id {pid[:40]!r}{'...' * (len(pid) > 40)} cannot be written to CSV")
     for i, nid in enumerate(ds.nest_id or ()):
         if nid != nid.strip() or _BAD_ID_CHARS & set(nid):
             raise DataError(src, f"row {i + 1}: nest_id {nid!r} cannot be written to CSV")
@@ -466,6 +498,6 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     nest_ids = dataset.nest_id if dataset.nest_id is not None else None
     cell = (lambda v: "" if v != v else repr(v)) if np.isnan(numbers).any() else repr  # noqa: E731
     for i, (pid, set_name, row) in enumerate(zip(dataset.point_id, dataset.set, numbers.tolist())):
-        tail = [nest_ids[i]] if nest_ids is not None else []
-        lines.append(",".join([pid, set_name, *map(cell, row), *tail]))
+        tail = [neutralise(nest_ids[i])] if nest_ids is not None else []
+        lines.append(",".join([neutralise(pid), set_name, *map(cell, row), *tail]))
     atomic_write(path, ("\n".join(lines) + "\n").encode("utf-8"))

@@ -193,7 +193,8 @@ def finish(cfg: CampaignConfig, run_dir, model: CalibratedModel | None = None) -
     return report
 
 
-def run_iso9283(cfg: CampaignConfig, model: CalibratedModel | None, run_dir=None, console=None):
+def run_iso9283(cfg: CampaignConfig, model: CalibratedModel | None, run_dir=None, console=None,
+                overwrite: bool = False):
     """``campaign iso9283``: nominal cycles, then (with a model) corrected cycles, through ``run_campaign`` (same
     safety, log and lifecycle); returns (RunResult, report or None)."""
     from dataclasses import replace
@@ -205,7 +206,7 @@ def run_iso9283(cfg: CampaignConfig, model: CalibratedModel | None, run_dir=None
     kin = nominal_kinematics(cfg)
     cube = iso_cube(cfg, kin)
     plan = iso_plan(cfg, kin, None if model is None else corrected_joints(cfg, model, cube))
-    result = run_campaign(cfg, run_dir, None, console, plan=plan)
+    result = run_campaign(cfg, run_dir, None, console, plan=plan, overwrite=overwrite)
     if result.iso9283 is None:
         return result, None
     report = finish(cfg, result.run_dir, model)            # again with the model's registration as the frame

@@ -10,7 +10,6 @@ readings (``plan.nests``; set ``nest``; the robot waits, the tracker aims at the
 """
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 from dataclasses import dataclass, replace
@@ -51,9 +50,12 @@ class Skipped:
 
 @dataclass(frozen=True)
 class Plan:
+    """The measurement sequence, the targets that could not be planned, the hash of the sequence, and (``stop:
+    auto`` plans) the calibration-point counts at which the run may stop (``blocks``, ascending)."""
     points: tuple[PlanPoint, ...]
     skipped: tuple[Skipped, ...]
     sha256: str
+    blocks: tuple[int, ...] = ()
 
     def count(self, set_name: str) -> int:
         return sum(p.set == set_name for p in self.points)
@@ -131,47 +133,69 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     if cfg.plan.kind == "iso9283":                      # ISO 9283 acceptance test: the standard's cube and cycles
         from .iso_run import iso_plan
         return iso_plan(cfg, kin)
+    if cfg.plan.kind == "optimal":                      # D-optimal poses from a candidate pool
+        from .plan_optimal import optimal_plan
+        return optimal_plan(cfg, kin)
     g, pl = cfg.plan.grid, cfg.plan
     R = tool_rotation(pl.tool_direction)
-    q_ref = np.radians(pl.q_ref_deg)
     p_grid, idx = grid_points(g.center_mm, g.size_mm, g.step_mm)
     grid_ids = [f"G{i:02d}-{j:02d}-{k:02d}" for i, j, k in idx]
-    rng = np.random.default_rng(pl.test.seed)
-    c, s = np.asarray(g.center_mm), np.asarray(g.size_mm)
-    p_test = rng.uniform(c - s / 2, c + s / 2, (pl.test.count, 3))
-    test_ids = [f"T{i + 1:03d}" for i in range(pl.test.count)]
+    p_test, test_ids = test_targets(cfg)
     p_all = np.vstack([p_grid, p_test])
-    q_all, ok = solve_on_branch(kin, p_all, R, q_ref)
     sets = ["calib"] * len(p_grid) + ["test"] * len(p_test)
     ids = grid_ids + test_ids
-    bad = np.flatnonzero(~ok)
-    skipped = [Skipped(ids[i], sets[i], tuple(p_all[i]), why)
-               for i, why in zip(bad, _skip_reasons(kin, p_all[bad], R, q_ref))]
-    wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p_all), 90.0)
-    near = ok & (wrist < WRIST_MARGIN_DEG)
-    skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
-                        f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
-    ok &= ~near
     guard = PathGuard.from_config(cfg, kin)
-    if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
-        why = guard.pose_reasons(np.degrees(q_all[ok]))
-        blocked = np.flatnonzero(ok)[[w is not None for w in why]]
-        skipped += [Skipped(ids[i], sets[i], tuple(p_all[i]), w) for i, w in zip(np.flatnonzero(ok), why) if w]
-        ok[blocked] = False
-    skipped = tuple(skipped)
+    q_all, ok, skipped = solve_targets(cfg, kin, p_all, ids, sets, R, guard)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
-    order = _interleave(p_all, grid_ok, test_ok)
+    order = interleave_tests(p_all, grid_ok, test_ok)
     if pl.order == "random":
         order = [order[i] for i in np.random.default_rng(pl.order_seed).permutation(len(order))]
     points = [PlanPoint(ids[i], sets[i], tuple(np.degrees(q_all[i]).round(6)), tuple(p_all[i])) for i in order]
-    points = _with_check_poses(points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], pl.check_poses)
-    points = with_nest_rounds(points, pl.nests)
+    return finish_plan(cfg, guard, points, q_all[grid_ok], p_all[grid_ok], [ids[i] for i in grid_ok], skipped)
+
+
+def test_targets(cfg: CampaignConfig) -> tuple[np.ndarray, list[str]]:
+    """The seeded random test positions (N, 3) mm in the grid box and their ids."""
+    g, t = cfg.plan.grid, cfg.plan.test
+    rng = np.random.default_rng(t.seed)
+    c, s = np.asarray(g.center_mm), np.asarray(g.size_mm)
+    return rng.uniform(c - s / 2, c + s / 2, (t.count, 3)), [f"T{i + 1:03d}" for i in range(t.count)]
+
+
+def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets, R, guard: PathGuard | None
+                  ) -> tuple[np.ndarray, np.ndarray, list[Skipped]]:
+    """Joints (N, n) rad of the targets p (N, 3) with the flange orientation R on ``q_ref_deg``'s branch, which are
+    plannable (N,) bool (reachable, off the wrist singularity, outside keep-out boxes), and the skipped ones."""
+    q_ref = np.radians(cfg.plan.q_ref_deg)
+    q_all, ok = solve_on_branch(kin, p, R, q_ref)
+    bad = np.flatnonzero(~ok)
+    skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in zip(bad, _skip_reasons(kin, p[bad], R, q_ref))]
+    wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p), 90.0)
+    near = ok & (wrist < WRIST_MARGIN_DEG)
+    skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
+                        f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
+    ok &= ~near
+    if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
+        why = guard.pose_reasons(np.degrees(q_all[ok]))
+        blocked = np.flatnonzero(ok)[[w is not None for w in why]]
+        skipped += [Skipped(ids[i], sets[i], tuple(p[i]), w) for i, w in zip(np.flatnonzero(ok), why) if w]
+        ok[blocked] = False
+    return q_all, ok, skipped
+
+
+def finish_plan(cfg: CampaignConfig, guard: PathGuard | None, points: list[PlanPoint], q_calib: np.ndarray,
+                p_calib: np.ndarray, calib_ids: list[str], skipped: list[Skipped],
+                blocks: tuple[int, ...] = ()) -> Plan:
+    """The measurement sequence ``points`` with check-pose repeats (chosen among the calibration points q_calib
+    rad, p_calib mm), nest rounds and via poses, hashed."""
+    points = _with_check_poses(points, q_calib, p_calib, calib_ids, cfg.plan.check_poses)
+    points = with_nest_rounds(points, cfg.plan.nests)
     if guard is not None:
         points = _with_vias(cfg, guard, points)
     digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
                                         for p in points]).encode()).hexdigest()
-    return Plan(tuple(points), skipped, digest)
+    return Plan(tuple(points), tuple(skipped), digest, blocks)
 
 
 def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -> list[PlanPoint]:
@@ -184,8 +208,9 @@ def _with_vias(cfg: CampaignConfig, guard: PathGuard, points: list[PlanPoint]) -
     return [replace(points[i], via_deg=v) if v else points[i] for i, v in zip(order, vias)]
 
 
-def _interleave(p, grid_ok, test_ok) -> list[int]:
-    """Grid points in serpentine order, each test point right after its nearest grid point."""
+def interleave_tests(p, grid_ok, test_ok) -> list[int]:
+    """The calibration points ``grid_ok`` in the given order (a grid's serpentine, an optimal plan's tour), each
+    test point of ``test_ok`` right after its nearest calibration point (positions p, mm)."""
     if len(grid_ok) == 0:
         return list(test_ok)
     nearest = np.argmin(np.linalg.norm(p[test_ok][:, None] - p[grid_ok][None], axis=2), axis=1) if len(test_ok) else []
@@ -251,14 +276,25 @@ def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
 
 
 def write_plan_csv(plan: Plan, path: str | Path) -> None:
+    """Write :func:`plan_csv_text` atomically."""
+    from .fsutil import atomic_write
+
+    atomic_write(path, plan_csv_text(plan).encode("utf-8"))
+
+
+def plan_csv_text(plan: Plan) -> str:
     """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
     (id ``POINT.viaK``, no position) before the point they lead to; nest rows: where the
     robot waits, the nest's approximate position."""
+    from .csv_cells import render_rows
+
     n = len(plan.points[0].q_deg) if plan.points else 0
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"])
+
+    def rows():
         for p in plan.points:
             for k, via in enumerate(p.via_deg):              # via poses (keep-out): passed through, not measured
-                w.writerow([f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""])
-            w.writerow([p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)])
+                yield [f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""]
+            yield [p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)]
+
+    header = ["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"]
+    return render_rows(header, rows(), text_columns=(0, 1))

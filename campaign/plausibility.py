@@ -3,10 +3,13 @@
 * joint values outside the configured limits -> rejected rows, listed by line (CSV) or point record (log);
 * the xyz unit guessed from the scale (spread of the measured points / spread of the nominal model's points):
   mm is stated, m / cm / inch is an error naming the factor;
-* nominal RMS after registration on the calibration rows must be below 1 % of the robot's reach (wrong robot,
+* registration before plausibility: the base frame and the SMR offsets (one per SMR) are registration quantities,
+  not robot parameters; they are fitted together on the nominal geometry first (:func:`robocal.identify.register_tool`),
+  and an SMR offset more than ``TOOL_NOTE_MM`` from the config is reported with the value to configure;
+* nominal RMS after that registration on the calibration rows must be below 1 % of the robot's reach (wrong robot,
   wrong DH table, wrong joint order or offsets all fail it: "does this data belong to this robot?");
-* identified deltas beyond physical bounds (a length change > max(5 mm, 2 % of the nominal length), an angle
-  change > 2 deg) mean an error, not a model;
+* identified joint deltas beyond physical bounds (a length change > max(5 mm, 2 % of the nominal length), an angle
+  change > 2 deg) mean an error, not a model (base and SMR offsets are not bounded);
 * a run directory whose log holds fewer points than its plan says so (an interrupted run is never silent).
 
 A failed check raises :class:`campaign.errors.PlausibilityError` (exit 2, one line) unless the operator passed
@@ -32,6 +35,8 @@ LENGTH_DELTA_FRACTION = 0.02
 ANGLE_DELTA_DEG = 2.0           # identified angle change bound (theta, alpha, beta)
 MAX_ABS_MM = 1.0e6              # |xyz| beyond 1 km is not a tracker reading
 LIMIT_TOL_DEG = 1e-6
+TOOL_NOTE_MM = 3.0              # a registered SMR offset this far from the config is reported with the value to use
+ON_AXIS_START_MM = 5.0          # fits start with an SMR offset this close to the flange axis on the axis
 _UNITS = (("mm", 1.0), ("m", 1e-3), ("cm", 0.1), ("inch", 1 / 25.4))
 
 _FORCE: ContextVar[bool] = ContextVar("campaign_plausibility_force", default=False)
@@ -47,6 +52,41 @@ def forced(flag: bool = True) -> Iterator[None]:
         _FORCE.reset(token)
 
 
+def is_forced() -> bool:
+    """Whether the current command runs under ``--force`` (:func:`forced`)."""
+    return _FORCE.get()
+
+
+@dataclass(frozen=True)
+class ToolCheck:
+    """The SMR offsets (flange frame, mm) registered with the base on the nominal geometry, one per SMR, against
+    the configured ones; ``determined`` how many of the offset directions the poses' orientations determine."""
+    configured_mm: tuple[tuple[float, float, float], ...]
+    registered_mm: tuple[tuple[float, float, float], ...]
+    determined: int
+
+    @property
+    def difference_mm(self) -> tuple[float, ...]:
+        return tuple(float(np.linalg.norm(np.subtract(r, c))) for r, c in zip(self.registered_mm, self.configured_mm))
+
+    def notes(self) -> tuple[str, ...]:
+        """One line per SMR offset more than TOOL_NOTE_MM from the config, with the value to configure."""
+        keys = ("tool.p_flange_smr_mm", "tool.p_flange_smr2_mm", "tool.p_flange_smr3_mm")
+        return tuple(f"{key} is {_vec(c)} mm in the config but the data place the SMR at {_vec(r)} mm "
+                     f"({d:.1f} mm away, registered with the base on the nominal geometry): put {_vec(r)} in {key}"
+                     for key, c, r, d in zip(keys, self.configured_mm, self.registered_mm, self.difference_mm)
+                     if d > TOOL_NOTE_MM)
+
+    def to_dict(self) -> dict:
+        return {"configured_mm": [list(c) for c in self.configured_mm],
+                "registered_mm": [list(r) for r in self.registered_mm], "difference_mm": list(self.difference_mm),
+                "directions_determined": self.determined, "note_above_mm": TOOL_NOTE_MM, "notes": list(self.notes())}
+
+
+def _vec(v) -> str:
+    return "[" + ", ".join(f"{x:.1f}" for x in v) + "]"
+
+
 @dataclass(frozen=True)
 class Plausibility:
     """What was checked: unit guess, nominal RMS vs its bound, rows rejected, notes, overridden failures."""
@@ -60,12 +100,14 @@ class Plausibility:
     forced: bool = False
     max_length_delta_mm: float | None = None
     max_angle_delta_deg: float | None = None
+    tool: ToolCheck | None = None
 
     def to_dict(self) -> dict:
         return {"unit": self.unit, "scale": self.scale, "nominal_rms_mm": self.nominal_rms_mm,
                 "bound_mm": self.bound_mm, "rejected_rows": list(self.rejected_rows), "notes": list(self.notes),
                 "overridden": list(self.overridden), "forced": self.forced,
-                "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg}
+                "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg,
+                "tool": None if self.tool is None else self.tool.to_dict()}
 
 
 def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
@@ -75,9 +117,11 @@ def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
     return replace(state, overridden=state.overridden + (message,), forced=True)
 
 
-def reach_mm(cfg) -> float:
-    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr|."""
-    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(cfg.tool.p_flange_smr_mm))
+def reach_mm(cfg, p_flange_smr_mm=None) -> float:
+    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr| (the configured
+    offset unless one is given)."""
+    tool = cfg.tool.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm
+    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(tool))
 
 
 def row_locations(ds) -> list[str]:
@@ -182,7 +226,12 @@ def _check_completeness(ds, state: Plausibility) -> Plausibility:
     except (OSError, UnicodeDecodeError, csv.Error):
         return state
     notes = []
-    for name in ("calib", "test", "check"):
+    from .adaptive import stopped_after                 # plan.stop: auto runs skip blocks on purpose
+    stopped = stopped_after(src.parent)
+    if stopped is not None:
+        notes.append(f"plan.stop: auto stopped after {stopped} of {planned.count('calib')} planned calibration "
+                     "points (report.json: stop)")
+    for name in ("test",) if stopped is not None else ("calib", "test", "check"):
         want, have = planned.count(name), int(np.sum(ds.mask(name)))
         if have < want:
             notes.append(f"incomplete run: only {have} of {want} planned {name} points were measured")
@@ -216,35 +265,85 @@ def _check_unit(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibi
     return state, what
 
 
-def _check_nominal(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
-    """Nominal RMS after a closed-form registration on the calibration rows < 1 % of the reach."""
-    from robocal.identify import IdentificationError, register
-    from robocal.kinematics import smr_tracker
+def _register_tool(ds, cfg, cal: np.ndarray) -> ToolCheck | None:
+    """Base and SMR offsets registered together on the nominal geometry (every SMR the config and the data have,
+    on the calibration rows where all of them were read), or None when the rows cannot be registered."""
+    from robocal.identify import IdentificationError, register_tool
 
     from .cell import nominal_kinematics
 
-    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
+    clouds = [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
+    clouds = clouds[:len(cfg.tool.smrs_mm)]
+    P = np.stack([c[cal] for c in clouds])
+    rows = np.all(np.isfinite(P), axis=(0, 2))
+    configured = tuple(tuple(float(v) for v in s) for s in cfg.tool.smrs_mm[:len(clouds)])
     try:
-        kin = register(nominal_kinematics(cfg), q, p)
+        reg = register_tool(nominal_kinematics(cfg), np.radians(ds.q_deg[cal][rows]), P[:, rows], configured)
+    except (IdentificationError, np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(reg.p_flange_smr_mm)):
+        return None
+    return ToolCheck(configured, tuple(tuple(float(v) for v in r) for r in reg.p_flange_smr_mm), reg.determined)
+
+
+def registered_kinematics(cfg, plaus: Plausibility | None = None):
+    """The nominal model with the SMR offset registered by the plausibility check (the configured one when it
+    could not be registered): the model of the ``nominal`` stage."""
+    from .cell import nominal_kinematics
+
+    kin = nominal_kinematics(cfg)
+    if plaus is None or plaus.tool is None:
+        return kin
+    return kin.with_(p_flange_smr_mm=np.array(plaus.tool.registered_mm[0]))
+
+
+def start_kinematics(cfg, plaus: Plausibility | None = None):
+    """The model every fit starts from: :func:`registered_kinematics`, with an SMR offset within ON_AXIS_START_MM
+    of the flange axis put on the axis. From an on-axis start the calibration admits the wrist parameters that a
+    small lateral lever makes only marginally identifiable when its solution identifies them strongly
+    (:func:`robocal.identify.calibrate`), so neither the configured lateral values nor a rough config decide which
+    parameters are fitted (the fit identifies the lateral offset itself)."""
+    kin = registered_kinematics(cfg, plaus)
+    p = kin.p_flange_smr_mm
+    return kin.with_(p_flange_smr_mm=[0.0, 0.0, p[2]]) if np.hypot(p[0], p[1]) < ON_AXIS_START_MM else kin
+
+
+def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
+    """Every SMR's start offset (flange frame, mm): registered where the check registered it, else configured."""
+    got = () if plaus is None or plaus.tool is None else plaus.tool.registered_mm
+    return tuple(got) + tuple(cfg.tool.smrs_mm[len(got):])
+
+
+def _check_nominal(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
+    """Nominal RMS after registering the base and the SMR offsets on the calibration rows < 1 % of the reach."""
+    from robocal.identify import IdentificationError, register
+    from robocal.kinematics import smr_tracker
+
+    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
+    tool = _register_tool(ds, cfg, cal)
+    state = replace(state, tool=tool, notes=state.notes + (() if tool is None else tool.notes()))
+    try:
+        kin = register(registered_kinematics(cfg, state), q, p)
     except (IdentificationError, np.linalg.LinAlgError):
         return state, None                  # calibration reports it with its own message
     err = p - smr_tracker(kin, q)
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    bound = REACH_FRACTION * reach_mm(cfg)
+    reach = reach_mm(cfg, kin.p_flange_smr_mm)
+    bound = REACH_FRACTION * reach
     state = replace(state, nominal_rms_mm=rms, bound_mm=bound)
     if not np.isfinite(rms) or rms > bound:
         return state, (f"does this data belong to this robot ({cfg.robot.model})? nominal error "
                        f"{rms:.0f} mm RMS after registration, more than {bound:.0f} mm (1 % of the "
-                       f"{reach_mm(cfg):.0f} mm reach)")
+                       f"{reach:.0f} mm reach)")
     return state, None
 
 
 def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
-    """Identified geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error."""
-    nominal_len = np.concatenate([kin0.a_mm, kin0.d_mm, kin0.p_flange_smr_mm])
-    delta_len = np.concatenate([kin.a_mm, kin.d_mm, kin.p_flange_smr_mm]) - nominal_len
-    names = ([f"a{i + 1}" for i in range(kin0.n)] + [f"d{i + 1}" for i in range(kin0.n)]
-             + ["tool_x", "tool_y", "tool_z"])
+    """Identified joint geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error.
+    The base frame and the SMR offset are registration quantities and have no bound."""
+    nominal_len = np.concatenate([kin0.a_mm, kin0.d_mm])
+    delta_len = np.concatenate([kin.a_mm, kin.d_mm]) - nominal_len
+    names = [f"a{i + 1}" for i in range(kin0.n)] + [f"d{i + 1}" for i in range(kin0.n)]
     bound = np.maximum(LENGTH_DELTA_MM, LENGTH_DELTA_FRACTION * np.abs(nominal_len))
     delta_ang = np.degrees(np.concatenate([kin.theta_rad - kin0.theta_rad, kin.alpha_rad - kin0.alpha_rad,
                                            kin.beta_rad - kin0.beta_rad]))

@@ -10,9 +10,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from robocal.drift import DriftModel, fit_drift
+from robocal.drift import DriftModel, fit_drift, nest_rounds
 from robocal.identify import CalibrationOptions, IdentificationError, calibrate
 from robocal.readback import ENCODER_NOISE_DEG, prefer_commanded, readback_statistics
+from robocal.screen import nest_misreads
 from robocal.stats import error_stats
 
 from .cell import measurement_covariance, nominal_kinematics
@@ -97,29 +98,50 @@ def choose_joints(ds: Dataset, setting: str, cfg: CampaignConfig | None = None) 
 
 
 def _nest_drift(ds: Dataset) -> tuple[DriftModel | None, dict]:
-    """Drift model from the nest rows (None without nests)."""
+    """Drift model from the nest rows (None without nests): misread readings (a jump against the same nest's
+    readings before and after, robocal.screen.nest_misreads) are set aside and listed, the model is fitted on
+    the rest. A nest read only once is bad input (DataError)."""
     nest = ds.mask("nest")
     if not nest.any():
-        return None, {"nests": 0, "applied": False, "why": "no reference-nest readings in the data"}
+        return None, {"nests": 0, "applied": False, "why": "no reference-nest readings in the data", "excluded": []}
     if ds.t_s is None:
         raise DataError(ds.source, "nest rows need 't_s' (drift is a function of time)")
     ids = np.array(ds.nest_id)[nest]
-    names, index = np.unique(ids, return_inverse=True)
+    names, index, counts = np.unique(ids, return_inverse=True, return_counts=True)
+    if (counts < 2).any():
+        once = names[counts < 2]
+        raise DataError(ds.source, f"nest_id {str(once[0])!r} has a single reading{_more_names(once)}: a reference nest "
+                                   "must be read at least twice (start and end of the run) to show a drift")
     t, p = ds.t_s[nest], ds.p_tracker_mm[nest]
-    model = fit_drift(t, index, p, tuple(names.tolist()))
-    first = np.array([p[index == k][np.argmin(t[index == k])] for k in range(len(names))])
-    moved = np.linalg.norm(p - first[index], axis=1)
+    sc = nest_misreads(t, index, p)
+    keep = sc.keep
+    model = fit_drift(t[keep], index[keep], p[keep], tuple(names.tolist()), rounds=nest_rounds(index, t)[keep])
+    pid = np.array(ds.point_id)[nest]
+    excluded = [{"point_id": str(pid[e.index]), "nest_id": str(ids[e.index]), "t_s": float(t[e.index]),
+                 "reason": e.reason} for e in sc.excluded]
+    tk, pk, ik = t[keep], p[keep], index[keep]
+    first = np.array([pk[ik == k][np.argmin(tk[ik == k])] for k in range(len(names))])
+    moved = np.linalg.norm(pk - first[ik], axis=1)
     t_end = np.array([float(np.max(ds.t_s))])
+    key = f"{model.degree}{'+rotation' if model.rotation else ''}"
+    aside = f"; {len(excluded)} misread readings set aside (listed in 'excluded')" if excluded else ""
     report = {"nests": len(names), "readings": int(nest.sum()), "applied": model.degree > 0,
               "why": ("drift is significant: leave-one-round-out CV prefers degree "
                       f"{model.degree}{' with rotation' if model.rotation else ' (translation)'} over no drift"
                       if model.degree > 0 else
-                      "no drift model beats constant nest positions in leave-one-round-out CV"),
+                      "no drift model beats constant nest positions in leave-one-round-out CV") + aside,
+              "cv_rms_mm": model.cv_rms_mm.get(key),
+              "excluded": excluded,
               "max_nest_move_mm": float(moved.max()),
               "translation_at_end_mm": model.translation_mm(t_end)[0].tolist() if model.degree else [0.0] * 3,
               "rotation_at_end_urad": (1e6 * model.rotation_rad(t_end)[0]).tolist() if model.degree else [0.0] * 3,
               "model": model.to_dict()}
     return model, report
+
+
+def _more_names(names) -> str:
+    return f" (and {', '.join(repr(str(n)) for n in names[1:4])}{' ...' if len(names) > 4 else ''})" \
+        if len(names) > 1 else ""
 
 
 def prepare(ds: Dataset, cfg: CampaignConfig) -> Prepared:

@@ -11,6 +11,7 @@ Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated pos
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -18,29 +19,30 @@ import numpy as np
 
 from robocal.frames import transform_points
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
 from robocal.gp import GPRResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import ParamLayout, smr_tracker
-from robocal.layers import LayerChoice, choose_layer, fit_layer
+from robocal.kinematics import smr_tracker
+from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
-from robocal.multicalib import calibrate_multi_smr, orientation_errors_arcsec
-from robocal.screen import ScreenResult, screen
+from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.noise import noise_floor_mm
 from robocal.stats import error_stats
 
-from .cell import calibration_options, measurement_covariance, nominal_kinematics, tracker_uncertainty
+from .cell import calibration_options, tracker_uncertainty
 from .cell import weights_covariance
 from .config import CampaignConfig
-from .errors import DataError
+from .errors import DataError, DataWarning
 from .fsutil import write_json
-from .plausibility import check_dataset, check_deltas
+from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .interchange import Dataset
+from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
+from .multi_smr import multi_smr_report, screen_smrs
 from .prepare import prepare
 from .records import CalibrationReport
-from .report_points import cell_summary, point_table
+from .report_points import PointTable, cell_summary, point_table, report_points_value
 
 REPORT_FORMAT = "campaign-report/1"
+NO_TEST_ROWS = "no test rows: nothing is held out, so no figure is a held-out accuracy; give some rows set 'test'"
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,6 +50,7 @@ class Processed:
     report: CalibrationReport
     model: CalibratedModel
     calibration: CalibrationResult
+    points: PointTable | None = None       # the per-point rows (report.json's ``points``, or points.csv beyond a size)
 
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
@@ -83,29 +86,20 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> dict:
-    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point."""
+def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[dict, np.ndarray]:
+    """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
+    report entry and the values (M,)."""
     if len(q) == 0:
-        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}
+        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}, np.zeros(0)
     s = np.linalg.norm(layer.predict_std(q, None, payload), axis=1)
     return {"max_mm": float(s.max()), "mean_mm": float(s.mean()), "rms_mm": float(np.sqrt(np.mean(s**2))),
-            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}
+            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}, s
 
 
 def _prepare(ds: Dataset, cfg: CampaignConfig) -> Dataset:
     """The single place where a dataset is prepared before any fit: joint-set choice (commanded / read-back)
     and tracker-drift compensation from the reference nests (campaign/prepare.py)."""
     return prepare(ds, cfg).dataset
-
-
-def _effect_meta(ds: Dataset, cfg: CampaignConfig, rows: np.ndarray) -> dict:
-    """Per-row metadata of the physical effects: payload (kg; the tool's when the data has none), approach
-    signs of every joint (from the full measurement order), time since the start (s)."""
-    n = len(rows)
-    pay = ds.payload_kg[rows] if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
-    approach = ds.approach_sign()[rows] if len(ds) > 1 else None
-    return {"payload_kg": np.asarray(pay, float), "approach": approach,
-            "t_s": None if ds.t_s is None else np.asarray(ds.t_s[rows], float)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,10 +122,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
-    """Geometry-only calibration with the measurement-fault screen (``calibration.outliers``): fit, screen the
-    residuals locally, refit without the faults, until the excluded set is stable (at most 3 refits)."""
-    kin0 = nominal_kinematics(cfg)
+def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+    """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
+    measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
+    faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = weights_covariance(cfg, ds)[0][rows]
@@ -140,10 +134,8 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     keep = np.ones(len(rows), bool)
     sc = None
     if cfg.calibration.outliers == "local":
-        sigma = None if ds.sigma_mm is None else ds.sigma_mm[rows]
-        groups = repeat_groups(ds.q_deg[rows])
         for _ in range(4):
-            sc = screen(q, p, p - smr_tracker(result.kinematics, q), sigma, groups)
+            sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
             if np.array_equal(new_keep, keep):
                 break
@@ -157,83 +149,81 @@ def _geometric(ds: Dataset, cfg: CampaignConfig) -> GeometricFit:
     return GeometricFit(result, sc, rows)
 
 
+def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResult:
+    """The measurement-fault screen of the calib rows ``rows`` with residuals r_mm (nominal levers and reach)."""
+    q = np.radians(ds.q_deg[rows])
+    return screen(q, ds.p_tracker_mm[rows], r_mm, joint_levers_mm(kin0, q), NEAR_FRACTION * reach_mm(kin0),
+                  None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
+
+
 def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cfg)
-    ds, _ = check_dataset(ds, cfg)
-    return _geometric(_prepare(ds, cfg), cfg).result
+    ds, plaus = check_dataset(ds, cfg)
+    ds = _prepare(ds, cfg)
+    keep, _ = screen_smrs(ds, cfg)
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
 
 
-def _model_effects(ds, cfg, geo: GeometricFit, q, p, cov, meta):
-    """(choices, selection report or None): the configured effects, or those forward selection by CV takes."""
-    spec = cfg.calibration.effects
-    if spec == "none":
-        return [], None
-    if spec != "auto":
-        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                           for k, v in s.params.items())) for s in spec], None
-    kin = geo.result.kinematics
-    cols = np.array([ParamLayout.of(kin).index(n) for n in geo.result.identified])
-    sel = select_effects(kin, cols, q, p, cov, meta, candidate_effects(kin, q, meta), folds=cfg.calibration.cv_folds)
-    return list(sel.taken), sel
+@dataclass(frozen=True, eq=False)
+class Fitted:
+    """What reprocess and diagnose share: the preparation, the dataset the fits saw (SMR-triangle faults set
+    aside), those set-aside rows, the geometric fit and the elastic stage (the effect engine's answer)."""
+    prep: object
+    dataset: Dataset
+    smr_excluded: list
+    kin0: object
+    geo: GeometricFit
+    stage: ElasticStage
+
+
+def fit_stages(ds: Dataset, cfg: CampaignConfig, plaus) -> Fitted:
+    """Preparation, SMR-triangle screen, geometric fit (from the registered start ``kin0`` of the plausibility
+    check ``plaus``) and elastic stage of a checked dataset: one sequence for ``reprocess`` and ``diagnose``, so
+    both take the same effects with the same values."""
+    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
+    order = order_meta(ds)                                  # approach and moves from the full measurement order
+    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    if not smr_keep.all():
+        ds, order = ds.subset(smr_keep), subset(order, smr_keep)
+        _check_dataset(ds, cfg)
+    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cfg, kin0)
+    stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+    return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
 def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     _check_dataset(ds, cfg)
     ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/prepare.py)  # noqa: E702
-    kin0 = nominal_kinematics(cfg)
-    geo = _geometric(ds, cfg)
+    fitted = fit_stages(ds, cfg, plaus)
+    prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
+    kin0 = fitted.kin0
     result = geo.result
     plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
     q = np.radians(ds.q_deg)
     p = ds.p_tracker_mm
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
-    kept_rows = geo.rows[geo.keep]
-    qk, pk = q[kept_rows], p[kept_rows]
-    cov_all, cov_source = weights_covariance(cfg, ds)
-    covk = cov_all[kept_rows]
-    meta_all = _effect_meta(ds, cfg, np.arange(len(ds)))
-    sub = lambda m, rows: {k: (None if v is None else v[rows]) for k, v in m.items()}  # noqa: E731
-    meta_k = sub(meta_all, kept_rows)
+    if not test.any():
+        plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
+        warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
+    cov_source = weights_covariance(cfg, ds)[1]
+    meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
+    final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
+    sub = subset
+    qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)
-    choices, selection = _model_effects(ds, cfg, geo, qk, pk, covk, meta_k)
-    model_geo = CalibratedModel(result.kinematics, None, None, (), payload_model)
-    model_el, elastic = model_geo, None
-    final_screen = geo.screen
-    if choices:
-        cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified])
-
-        def fit_el(rows):
-            try:
-                return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows],
-                                         sub(meta_all, rows), choices, calibration_options(cfg))
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
-        elastic = fit_el(kept_rows)
-        model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
-        if cfg.calibration.outliers == "local":
-            # screen again against the model with its effects: structure the geometry alone could not fit is no
-            # reason to exclude a point (and a fault hidden by that structure shows now)
-            rc = geo.rows
-            final_screen = screen(q[rc], p[rc], p[rc] - model_el.smr_tracker(q[rc], sub(meta_all, rc)),
-                                  None if ds.sigma_mm is None else ds.sigma_mm[rc], repeat_groups(ds.q_deg[rc]))
-            robust_rejected = ~geo.keep
-            robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
-            new_keep = final_screen.keep & ~robust_rejected
-            if new_keep.sum() < 10:
-                final_screen = geo.screen
-            elif not np.array_equal(new_keep, geo.keep):
-                kept_rows = rc[new_keep]
-                qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
-                elastic = fit_el(kept_rows)
-                model_el = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload_model)
     payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
     pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
-    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest)
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    eval_rows = test if test.any() else cal
+    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    floor = repeats if repeats is not None else specs
+    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
+                  noise_floor_mm=floor)
     if c.residual == "auto":
         choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
     elif c.residual == "none":
@@ -247,33 +237,36 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(kin0, q[cal], p[cal])), ("kinematic", result.kinematics)]
+    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+                    ("kinematic", result.kinematics)]
     if elastic is not None:
         stage_models.append(("elastic", model_el))
     stage_models.append(("compensated", model))
     stages = {name: {"test": _stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
                      "calib": _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal))}
               for name, m in stage_models}
+    pred_std = None                                       # (N,) GPR predictive std of the test rows, else NaN
     if isinstance(model.residual, GPRResidual):
-        stages["compensated"]["test_pred_std_mm"] = _pred_std(model.residual, q[test], rows(test),
-                                                              np.array(ds.point_id)[test].tolist())
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
-    eval_rows = test if test.any() else cal
-    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+        pred_std = np.full(len(ds), np.nan)
+        stages["compensated"]["test_pred_std_mm"], pred_std[test] = _pred_std(
+            model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
+    if choice.layer is not None:
+        stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
     calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = [] if final_screen is None else [
-        {"point_id": str(calib_ids[e.index]), "reason": e.reason} for e in final_screen.excluded]
-    rejected_ids = sorted(set(calib_ids.tolist()) - set(np.array(ds.point_id)[kept_rows].tolist()),
-                          key=calib_ids.tolist().index)
+    excluded = smr_excluded + ([] if final_screen is None else [
+        {"point_id": str(calib_ids[e.index]), "set": "calib", "reason": e.reason} for e in final_screen.excluded])
+    in_fit = np.zeros(len(ds), bool)
+    in_fit[kept_rows] = True
+    rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
     listed = {e["point_id"] for e in excluded}
-    excluded += [{"point_id": pid, "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+    excluded += [{"point_id": pid, "set": "calib", "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
                  for pid in rejected_ids if pid not in listed]
     report = {
         "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
         "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
               "rejected": len(rejected_ids)},
         "stages": stages,
-        "noise_floor_mm": repeats if repeats is not None else specs,
+        "noise_floor_mm": floor,
         "noise_floor_source": "repeats" if repeats is not None else "specs",
         "noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
         "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
@@ -293,46 +286,21 @@ def process(ds: Dataset, cfg: CampaignConfig) -> Processed:
         "preparation": prep.report,
     }
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = _multi_smr(ds, cfg, kin0, kept_rows, test)
+        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if "p_flange_smr_mm" in report["multi_smr"]:
             model = replace(model, meta={**(model.meta or {}),
                                          "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
     used[geo.rows], used[kept_rows] = 0.0, 1.0
     report["cell"] = cell_summary(cfg)
-    report["points"] = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
-                                   {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
-                                    for name, m in stage_models}, used, ds.t_s)
-    return Processed(CalibrationReport(**report), model, result)
-
-
-def _multi_smr(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray) -> dict:
-    """Multi-SMR identification (one robot, one flange offset per SMR) on the kept calib rows and its test
-    figures per SMR; with three SMRs, the flange orientation error on the test set (arc seconds)."""
-    clouds = [ds.p_tracker_mm, ds.p2_tracker_mm] + ([ds.p3_tracker_mm] if ds.p3_tracker_mm is not None else [])
-    offsets0 = cfg.tool.smrs_mm
-    if len(offsets0) < len(clouds):
-        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
-                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
-    P = np.stack(clouds)
-    q = np.radians(ds.q_deg)
-    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
-    try:
-        res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
-                                  calibration_options(cfg))
-    except (IdentificationError, np.linalg.LinAlgError) as exc:
-        raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
-    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
-           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
-           "test": {}}
-    if test.any():
-        pred = res.predict_tracker(q[test])
-        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
-        if len(clouds) == 3:
-            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
-            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
-                                               "max": float(a.max()), "n": int(len(a))}
-    return out
+    table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
+                        {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
+                         for name, m in stage_models}, used, ds.t_s, pred_std)
+    report["points"] = report_points_value(table)
+    if "file" in report["points"] and pred_std is not None:     # per test point: in points.csv too
+        stages["compensated"]["test_pred_std_mm"]["per_point_mm"] = {"file": report["points"]["file"],
+                                                                     "column": "pred_std_mm"}
+    return Processed(CalibrationReport(**report), model, result, table)
 
 
 def _effects_report(selection, elastic) -> dict:
@@ -360,18 +328,6 @@ def _residual_cv_summary(choice: LayerChoice) -> dict | None:
             "t": cands[kind]["t"], "significant": cands[kind]["significant"]}
 
 
-def fit_residual_layer(cfg: CampaignConfig, kin, q, p, weights, payload=None):
-    """The configured residual layer (IDW or GPR) fitted on calibration points of a geometric model, or None."""
-    c = cfg.calibration
-    keep = np.ones(len(q), bool) if weights is None else np.asarray(weights) > 0
-    if c.residual not in ("idw", "gpr"):
-        return None
-    model = CalibratedModel(kin)
-    layer = fit_layer(c.residual, model, q[keep], p[keep], None, None if payload is None else payload[keep],
-                      c.idw_power, c.idw_k_nearest)
-    return layer.with_payload(cfg.tool.payload_kg) if getattr(layer, "uses_payload", False) else layer
-
-
 def _parameters(result: CalibrationResult) -> list[dict]:
     """Parameter table with angles converted to degrees for people."""
     rows = []
@@ -384,9 +340,13 @@ def _parameters(result: CalibrationResult) -> list[dict]:
 
 
 def write_outputs(processed: Processed, out_dir: str | Path) -> Path:
-    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units)."""
+    """DIR/report.json and DIR/model.json (the calibrated model, plain JSON with units); DIR/points.csv first when
+    the report's per-point rows are too many to keep inline (``campaign.report_points``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    ref = processed.report.points
+    if isinstance(ref, dict) and "file" in ref:
+        processed.points.write_csv(out / ref["file"])
     write_json(out / "report.json", processed.report.to_dict())
     write_json(out / "model.json", processed.model.to_dict())
     return out / "report.json"

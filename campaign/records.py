@@ -201,9 +201,10 @@ class PointRecord:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping) -> "PointRecord":
-        """Check and convert a point record's data; RecordError names the first bad field."""
-        n = len(_vec(data, "q_cmd_deg"))
+    def from_dict(cls, data: Mapping, n_joints: int | None = None) -> "PointRecord":
+        """Check and convert a point record's data; RecordError names the first bad field. The joint vectors
+        have ``n_joints`` values (the robot's, when known), else as many as ``q_cmd_deg``."""
+        n = len(_vec(data, "q_cmd_deg", n_joints))
         smrs = tuple(s for s in (SmrReading.from_dict(data, k) for k in (2, 3)) if s is not None)
         return cls(
             _str(data, "point_id"), _str(data, "set"), _vec(data, "q_cmd_deg"), _vec(data, "q_read_deg", n),
@@ -262,11 +263,12 @@ class NestRecord:
                    _vec(data, "p_nest_base_mm", 3), _obj(data, "temperatures", True))
 
 
-def point_from_dict(data: Mapping) -> PointRecord | NestRecord:
-    """A log ``point`` record's data as the typed record its ``set`` says (nest or robot point)."""
+def point_from_dict(data: Mapping, n_joints: int | None = None) -> PointRecord | NestRecord:
+    """A log ``point`` record's data as the typed record its ``set`` says (nest or robot point with ``n_joints``
+    joint values, when known)."""
     if not isinstance(data, Mapping):
         raise RecordError("data", f"expected an object, got {repr(data)[:80]}")
-    return NestRecord.from_dict(data) if data.get("set") == "nest" else PointRecord.from_dict(data)
+    return NestRecord.from_dict(data) if data.get("set") == "nest" else PointRecord.from_dict(data, n_joints)
 
 
 # --------------------------------------------------------------------------
@@ -289,7 +291,7 @@ class _ReportMapping(Mapping):
         return len(self.to_dict())
 
 
-_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version")
+_IDENTIFICATION = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
@@ -300,8 +302,10 @@ class CalibrationReport(_ReportMapping):
     ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test rows (mm);
     ``noise_floor_mm`` with its source ("repeats" or "specs") and both candidates; the identified ``parameters``
     and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm); the method and effect choices; optional
-    ``multi_smr``; ``cell`` summary and per-point ``points`` table (HTML figures); the hardware ``identification``
-    of the run log (robot/tracker identity, driver and software versions) when processed from a log.
+    ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
+    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (HTML figures); the
+    hardware ``identification`` of the run log (robot/tracker identity, driver and software versions) when processed
+    from a log.
     """
 
     format: str
@@ -331,6 +335,7 @@ class CalibrationReport(_ReportMapping):
     residual_cv: dict | None
     preparation: dict | None
     multi_smr: dict | None = None
+    stop: dict | None = None
     cell: Any = None
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
@@ -340,6 +345,8 @@ class CalibrationReport(_ReportMapping):
         out = {name: getattr(self, name) for name in _REPORT_KEYS}
         if self.multi_smr is not None:
             out["multi_smr"] = self.multi_smr
+        if self.stop is not None:
+            out["stop"] = self.stop
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
         return out
@@ -357,8 +364,8 @@ class CalibrationReport(_ReportMapping):
                             (_num, "noise_floor_mm"), (_get, "T_tracker_base")):
             check(data, name)
         args = {name: _get(data, name, optional=True) for name in _REPORT_KEYS}
-        return cls(**args, multi_smr=_obj(data, "multi_smr", True), cell=data.get("cell"),
-                   points=data.get("points"),
+        return cls(**args, multi_smr=_obj(data, "multi_smr", True), stop=_obj(data, "stop", True),
+                   cell=data.get("cell"), points=data.get("points"),
                    identification=tuple((k, data[k]) for k in _IDENTIFICATION if k in data))
 
 

@@ -1,6 +1,8 @@
 """Terminal rendering of plans and reports with rich (nothing here computes a figure)."""
 from __future__ import annotations
 
+import math
+
 from rich.console import Console
 from rich.table import Table
 
@@ -16,18 +18,24 @@ def _mm(v) -> str:
 
 
 def render_stages(console: Console, report: CalibrationReport) -> None:
-    """Seed 000 Table 3 rows on the held-out test set, with the noise floor."""
-    t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
-    for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
-        t.add_column(col, justify="left" if col == "stage" else "right")
+    """Seed 000 Table 3 rows on the held-out test set, with the noise floor ("none" without test rows)."""
     floor = report.noise_floor_mm
-    for key, label in STAGE_LABELS:
-        if key not in report.stages:
-            continue
-        s = report.stages[key]["test"]
-        ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
-        t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
-    console.print(t)
+    if not report.n["test"]:
+        console.print("Position error on the held-out test set: none (no test rows)", style="yellow")
+    else:
+        t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
+        for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+            t.add_column(col, justify="left" if col == "stage" else "right")
+        for key, label in STAGE_LABELS:
+            if key not in report.stages:
+                continue
+            s = report.stages[key]["test"]
+            ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
+            t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
+        console.print(t)
+    layer = report.stages.get("compensated", {}).get("layer")
+    if layer:
+        console.print(layer_line(layer), markup=False)
     render_choices(console, report)
     cv = report.residual_cv
     if cv and report.residual_choice is None:
@@ -43,6 +51,18 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
     render_identity(console, report)
 
 
+def layer_line(lay: dict) -> str:
+    """The fitted residual layer's calibration RMS next to its CV-predicted held-out RMS, labelled."""
+    gp = ""
+    if "approximation" in lay:
+        how = "exact GP" if lay["approximation"] == "exact" else f"inducing-point GP, {lay['n_inducing']} inputs"
+        gp = (f" ({how} on {lay['n_train']} points, noise {_mm(lay['noise_mm'])} mm, "
+              f"floor {_mm(lay['noise_floor_mm'])} mm)")
+    return (f"residual layer {lay['kind']}{gp}: calibration RMS {_mm(lay['calib_rms_mm'])} mm is a fit to its own "
+            f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay['cv_predicted_rms_mm'])} mm "
+            f"({lay['folds']}-fold), test set {_mm(lay['test_rms_mm'])} mm")
+
+
 def render_identity(console: Console, report: CalibrationReport) -> None:
     """One line naming the hardware the data was measured with (when the report carries it)."""
     ident = dict(report.identification)
@@ -51,6 +71,8 @@ def render_identity(console: Console, report: CalibrationReport) -> None:
         console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
                       f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
                       f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
+    for reason in (ident.get("identity_check") or {}).get("overridden", []):
+        console.print(f"identity check overridden with --force: {reason}", style="yellow", markup=False)
 
 
 def render_preparation(console: Console, prep: dict | None) -> None:
@@ -63,7 +85,10 @@ def render_preparation(console: Console, prep: dict | None) -> None:
         move = d["translation_at_end_mm"]
         console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
                       f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
-                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm", markup=False)
+                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm"
+                      + (f"; CV RMS {d['cv_rms_mm']:.4f} mm" if d.get("cv_rms_mm") is not None else ""), markup=False)
+        for e in d.get("excluded", []):
+            console.print(f"  nest reading {e['point_id']} set aside: {e['reason']}", markup=False)
 
 
 def render_choices(console: Console, report: CalibrationReport) -> None:
@@ -126,6 +151,39 @@ def _vias(plan: Plan) -> str:
     return f", {n} via poses around keep-out boxes" if n else ""
 
 
+def render_stop(console: Console, report: CalibrationReport) -> None:
+    """``plan.stop: auto``: the predicted held-out RMS curve of the last refit, where the run stopped and why,
+    and the held-out RMS the final model reached."""
+    stop = report.stop
+    if not stop:
+        return
+    t = Table(title="Predicted held-out RMS vs calibration points (last refit), mm")
+    t.add_column("calibration points", justify="right")
+    t.add_column("predicted RMS", justify="right")
+    for n, rms in stop["checks"][-1]["curve"]:
+        t.add_row(str(n) + (" (stop)" if n == stop["n_calib_at_stop"] else ""), f"{rms:.4f}")
+    console.print(t)
+    console.print(f"stopped after {stop['n_calib_at_stop']} calibration points ({stop['reason']}): predicted "
+                  f"held-out RMS {stop['predicted_rms_mm']:.4f} mm, measured {_mm(stop['measured_rms_mm'])} mm "
+                  "(final model, test set)", markup=False)
+
+
+def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
+    """``campaign plan``: the parameter uncertainty the plan's calibration points predict, the calibrated model's
+    own error at the test poses from it (AP(theta) RMS) and the held-out RMS to expect with the noise floor."""
+    shown = [(n, math.degrees(s) if u == "rad" else float(s), "deg" if u == "rad" else u)
+             for n, u, s in zip(fc.names, fc.units, fc.std)]
+    text = ", ".join(f"{n} {v:.4f} {u}" for n, v, u in sorted(shown, key=lambda t: -t[1])[:4])
+    console.print(f"forecast (unit-weight error 1): {len(fc.names)} geometric parameters identifiable, largest std "
+                  f"{text}; O1 {fc.O1:.3g}, condition number {fc.condition_number:.0f}", markup=False)
+    held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
+    console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
+                  f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
+                  f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
+    if blocks:
+        console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
+
+
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
                   f"{plan.count('check')} check-pose measurements, "
@@ -157,3 +215,8 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
     for p in rep.passes:
         for why, count in p["held"].items():
             console.print(f"{p['stage']}: {count} held: {why}", markup=False)
+    for p in rep.passes:
+        a = p.get("orientation_error_arcsec")
+        if a:
+            console.print(f"{p['stage']}: tool orientation error {a['rms']:.1f} arcsec RMS, max {a['max']:.1f} "
+                          f"({a['source']})", markup=False)

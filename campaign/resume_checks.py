@@ -9,8 +9,11 @@ The first bad record is a :class:`campaign.runlog.RunLogError` naming its line: 
 """
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
+from .csv_cells import restore
+from .errors import DataError
 from .records import NestRecord, PointRecord
 from .runlog import LOG_NAME, RunLogError, read_log
 
@@ -72,10 +75,31 @@ def _plan_csv(run_dir: Path) -> list:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
         n = sum(1 for h in rows[0] if h[:1] == "q" and h[1:].isdigit())
-        return [PlanPoint(r[0], r[1], tuple(float(v) for v in r[2:2 + n]), tuple(float(v) for v in r[2 + n:5 + n]))
-                for r in rows[1:]]
+        return [PlanPoint(restore(r[0]), restore(r[1]), tuple(float(v) for v in r[2:2 + n]),
+                          tuple(float(v) for v in r[2 + n:5 + n])) for r in rows[1:]]
     except (OSError, UnicodeDecodeError, IndexError, ValueError, csv.Error):
         raise RunLogError(str(path), "missing or unreadable plan.csv: not a resumable run directory") from None
+
+
+def check_unchanged(run_dir: str | Path, start: dict, cfg, plan=None) -> None:
+    """The config, RUN_DIR/plan.csv and (when given) the rebuilt plan are those the run started with (hashes in
+    the start record); DataError naming what changed otherwise (exit 2, nothing moves)."""
+    run_dir = Path(run_dir)
+    if start.get("config_sha256") != cfg.sha256:
+        raise DataError(str(cfg.source_path), f"this is not the config {run_dir} started with (its sha256 differs "
+                                              f"from the run's start record): resume with {run_dir / 'config.yaml'}")
+    expected = start.get("plan_csv_sha256")                 # absent in runs of earlier versions
+    if expected is not None:
+        try:
+            actual = hashlib.sha256((run_dir / "plan.csv").read_bytes()).hexdigest()
+        except OSError:
+            actual = None
+        if actual != expected:
+            raise DataError(str(run_dir / "plan.csv"), "missing or changed since the run started (its sha256 differs "
+                                                       "from the run's start record): restore the run's plan.csv")
+    if plan is not None and start.get("plan_sha256") != plan.sha256:
+        raise DataError(str(run_dir), "the plan built from this config differs from the one the run started with "
+                                      "(software or config change): the run cannot be resumed")
 
 
 def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
@@ -84,19 +108,14 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
     the whole log must convert to a dataset (as it will at the end of the run)."""
     from .log_dataset import dataset_from_log
 
-    from .errors import CampaignError
-
     path = Path(run_dir) / LOG_NAME
     if not path.is_file():
         raise RunLogError(str(path), "no run log here: not a run directory (nothing to resume)")
     contents = read_log(run_dir)
-    if contents.start.get("config_sha256") != cfg.sha256:
-        raise CampaignError(f"{run_dir}: the config file changed since the run started; resume with the same config")
-    if plan is not None and contents.start.get("plan_sha256") != plan.sha256:
-        raise CampaignError(f"{run_dir}: the plan differs from the one the run started with")
+    check_unchanged(run_dir, contents.start, cfg, plan)
     lines = contents.point_lines
     try:
-        records = contents.records()         # every field of every record typed and checked (line and field named)
+        records = contents.records(cfg.robot.n_joints)  # every field typed and checked (line and field named)
     except RunLogError as exc:
         raise RunLogError(exc.file, f"{exc.message}: the log cannot be resumed (nothing was moved)",
                           line=exc.line) from None

@@ -46,7 +46,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .fsutil import fsync_dir
+from drivers.redact import redact
+
+from .fsutil import fsync_dir, remove_quietly
 
 from campaign.errors import DataError
 
@@ -109,12 +111,13 @@ class LogContents:
     path: str = ""
     point_lines: list[int] = field(default_factory=list)
 
-    def records(self) -> list[PointRecord | NestRecord]:
-        """The point records as typed records; a bad one raises :class:`RunLogError` naming its line and field."""
+    def records(self, n_joints: int | None = None) -> list[PointRecord | NestRecord]:
+        """The point records as typed records (``n_joints`` joint values each, when known); a bad one raises
+        :class:`RunLogError` naming its line and field."""
         out = []
         for k, data in enumerate(self.points):
             try:
-                out.append(point_from_dict(data))
+                out.append(point_from_dict(data, n_joints))
             except RecordError as exc:
                 line = self.point_lines[k] if k < len(self.point_lines) else None
                 raise RunLogError(self.path, f"point record {data.get('point_id')!r}: {exc.message}",
@@ -154,11 +157,12 @@ def encode_record(kind: str, seq: int, data: dict) -> bytes:
     """The full line (bytes, ending in ``b"\\n"``) for one record.
 
     ``data`` is first normalised through a JSON round trip (numpy values to
-    lists/floats, keys to strings) so that a reader re-serialising the parsed
+    lists/floats, keys to strings; URL user-info and known secrets masked by
+    ``drivers.redact.redact``) so that a reader re-serialising the parsed
     record gets exactly the canonical text the CRC was computed on.
     Raises ``ValueError``/``TypeError`` for NaN/inf or unserialisable data.
     """
-    first = json.dumps(data, default=_json_default, allow_nan=False)
+    first = redact(json.dumps(data, default=_json_default, allow_nan=False))
     canonical = _canonical(kind, seq, json.loads(first))
     # canonical is '{"data":...,"kind":...,"seq":N}'; append the crc key.
     line = f'{canonical[:-1]},"crc":"{_crc_hex(canonical)}"}}\n'
@@ -326,20 +330,21 @@ def _create_with_start(path: Path, first_line: bytes) -> None:
     write where hard links are unsupported.
     """
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     try:
-        _write_all(fd, first_line)
-        os.fsync(fd)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            _write_all(fd, first_line)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise RunLogExistsError(str(path), "run log already exists") from None
+        except OSError:  # no hard links here (e.g. FAT, some network mounts)
+            _create_exclusive(path, first_line)
     finally:
-        os.close(fd)
-    try:
-        os.link(tmp, path)
-    except FileExistsError:
-        raise RunLogExistsError(str(path), "run log already exists") from None
-    except OSError:  # no hard links here (e.g. FAT, some network mounts)
-        _create_exclusive(path, first_line)
-    finally:
-        tmp.unlink(missing_ok=True)
+        remove_quietly(tmp)
 
 
 def _create_exclusive(path: Path, first_line: bytes) -> None:

@@ -14,11 +14,8 @@ checked along its swept path first, and the first move is routed from wherever t
 With a multi-SMR tool (``n_smrs`` 2 or 3, seed 003) the tracker is aimed at each further SMR in turn
 (``tracker.select_smr(k)``) at the same stop, and the record gains ``p2_tracker_mm`` / ``p3_tracker_mm``
 (+ ``cov2_mm2`` / ``cov3_mm2``); the tracker is aimed back at SMR 1 before the next move.
-Reference nests (plan points of set ``nest``): the robot does not move; the tracker aims at the nest
-(``tracker.select_nest(nest_id, p_tracker_mm_guess)``, or ``reacquire(guess)`` at the nest's last reading, the
-first time at its ``plan.nests`` ``p_tracker_mm``, required for such drivers),
-the reading is logged as a :class:`NestRecord`, and a nest more than ``max_move_mm`` from its first reading
-pauses the run (tracker stand or nest disturbed).
+Reference nests (plan points of set ``nest``, :mod:`campaign.runner_nests`): the robot does not move, the tracker
+reads the nest; a reading off its first one is read again, then the run pauses.
 """
 from __future__ import annotations
 
@@ -37,7 +34,8 @@ from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload,
 from .config import MeasurementConfig, NestsConfig
 from .motion_safety import PathGuard, UnsafeMotion
 from .plan import PlanPoint
-from .records import NestRecord, PointRecord, SmrReading
+from .records import PointRecord, SmrReading
+from .runner_nests import NestReadings, PointFailed
 from .runlog import RunLog, RunLogError
 from .tracker_quality import check_device_stability, device_covariance
 from .traceability import device_identity, environment_from_readings
@@ -54,11 +52,7 @@ class RunOutcome:
     n_measured: int
 
 
-class PointFailed(Exception):
-    """A point could not be measured within the retry limits (the run pauses)."""
-
-
-class Runner:
+class Runner(NestReadings):
     """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty."""
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
@@ -78,17 +72,7 @@ class Runner:
         self.predict_p_tracker_mm, self.covariance_from_device = predict_p_tracker_mm, covariance_from_device
         self.q_read: np.ndarray | None = None
         self._smr = 1
-        self.nests = nests or NestsConfig()
-        if self.nests.points and not callable(getattr(tracker, "select_nest", None)):
-            if not (callable(getattr(tracker, "reacquire", None)) and getattr(tracker, "can_reacquire", True)):
-                raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the plan has reference nests but this "
-                                  "tracker driver cannot aim at a fixed point (no select_nest or reacquire)")
-            blind = [n.id for n in self.nests.points if n.p_tracker_mm is None]
-            if blind:
-                raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: this tracker driver aims by position only "
-                                  f"(reacquire): give plan.nests p_tracker_mm for nest {blind[0]}")
-        self.nest_first: dict[str, np.ndarray] = {}     # first reading of each nest (tracker frame, mm)
-        self.nest_last: dict[str, np.ndarray] = {}
+        self._init_nests(tracker, nests)
         self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
@@ -156,7 +140,7 @@ class Runner:
             self._first_pass(points, log)
         for point in points:
             if point.set == "nest":
-                record = self.measure_nest(point, log)
+                record = self.read_nest(point, log)           # read twice when the first reading is off
                 log.append_point(record)                  # durable before the bound check can pause
                 n += 1
                 if self.on_point:
@@ -275,78 +259,6 @@ class Runner:
             device_std_mm=None if dev_cov is None else tuple(np.sqrt(np.diag(dev_cov))),
             device_cov_mm2=None if dev_cov is None else tuple(map(tuple, dev_cov)),
             smrs=tuple(self._measure_smr(k, point, log) for k in range(2, self.n_smrs + 1)))
-
-    def _remember_nests(self, contents) -> None:
-        """First/last nest readings of earlier sessions (resume), so the bound refers to the run's start."""
-        for rec in getattr(contents, "records", lambda: [])():
-            p = np.asarray(rec.p_tracker_mm, float)
-            if isinstance(rec, NestRecord):
-                self.nest_first.setdefault(rec.nest_id, p)
-                self.nest_last[rec.nest_id] = p
-            else:
-                self.p_last = p
-
-    def _nest_guess(self, nest_id: str) -> np.ndarray | None:
-        """Where to aim (tracker frame, mm): the nest's last reading, else its configured ``p_tracker_mm``."""
-        if nest_id in self.nest_last:
-            return self.nest_last[nest_id]
-        given = next((n.p_tracker_mm for n in self.nests.points if n.id == nest_id), None)
-        return None if given is None else np.asarray(given, float)
-
-    def _aim_at_nest(self, nest_id: str) -> None:
-        """Aim the tracker at the nest; a failed search pauses the run (PointFailed) with the reason."""
-        guess = self._nest_guess(nest_id)
-        try:
-            if callable(getattr(self.tracker, "select_nest", None)):
-                self.tracker.select_nest(nest_id, None if guess is None else tuple(float(v) for v in guess))
-            else:
-                self.tracker.reacquire(tuple(float(v) for v in guess))
-        except TrackerError as exc:
-            raise PointFailed(f"nest {nest_id}: tracker cannot find it ({' '.join(str(exc).split())})") from None
-
-    def _aim_back(self) -> None:
-        """Back to the robot's SMR 1 after a nest reading (its predicted position, else its last reading)."""
-        self._smr = 1
-        if callable(getattr(self.tracker, "select_smr", None)):
-            self.tracker.select_smr(1)
-            return
-        p = self.p_last
-        if self.predict_p_tracker_mm is not None and self.q_read is not None:
-            p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
-        if p is not None and callable(getattr(self.tracker, "reacquire", None)):
-            self.tracker.reacquire(tuple(float(v) for v in p))
-
-    def measure_nest(self, point: PlanPoint, log: RunLog) -> NestRecord:
-        """One reading of a reference nest (the robot stays where it is); returns the log record."""
-        nest_id = point.point_id.rsplit("@", 1)[0]
-        t_start = self.clock.now()
-        self._aim_at_nest(nest_id)
-        self._smr = 0                                   # a beam break now must not search at the robot's SMR
-        try:
-            mean, spread, readings, retries = self._measure_with_retries(point, log)
-        finally:
-            self._aim_back()
-        try:
-            env = dict(self.tracker.environment() or {})
-        except DriverError as exc:
-            env = {}
-            log.append_event({"type": "environment_fault", "point_id": point.point_id,
-                              "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
-        cov = self.covariance(mean)
-        rec = NestRecord(point.point_id, nest_id, tuple(mean), tuple(map(tuple, cov)), spread, len(readings),
-                         t_start, self.clock.now(), retries, tuple(point.p_base_mm), env or None)
-        return rec
-
-    def _check_nest(self, record: NestRecord) -> None:
-        """Pause when the nest reads more than ``max_move_mm`` from its first reading."""
-        nest_id, p = record.nest_id, np.asarray(record.p_tracker_mm, float)
-        first = self.nest_first.setdefault(nest_id, p)
-        self.nest_last[nest_id] = p
-        moved = float(np.linalg.norm(p - first))
-        if moved > self.nests.max_move_mm:
-            raise PointFailed(f"nest {nest_id} moved {moved:.3f} mm since its first reading (bound "
-                              f"{self.nests.max_move_mm:g} mm, plan.nests.max_move_mm): tracker stand or nest "
-                              "disturbed; check them before resuming")
 
     def _joint_temperatures(self, point: PlanPoint, log: RunLog) -> list[float] | None:
         """Joint (motor) temperatures in deg C where the driver offers ``joint_temperatures_c()``."""

@@ -1,6 +1,8 @@
 """What identifies a measurement: hardware identity, driver and software versions, environment, run logging.
 
 ``device_identity`` goes into the log's start record, every ``devices`` event and ``report.json``;
+``check_identity`` compares the robot and tracker models read at connect with ``robot.model`` / ``tracker.model``
+of the config (a mismatch is a PlausibilityError before anything moves, ``--force`` records the override);
 ``environment_from_readings`` averages the environment values a tracker reports with its readings;
 ``run_logging`` sends Python ``logging`` (driver warnings included) to ``RUN_DIR/campaign.log`` and to the
 console through rich.
@@ -9,12 +11,17 @@ from __future__ import annotations
 
 import logging
 import logging.handlers
+import re
 from contextlib import contextmanager
+from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Iterator, Mapping, Sequence
 
 from drivers.base import DriverError, TrackerReading
+
+from .errors import PlausibilityError
+from .terminal import CleanLogRecords
 
 ROBOT_KEYS = ("vendor", "model", "controller_type", "serial", "software_version")
 TRACKER_KEYS = ("vendor", "model", "serial", "firmware")
@@ -83,12 +90,14 @@ class RunLogging:
     def __init__(self, console=None, level: int = logging.INFO) -> None:
         self.buffer = logging.handlers.MemoryHandler(capacity=100000, flushLevel=logging.CRITICAL + 1)
         self.buffer.setLevel(level)
+        self.buffer.addFilter(CleanLogRecords())          # control characters escaped, URL user-info masked
         self.file: logging.FileHandler | None = None
         self.console = None
         if console is not None:
             from rich.logging import RichHandler
             self.console = RichHandler(console=console, show_path=False, markup=False)
             self.console.setLevel(logging.WARNING)
+            self.console.addFilter(CleanLogRecords())
         self.level = level
         self._saved: list[tuple[logging.Logger, int, bool]] = []
 
@@ -108,6 +117,7 @@ class RunLogging:
         self.file = logging.FileHandler(path, encoding="utf-8")
         self.file.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
         self.file.setLevel(self.level)
+        self.file.addFilter(CleanLogRecords())
         self.buffer.setTarget(self.file)
         self.buffer.flush()
         for lg, _, _ in self._saved:
@@ -142,8 +152,8 @@ def run_logging(console=None) -> Iterator[RunLogging]:
 def identification(contents) -> dict:
     """The identification fields of a run log's start record (for report.json)."""
     start = contents.start
-    return {k: start[k] for k in ("robot_identity", "tracker_identity", "driver_versions", "software_version")
-            if k in start}
+    return {k: start[k] for k in ("robot_identity", "tracker_identity", "driver_versions", "software_version",
+                                  "identity_check") if k in start}
 
 
 def identity_changes(start: dict, now: dict) -> list[str]:
@@ -155,3 +165,72 @@ def identity_changes(start: dict, now: dict) -> list[str]:
         out += [f"{role} {k} was {before[k]!r}, now {after.get(k)!r}" for k in keys
                 if k in before and before[k] != after.get(k)]
     return out
+
+
+# ------------------------------------------------------------------------------------------------ identity check
+_MODEL_RE = re.compile(r"(?<![a-z0-9])([a-z]{1,6})[ -]?(\d{1,5})([a-z]{0,2})(?![a-z0-9])(?:[ -]*(\d[\d./]*))?")
+_VENDOR_WORDS = frozenset({"abb", "kuka", "fanuc", "yaskawa", "motoman", "staubli", "kawasaki", "denso", "epson",
+                           "universal", "robots", "robot", "leica", "faro", "api", "hexagon", "absolute", "tracker",
+                           "laser", "emscon", "mock", "simulated", "series", "cb", "e"})
+
+
+@dataclass(frozen=True)
+class ModelName:
+    """A model designation read from vendor text: ``family`` letters + number ("irb2600", "ur10", "at960"), an
+    optional letter ``suffix`` ("e" of UR10e) and ``variant`` (payload/reach "12/1.65"); "" when not given."""
+    family: str
+    suffix: str = ""
+    variant: str = ""
+
+
+def model_name(text: str) -> ModelName | None:
+    """The first model designation in ``text`` (vendor words skipped), None when the text names none
+    ("simulated robot", "unknown")."""
+    for m in _MODEL_RE.finditer(str(text).lower()):
+        letters, number, suffix, variant = m.groups()
+        if letters in _VENDOR_WORDS:
+            continue
+        return ModelName(letters + number, suffix, (variant or "").rstrip("./"))
+    return None
+
+
+def same_model(configured: str, reported: str) -> bool | None:
+    """True when both texts name the same model (vendor formatting aside: "ABB IRB 2600-12/1.65" = "IRB2600";
+    "Universal Robots UR10 (CB3)" = "UR10"), False when they name different ones (another family, or both give
+    a different payload/reach variant or suffix), None when either names no model (nothing to compare)."""
+    a, b = model_name(configured), model_name(reported)
+    if a is None or b is None:
+        return None
+    if a.family != b.family:
+        return False
+    return not ((a.variant and b.variant and a.variant != b.variant) or (a.suffix and b.suffix and a.suffix != b.suffix))
+
+
+def identity_check(cfg, identity: Mapping) -> dict:
+    """Robot and tracker model read at connect vs ``robot.model`` / ``tracker.model``: per role ``configured``,
+    ``reported``, ``serial``, ``result`` (match | mismatch | not compared) and, for a mismatch, ``reason``."""
+    out = {}
+    for role, section in (("robot", cfg.robot), ("tracker", cfg.tracker)):
+        ident = identity.get(f"{role}_identity") or {}
+        reported, serial = str(ident.get("model", "unknown")), str(ident.get("serial", "unknown"))
+        same = same_model(section.model, reported)
+        entry = {"configured": section.model, "reported": reported, "serial": serial,
+                 "result": {True: "match", False: "mismatch", None: "not compared"}[same]}
+        if same is False:
+            entry["reason"] = (f"{role}.model is {section.model!r} but the {role} at {section.url} reports "
+                               f"{reported!r} (serial {serial})")
+        out[role] = entry
+    return out
+
+
+def check_identity(cfg, identity: Mapping, force: bool = False) -> dict:
+    """``identity_check`` that raises PlausibilityError (exit 2; before anything moves) on a mismatch unless
+    ``force``; forced, the result carries ``overridden`` (the reasons) for the log's start record and the report."""
+    check = identity_check(cfg, identity)
+    reasons = [e["reason"] for e in check.values() if e["result"] == "mismatch"]
+    if reasons and not force:
+        raise PlausibilityError(cfg.source_path, "; ".join(reasons) + ": not the configured cell; nothing moved")
+    if reasons:
+        log.warning("identity mismatch overridden with --force: %s", "; ".join(reasons))
+        check["overridden"] = reasons
+    return check

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from .base import DriverError, MotionError
+from .redact import register_secret
 from .rws_client import Credentials, RetryPolicy, Timeouts
 
 log = logging.getLogger("drivers.abb_rws")
@@ -185,6 +186,7 @@ def load_credentials(opts: CredentialOptions, environ: Mapping[str, str] | None 
         return _credentials_file(opts.file)
     user, password = env.get(opts.user_env), env.get(opts.password_env)
     if user and password:
+        register_secret(password)                       # masked in every line and file the software writes
         return Credentials(user, password)
     if opts.use_default:
         log.warning("using ABB's factory RWS account %r (options.credentials.use_default)", DEFAULT_USER)
@@ -198,7 +200,8 @@ def _credentials_file(path: str) -> Credentials:
     """Parse a ``user=...`` / ``password=...`` file (``#`` comments); warn if others can read it."""
     path = os.path.expanduser(path)
     try:
-        text = open(path, encoding="utf-8").read()
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
         mode = os.stat(path).st_mode
     except OSError as exc:
         raise DriverError(f"abb-rws: cannot read credentials file {path}: {exc.strerror}") from None
@@ -211,4 +214,5 @@ def _credentials_file(path: str) -> Credentials:
             values[key.strip().lower()] = value.strip()
     if not values.get("user") or not values.get("password"):
         raise DriverError(f"abb-rws: credentials file {path} needs 'user=' and 'password=' lines")
+    register_secret(values["password"])
     return Credentials(values["user"], values["password"])

@@ -36,7 +36,8 @@ def _module_bytes(name: str, text: str, url: str) -> bytes:
 def _read_text(path: str) -> str:
     """A local module file (ISO-8859-1); DriverError if unreadable."""
     try:
-        return open(os.path.expanduser(path), encoding="latin-1").read()
+        with open(os.path.expanduser(path), encoding="latin-1") as fh:
+            return fh.read()
     except OSError as exc:
         raise DriverError(f"abb-rws: options.module_file: cannot read {path}: {exc.strerror}") from None
 

@@ -30,3 +30,14 @@ def next_approach(previous: np.ndarray | None, q_prev: np.ndarray | None, q_next
         return np.zeros_like(q_next)
     d = q_next - np.asarray(q_prev, float)
     return np.where(np.abs(d) > tol, np.sign(d), previous)
+
+
+def moves_from_order(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(last move, the move before) per row and joint (N, n), from joint values q (N, n) in measurement order
+    (same unit as q; row 0 and the move before row 1 are 0). A read-back lag scales with them."""
+    q = np.asarray(q, float)
+    move = np.zeros_like(q)
+    move[1:] = np.diff(q, axis=0)
+    prev = np.zeros_like(q)
+    prev[1:] = move[:-1]
+    return move, prev

@@ -72,7 +72,7 @@ class DriftModel:
                 "residual_rms_mm": self.residual_rms_mm, "nest_ids": list(self.nest_ids)}
 
 
-def _rounds(nest: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+def nest_rounds(nest: np.ndarray, t_s: np.ndarray) -> np.ndarray:
     """Round number of each reading: its occurrence count among readings of the same nest, in time order."""
     order = np.argsort(t_s, kind="stable")
     r = np.zeros(len(nest), int)
@@ -103,6 +103,33 @@ def _solve(nest, tau, p, p_mean, degree, rotation):
     return x
 
 
+def _held_out_rounds(rounds: np.ndarray, nest: np.ndarray, k: int, n_rounds: int) -> np.ndarray:
+    """The interior rounds (1 .. n_rounds - 2) that hold readings and leave every nest in the training set."""
+    count = np.zeros((max(n_rounds, 1), max(k, 1)), int)
+    np.add.at(count, (rounds, nest), 1)
+    left = count.sum(axis=0)[None, :] - count
+    r = np.arange(1, n_rounds - 1)
+    return r[(count[r].sum(axis=1) > 0) & np.all(left[r] > 0, axis=1)]
+
+
+def _leave_round_out_rms(A: np.ndarray, b: np.ndarray, row_round: np.ndarray, held: np.ndarray) -> float:
+    """RMS (3-D, mm) of the readings of every ``held`` round predicted by the least-squares fit of all other rows
+    of A x = b: one normal-equation downdate per round (A column-scaled), batched."""
+    scale = np.linalg.norm(A, axis=0)
+    As = A / np.where(scale > 0, scale, 1.0)
+    n_r = int(row_round.max()) + 1
+    G_r = np.zeros((n_r, As.shape[1], As.shape[1]))
+    np.add.at(G_r, row_round, As[:, :, None] * As[:, None, :])
+    h_r = np.zeros((n_r, As.shape[1]))
+    np.add.at(h_r, row_round, As * b[:, None])
+    x = np.einsum("rij,rj->ri", np.linalg.pinv(G_r.sum(0) - G_r[held]), h_r.sum(0) - h_r[held])   # (H, P)
+    slot = np.full(n_r, -1)
+    slot[held] = np.arange(len(held))
+    rows = slot[row_round] >= 0
+    e = b[rows] - np.einsum("ip,ip->i", As[rows], x[slot[row_round[rows]]])
+    return float(np.sqrt(np.sum(e**2) / (len(e) / 3)))
+
+
 def _unpack(x: np.ndarray, k: int, degree: int, rotation: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     p0 = x[: 3 * k].reshape(k, 3)
     per = 6 if rotation else 3
@@ -112,11 +139,12 @@ def _unpack(x: np.ndarray, k: int, degree: int, rotation: bool) -> tuple[np.ndar
 
 
 def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_ids=(),
-              max_degree: int = MAX_DEGREE) -> DriftModel:
+              max_degree: int = MAX_DEGREE, rounds: np.ndarray | None = None) -> DriftModel:
     """Drift model from nest readings: times t_s (M,) s, nest index nest (M,) int in 0..K-1, readings
     p_tracker_mm (M, 3) mm. Degree 0..max_degree by leave-one-round-out CV over the interior rounds (robot points
     always lie between the first and the last round, so interpolation is what counts; the lowest CV RMS wins,
-    ties to the lower degree); with fewer than 3 rounds the model is degree 0 (no drift)."""
+    ties to the lower degree); with fewer than 3 rounds the model is degree 0 (no drift). ``rounds`` (M,) the
+    round number of each reading when some were set aside (default: counted per nest in time order)."""
     t = np.asarray(t_s, float)
     nest = np.asarray(nest, int)
     p = np.asarray(p_tracker_mm, float)
@@ -126,25 +154,18 @@ def fit_drift(t_s: np.ndarray, nest: np.ndarray, p_tracker_mm: np.ndarray, nest_
     can_rotate = bool(k >= 3 and len(spread) >= 2 and spread[1] > MIN_SPREAD_MM)
     scale = float(max(np.ptp(t), 1.0)) if len(t) else 1.0
     tau = t / scale
-    rounds = _rounds(nest, t) if len(t) else np.zeros(0, int)
+    if rounds is None:
+        rounds = nest_rounds(nest, t) if len(t) else np.zeros(0, int)
+    rounds = np.asarray(rounds, int)
     n_rounds = int(rounds.max()) + 1 if len(rounds) else 0
     top = min(max_degree, n_rounds - 2)
     cv: dict = {}
     candidates = [(d, r) for d in range(0, max(top, 0) + 1) for r in ((False, True) if can_rotate and d else (False,))]
+    held = _held_out_rounds(rounds, nest, k, n_rounds)
     for degree, rotation in candidates:
-        err = []
-        for r in range(1, n_rounds - 1):
-            tr, te = rounds != r, rounds == r
-            if len(np.unique(nest[tr])) < k:
-                continue
-            x = _solve(nest[tr], tau[tr], p[tr], p_mean, degree, rotation)
-            p0, v, w = _unpack(x, k, degree, rotation)
-            u = tau[te][:, None] ** np.arange(1, degree + 1)[None, :]
-            pred = p0[nest[te]] + u @ v + np.cross(u @ w, p_mean[nest[te]])
-            err.append(p[te] - pred)
-        if err:
-            e = np.concatenate(err)
-            cv[(degree, rotation)] = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+        if len(held):
+            A = _design(nest, tau, p_mean, degree, rotation)
+            cv[(degree, rotation)] = _leave_round_out_rms(A, p.reshape(-1), np.repeat(rounds, 3), held)
     best = min(cv.values()) if cv else 0.0
     degree, rotation = min((c for c, v in cv.items() if v <= best), default=(0, False))   # ties: simplest
     cv = {f"{d}{'+rotation' if r else ''}": v for (d, r), v in cv.items()}

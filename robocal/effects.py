@@ -9,8 +9,11 @@ An effect maps joint angles ``q_rad (N, n)`` and per-point metadata to a *basis*
 The same basis both *simulates* a robot (``apply_effects``: exact FK with ``q + dq`` and scaled links)
 and *extends* a model as extra parameters (``effect_regressor``: the linearised tracker-frame columns).
 Metadata keys (all optional, arrays of N): ``t_s`` time since the campaign start (s), ``temp_c``,
-``payload_kg``, ``approach`` (N, n) sign of the last motion of each joint (+1/-1/0).
-Joint numbers in names and ``joints`` are 1-based.
+``payload_kg``, ``approach`` (N, n) sign of the last motion of each joint (+1/-1/0), ``move`` / ``prev_move``
+(N, n) rad the signed last move and the one before, ``order`` position in the measurement sequence. A missing
+key makes the effect's contribution zero (a commanded target has no read-back lag, no drift clock).
+Joint numbers in names and ``joints`` are 1-based. Gravity acts through the one torque model ``gravity_torques``
+(lumped link masses of ``GravityModel``, payload at its centre of gravity, gravity direction in the base frame).
 """
 from __future__ import annotations
 
@@ -24,11 +27,10 @@ from .frames import skew, transform_points
 
 G_MM_S2 = 9.80665
 EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
-                "axis_coupling", "registration_drift")     # every effect the diagnosis names, in report order
-SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag")   # what ``by_name`` builds
-# the effects a calibrated model may carry as parameters (read-back lag is a joint-set choice, registration drift
-# the nests' drift model)
-MODEL_EFFECTS = tuple(name for name in EFFECT_NAMES if name not in ("readback_lag", "registration_drift"))
+                "axis_coupling", "registration_drift")     # every effect of the library, in report order
+# what the mock robot can simulate (a read-back lag is an artefact of the controller's report, simulated apart)
+SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag")
+MODEL_EFFECTS = EFFECT_NAMES          # every library effect can be a parameter of the calibrated model
 
 
 @dataclass(frozen=True)
@@ -69,28 +71,89 @@ def _meta(meta, key, n, default=0.0):
     return np.full(n, default, float) if v is None else np.asarray(v, float)
 
 
-# ---------------------------------------------------------------- gravity torques
-def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_kg) -> np.ndarray:
+# ---------------------------------------------------------------- gravity torques: the one torque model
+def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_kg, payload_cog_flange_mm=None,
+                    gravity_base=(0.0, 0.0, -1.0)) -> np.ndarray:
     """Gravity torque about each joint axis (N, n) in N·m from lumped masses at the midpoint of each
-    link (joint origin i -> joint origin i+1, the last one -> flange) and a payload at the SMR.
-    Gravity is -z of the base frame."""
-    c = chain(kin, q_rad)
-    N, n = q_rad.shape
+    link (joint origin i -> joint origin i+1, the last one -> flange) and a payload at its centre of gravity
+    ``payload_cog_flange_mm`` in the flange frame (None: at the SMR). ``gravity_base``: direction of gravity in
+    the base frame (floor mount -z; a wall or ceiling mount another unit vector)."""
+    q = np.atleast_2d(q_rad)
+    c = chain(kin, q)
+    N, n = q.shape
     o = np.concatenate([c.origin, c.T_base_flange[:, None, :3, 3]], axis=1)      # (N, n+1, 3)
     centres = 0.5 * (o[:, :-1] + o[:, 1:])                                       # (N, n, 3)
-    p_smr = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
+    cog = kin.p_flange_smr_mm if payload_cog_flange_mm is None else np.asarray(payload_cog_flange_mm, float)
+    p_pay = transform_points(c.T_base_flange, cog)
     masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
-    force = np.array([0.0, 0.0, -G_MM_S2])                                       # per kg, N
+    g = np.asarray(gravity_base, float)
+    force = G_MM_S2 * g / np.linalg.norm(g)                                      # per kg, N
     tau = np.zeros((N, n))
     for j in range(n):
         lever = centres[:, j:] - c.origin[:, j:j + 1]                             # links j..n-1 hang on joint j
         t_links = np.einsum("nmk,nk->nm", np.cross(lever, force), c.axis[:, j]) * masses[:, j:]
-        t_pay = np.einsum("nk,nk->n", np.cross(p_smr - c.origin[:, j], force), c.axis[:, j]) * np.asarray(payload_kg, float)
+        t_pay = np.einsum("nk,nk->n", np.cross(p_pay - c.origin[:, j], force), c.axis[:, j]) * np.asarray(payload_kg, float)
         tau[:, j] = (t_links.sum(axis=1) + t_pay) / 1000.0                        # N·mm -> N·m
     return tau
 
 
+def lever_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0, 0.0, -1.0)
+                  ) -> dict[int, tuple[np.ndarray, tuple[str, ...]]]:
+    """{joint: (torque per kg (N, m) N·m/kg, point names)} about each of ``joints`` (1-based) of a mass at every
+    downstream joint origin, the flange and a point beside the next link: any lumped mass fixed on those links
+    loads the joint by a combination of them (the mass distribution of ``joint_compliance(form="levers")``)."""
+    q = np.atleast_2d(q_rad)
+    c = chain(kin, q, full=False)
+    flange = c.T_base_flange[:, :3, 3]
+    g = np.asarray(gravity_base, float)
+    force = G_MM_S2 * g / np.linalg.norm(g)
+    out = {}
+    for joint in joints:
+        j = joint - 1
+        nxt = c.origin[:, j + 1] if j + 1 < kin.n else flange
+        pts = [(f"o{i + 1}", c.origin[:, i]) for i in range(j + 1, kin.n)] + [("flange", flange)]
+        pts.append(("beside", c.origin[:, j] + np.cross(c.axis[:, j], nxt - c.origin[:, j])))
+        P = np.stack([pt for _, pt in pts], axis=1) - c.origin[:, j:j + 1]               # (N, m, 3)
+        tau = np.einsum("nmk,nk->nm", np.cross(P, force), c.axis[:, j]) / 1000.0
+        out[joint] = (tau, tuple(name for name, _ in pts))
+    return out
+
+
 DEFAULT_LINK_MASSES_KG = (0.0, 35.0, 40.0, 12.0, 4.0, 1.0)
+MOVING_SHARE = 0.7      # the moving links carry ~70 % of a 6-axis arm's datasheet mass (base and J1 column the rest)
+
+
+@dataclass(frozen=True)
+class GravityModel:
+    """The one gravity-torque model of the calibration: lumped link masses (kg, one per joint's link), the
+    payload's centre of gravity in the flange frame (mm) and the direction of gravity in the base frame.
+    ``source``: "config" (``robot.link_masses_kg``), "mass class" (``robot.mass_kg`` x ``MOVING_SHARE`` shared
+    over the links as ``DEFAULT_LINK_MASSES_KG``) or "default" (``DEFAULT_LINK_MASSES_KG``, a ~130 kg arm: the
+    shape of the torques is right for a typical 6-axis arm, stiffnesses scale with the true moving mass)."""
+    link_masses_kg: tuple[float, ...] = DEFAULT_LINK_MASSES_KG
+    payload_cog_flange_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity_base: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    source: str = "default"
+
+    @classmethod
+    def of_robot(cls, n: int, link_masses_kg=None, mass_kg: float | None = None,
+                 payload_cog_flange_mm=(0.0, 0.0, 0.0), gravity_base=(0.0, 0.0, -1.0)) -> "GravityModel":
+        """From the config: explicit link masses, else the size law of the robot's mass class, else the default."""
+        shares = _link_masses(n, DEFAULT_LINK_MASSES_KG)
+        if link_masses_kg is not None:
+            masses, source = _link_masses(n, link_masses_kg), "config"
+        elif mass_kg is not None:
+            masses, source = MOVING_SHARE * float(mass_kg) * shares / max(shares.sum(), 1e-12), "mass class"
+        else:
+            masses, source = shares, "default"
+        g = np.asarray(gravity_base, float)
+        return cls(tuple(float(m) for m in masses), tuple(float(v) for v in payload_cog_flange_mm),
+                   tuple(float(v) for v in g / np.linalg.norm(g)), source)
+
+    def options(self) -> tuple[tuple[str, object], ...]:
+        """Keyword options of the elastic effect factories (stored with a fitted effect in model.json)."""
+        return (("link_masses_kg", self.link_masses_kg), ("payload_cog_flange_mm", self.payload_cog_flange_mm),
+                ("gravity_base", self.gravity_base))
 
 
 def _link_masses(n, masses):
@@ -101,10 +164,14 @@ def _link_masses(n, masses):
 
 
 # ---------------------------------------------------------------- effect factories
-def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAULT_LINK_MASSES_KG) -> Effect:
+def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAULT_LINK_MASSES_KG,
+                     payload_cog_flange_mm=None, gravity_base=(0.0, 0.0, -1.0), n_joints: int = 6) -> Effect:
     """Joint compliance under gravity.
 
-    ``gravity``: dq_j = c_j * tau_j(q, payload), c_j compliance in rad/(N·m), tau from lumped masses + payload.
+    ``gravity``: dq_j = c_j * tau_j(q, payload), c_j compliance in rad/(N·m), tau the ``gravity_torques`` of the
+    lumped link masses + payload (its centre of gravity ``payload_cog_flange_mm`` in the flange frame).
+    ``levers``: the mass distribution left free: dq_j = sum_p c_jp * tau_jp(q) over the ``lever_torques`` points
+    of joint j (torque per kg) + the payload torque, c_jp in rad·kg/(N·m) (compliance x mass).
     ``trig`` (seed 001 eq. 21-22, controller angles): dq2 = k1 s2 + k2 s23 + k3 c23; dq3 = k4 s23 + k5 c23 (rad).
     """
     if form == "trig":
@@ -116,9 +183,14 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAUL
             return Basis(dq=dq)
         return Effect("joint_compliance", (2, 3), ("k1", "k2", "k3", "k4", "k5"), "rad", basis,
                       typical=(2e-4, 1e-4, 1e-4, 1e-4, 1e-4))
+    if form == "levers":
+        return _lever_compliance(tuple(joints), payload_cog_flange_mm, gravity_base, n_joints)
+    if form != "gravity":
+        raise ValueError(f"unknown compliance form {form!r} (expected gravity, levers or trig)")
 
     def basis(kin, q, meta):
-        tau = gravity_torques(kin, q, _link_masses(kin.n, link_masses_kg), _meta(meta, "payload_kg", len(q)))
+        tau = gravity_torques(kin, q, _link_masses(kin.n, link_masses_kg), _meta(meta, "payload_kg", len(q)),
+                              payload_cog_flange_mm, gravity_base)
         dq = _zeros_dq(q, len(joints))
         for k, j in enumerate(joints):
             dq[:, j - 1, k] = tau[:, j - 1]
@@ -128,10 +200,29 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAUL
                   typical=tuple(typical.get(j, 3e-6) for j in joints))
 
 
-def payload_deflection(joints=(2, 3)) -> Effect:
-    """Deflection from the payload's gravity torque only: dq_j = c_j * tau_payload_j (rad/(N·m))."""
+def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
+    names = tuple(f"c{j}_{p}" for j in joints for p in [f"o{i + 1}" for i in range(j, n)] + ["flange", "beside", "payload"])
+
     def basis(kin, q, meta):
-        tau = gravity_torques(kin, q, np.zeros(kin.n), _meta(meta, "payload_kg", len(q)))
+        pay = _meta(meta, "payload_kg", len(q))
+        tau_pay = gravity_torques(kin, q, np.zeros(kin.n), pay, payload_cog_flange_mm, gravity_base)
+        levers = lever_torques(kin, q, joints, gravity_base)
+        cols = [(j, np.concatenate([levers[j][0], tau_pay[:, j - 1:j]], axis=1)) for j in joints]
+        dq = _zeros_dq(q, sum(c.shape[1] for _, c in cols))
+        at = 0
+        for j, c in cols:
+            dq[:, j - 1, at:at + c.shape[1]] = c
+            at += c.shape[1]
+        return Basis(dq=dq)
+    return Effect("joint_compliance", joints, names, "rad*kg/(N*m)", basis, typical=tuple(3e-8 for _ in names))
+
+
+def payload_deflection(joints=(2, 3), payload_cog_flange_mm=None, gravity_base=(0.0, 0.0, -1.0)) -> Effect:
+    """Deflection from the payload's gravity torque only (a balanced arm): dq_j = c_j * tau_payload_j
+    (rad/(N·m))."""
+    def basis(kin, q, meta):
+        tau = gravity_torques(kin, q, np.zeros(kin.n), _meta(meta, "payload_kg", len(q)), payload_cog_flange_mm,
+                              gravity_base)
         dq = _zeros_dq(q, len(joints))
         for k, j in enumerate(joints):
             dq[:, j - 1, k] = tau[:, j - 1]
@@ -166,6 +257,26 @@ def backlash(joints=(1, 2, 3)) -> Effect:
                   typical=tuple(2.9e-4 for _ in joints), needs=("approach",))
 
 
+def readback_lag(joints=(1, 2, 3), memory_joints=()) -> Effect:
+    """Read-back lag: the reported joint is off by lambda_j x (signed last move) [+ mu_j x (the move before)], so
+    the robot really stood at dq_j = p_j * move_j + m_j * prev_move_j from the reported angle (p_j = -lambda_j,
+    rad per rad of move). ``move``/``prev_move`` (N, n) rad come from the rows in measurement order; without them
+    (a commanded target) the effect is zero: a lag is in the report of a position, not in the robot."""
+    def basis(kin, q, meta):
+        move, prev = meta.get("move"), meta.get("prev_move")
+        dq = _zeros_dq(q, len(joints) + len(memory_joints))
+        for k, j in enumerate(joints):
+            if move is not None:
+                dq[:, j - 1, k] = np.asarray(move, float)[:, j - 1]
+        for k, j in enumerate(memory_joints):
+            if prev is not None:
+                dq[:, j - 1, len(joints) + k] = np.asarray(prev, float)[:, j - 1]
+        return Basis(dq=dq)
+    names = tuple(f"lag{j}" for j in joints) + tuple(f"lag{j}_memory" for j in memory_joints)
+    return Effect("readback_lag", tuple(sorted(set(joints) | set(memory_joints))), names, "rad/rad", basis,
+                  typical=tuple(-5e-4 for _ in names), needs=("move",))
+
+
 def warmup(meta, n, tau_s):
     """Thermal state u in [0, 1): from temperature rise when logged (per K), else 1 - exp(-t/tau)."""
     temp = meta.get("temp_c")
@@ -198,47 +309,74 @@ def axis_coupling() -> Effect:
     return Effect("axis_coupling", (4, 5, 6), ("e56", "e46", "e45"), "1", basis, typical=(4e-3, 2e-3, 2e-3))
 
 
-def registration_drift() -> Effect:
-    """Tracker-to-base drift linear in time: dp = t_h * (v + w x p) in the tracker frame (mm/h, rad/h)."""
+def registration_drift(clock: str = "t_s", degree: int = 1, span: float = 3600.0) -> Effect:
+    """Drift of the tracker against the robot base: dp = sum_k u^k (v_k + w_k x p) in the tracker frame, u =
+    clock / span with ``clock`` "t_s" (time since the start, s) or "order" (position in the measurement sequence),
+    k = 1..``degree``; v_k in mm, w_k in rad (per span^k). Without the clock (a commanded target) it is zero: the
+    model is the robot at the start of the run."""
+    if clock not in ("t_s", "order"):
+        raise ValueError(f"unknown drift clock {clock!r} (expected t_s or order)")
+
     def basis(kin, q, meta):
-        t_h = _meta(meta, "t_s", len(q)) / 3600.0
         from .kinematics import smr_tracker
+        u = meta.get(clock)
+        dp = np.zeros((len(q), 3, 6 * degree))
+        if u is None:
+            return Basis(dp=dp)
+        u = np.asarray(u, float) / float(span)
         p = smr_tracker(kin, q)
-        dp = np.zeros((len(q), 3, 6))
-        dp[:, :, :3] = np.eye(3)
-        dp[:, :, 3:] = -skew(p)
-        return Basis(dp=dp * t_h[:, None, None])
-    return Effect("registration_drift", (), ("vx", "vy", "vz", "wx", "wy", "wz"), "mm/h or rad/h", basis,
-                  typical=(0.02, 0.015, 0.01, 7e-6, 5e-6, 5e-6), needs=("t_s",))
+        screw = np.concatenate([np.broadcast_to(np.eye(3), (len(q), 3, 3)), -skew(p)], axis=2)
+        for k in range(degree):
+            dp[:, :, 6 * k:6 * k + 6] = (u ** (k + 1))[:, None, None] * screw
+        return Basis(dp=dp)
+    names = tuple(f"{c}{k + 1}" for k in range(degree) for c in ("vx", "vy", "vz", "wx", "wy", "wz"))
+    typical = tuple(v for _ in range(degree) for v in (0.02, 0.015, 0.01, 7e-6, 5e-6, 5e-6))
+    return Effect("registration_drift", (), names, "mm or rad per span^k", basis, typical=typical, needs=(clock,))
 
 
 # ---------------------------------------------------------------- use of the bases
+def combine(q_rad: np.ndarray, bases, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint deviation dq (N, n) rad, link-length scale (N,) and tracker-frame displacement dp (N, 3) mm of
+    effect bases [Basis, ...] at the points ``q_rad`` (N, n) with their parameter values [(K,), ...]."""
+    q = np.atleast_2d(q_rad)
+    dq, scale, dp = np.zeros(q.shape), np.ones(len(q)), np.zeros((len(q), 3))
+    for b, v in zip(bases, values):
+        v = np.asarray(v, float)
+        if b.dq is not None:
+            dq += b.dq @ v
+        if b.scale is not None:
+            scale += b.scale @ v
+        if b.dp is not None:
+            dp += b.dp @ v
+    return dq, scale, dp
+
+
+def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``combine`` of ``effects`` [(Effect, values (K,)), ...] at the points ``q_rad`` with their metadata: dq
+    (robot), scale (links), dp (a drift of the measurement, not of the robot)."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    return combine(q, [eff.basis(kin, q, meta) for eff, _ in effects], [v for _, v in effects])
+
+
 def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
     """Exact SMR positions in the tracker frame (N, 3) mm of a robot with geometry ``kin`` and the
     given ``[(Effect, params (K,)), ...]``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    dq, scale, dp = np.zeros_like(q), np.ones(len(q)), np.zeros((len(q), 3))
-    for eff, params in effects:
-        b = eff.basis(kin, q, meta)
-        params = np.asarray(params, float)
-        if b.dq is not None:
-            dq += b.dq @ params
-        if b.scale is not None:
-            scale += b.scale @ params
-        if b.dp is not None:
-            dp += b.dp @ params
+    dq, scale, dp = effect_state(kin, q, meta, effects)
     c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None])
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     return transform_points(kin.T_tracker_base, p_base) + dp
 
 
 def effect_regressor(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effect: Effect,
-                     jacobian: tuple | None = None) -> np.ndarray:
-    """Linearised tracker-frame displacement per unit effect parameter, (N, 3, K) mm."""
+                     jacobian: tuple | None = None, basis: Basis | None = None) -> np.ndarray:
+    """Linearised tracker-frame displacement per unit effect parameter, (N, 3, K) mm (``basis``: the effect's
+    basis at these points when already computed)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     _, J = identification_jacobian(kin, q) if jacobian is None else jacobian
     layout = ParamLayout.of(kin)
-    b = effect.basis(kin, q, meta)
+    b = effect.basis(kin, q, meta) if basis is None else basis
     out = np.zeros((len(q), 3, effect.k))
     theta_cols = [c for c, i, k in layout.joint_cols if k == 0]
     if b.dq is not None:
@@ -253,123 +391,35 @@ def effect_regressor(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effect: 
 
 
 def library(n_joints: int = 6) -> tuple[Effect, ...]:
-    """The candidate effects of the diagnosis library with their default joints."""
-    effs = [joint_compliance(), payload_deflection()]
+    """One instance of every library effect with its default joints (tests of the bases)."""
+    effs = [joint_compliance(), joint_compliance(form="levers", n_joints=n_joints), payload_deflection()]
     effs += [gear_cyclic(j) for j in range(1, min(n_joints, 6) + 1)]
-    effs += [backlash(tuple(range(1, min(n_joints, 6) + 1))), thermal_drift()]
+    effs += [backlash(tuple(range(1, min(n_joints, 6) + 1))), readback_lag((1, 2, 3), (2,)), thermal_drift()]
     if n_joints >= 6:
         effs.append(axis_coupling())
-    effs.append(registration_drift())
+    effs += [registration_drift(), registration_drift("order", 2, 100.0)]
     return tuple(effs)
 
 
+FACTORY_KEYS = {"joint_compliance": {"joints", "form", "link_masses_kg", "payload_cog_flange_mm", "gravity_base"},
+                "payload_deflection": {"joints", "payload_cog_flange_mm", "gravity_base"},
+                "gear_cyclic": {"joint", "harmonics"}, "backlash": {"joints"},
+                "readback_lag": {"joints", "memory_joints"}, "thermal_drift": {"tau_s", "joints"},
+                "axis_coupling": set(), "registration_drift": {"clock", "degree", "span"}}
+
+
 def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:
-    """Effect factory by name (the names of the JSON contract) with its default parameters."""
-    factories = {"joint_compliance": joint_compliance, "payload_deflection": payload_deflection,
+    """Effect factory by name (the names of the JSON contract) with its keyword options (``FACTORY_KEYS``).
+    ValueError names an unknown effect or option."""
+    factories = {"joint_compliance": lambda **kw: joint_compliance(n_joints=n_joints, **kw),
+                 "payload_deflection": payload_deflection,
                  "gear_cyclic": lambda **kw: gear_cyclic(kw.pop("joint", 1), **kw),
-                 "backlash": backlash, "thermal_drift": thermal_drift, "axis_coupling": axis_coupling,
-                 "registration_drift": registration_drift}
+                 "backlash": backlash, "readback_lag": readback_lag, "thermal_drift": thermal_drift,
+                 "axis_coupling": axis_coupling, "registration_drift": registration_drift}
     if name not in factories:
-        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(SIMULATED_EFFECTS)})")
+        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(EFFECT_NAMES)})")
+    unknown = sorted(set(kwargs) - FACTORY_KEYS[name])
+    if unknown:
+        raise ValueError(f"effect {name!r} has no option {unknown[0]!r} (expected one of: "
+                         f"{', '.join(sorted(FACTORY_KEYS[name])) or 'none'})")
     return factories[name](**kwargs)
-
-
-# ---------------------------------------------------------------- alternative functional forms
-# Used as *truths* by the self-check (robocal/selfcheck.py), so that the diagnosis is not only tested on the
-# forms its own candidates use: lumped masses with off-line centres of mass and an offset payload, other warm-up
-# curves with per-link growth, drifting registration with a settling curve.
-def warmup_curve(t_s: np.ndarray, curve: str = "exp", tau_s: float = 2700.0, tau2_s: float | None = None,
-                 mix: float = 0.5) -> np.ndarray:
-    """Thermal state u(t) in [0, 1]: ``exp`` 1 - e^(-t/tau); ``two_exp`` mix of two such curves (tau, tau2);
-    ``hyperbolic`` t / (t + tau); ``ramp`` min(t / tau, 1) (linear warm-up, then steady)."""
-    t = np.maximum(np.asarray(t_s, float), 0.0)
-    if curve == "exp":
-        return 1.0 - np.exp(-t / tau_s)
-    if curve == "two_exp":
-        return mix * (1.0 - np.exp(-t / tau_s)) + (1.0 - mix) * (1.0 - np.exp(-t / (tau2_s or 4.0 * tau_s)))
-    if curve == "hyperbolic":
-        return t / (t + tau_s)
-    if curve == "ramp":
-        return np.minimum(t / tau_s, 1.0)
-    raise ValueError(f"unknown warm-up curve {curve!r} (expected exp, two_exp, hyperbolic or ramp)")
-
-
-def lumped_gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, com_fraction=0.5,
-                           com_lateral_mm=0.0, payload_kg=0.0, payload_com_flange_mm=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Gravity torque about each joint axis (N, n) N·m from one lumped mass per link and a payload.
-
-    Link i runs from joint i's axis point to joint i+1's (the last to the flange); its centre of mass sits at
-    ``com_fraction`` of the way along it and ``com_lateral_mm`` off it, perpendicular to the link in the plane
-    normal to joint i's axis (so it is not on the link line). The payload's centre of mass is
-    ``payload_com_flange_mm`` in the flange frame. Gravity is -z of the base frame."""
-    q = np.atleast_2d(np.asarray(q_rad, float))
-    c = chain(kin, q, full=False)
-    N, n = q.shape
-    flange = c.T_base_flange[:, :3, 3]
-    o = np.concatenate([c.origin, flange[:, None, :]], axis=1)
-    link = o[:, 1:] - o[:, :-1]
-    lat = np.cross(c.axis, link)
-    norm = np.linalg.norm(lat, axis=2, keepdims=True)
-    lat = np.where(norm > 1e-6, lat / np.maximum(norm, 1e-12), 0.0)
-    f = np.broadcast_to(np.asarray(com_fraction, float), (n,))
-    lateral = np.broadcast_to(np.asarray(com_lateral_mm, float), (n,))
-    com = o[:, :-1] + f[None, :, None] * link + lateral[None, :, None] * lat
-    p_pay = flange + np.einsum("nij,j->ni", c.T_base_flange[:, :3, :3], np.asarray(payload_com_flange_mm, float))
-    masses = _link_masses(n, link_masses_kg)
-    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
-    force = np.array([0.0, 0.0, -G_MM_S2])
-    tau = np.zeros((N, n))
-    for j in range(n):
-        arm = com[:, j:] - c.origin[:, j:j + 1]
-        t_links = np.einsum("nmk,nk->nm", np.cross(arm, force), c.axis[:, j]) @ masses[j:]
-        t_pay = np.einsum("nk,nk->n", np.cross(p_pay - c.origin[:, j], force), c.axis[:, j]) * pay
-        tau[:, j] = (t_links + t_pay) / 1000.0
-    return tau
-
-
-def lumped_compliance(joints=(2, 3), link_masses_kg=DEFAULT_LINK_MASSES_KG, com_fraction=0.5, com_lateral_mm=0.0,
-                      payload_com_flange_mm=(0.0, 0.0, 0.0), name: str = "joint_compliance") -> Effect:
-    """Joint compliance from lumped-mass gravity torques (``lumped_gravity_torques``): dq_j = c_j * tau_j,
-    c_j in rad/(N·m). With all link masses zero it is the payload-only deflection (``name`` payload_deflection)."""
-    def basis(kin, q, meta):
-        tau = lumped_gravity_torques(kin, q, link_masses_kg, com_fraction, com_lateral_mm,
-                                     _meta(meta, "payload_kg", len(q)), payload_com_flange_mm)
-        dq = _zeros_dq(q, len(joints))
-        for k, j in enumerate(joints):
-            dq[:, j - 1, k] = tau[:, j - 1]
-        return Basis(dq=dq)
-    return Effect(name, tuple(joints), tuple(f"c{j}" for j in joints), "rad/(N*m)", basis,
-                  typical=tuple({2: 3.3e-7, 3: 6.7e-7}.get(j, 3e-6) for j in joints),
-                  needs=("payload_kg",) if name == "payload_deflection" else ())
-
-
-def thermal_warmup(length_growth, zero_drift_rad, curve: str = "exp", tau_s: float = 2700.0,
-                   tau2_s: float | None = None, mix: float = 0.5) -> Effect:
-    """Warm-up with per-link growth: a_i, d_i grow by ``length_growth[i] * u(t)`` (relative) and joint zeros drift
-    by ``zero_drift_rad[i] * u(t)``, u = ``warmup_curve``. Exact (not linearised): one parameter, the scale of
-    the whole displacement (1 = as given); its basis is the exact SMR displacement in the tracker frame."""
-    from .kinematics import smr_tracker
-    g = np.asarray(length_growth, float)
-    z = np.asarray(zero_drift_rad, float)
-
-    def basis(kin, q, meta):
-        u = warmup_curve(_meta(meta, "t_s", len(q)), curve, tau_s, tau2_s, mix)[:, None]
-        c = chain(kin, q, a=kin.a_mm * (1 + u * g), d=kin.d_mm * (1 + u * g), theta=kin.theta_rad + u * z, full=False)
-        p = transform_points(kin.T_tracker_base, transform_points(c.T_base_flange, kin.p_flange_smr_mm))
-        return Basis(dp=(p - smr_tracker(kin, q))[:, :, None])
-    return Effect("thermal_drift", tuple(int(i) + 1 for i in np.flatnonzero(z)), ("scale",), "1", basis,
-                  typical=(1.0,), needs=("t_s",))
-
-
-def registration_drift_curve(v_mm, w_rad, curve: str = "linear", tau_s: float = 2700.0) -> Effect:
-    """Tracker-to-base drift dp = u(t) * (v + w x p): ``linear`` u = t in hours (v mm/h, w rad/h), otherwise
-    u = ``warmup_curve`` (a settling tripod: v, w are the final offsets). One parameter (scale, 1 = as given)."""
-    from .kinematics import smr_tracker
-    v, w = np.asarray(v_mm, float), np.asarray(w_rad, float)
-
-    def basis(kin, q, meta):
-        t = _meta(meta, "t_s", len(q))
-        u = t / 3600.0 if curve == "linear" else warmup_curve(t, curve, tau_s)
-        p = smr_tracker(kin, q)
-        return Basis(dp=(u[:, None] * (v + np.cross(w, p)))[:, :, None])
-    return Effect("registration_drift", (), ("scale",), "1", basis, typical=(1.0,), needs=("t_s",))

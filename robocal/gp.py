@@ -1,4 +1,4 @@
-"""Gaussian-process regression of robot errors (seed 003 §1.2, eq. 4-9) and an RBF-network baseline.
+"""Gaussian-process regression of robot errors (seed 003 §1.2, eq. 4-9); the RBF-network baseline is robocal/rbf.py.
 
 One output per model: ``e = Omega(x) + eps`` with a squared-exponential ARD kernel
 
@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.linalg.lapack import dpotri
 from scipy.optimize import minimize
 
 from .frames import transform_points
@@ -28,14 +29,36 @@ from .kinematics import Kinematics, fk
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 JITTER = 1e-10            # added to the diagonal, relative to var(y), for a safe Cholesky
+NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are exactly 0 (se_ard)
 
 
 # ---------------------------------------------------------------- kernel and likelihood
 def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -> np.ndarray:
-    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d)."""
+    """Squared-exponential ARD covariance (Na, Nb) between inputs Xa (Na, d) and Xb (Nb, d).
+
+    Entries below 1e-50 sigma_f^2 are exactly 0: far below the rounding of any sum they enter, and kept they turn
+    into subnormal numbers inside the Cholesky factor and its inverse at short length scales (slow arithmetic in
+    the hyperparameter search)."""
     A, B = Xa / length, Xb / length
-    d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :] - 2.0 * A @ B.T
-    return sigma_f**2 * np.exp(-0.5 * np.maximum(d2, 0.0))
+    d2 = np.sum(A**2, 1)[:, None] + np.sum(B**2, 1)[None, :]
+    d2 -= 2.0 * A @ B.T                                   # in place from here: one (Na, Nb) array, no temporaries
+    np.maximum(d2, 0.0, out=d2)
+    d2 *= -0.5
+    np.putmask(d2, d2 < NEGLIGIBLE_LOG, -np.inf)
+    np.exp(d2, out=d2)
+    d2 *= sigma_f**2
+    return d2
+
+
+def cholesky_inverse(c: tuple[np.ndarray, bool]) -> np.ndarray:
+    """H^-1 (m, m) from the lower Cholesky factor ``c`` of ``cho_factor(H, lower=True)`` (LAPACK potri: a third
+    of the work of solving against the identity)."""
+    inv, info = dpotri(c[0], lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"potri failed ({info})")
+    upper = np.triu_indices(len(inv), 1)
+    inv[upper] = inv.T[upper]                             # mirror the lower triangle potri wrote
+    return inv
 
 
 def unpack(log_theta: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -66,7 +89,7 @@ def neg_log_marginal_likelihood(log_theta: np.ndarray, X: np.ndarray, y: np.ndar
     L = 0.5 * y @ alpha + np.sum(np.log(np.diag(c[0]))) + 0.5 * m * LOG_2PI
     if not grad:
         return float(L)
-    W = np.outer(alpha, alpha) - cho_solve(c, np.eye(m), check_finite=False)
+    W = np.outer(alpha, alpha) - cholesky_inverse(c)
     M = W * K
     r = M.sum(axis=1)
     quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)       # = 1/2 sum_ab M_ab (x_ai - x_bi)^2
@@ -84,32 +107,50 @@ def nlml_shared(log_theta: np.ndarray, X: np.ndarray, Y: np.ndarray, jitter: flo
     sf, sn, lam = unpack(log_theta)
     m, k = Y.shape
     K = se_ard(X, X, lam, sf)
-    H = K + (sn**2 + jitter) * np.eye(m)
+    H = K.copy()
+    H.flat[::m + 1] += sn**2 + jitter
     try:
-        c = cho_factor(H, lower=True, check_finite=False)
+        c = cho_factor(H, lower=True, overwrite_a=True, check_finite=False)
     except np.linalg.LinAlgError:
         return np.inf, np.zeros_like(log_theta)
     A = cho_solve(c, Y, check_finite=False)
     L = 0.5 * np.sum(Y * A) + k * np.sum(np.log(np.diag(c[0]))) + 0.5 * m * k * LOG_2PI
-    W = A @ A.T - k * cho_solve(c, np.eye(m), check_finite=False)
-    M = W * K
+    Hinv = cholesky_inverse(c)
+    Hinv *= k
+    W = A @ A.T
+    W -= Hinv
+    trace_W = np.trace(W)
+    M = W
+    M *= K                                                # in place: W is not needed after its trace
     r = M.sum(axis=1)
     quad = (X**2).T @ r - np.sum((M @ X) * X, axis=0)
     g = np.empty(len(log_theta))
     g[0] = -np.sum(M)
-    g[1] = -sn**2 * np.trace(W)
+    g[1] = -sn**2 * trace_W
     g[2:] = -quad / lam**2
     return float(L), g
 
 
+def noise_floor_bound(noise_floor_mm: float | None, y_std: np.ndarray) -> float | None:
+    """Lower bound of the standardised shared sigma_n so that the model's noise, as a 3-D RMS over the outputs
+    (sqrt(sum_j (sigma_n y_std_j)^2), mm), is at least the measurement noise floor (a 3-D RMS, mm): a GP never
+    explains its own points more closely than the instrument measures them. None without a floor."""
+    if noise_floor_mm is None or not noise_floor_mm > 0:
+        return None
+    return float(noise_floor_mm / max(float(np.sqrt(np.sum(np.square(y_std)))), 1e-12))
+
+
 def fit_shared_hyperparameters(X: np.ndarray, Y: np.ndarray, *, log_theta0: np.ndarray | None = None,
-                               n_restarts: int = 0, seed: int = 0, max_iter: int = 150) -> np.ndarray:
+                               n_restarts: int = 0, seed: int = 0, max_iter: int = 150,
+                               sn_min: float | None = None) -> np.ndarray:
     """Shared log-hyperparameters (log sigma_f, log sigma_n, log lambda) of standardised outputs Y (m, k),
-    by L-BFGS-B on ``nlml_shared`` from a heuristic (or given) start plus ``n_restarts`` seeded starts."""
+    by L-BFGS-B on ``nlml_shared`` from a heuristic (or given) start plus ``n_restarts`` seeded starts;
+    ``sn_min`` bounds sigma_n below (``noise_floor_bound``)."""
     Xc = X - X.mean(axis=0)
     s_x = np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
     start = np.log(np.concatenate([[1.0, 0.3], s_x])) if log_theta0 is None else np.asarray(log_theta0, float)
-    bounds = [(np.log(1e-3), np.log(1e2)), (np.log(1e-4), np.log(10.0))]
+    sn_lo = np.log(max(1e-4, sn_min or 0.0))
+    bounds = [(np.log(1e-3), np.log(1e2)), (sn_lo, max(np.log(10.0), sn_lo + np.log(10.0)))]
     bounds += [(np.log(1e-2 * s), np.log(1e3 * s)) for s in s_x]
     lo, hi = np.array(bounds).T
     rng = np.random.default_rng(seed)
@@ -153,9 +194,9 @@ class GaussianProcess:
         put("_alpha", cho_solve((L, True), self.y - self.y_mean, check_finite=False))
 
     @classmethod
-    def from_factor(cls, X, y, sigma_f, sigma_n, length, y_mean, x_centre, chol) -> "GaussianProcess":
+    def from_factor(cls, X, y, sigma_f, sigma_n, length, y_mean, x_centre, chol, alpha=None) -> "GaussianProcess":
         """A GP whose Cholesky factor of K + (sigma_n^2 + jitter) I is already known (shared by outputs that differ
-        only by scale): no O(m^3) work here."""
+        only by scale), and optionally its alpha = H^-1 (y - y_mean): no O(m^3) work here."""
         gp = object.__new__(cls)
         put = lambda k, v: object.__setattr__(gp, k, v)  # noqa: E731
         put("X", np.atleast_2d(np.asarray(X, float)))
@@ -166,7 +207,8 @@ class GaussianProcess:
         put("y_mean", float(y_mean))
         put("x_centre", np.asarray(x_centre, float))
         put("_chol", chol)
-        put("_alpha", cho_solve((chol, True), gp.y - gp.y_mean, check_finite=False))
+        put("_alpha", cho_solve((chol, True), gp.y - gp.y_mean, check_finite=False) if alpha is None
+            else np.asarray(alpha, float))
         return gp
 
     def _jitter(self) -> float:
@@ -261,6 +303,9 @@ class GaussianProcess:
 class MultiOutputGP:
     """Independent GPs on the same inputs, one per output column (seed 003: one model per axis)."""
     models: tuple[GaussianProcess, ...]
+    noise_floor_mm: float | None = None      # the bound of sigma_n a ``fit_subset`` model was fitted with
+
+    kind = "exact"
 
     @classmethod
     def fit(cls, X: np.ndarray, Y: np.ndarray, *, n_restarts: int = 3, seed: int = 0) -> "MultiOutputGP":
@@ -271,11 +316,13 @@ class MultiOutputGP:
 
     @classmethod
     def fit_subset(cls, X: np.ndarray, Y: np.ndarray, *, hyper_points: int = 300, n_restarts: int = 1,
-                   seed: int = 0, max_iter: int = 150, log_theta0: np.ndarray | None = None) -> "MultiOutputGP":
+                   seed: int = 0, max_iter: int = 150, log_theta0: np.ndarray | None = None,
+                   noise_floor_mm: float | None = None) -> "MultiOutputGP":
         """Fast fit: every output standardised, one shared set of hyperparameters (length scales and
         signal-to-noise ratio) by marginal likelihood on a seeded random subset of at most ``hyper_points``
         points, then the exact GP of every output on all points with sigma_f, sigma_n scaled back by the
-        output's standard deviation. ``log_theta0`` (standardised units) warm-starts the search."""
+        output's standard deviation. ``log_theta0`` (standardised units) warm-starts the search;
+        ``noise_floor_mm`` (3-D RMS) bounds the noise below (``noise_floor_bound``)."""
         X = np.atleast_2d(np.asarray(X, float))
         Y = np.asarray(Y, float).reshape(len(X), -1)
         mu, sd = Y.mean(axis=0), np.maximum(Y.std(axis=0), 1e-12)
@@ -283,13 +330,17 @@ class MultiOutputGP:
         sub = np.arange(len(X)) if len(X) <= hyper_points else \
             np.sort(np.random.default_rng(seed).choice(len(X), hyper_points, replace=False))
         t = fit_shared_hyperparameters(X[sub], Z[sub], log_theta0=log_theta0, n_restarts=n_restarts, seed=seed,
-                                       max_iter=max_iter)
+                                       max_iter=max_iter, sn_min=noise_floor_bound(noise_floor_mm, sd))
         sf, sn, lam = unpack(t)
         centre = X.mean(axis=0)
         Xc = X - centre
-        L0 = np.linalg.cholesky(se_ard(Xc, Xc, lam, sf) + (sn**2 + JITTER) * np.eye(len(X)))   # standardised units
+        H0 = se_ard(Xc, Xc, lam, sf)                                  # standardised units
+        H0.flat[::len(X) + 1] += sn**2 + JITTER                        # in place: no (m, m) identity
+        L0 = np.linalg.cholesky(H0)
+        A0 = cho_solve((L0.T, False), Y - mu, check_finite=False)      # all outputs at once; L0.T is Fortran-ordered
         return cls(tuple(GaussianProcess.from_factor(X, Y[:, j], sf * sd[j], sn * sd[j], lam, float(mu[j]), centre,
-                                                     sd[j] * L0) for j in range(Y.shape[1])))
+                                                     sd[j] * L0, A0[:, j] / sd[j] ** 2) for j in range(Y.shape[1])),
+                   noise_floor_mm)
 
     @property
     def shared_log_theta(self) -> np.ndarray:
@@ -308,7 +359,8 @@ class MultiOutputGP:
         for k in np.unique(fold):
             tr, te = fold != k, fold == k
             gk = MultiOutputGP.fit_subset(X[tr], Y[tr], hyper_points=hyper_points, n_restarts=0, seed=seed,
-                                          max_iter=max_iter, log_theta0=self.shared_log_theta)
+                                          max_iter=max_iter, log_theta0=self.shared_log_theta,
+                                          noise_floor_mm=self.noise_floor_mm)
             err[te] = Y[te] - gk.predict(X[te])
         return err
 
@@ -318,20 +370,43 @@ class MultiOutputGP:
         return np.stack([g.kfold_errors(fold) for g in self.models], axis=1)
 
     def predict(self, Xs: np.ndarray) -> np.ndarray:
-        """Predictive means (N, k)."""
-        return np.stack([g.predict(Xs) for g in self.models], axis=1)
+        """Predictive means (N, k); one kernel matrix for all outputs when they share inputs and length scales
+        (``fit_subset``: their kernels differ by the factor sigma_f^2 only)."""
+        g0 = self.models[0]
+        if len(self.models) == 1 or not all(_same_inputs(g0, g) for g in self.models[1:]):
+            return np.stack([g.predict(Xs) for g in self.models], axis=1)
+        Xs = np.atleast_2d(np.asarray(Xs, float)) - g0.x_centre
+        K0 = se_ard(Xs, g0.X - g0.x_centre, g0.length, 1.0)
+        return K0 @ np.stack([g.sigma_f**2 * g._alpha for g in self.models], axis=1) + [g.y_mean for g in self.models]
 
     def predict_std(self, Xs: np.ndarray, include_noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mean (N, k), predictive standard deviation (N, k))."""
         out = [g.predict(Xs, return_var=True, include_noise=include_noise) for g in self.models]
         return np.stack([m for m, _ in out], 1), np.sqrt(np.stack([v for _, v in out], 1))
 
+    @property
+    def sigma_n_mm(self) -> np.ndarray:
+        """Noise standard deviation (k,) per output, mm."""
+        return np.array([g.sigma_n for g in self.models])
+
+    @property
+    def n_train(self) -> int:
+        return len(self.models[0].y)
+
     def to_dict(self) -> dict:
-        return {"models": [g.to_dict() for g in self.models]}
+        return {"approximation": self.kind, "models": [g.to_dict() for g in self.models],
+                "noise_floor_mm": self.noise_floor_mm}
 
     @classmethod
     def from_dict(cls, d: dict) -> "MultiOutputGP":
-        return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]))
+        floor = d.get("noise_floor_mm")
+        return cls(tuple(GaussianProcess.from_dict(g) for g in d["models"]), None if floor is None else float(floor))
+
+
+def _same_inputs(a: GaussianProcess, b: GaussianProcess) -> bool:
+    """Same training inputs, centre and length scales (then the kernels differ by sigma_f^2 only)."""
+    return ((a.X is b.X or np.array_equal(a.X, b.X)) and np.array_equal(a.x_centre, b.x_centre)
+            and np.array_equal(a.length, b.length))
 
 
 def gp_inputs(q_rad: np.ndarray, payload_kg=None) -> np.ndarray:
@@ -348,7 +423,7 @@ class GPRResidual:
     """GPR residual layer: one GP per base-frame axis on the residual ``p_measured - p_model`` (mm) as a
     function of the joint angles (+ payload when ``uses_payload``). ``payload_kg`` is the payload assumed when
     ``predict`` is given none (the tool the robot carries now; see ``with_payload``)."""
-    gp: MultiOutputGP
+    gp: "MultiOutputGP | SparseGP"          # exact, or inducing points beyond a size (robocal.sparse_gp)
     uses_payload: bool = False
     payload_kg: float | None = None
 
@@ -381,9 +456,13 @@ class GPRResidual:
 
     @classmethod
     def from_dict(cls, d: dict) -> "GPRResidual":
+        from .sparse_gp import SparseGP           # lazy: sparse_gp builds on this module
         pay = d.get("payload_kg")
-        return cls(MultiOutputGP.from_dict(d["gp"]), bool(d.get("uses_payload", False)),
-                   None if pay is None else float(pay))
+        kind = d["gp"].get("approximation", "exact")
+        if kind not in ("exact", SparseGP.kind):
+            raise ValueError(f"unknown GP approximation {kind!r}")
+        gp = SparseGP.from_dict(d["gp"]) if kind == SparseGP.kind else MultiOutputGP.from_dict(d["gp"])
+        return cls(gp, bool(d.get("uses_payload", False)), None if pay is None else float(pay))
 
 
 def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weights: np.ndarray | None = None,
@@ -402,69 +481,3 @@ def fit_gpr_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, 
     else:
         gp = MultiOutputGP.fit(gp_inputs(q, pay), p_meas_base - p_kin, n_restarts=n_restarts, seed=seed)
     return GPRResidual(gp, pay is not None, None)
-
-
-# ---------------------------------------------------------------- RBF-network baseline (seed 003 Fig. 8)
-RBF_WIDTHS = (0.25, 0.5, 1.0, 2.0, 4.0)       # x the median distance between centres
-RBF_RIDGES = (1e-8, 1e-5, 1e-2)
-
-
-@dataclass(frozen=True, eq=False)
-class RBFNetwork:
-    """Gaussian radial-basis-function network: inputs standardised, centres by seeded k-means (``n_centres``,
-    default half the training points), one common width, linear output layer with bias by ridge least
-    squares. Width (a multiple of the median distance between centres) and ridge are chosen by seeded
-    5-fold cross-validation on the training set unless given: a fair baseline, not a strawman."""
-    centres: np.ndarray
-    width: float
-    weights: np.ndarray
-    x_mean: np.ndarray
-    x_std: np.ndarray
-
-    @classmethod
-    def fit(cls, X: np.ndarray, Y: np.ndarray, n_centres: int | None = None, width: float | None = None,
-            ridge: float | None = None, seed: int = 0) -> "RBFNetwork":
-        from scipy.cluster.vq import kmeans2
-        X = np.atleast_2d(np.asarray(X, float))
-        Y = np.asarray(Y, float).reshape(len(X), -1)
-        mu, sd = X.mean(0), np.where(X.std(0) > 1e-12, X.std(0), 1.0)
-        Z = (X - mu) / sd
-        k = min(len(X), n_centres or max(2, len(X) // 2))
-        C = Z.copy() if k == len(X) else kmeans2(Z, k, minit="++", seed=np.random.default_rng(seed))[0]
-        dc = np.sqrt(np.sum((C[:, None] - C[None]) ** 2, -1))
-        scale = float(np.median(dc[np.triu_indices(len(C), 1)])) if len(C) > 1 else 1.0
-        widths = [scale * f for f in RBF_WIDTHS] if width is None else [width]
-        ridges = list(RBF_RIDGES) if ridge is None else [ridge]
-        if len(widths) * len(ridges) > 1:
-            width, ridge = cls._cross_validate(Z, Y, C, widths, ridges, seed)
-        else:
-            width, ridge = widths[0], ridges[0]
-        return cls(C, width, cls._solve(cls._design(Z, C, width), Y, ridge), mu, sd)
-
-    @classmethod
-    def _cross_validate(cls, Z, Y, C, widths, ridges, seed, folds=5):
-        fold = np.random.default_rng(seed).permutation(len(Z)) % folds
-        best, arg = np.inf, (widths[0], ridges[0])
-        for w in widths:
-            Phi = cls._design(Z, C, w)
-            for r in ridges:
-                sse = sum(np.sum((Y[fold == f] - Phi[fold == f] @ cls._solve(Phi[fold != f], Y[fold != f], r)) ** 2)
-                          for f in range(folds))
-                if sse < best:
-                    best, arg = sse, (w, r)
-        return arg
-
-    @staticmethod
-    def _solve(Phi, Y, ridge):
-        A = Phi.T @ Phi + ridge * len(Phi) * np.eye(Phi.shape[1])
-        return np.linalg.solve(A, Phi.T @ Y)
-
-    @staticmethod
-    def _design(Z, C, width):
-        d2 = np.sum((Z[:, None, :] - C[None]) ** 2, -1)
-        return np.column_stack([np.exp(-0.5 * d2 / width**2), np.ones(len(Z))])
-
-    def predict(self, Xs: np.ndarray) -> np.ndarray:
-        """Predicted outputs (N, k)."""
-        Z = (np.atleast_2d(np.asarray(Xs, float)) - self.x_mean) / self.x_std
-        return self._design(Z, self.centres, self.width) @ self.weights

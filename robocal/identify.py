@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .lm import levenberg_marquardt
-from .frames import fit_rigid
-from .kinematics import (Kinematics, ParamLayout, apply_update, identification_jacobian, parameter_difference,
-                         smr_base)
+from .frames import fit_rigid, make_T, rotvec_to_matrix, skew
+from .kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian_t, parameter_difference,
+                         smr_base, smr_tracker)
 
 
 class IdentificationError(ValueError):
@@ -92,6 +92,88 @@ def register(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, weigh
     return kin.with_(T_tracker_base=fit_rigid(p_nom, p_tracker_mm, weights))
 
 
+TOOL_DIRECTION_TOL = 0.01      # an SMR-offset direction is registered when the poses' orientations turn it by
+                               # more than ~0.6 deg RMS (its residual then exceeds 1 % of the offset error)
+HUBER_C = 2.5                  # robust registration: points beyond 2.5 x the median residual are down-weighted
+
+
+@dataclass(frozen=True, eq=False)
+class ToolRegistration:
+    """Base frame and SMR offsets registered together on a fixed (nominal) geometry.
+
+    ``T_tracker_base`` (4, 4) mm; ``p_flange_smr_mm`` (k, 3) mm, one row per SMR; ``determined`` how many of the
+    3k offset directions the pose set determines (the others keep their start values: with one SMR orientation
+    an offset cannot be told from a base translation); ``weights`` (N,) the final robust point weights."""
+    T_tracker_base: np.ndarray
+    p_flange_smr_mm: np.ndarray
+    determined: int
+    weights: np.ndarray
+
+
+def _registered_points(R_flange, t_flange, offsets, R, t):
+    """(k, N, 3): SMR centres in the tracker frame for offsets (k, 3), flange poses (N, 3, 3) / (N, 3)."""
+    return (np.einsum("nij,kj->kni", R_flange, offsets) + t_flange) @ R.T + t
+
+
+def register_tool(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, p_flange_smr_mm=None,
+                  max_iter: int = 30) -> ToolRegistration:
+    """Register T_tracker_base and the SMR offsets together on the geometry of ``kin``: a small robust
+    (Huber) Gauss-Newton fit of 6 + 3k parameters from the closed-form registration at the start offsets.
+
+    ``p_tracker_mm`` (N, 3) for one SMR or (k, N, 3) for k SMRs; ``p_flange_smr_mm`` (3,) or (k, 3) start
+    offsets (default ``kin.p_flange_smr_mm``). Offset directions the poses' orientations do not turn by more
+    than ``TOOL_DIRECTION_TOL`` (rad RMS) keep their start values."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    P = np.asarray(p_tracker_mm, float)
+    P = P[None] if P.ndim == 2 else P
+    k, N = P.shape[0], P.shape[1]
+    offs = np.array(kin.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm, float).reshape(k, 3)
+    T_flange = fk(kin, q)
+    Rf, tf = T_flange[:, :3, :3], T_flange[:, :3, 3]
+    a = np.einsum("nij,kj->kni", Rf, offs) + tf
+    if N < 3 or np.linalg.matrix_rank(a[0] - a[0].mean(0), tol=1.0) < 2:
+        raise IdentificationError("registration needs at least 3 non-collinear points")
+    T = fit_rigid(a.reshape(-1, 3), P.reshape(-1, 3))
+    R, t = T[:3, :3], T[:3, 3]
+    w = np.ones(N)
+    basis = None
+    for _ in range(max_iter):
+        pred = _registered_points(Rf, tf, offs, R, t)
+        r = P - pred                                                         # (k, N, 3)
+        J = np.zeros((k, N, 3, 6 + 3 * k))
+        J[..., :3] = -skew(pred - t)
+        J[..., 3:6] = np.eye(3)
+        for s in range(k):
+            J[s, :, :, 6 + 3 * s:9 + 3 * s] = R @ Rf
+        sw = np.sqrt(np.broadcast_to(w[None, :, None], r.shape)).reshape(-1)
+        A, b = J.reshape(-1, 6 + 3 * k) * sw[:, None], r.reshape(-1) * sw
+        if basis is None:                                                    # fixed at the start offsets
+            basis = _determined_tool_directions(A, np.sqrt(np.sum(w)))
+        A = np.column_stack([A[:, :6], A[:, 6:] @ basis])
+        D = np.maximum(np.linalg.norm(A, axis=0), 1e-12)
+        x = np.linalg.lstsq(A / D, b, rcond=None)[0] / D
+        R, t = rotvec_to_matrix(x[:3]) @ R, t + x[3:6]
+        offs = offs + (basis @ x[6:]).reshape(k, 3)
+        e = np.linalg.norm(P - _registered_points(Rf, tf, offs, R, t), axis=2).max(axis=0)     # (N,)
+        scale = max(float(np.median(e)), 1e-9)
+        w_new = np.minimum(1.0, HUBER_C * scale / np.maximum(e, 1e-300))
+        done = np.max(np.abs(x[3:])) < 1e-7 and np.max(np.abs(x[:3])) < 1e-10 and np.max(np.abs(w_new - w)) < 1e-4
+        w = w_new
+        if done:
+            break
+    return ToolRegistration(make_T(R, t), offs, int(basis.shape[1]), w)
+
+
+def _determined_tool_directions(A: np.ndarray, tool_norm: float) -> np.ndarray:
+    """(3k, m) orthonormal offset directions whose effect on the points is not a rigid motion: the SVD of the
+    offset columns of A (M, 6 + 3k) projected off the registration columns, kept above TOOL_DIRECTION_TOL."""
+    reg = A[:, :6] / np.maximum(np.linalg.norm(A[:, :6], axis=0), 1e-12)
+    Q = np.linalg.qr(reg)[0]
+    tool = A[:, 6:] - Q @ (Q.T @ A[:, 6:])
+    _, s, Vt = np.linalg.svd(tool, full_matrices=False)
+    return Vt[s / tool_norm > TOOL_DIRECTION_TOL].T
+
+
 # ---------------------------------------------------------------- weighting
 def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
     """Matrices W (N, 3, 3) with W^T W = cov^-1, or None for unit weights."""
@@ -102,10 +184,33 @@ def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
 
 
 def _whiten(W, x):
-    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays."""
+    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays (batched 3x3 products: matmul, not einsum, which
+    is several times slower at 10^5 points)."""
     if W is None:
         return x
+    x = np.asarray(x, float)
+    if x.ndim == 2:
+        return np.matmul(W, x[:, :, None])[:, :, 0]
+    if x.ndim == 3:
+        return np.matmul(W, x)
     return np.einsum("nij,nj...->ni...", W, x)
+
+
+def _whiten_t(W, Jt):
+    """Per-point whitening of parameter-major Jacobian columns Jt (K, N, 3) -> (K, N, 3)."""
+    if W is None:
+        return Jt
+    return np.matmul(Jt[:, :, None, :], np.swapaxes(W, 1, 2))[:, :, 0, :]
+
+
+def r_factor(A: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """Triangular factor R (P, P) of A (m, P) = Q R by QR of row blocks, then of their stacked factors: every
+    norm, projection, least-squares fit and singular value of A's columns is R's, at O(m P^2) time in cache-sized
+    blocks (a single QR of a 10^5-row A is several times slower). A itself when it has few rows."""
+    if len(A) <= 4 * A.shape[1] + chunk:
+        return A
+    blocks = [np.linalg.qr(A[i:i + chunk], mode="r") for i in range(0, len(A), chunk)]
+    return np.linalg.qr(np.vstack(blocks), mode="r")
 
 
 def igg3_weight(v_std: np.ndarray, k0: float = 1.5, k1: float = 2.5) -> np.ndarray:
@@ -154,7 +259,9 @@ def observability_indices(A: np.ndarray) -> dict:
 def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[int], rank_tol: float,
                             fixed: tuple[str, ...] = ()) -> Identifiability:
     """Admit columns of A (m, P) in ``order`` when their part orthogonal to the admitted ones keeps more
-    than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with."""
+    than ``rank_tol`` of their (unit-scaled) norm; the rest are reported with what they are redundant with.
+    Works on A's triangular factor (``r_factor``): the same answer, with no (m, P) temporaries."""
+    A = r_factor(np.asarray(A, float))
     norms = np.linalg.norm(A, axis=0)
     keep = np.zeros(A.shape[1], bool)
     rels = np.zeros(A.shape[1])
@@ -186,9 +293,11 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
 
 # ---------------------------------------------------------------- estimation
 def _linearise(kin, q, p_meas, W, cols, D):
-    p, J = identification_jacobian(kin, q)
+    """(r (3N,), A (3N, P)) whitened, A column-scaled by D; A is the transpose of a C-ordered (P, 3N) array (the
+    parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
+    p, Jt = identification_jacobian_t(kin, q)
     r = _whiten(W, p_meas - p).reshape(-1)
-    A = _whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
+    A = (_whiten_t(W, Jt[cols]).reshape(len(cols), -1) / D[:, None]).T
     return r, A
 
 
@@ -268,8 +377,8 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
         # identifiability depends on where the model is (theta6, a5, alpha5 are degenerate while the SMR estimate
         # sits on the J6 axis): re-analyse at the solution and re-solve when a parameter became clearly
         # identifiable (10x the rank tolerance, so a borderline column never enters on the way)
-        _, J = identification_jacobian(kin, q)
-        A_full = _whiten(W, J).reshape(-1, layout.size)
+        _, Jt = identification_jacobian_t(kin, q)
+        A_full = _whiten_t(W, Jt).reshape(layout.size, -1).T
         ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol,
                                         options.fixed)
         if cols is None:
@@ -299,7 +408,7 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
     cov_scaled = sigma0**2 * np.linalg.pinv(N)
     std = np.full(layout.size, np.nan)
     std[cols] = np.sqrt(np.diag(cov_scaled)) / D
-    p_model = identification_jacobian(kin, q)[0]
+    p_model = smr_tracker(kin, q)
     return CalibrationResult(
         kinematics=kin, start=start, names=layout.names, identified=tuple(layout.names[c] for c in cols),
         delta=parameter_difference(kin, start), std=std, unidentifiable=ident.unidentifiable,

@@ -98,7 +98,7 @@ def branch_signature(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     wrist centre in front of/behind J2, forearm turning +/- about J2, and the sign of J5 bending."""
     c = chain(kin, q_rad)
     o2, o3, w = c.origin[:, 1], c.origin[:, 2], c.origin[:, 4]
-    forward = c.dirs[2][:, 0]                       # x axis after joint 1 (the arm's plane direction)
+    forward = c.dirs[2][0]                          # x axis after joint 1 (the arm's plane direction)
     shoulder = np.sign(np.einsum("ni,ni->n", w - o2, forward))
     elbow = np.sign(np.einsum("ni,ni->n", np.cross(o3 - o2, w - o3), c.axis[:, 1]))
     wrist = np.sign(np.einsum("ni,ni->n", np.cross(c.axis[:, 3], c.axis[:, 5]), c.axis[:, 4]))

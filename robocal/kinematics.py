@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .frames import exp_se3_left, inv_T, matrix_to_rotvec, skew, transform_points
+from .frames import exp_se3_left, inv_T, matrix_to_rotvec, transform_points
 
 JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
@@ -104,14 +104,15 @@ class Chain(NamedTuple):
     """Intermediate frames of a batch of poses, all in the base frame.
 
     ``T_base_flange`` (N, 4, 4). Per joint i, ``axis[:, i]``/``origin[:, i]`` give the joint's rotation axis
-    and a point on it, and ``dirs[k][:, i]``/``pts[k][:, i]`` the direction and pivot of each parameter's
-    elementary motion (k indexes JOINT_PARAMS); pivots are unused for the prismatic ones (d, a).
+    and a point on it, and ``dirs[k][i]``/``pts[k][i]`` (N, 3) the direction and pivot of each parameter's
+    elementary motion (k indexes JOINT_PARAMS; tuples of the frames' own arrays, shared, never copied); pivots are
+    unused for the prismatic ones (d, a).
     """
     T_base_flange: np.ndarray
     axis: np.ndarray
     origin: np.ndarray
-    dirs: np.ndarray
-    pts: np.ndarray
+    dirs: tuple | None
+    pts: tuple | None
 
 
 def _per_pose(x: np.ndarray, i: int) -> np.ndarray:
@@ -144,8 +145,7 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
     o = np.zeros((N, 3))
     x, y, z = list(np.broadcast_to(np.eye(3), (N, 3, 3)).transpose(1, 0, 2))
     axis = np.empty((N, n, 3)); origin = np.empty((N, n, 3))
-    dirs = np.empty((5, N, n, 3)) if full else None
-    pts = np.zeros((5, N, n, 3)) if full else None
+    dirs, pts = [[] for _ in range(5)], [[] for _ in range(5)]
     for i in range(n):
         th = q[:, i] + _per_pose(theta, i)
         ct, st = np.cos(th)[:, None], np.sin(th)[:, None]
@@ -161,8 +161,8 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
             x, y, z, o = cb * x1 - sb * z2, y2, sb * x1 + cb * z2, o2
             axis[:, i], origin[:, i] = zF, oF
             if full:
-                dirs[:, :, i] = (zF, zF, x1, x1, y2)
-                pts[0, :, i], pts[3, :, i], pts[4, :, i] = oF, o2, o2
+                _append(dirs, (zF, zF, x1, x1, y2))
+                _append(pts, (oF, oF, oF, o2, o2))
         else:                                              # Rx(alpha) Ry(beta) Tx(a) Rz(th) Tz(d)
             oF, xF = o, x
             y1, z1 = ca * y + sa * z, ca * z - sa * y
@@ -171,11 +171,18 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
             x, y, z, o = ct * x2 + st * y1, ct * y1 - st * x2, z2, o2 + d_i * z2
             axis[:, i], origin[:, i] = z2, o2
             if full:
-                dirs[:, :, i] = (z2, z2, x2, xF, y1)
-                pts[0, :, i], pts[3, :, i], pts[4, :, i] = o2, oF, oF
+                _append(dirs, (z2, z2, x2, xF, y1))
+                _append(pts, (o2, o2, o2, oF, oF))
     T = np.zeros((N, 4, 4))
     T[:, :3, 0], T[:, :3, 1], T[:, :3, 2], T[:, :3, 3], T[:, 3, 3] = x, y, z, o, 1.0
-    return Chain(T, axis, origin, dirs, pts)
+    if not full:
+        return Chain(T, axis, origin, None, None)
+    return Chain(T, axis, origin, tuple(map(tuple, dirs)), tuple(map(tuple, pts)))
+
+
+def _append(lists: list, arrays: tuple) -> None:
+    for lst, arr in zip(lists, arrays):
+        lst.append(arr)
 
 
 def fk(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
@@ -248,23 +255,41 @@ def identification_jacobian(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndar
 
     Returns (p_tracker_mm (N, 3), J (N, 3, P)). Units per column: mm/rad or mm/mm.
     """
+    p_tracker, Jt = identification_jacobian_t(kin, q_rad)
+    return p_tracker, np.ascontiguousarray(Jt.transpose(1, 2, 0))
+
+
+def identification_jacobian_t(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``identification_jacobian`` stored by parameter: (p_tracker_mm (N, 3), Jt (P, N, 3)), Jt[c] the (N, 3)
+    column c. Every column is written contiguously (the (N, 3, P) layout writes one cache line per value, the
+    cost at 10^5 poses); the fitting loops use this form."""
     layout = ParamLayout.of(kin)
     c = chain(kin, q_rad)
     N = c.T_base_flange.shape[0]
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     R_tb = kin.T_tracker_base[:3, :3]
     p_tracker = p_base @ R_tb.T + kin.T_tracker_base[:3, 3]
-    J_base = np.empty((N, 3, layout.size))
+    Jt = np.empty((layout.size, N, 3))
     prismatic = (1, 2)  # d, a
-    for col, i, k in layout.joint_cols:
-        u = c.dirs[k][:, i]
-        J_base[:, :, col] = u if k in prismatic else np.cross(u, p_base - c.pts[k][:, i])
-    J = np.einsum("ij,njk->nik", R_tb, J_base)
+    w = np.empty((N, 3))
+    for col, i, k in layout.joint_cols:                          # base-frame motion, rotated into the tracker frame
+        u = c.dirs[k][i] if k in prismatic else _cross(c.dirs[k][i], p_base - c.pts[k][i], w)
+        np.matmul(u, R_tb.T, out=Jt[col])
     nj = len(layout.joint_cols)
-    J[:, :, nj:nj + 3] = np.eye(3)
-    J[:, :, nj + 3:nj + 6] = -skew(p_tracker)
-    J[:, :, nj + 6:nj + 9] = R_tb @ c.T_base_flange[:, :3, :3]
-    return p_tracker, J
+    Jt[nj:nj + 3] = 0.0
+    for a in range(3):
+        Jt[nj + a, :, a] = 1.0                                        # base translation
+        _cross(np.eye(3)[a][None, :], p_tracker, Jt[nj + 3 + a])      # base rotation about tracker axis a
+        Jt[nj + 6 + a] = c.T_base_flange[:, :3, a] @ R_tb.T           # tool offset along flange axis a
+    return p_tracker, Jt
+
+
+def _cross(u: np.ndarray, v: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """u x v of (N, 3) (or broadcastable) arrays into ``out`` (N, 3), component-wise (np.cross is slow)."""
+    out[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
+    out[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
+    out[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    return out
 
 
 def apply_update(kin: Kinematics, delta: np.ndarray) -> Kinematics:

@@ -6,7 +6,9 @@ the robot base frame (kinematic layer with its physical effects). ``fit_layer`` 
 kinematic layer fixed) and returns a layer only when its CV gain over none is significant (one-sided paired t of
 the per-point squared errors > 3 and CV RMS lower by > 2 %, ``robocal.stats.paired_gain``). GPR's CV re-fits the
 hyperparameters on every training fold (hyperparameters fitted on the held-out points too make a GP that
-interpolates noise look useful).
+interpolates noise look useful). The GPR is exact up to ``EXACT_MAX_POINTS`` training points and the inducing-point
+approximation above (``robocal.sparse_gp``: bounded memory); the CV evaluates the one that is then used. Its noise is
+bounded below by the measurement noise floor (``noise_floor_mm``, 3-D RMS) when one is given. IDW queries a KD-tree.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from .elastic import kfold
 from .gp import GPRResidual, MultiOutputGP, gp_inputs
 from .model import CalibratedModel
 from .residual import IDWResidual
+from .sparse_gp import EXACT_MAX_POINTS, SparseGP
 from .stats import paired_gain
 
 LAYER_KINDS = ("idw", "gpr")
@@ -34,15 +37,31 @@ def layer_targets(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nd
     return p_kin, p_meas, p_meas - p_kin
 
 
+def fit_gp(X: np.ndarray, Y: np.ndarray, seed: int = 0, noise_floor_mm: float | None = None):
+    """The layer's GP of inputs X (N, d) and residuals Y (N, 3) mm: exact (``MultiOutputGP.fit_subset``) up to
+    ``EXACT_MAX_POINTS`` points, the inducing-point ``SparseGP`` above; noise bounded below by the floor."""
+    if len(X) <= EXACT_MAX_POINTS:
+        return MultiOutputGP.fit_subset(X, Y, seed=seed, noise_floor_mm=noise_floor_mm)
+    return SparseGP.fit(X, Y, seed=seed, noise_floor_mm=noise_floor_mm)
+
+
+def gp_cv_errors(gp, X: np.ndarray, Y: np.ndarray, fold: np.ndarray, seed: int = 0) -> np.ndarray:
+    """k-fold held-out errors (N, 3) mm of a ``fit_gp`` model fitted on X, Y (hyperparameters re-fitted per fold)."""
+    if isinstance(gp, SparseGP):
+        return gp.cv_errors(X, Y, fold, seed=seed)
+    return gp.cv_errors(fold, seed=seed)
+
+
 def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
               meta: Mapping | None = None, payload_kg: np.ndarray | None = None, idw_power: float = 2.0,
-              idw_k_nearest: int = 8, seed: int = 0):
-    """An IDW or GPR layer on the calibration residuals of ``model`` (payload_kg (N,) as a GPR input when given)."""
+              idw_k_nearest: int = 8, seed: int = 0, noise_floor_mm: float | None = None):
+    """An IDW or GPR layer on the calibration residuals of ``model`` (payload_kg (N,) as a GPR input when given;
+    ``noise_floor_mm`` bounds the GPR's noise below)."""
     _, p_meas, e = layer_targets(model, q_rad, p_tracker_mm, meta)
     if kind == "idw":
         return IDWResidual.fit(p_meas, e, idw_power, idw_k_nearest)
     if kind == "gpr":
-        gp = MultiOutputGP.fit_subset(gp_inputs(q_rad, payload_kg), e, seed=seed)
+        gp = fit_gp(gp_inputs(q_rad, payload_kg), e, seed, noise_floor_mm)
         return GPRResidual(gp, payload_kg is not None, None)
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
@@ -63,7 +82,8 @@ class LayerChoice:
 
 
 def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fold, meta=None, payload_kg=None,
-                      idw_power: float = 2.0, idw_k_nearest: int = 8, seed: int = 0):
+                      idw_power: float = 2.0, idw_k_nearest: int = 8, seed: int = 0,
+                      noise_floor_mm: float | None = None):
     """(per-point held-out squared errors (N,) mm^2, layer fitted on all points or None) of one candidate."""
     p_kin, p_meas, e = layer_targets(model, q_rad, p_tracker_mm, meta)
     if kind == "none":
@@ -76,21 +96,23 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
             err[te] = e[te] - lay.predict(None, p_kin[te])
         return np.sum(err**2, axis=1), IDWResidual.fit(p_meas, e, idw_power, idw_k_nearest)
     if kind == "gpr":
-        gp = MultiOutputGP.fit_subset(gp_inputs(q_rad, payload_kg), e, seed=seed)
-        return np.sum(gp.cv_errors(fold, seed=seed) ** 2, axis=1), GPRResidual(gp, payload_kg is not None, None)
+        X = gp_inputs(q_rad, payload_kg)
+        gp = fit_gp(X, e, seed, noise_floor_mm)
+        return np.sum(gp_cv_errors(gp, X, e, fold, seed) ** 2, axis=1), GPRResidual(gp, payload_kg is not None, None)
     raise ValueError(f"unknown residual layer {kind!r}")
 
 
 def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None,
                  payload_kg: np.ndarray | None = None, candidates=LAYER_KINDS, folds: int = 5, seed: int = 0,
-                 idw_power: float = 2.0, idw_k_nearest: int = 8) -> LayerChoice:
+                 idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None) -> LayerChoice:
     """none / IDW / GPR by k-fold CV on the calibration points: the candidate with the lowest CV RMS among those
-    whose gain over none is significant, else none."""
+    whose gain over none is significant, else none (``noise_floor_mm``: the GPR's noise bound)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     if len(q) < 4 * folds:
         return LayerChoice("none", None, {}, folds)
     fold = kfold(len(q), folds, seed)
-    kw = dict(meta=meta, payload_kg=payload_kg, idw_power=idw_power, idw_k_nearest=idw_k_nearest, seed=seed)
+    kw = dict(meta=meta, payload_kg=payload_kg, idw_power=idw_power, idw_k_nearest=idw_k_nearest, seed=seed,
+              noise_floor_mm=noise_floor_mm)
     se0, _ = cv_squared_errors("none", model, q, p_tracker_mm, fold, **kw)
     cv = {"none": {"cv_rms_mm": float(np.sqrt(np.mean(se0)))}}
     best = ("none", None, float(np.sqrt(np.mean(se0))))
@@ -101,3 +123,21 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
         if g.significant and g.rms_cand_mm < best[2]:
             best = (kind, layer, g.rms_cand_mm)
     return LayerChoice(best[0], best[1], cv, folds)
+
+
+def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
+    """The fitted layer next to its honest figures: ``calib_rms_mm`` of the final model on the calibration rows
+    (a fit to points the layer has seen: not an accuracy), the CV-predicted held-out RMS (this layer's k-fold CV,
+    the kinematic layer fixed) and the test-set RMS; for a GPR its approximation, training size and noise (3-D
+    RMS, mm) against the floor it was bounded by. ``stage``: the report's compensated stage (calib/test stats)."""
+    out = {"kind": choice.kind, "calib_rms_mm": stage["calib"]["rms_mm"],
+           "cv_predicted_rms_mm": choice.cv.get(choice.kind, {}).get("cv_rms_mm"), "folds": choice.folds,
+           "test_rms_mm": stage["test"]["rms_mm"],
+           "note": "calib_rms_mm is a fit to the points the layer interpolates, not an accuracy; "
+                   "cv_predicted_rms_mm predicts the held-out RMS"}
+    gp = getattr(choice.layer, "gp", None)
+    if gp is not None:
+        out.update(approximation=gp.kind, n_train=int(gp.n_train),
+                   n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,
+                   noise_mm=float(np.sqrt(np.sum(gp.sigma_n_mm**2))), noise_floor_mm=gp.noise_floor_mm)
+    return out

@@ -14,6 +14,7 @@ import numpy as np
 
 from .frames import transform_points
 from .kinematics import Kinematics, fk
+from .effects import effect_state
 from .elastic import FittedEffect, elastic_flange
 from .gp import GPRResidual
 from .residual import IDWResidual
@@ -48,8 +49,16 @@ class CalibratedModel:
         return elastic_flange(self.kinematics, q, self.effect_meta(len(q), meta), pairs)
 
     def kinematic_smr_base(self, q_rad: np.ndarray, meta: Mapping | None = None) -> np.ndarray:
-        """SMR position (N, 3) mm, base frame, kinematic layer (geometry + effects) only."""
-        return transform_points(self.flange_pose(q_rad, meta), self.kinematics.p_flange_smr_mm)
+        """SMR position (N, 3) mm, base frame, kinematic layer (geometry + effects) only; a drift of the
+        measurement (registration drift at the rows' clock) is where the tracker sees the SMR, in base axes."""
+        q = np.atleast_2d(q_rad)
+        p = transform_points(self.flange_pose(q, meta), self.kinematics.p_flange_smr_mm)
+        drift = [(fe.choice.build(self.kinematics.n), fe.values) for fe in self.effects
+                 if fe.choice.name == "registration_drift"]
+        if drift and meta is not None:
+            dp = effect_state(self.kinematics, q, self.effect_meta(len(q), meta), drift)[2]
+            p = p + dp @ self.kinematics.T_tracker_base[:3, :3]
+        return p
 
     def residual_base(self, q_rad: np.ndarray, p_kin_base_mm: np.ndarray | None = None) -> np.ndarray:
         """Predicted residual error (N, 3) mm in the base frame (zeros without a residual layer)."""

@@ -86,6 +86,15 @@ class TruthProtocol(CampaignShape):
     nests: int = 3
     q3_fixed_deg: float | None = None     # hold J3 at one angle (data that cannot tell a J2 harmonic from gravity)
     compliance_joints: tuple[int, ...] = (2, 3)
+    sampling: str = "uniform"             # uniform | box (small joint ranges in front of a small arm, SMALL_ARM_BOX_DEG)
+    #                                       | sparse_extremes (most poses central, a few at the extremes of J2/J3)
+    order: str = "random"                 # random | sweep_j1 (measured in order of J1: time correlates with q1)
+    misalignment_deg: float = 0.0         # extra parallel-axis misalignment (Hayati beta) of the Hayati joints
+    kg_per_mm: float = 0.12               # link mass per mm of link length
+    stiffness_nm_per_rad: tuple | None = None   # ((J2 lo, hi), (J3 lo, hi)) instead of the industrial-arm ranges
+    gear_joints: tuple[int, ...] = (1, 2, 3, 4, 5, 6)   # joints a gear error is drawn on
+    gear_arcsec: float = 20.0             # typical first-harmonic amplitude of a gear error on J1-J3 (x3 on the wrist)
+    gravity_base: tuple[float, float, float] = (0.0, 0.0, -1.0)   # gravity in the base frame (floor mount: -z)
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,6 +128,17 @@ def _rng_sign(rng) -> float:
     return float(rng.choice([-1.0, 1.0]))
 
 
+SMALL_ARM_BOX_DEG = ((-30, -95, 70, -100, 50, -10), (50, -35, 140, 15, 130, 20))   # UR joint conventions
+CENTRAL_DEG = ((-10, -25), (25, 5))        # sparse_extremes: (q2, q3) box of the central poses (IRB conventions)
+
+
+def small_arm_nominal() -> Kinematics:
+    """A small 6-axis arm with three parallel axes (the published UR5 DH table), Hayati beta on J2 and J3."""
+    return Kinematics.from_table("dh", [90, 0, 0, 90, -90, 0], [0, -425, -392.25, 0, 0, 0],
+                                 [89.159, 0, 0, 109.15, 94.65, 82.3], [0] * 6, [-360] * 6, [360] * 6,
+                                 hayati_joints=[2, 3], p_flange_smr_mm=[0, 0, 30])
+
+
 def perturbed_geometry(nominal: Kinematics, rng: np.random.Generator) -> Kinematics:
     """Truth geometry: each DH parameter off by a random amount with a random sign."""
     n = nominal.n
@@ -129,9 +149,12 @@ def perturbed_geometry(nominal: Kinematics, rng: np.random.Generator) -> Kinemat
                          theta_rad=nominal.theta_rad + np.radians(s(0.005, 0.05)), beta_rad=nominal.beta_rad + beta)
 
 
-def sample_configurations(kin: Kinematics, rng: np.random.Generator, n: int, q3_fixed_deg: float | None = None
-                          ) -> np.ndarray:
-    """n random joint vectors (rad): SMR above the floor and off the base column, wrist off its singularity."""
+def sample_configurations(kin: Kinematics, rng: np.random.Generator, n: int, q3_fixed_deg: float | None = None,
+                          sampling: str = "uniform") -> np.ndarray:
+    """n random joint vectors (rad): SMR above the floor and off the base column, wrist off its singularity.
+    ``box``: uniform in ``SMALL_ARM_BOX_DEG``; ``sparse_extremes``: 85 % with (q2, q3) in ``CENTRAL_DEG``."""
+    if sampling == "box":
+        return rng.uniform(np.radians(SMALL_ARM_BOX_DEG[0]), np.radians(SMALL_ARM_BOX_DEG[1]), (n, kin.n))
     lo = np.radians([-120, -50, -120, -180, -115, -180])[:kin.n]
     hi = np.radians([120, 90, 60, 180, 115, 180])[:kin.n]
     out, got = [], 0
@@ -139,6 +162,9 @@ def sample_configurations(kin: Kinematics, rng: np.random.Generator, n: int, q3_
         q = rng.uniform(lo, hi, (4 * n, kin.n))
         if q3_fixed_deg is not None:
             q[:, 2] = np.radians(q3_fixed_deg)
+        if sampling == "sparse_extremes":
+            central = rng.random(len(q)) < 0.85
+            q[central, 1:3] = rng.uniform(np.radians(CENTRAL_DEG[0]), np.radians(CENTRAL_DEG[1]), (central.sum(), 2))
         c = chain(kin, q, full=False)
         p = c.T_base_flange[:, :3, 3]
         ok = (p[:, 2] > 150) & (np.hypot(p[:, 0], p[:, 1]) > 450) & (np.abs(q[:, 4]) > np.radians(15))
@@ -159,19 +185,19 @@ class MassModel:
     payload_com_flange_mm: np.ndarray
 
 
-def random_mass_model(kin: Kinematics, rng: np.random.Generator) -> MassModel:
-    """Link masses of a robot of this size: about 0.12 kg per mm of link length, x U(0.6, 1.4)."""
+def random_mass_model(kin: Kinematics, rng: np.random.Generator, kg_per_mm: float = 0.12) -> MassModel:
+    """Link masses of a robot of this size: about ``kg_per_mm`` per mm of link length, x U(0.6, 1.4)."""
     n = kin.n
     length = np.hypot(kin.a_mm, kin.d_mm)
-    masses = np.where(np.arange(n) == 0, 0.0, 0.12 * np.maximum(length, 80.0) * rng.uniform(0.6, 1.4, n))
+    masses = np.where(np.arange(n) == 0, 0.0, kg_per_mm * np.maximum(length, 80.0) * rng.uniform(0.6, 1.4, n))
     return MassModel(masses, rng.uniform(0.3, 0.7, n), rng.uniform(-60, 60, n), rng.uniform(-30, 30, n),
                      np.array([rng.uniform(-40, 40), rng.uniform(-40, 40), rng.uniform(50, 150)]))
 
 
 def gravity_torque_nm(kin: Kinematics, q_rad: np.ndarray, mm: MassModel, payload_kg: np.ndarray,
-                      arm: bool = True) -> np.ndarray:
+                      arm: bool = True, down=(0.0, 0.0, -1.0)) -> np.ndarray:
     """Gravity torque (N, n) N*m about every joint axis: sum over the downstream centres of mass of
-    (r x m g) . axis; gravity along -z of the base frame."""
+    (r x m g) . axis; gravity along ``down`` in the base frame (-z: floor mount)."""
     c = chain(kin, q_rad, full=False)
     N, n = q_rad.shape
     R_fl = c.T_base_flange[:, :3, :3]
@@ -187,7 +213,7 @@ def gravity_torque_nm(kin: Kinematics, q_rad: np.ndarray, mm: MassModel, payload
                               np.asarray(payload_kg, float).reshape(N, 1)], axis=1) * G_M_S2   # N
     pts = np.concatenate([com, p_pay[:, None, :]], axis=1)                                # (N, n+1, 3)
     tau = np.zeros((N, n))
-    force = np.array([0.0, 0.0, -1.0])
+    force = np.asarray(down, float) / np.linalg.norm(down)
     for j in range(n):
         r = pts[:, j:] - c.origin[:, j:j + 1]                                             # links j.. and payload
         tau[:, j] = np.einsum("nmk,nk,nm->n", np.cross(r, force), c.axis[:, j], weights[:, j:]) / 1000.0
@@ -212,21 +238,23 @@ def warmup(t_s: np.ndarray, tau_s: float) -> np.ndarray:
 
 
 # ============================================================================ effects as instances
-def draw_effect(name: str, rng: np.random.Generator, kin: Kinematics, scale: float) -> TruthEffect:
+def draw_effect(name: str, rng: np.random.Generator, kin: Kinematics, scale: float,
+                protocol: TruthProtocol = TruthProtocol()) -> TruthEffect:
     """A random physical instance of an effect; ``scale`` multiplies its typical size."""
     u = rng.uniform
     if name == "joint_compliance":
-        k2, k3 = u(1.2e6, 3e6) / scale, u(0.6e6, 1.5e6) / scale
+        (a2, b2), (a3, b3) = protocol.stiffness_nm_per_rad or ((1.2e6, 3e6), (0.6e6, 1.5e6))
+        k2, k3 = u(a2, b2) / scale, u(a3, b3) / scale
         return TruthEffect(name, (2, 3), "lumped masses, off-line COMs, offset payload (J2 torque depends on q3)",
                            {"stiffness_nm_per_rad": {2: k2, 3: k3}})
     if name == "payload_deflection":
         return TruthEffect(name, (2, 3), "payload torque only (balanced arm)",
                            {"stiffness_nm_per_rad": {2: u(0.6e6, 1.5e6) / scale, 3: u(0.3e6, 0.8e6) / scale}})
     if name == "gear_cyclic":
-        joint = int(rng.integers(1, 7))
+        joint = int(rng.integers(1, 7)) if len(protocol.gear_joints) == 6 else int(rng.choice(protocol.gear_joints))
         sets = [(1,), (2,), (1, 2), (2, 3), (1, 3)]
         hs = sets[int(rng.integers(len(sets)))]
-        base = (20.0 if joint <= 3 else 60.0) / 3600.0 * np.pi / 180.0
+        base = protocol.gear_arcsec * (1.0 if joint <= 3 else 3.0) / 3600.0 * np.pi / 180.0
         amps = {h: base * scale * u(0.7, 1.3) * (1.0 if h == hs[0] else 0.6) for h in hs}
         return TruthEffect(name, (joint,), f"harmonics {','.join(map(str, hs))}",
                            {"amplitude_rad": amps, "phase_rad": {h: u(-np.pi, np.pi) for h in hs}})
@@ -276,12 +304,17 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     T_tb = make_T(rotvec_to_matrix(np.array([0, 0, rng.uniform(-np.pi, np.pi)]) + rng.normal(0, 0.01, 3)),
                   np.array([dist * np.cos(az), dist * np.sin(az), rng.uniform(-1200, -600)]))
     truth = perturbed_geometry(nominal, rng).with_(T_tracker_base=T_tb, p_flange_smr_mm=smr)
-    nominal = nominal.with_(p_flange_smr_mm=smr + rng.normal(0, 0.5, 3))
     pr = protocol
+    if pr.misalignment_deg:
+        tilt = np.radians(pr.misalignment_deg) * rng.uniform(0.7, 1.3, truth.n) * rng.choice([-1.0, 1.0], truth.n)
+        truth = truth.with_(beta_rad=truth.beta_rad + np.where(nominal.hayati, tilt, 0.0))
+    nominal = nominal.with_(p_flange_smr_mm=smr + rng.normal(0, 0.5, 3))
     n_main = pr.n_calib + pr.n_test
-    q_main = sample_configurations(nominal, rng, n_main, pr.q3_fixed_deg)
+    q_main = sample_configurations(nominal, rng, n_main, pr.q3_fixed_deg, pr.sampling)
+    if pr.order == "sweep_j1":                     # measured in order of J1 (a sweep), not in random order
+        q_main = q_main[np.argsort(q_main[:, 0] + np.radians(rng.normal(0.0, 3.0, n_main)))]
     sets = list(np.array(["calib"] * pr.n_calib + ["test"] * pr.n_test)[rng.permutation(n_main)])
-    q_chk = sample_configurations(nominal, rng, pr.check_poses, pr.q3_fixed_deg)
+    q_chk = sample_configurations(nominal, rng, pr.check_poses, pr.q3_fixed_deg, pr.sampling)
     order = [pr.check_poses - 1] + list(range(pr.check_poses)) * pr.check_repeats
     q_cmd = np.concatenate([q_main, q_chk[order]])
     sets += ["calib"] + ["check"] * (len(order) - 1)
@@ -292,9 +325,9 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
                         pr.duration_s + 6.0 * np.arange(1, len(order) + 1)])
     payload = np.asarray(pr.payloads_kg, float)[(t // pr.payload_block_s).astype(int) % len(pr.payloads_kg)]
     payload[n_main:] = pr.payloads_kg[0]
-    truths = [draw_effect(name, rng, nominal, float(rng.uniform(0.6, 1.4)) if scale is None else scale)
+    truths = [draw_effect(name, rng, nominal, float(rng.uniform(0.6, 1.4)) if scale is None else scale, pr)
               for name in effects]
-    mass = random_mass_model(nominal, rng)
+    mass = random_mass_model(nominal, rng, pr.kg_per_mm)
     move, prev, sign = last_moves(q_cmd)
     # ---- link angles (where the robot really is) and what the controller reports
     q_link = q_cmd.copy()
@@ -306,7 +339,7 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     for te in truths:
         v = te.values
         if te.name in ("joint_compliance", "payload_deflection"):
-            tau = gravity_torque_nm(truth, q_cmd, mass, payload, arm=te.name == "joint_compliance")
+            tau = gravity_torque_nm(truth, q_cmd, mass, payload, te.name == "joint_compliance", pr.gravity_base)
             for j, k in v["stiffness_nm_per_rad"].items():
                 if j in pr.compliance_joints:
                     q_link[:, j - 1] += tau[:, j - 1] / k

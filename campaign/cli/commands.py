@@ -1,4 +1,4 @@
-"""``campaign validate|run|plan|reprocess|correct|verify``: the campaign's own subcommands.
+"""``campaign validate|run|plan|reprocess|select|correct|verify``: the campaign's own subcommands.
 
 Each registers itself with :func:`campaign.cli.common.command`; each handler receives the parsed
 ``argparse.Namespace`` and returns the exit code.
@@ -11,7 +11,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from campaign.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command, print_plausibility
+from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
+                                 overwrite_argument, print_plausibility)
 from campaign.config import load_config
 from campaign.errors import DataError
 from campaign.plausibility import forced
@@ -37,20 +38,22 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
-    parser.add_argument("--out", metavar="RUN_DIR", type=Path, help="run directory (default: output.dir/NAME-TIMESTAMP)")
+    parser.add_argument("--out", metavar="RUN_DIR", type=Path,
+                        help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
     parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
     _force_argument(parser)
+    overwrite_argument(parser)
 
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
 def cmd_run(args: argparse.Namespace) -> int:
     from campaign.pipeline import run_campaign
-    from campaign.report import render_parameters, render_stages
+    from campaign.report import render_parameters, render_stages, render_stop
 
     cfg = load_config(args.config)
     out = _stdout()
     with forced(args.force):
-        result = run_campaign(cfg, args.out, args.resume, out)
+        result = run_campaign(cfg, args.out, args.resume, out, overwrite=args.overwrite)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
@@ -63,6 +66,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
+    render_stop(out, result.processed.report)
     print_plausibility(out, result.processed.report.get("plausibility"))
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
@@ -72,6 +76,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _plan_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
     parser.add_argument("--csv", metavar="FILE", type=Path, help="also write the plan as CSV")
+    overwrite_argument(parser)
 
 
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
@@ -81,9 +86,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from campaign.plan import build_plan, write_plan_csv
     from campaign.report import render_plan
 
+    from campaign.outputs import check_file
+
     cfg = load_config(args.config)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, nominal_kinematics(cfg)))
+    if args.csv:
+        check_file(args.csv, args.overwrite, "--csv")
+    kin = nominal_kinematics(cfg)
+    plan = build_plan(cfg, kin)
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, kin))
+    if cfg.plan.kind != "iso9283" and plan.count("calib"):
+        from campaign.plan_optimal import plan_forecast
+        from campaign.report import render_forecast
+        render_forecast(_stdout(), plan_forecast(cfg, kin, plan), plan.blocks)
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -92,25 +106,61 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", metavar="RUN_DIR_OR_CSV", type=Path, help="a run directory or an interchange CSV")
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise, options)")
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where report.json and model.json go")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR",
+                        help="where report.json, model.json and report.html go: a new or empty directory (or one "
+                             "reprocess wrote from the same source); never a run's directory")
     _force_argument(parser)
+    overwrite_argument(parser)
 
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
 def cmd_reprocess(args: argparse.Namespace) -> int:
     from campaign.pipeline import reprocess
-    from campaign.report import render_parameters, render_stages
+    from campaign.report import render_parameters, render_stages, render_stop
 
     cfg = load_config(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
     with forced(args.force):
-        processed = reprocess(args.source, cfg, args.out)
+        processed = reprocess(args.source, cfg, args.out, args.overwrite)
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
+    render_stop(out, processed.report)
     print_plausibility(out, processed.report.get("plausibility"))
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
+    return EXIT_OK
+
+
+def _select_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", metavar="DATA.csv", type=Path, help="an interchange CSV of a measured campaign")
+    parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise)")
+    parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
+    parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
+    overwrite_argument(parser)
+
+
+@command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
+         _select_arguments)
+def cmd_select(args: argparse.Namespace) -> int:
+    from campaign.interchange import read_csv, write_csv
+    from campaign.select import select_rows
+
+    cfg = load_config(args.config)
+    if args.points < 1:
+        raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
+    if args.out.resolve() == args.data.resolve():
+        raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
+    from campaign.outputs import check_file
+
+    check_file(args.out, args.overwrite)
+    ds = read_csv(args.data)
+    keep = select_rows(ds, cfg, args.points)
+    write_csv(args.out, ds.subset(keep))
+    n_cal = int(ds.mask("calib").sum())
+    _stdout().print(f"selected {args.points} of {n_cal} calibration rows by the optimal-plan criterion (D-optimal, "
+                    f"joints spread), kept the {int((~ds.mask('calib')).sum())} other rows; wrote {args.out}",
+                    markup=False)
     return EXIT_OK
 
 
@@ -119,7 +169,10 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", required=True, type=Path, help="model.json written by run or reprocess")
     parser.add_argument("--targets", required=True, type=Path,
                         help="CSV target_id,x,y,z[,qw,qx,qy,qz] in mm in the robot base frame (a path: one row per point)")
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="where the corrected targets go")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR",
+                        help="where the corrected targets go: a new or empty directory (or one correct wrote with "
+                             "the same model)")
+    overwrite_argument(parser)
     parser.add_argument("--format", action="append", choices=("rapid", "ur", "csv"), metavar="FORMAT",
                         help="write-back format: rapid, ur or csv (repeatable; default: the configured "
                              "controller's format and csv)")
@@ -128,13 +181,14 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import correct_targets, read_rejected, read_targets_csv, recorded_identity, write_corrected
+    from campaign.correction import (check_model_fits, correct_targets, read_rejected, read_targets_csv,
+                                     recorded_identity, write_corrected)
+    from campaign.outputs import check_dir, source_key
     from campaign.plan import tool_rotation
     from campaign.process import load_model
 
-    from campaign.correction import check_model_fits
-
     cfg = load_config(args.config)
+    claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
     model = load_model(args.model)
     with forced(args.force):
         check_model_fits(cfg, model, str(args.model))
@@ -142,7 +196,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
-        paths = write_corrected(cfg, accepted, rejected, args.out, tuple(args.format or ()))
+        paths = write_corrected(cfg, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
         _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]
@@ -169,6 +223,7 @@ def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
 
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="a finished run (with model.json)")
+    _force_argument(parser)
 
 
 @command("verify", "measure the run's test points after correction (closed loop) and report before/after",
@@ -177,7 +232,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.pipeline import verify
     from campaign.report import render_verify
 
-    result = verify(args.run_dir, _stdout())
+    with forced(args.force):
+        result = verify(args.run_dir, _stdout())
     render_verify(_stdout(), result.report)
     _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
@@ -189,4 +245,5 @@ def cmd_verify(args: argparse.Namespace) -> int:
 def _force_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (wrong robot/unit, rows outside the joint limits, "
-                             "implausible deltas); the report says they were overridden")
+                             "implausible deltas, a controller or tracker reporting another model than the "
+                             "config's); the report says they were overridden")

@@ -44,11 +44,20 @@ def command(name: str, help: str, configure: Configure) -> Callable[[Handler], H
 
 
 def _stdout() -> Console:
-    return Console(soft_wrap=True, highlight=False)
+    from campaign.terminal import stdout_console
+    return stdout_console()
 
 
 def _stderr() -> Console:
-    return Console(stderr=True, soft_wrap=True, highlight=False)
+    from campaign.terminal import stderr_console
+    return stderr_console()
+
+
+def overwrite_argument(parser: argparse.ArgumentParser) -> None:
+    """``--overwrite``: write into an output path that exists and is not the command's own (never a run's)."""
+    parser.add_argument("--overwrite", action="store_true",
+                        help="write even where the output path exists with other files (an existing file, a "
+                             "directory of other files or of another dataset's outputs); never into another run")
 
 
 def print_plausibility(out: Console, plaus: dict | None) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli.common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command, overwrite_argument
 from campaign.errors import DataError
 
 MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
@@ -37,10 +37,11 @@ def _arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--self-check", action="store_true",
                         help="simulate campaigns with withheld effects and check the diagnosis finds them")
     parser.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
-                        help="self-check: seeds per effect (default 5; 2N controls, 2N two-effect cases, N outside the "
-                             "library)")
+                        help="self-check: seeds per effect and per failure class (default 5; 2N controls, 2N "
+                             "two-effect cases, N outside the library)")
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (the report says they were overridden)")
+    overwrite_argument(parser)
 
 
 @command("diagnose", "diagnose the sim-to-real gap: where it lies, which effect causes it, how far it shrinks",
@@ -52,13 +53,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         return _self_check(args)
     if args.source is None or not args.config:
         raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
+    from campaign.cli.common import print_plausibility
     from campaign.config import load_config
     from campaign.diagnose import diagnose_source, render, write_diagnosis_json, write_plots
-
-    cfg = load_config(args.config)
-    from campaign.cli.common import print_plausibility
     from campaign.plausibility import forced
 
+    cfg = load_config(args.config)
+    plots = _check_outputs(args)                  # every output path refused or accepted before any work
     with forced(args.force):
         result = diagnose_source(args.source, cfg)
     out = _stdout()
@@ -67,27 +68,47 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.json:
         write_diagnosis_json(args.json, result.report)
         out.print(f"wrote {args.json}", markup=False)
-    if args.plots:
-        files = write_plots(result.report, args.plots)
+    if plots is not None:
+        files = write_plots(result.report, plots)
         out.print(files if isinstance(files, str) else f"wrote {', '.join(str(f) for f in files)}", markup=False)
-    html = _write_html(args.source, args.html, result.report)       # RUN_DIR/diagnosis.json + report.html
+    html = _write_html(args, result.report)       # RUN_DIR/diagnosis.json + report.html, or --html FILE
     if html:
         out.print(f"wrote {html}", markup=False)
     return EXIT_OK
 
 
-def _write_html(source: Path, html: Path | None, report: dict) -> Path | None:
-    """The diagnosis as diagnosis.json beside the HTML report (in the run directory unless --html names a file)."""
-    from campaign.diagnose import write_diagnosis_json
-    from campaign.html_report import write_report
+def _check_outputs(args: argparse.Namespace):
+    """--json FILE, --plots DIR, --html FILE (or the run directory's diagnosis.json and report.html) checked
+    (:mod:`campaign.outputs`); returns the claim of the plots directory (None without --plots)."""
+    from campaign.html_report import report_targets
+    from campaign.outputs import check_campaign_dir, check_dir, check_file, source_key
 
-    if html is None and not source.is_dir():
+    if args.json:
+        check_file(args.json, args.overwrite, "--json")
+    if args.html is not None:
+        report_targets(args.html.parent, args.html, args.overwrite)
+    elif args.source.is_dir():
+        check_campaign_dir(args.source, "diagnose")
+        report_targets(args.source)
+    if args.plots is None:
         return None
-    folder = source if html is None else html.parent
-    if not folder.is_dir():
-        raise DataError(str(html), "the directory does not exist")
-    write_diagnosis_json(folder / "diagnosis.json", report)
-    return write_report(folder, html)
+    return check_dir(args.plots, "plots", args.overwrite, source=source_key(args.source), option="--plots")
+
+
+def _write_html(args: argparse.Namespace, report: dict) -> Path | None:
+    """The diagnosis as an HTML report: --html FILE (from the diagnosis alone), or the run directory's
+    report.html with diagnosis.json beside it."""
+    from campaign.diagnose import write_diagnosis_json
+    from campaign.html_report import ReportSources, write_report
+
+    if args.html is not None:
+        title = f"{report.get('config', 'diagnosis')}: {args.html.stem}"
+        return write_report(args.html.parent, args.html, args.overwrite,
+                            sources=ReportSources(title, diagnosis=report, files={"diagnosis": "(this command)"}))
+    if not args.source.is_dir():
+        return None
+    write_diagnosis_json(args.source / "diagnosis.json", report)
+    return write_report(args.source)
 
 
 def _self_check(args: argparse.Namespace) -> int:
@@ -109,7 +130,8 @@ def _self_check(args: argparse.Namespace) -> int:
         write_diagnosis_json(args.json, result.to_dict())
         out.print(f"wrote {args.json}", markup=False)
     if not result.passed():
-        _stderr().print("self-check below target: < 95 % of single effects named right, < 95 % of controls clean, "
-                        "or > 1 spurious acceptance per 20 datasets", style="red", markup=False)
+        _stderr().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
+                        "effect accepted on a control, a confound class not named, or a lag called backlash",
+                        style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK

@@ -19,9 +19,19 @@ from pathlib import Path
 from campaign.cli.common import COMMANDS, EXIT_BAD_INPUT, _stderr
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line usage error (``campaign run: error: ... (see campaign run --help)``), exit 2."""
+
+    def error(self, message: str):
+        _fail(f"{self.prog}: error: {message} (see {self.prog} --help)", EXIT_BAD_INPUT)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
-    parser = argparse.ArgumentParser(
+    from campaign.cli import commands, diagnose, importing, report  # noqa: F401  (registration order = help order)
+
+    parser = _Parser(
         prog="campaign",
         description="Industrial-robot accuracy campaigns with a laser tracker.",
     )
@@ -46,10 +56,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run_dir_hint(args: argparse.Namespace) -> Path | None:
-    """The run directory a crash report should go to, if the command names one."""
+    """The run directory a crash report should go to, if the command names one written by campaign (never a
+    directory of the user's: the report then goes to a temporary file)."""
+    from campaign.outputs import LOG_NAME, read_marker
+
     for name in ("resume", "run_dir", "out"):
         value = getattr(args, name, None)
-        if isinstance(value, Path) and value.is_dir():
+        if isinstance(value, Path) and value.is_dir() and (read_marker(value) or (value / LOG_NAME).exists()):
             return value
     return None
 

@@ -11,22 +11,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command
+from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
+                                 overwrite_argument)
 from campaign.errors import DataError
 
 
 def _report_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path,
                         help="a run or output directory with report.json, diagnosis.json or verify-*/verify.json")
-    parser.add_argument("--out", type=Path, metavar="FILE", help="HTML file (default RUN_DIR/report.html)")
+    parser.add_argument("--out", type=Path, metavar="FILE",
+                        help="HTML file (default RUN_DIR/report.html); its figures go to FILE-STEM_figures/")
+    overwrite_argument(parser)
 
 
 @command("report", "write the self-contained HTML report of a run (figures also as PNG)", _report_arguments)
 def cmd_report(args: argparse.Namespace) -> int:
-    from campaign.html_report import write_report
+    from campaign.html_report import figures_dir, write_report
 
-    path = write_report(args.run_dir, args.out)
-    _stdout().print(f"wrote {path} (figures as PNG in {path.parent / 'figures'})", markup=False)
+    path = write_report(args.run_dir, args.out, args.overwrite)
+    _stdout().print(f"wrote {path} (figures as PNG in {figures_dir(path)})", markup=False)
     return EXIT_OK
 
 
@@ -36,6 +39,7 @@ def _export_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dh-csv", type=Path, metavar="FILE", help="CSV table of the calibrated parameters")
     parser.add_argument("--robodk", type=Path, metavar="FILE", help="DH(M) table as RoboDK users enter it by hand")
     parser.add_argument("--name", default="robot", help="robot name in the URDF (default: robot)")
+    overwrite_argument(parser)
 
 
 @command("export", "export a calibrated model as URDF, a DH table (CSV) or a RoboDK DH(M) table", _export_arguments)
@@ -43,11 +47,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     from campaign.export import export
     from campaign.process import load_model
 
+    from campaign.outputs import check_file
+
     if not (args.urdf or args.dh_csv or args.robodk):
         raise DataError("export", "nothing to write: give --urdf, --dh-csv and/or --robodk")
-    for path in (args.urdf, args.dh_csv, args.robodk):
-        if path is not None and not path.parent.resolve().is_dir():
-            raise DataError(str(path), "the directory does not exist")
+    for option, path in (("--urdf", args.urdf), ("--dh-csv", args.dh_csv), ("--robodk", args.robodk)):
+        if path is not None:
+            check_file(path, args.overwrite, option)
     files = export(load_model(args.model), args.urdf, args.dh_csv, args.robodk, args.name)
     _stdout().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
     return EXIT_OK
@@ -58,7 +64,9 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", type=Path, metavar="MODEL.json",
                         help="calibrated model: its registration gives the base frame, and corrected cycles follow "
                              "the nominal ones (before/after certificate)")
-    parser.add_argument("--out", type=Path, metavar="RUN_DIR", help="run directory (default: output.dir/NAME-TIMESTAMP)")
+    parser.add_argument("--out", type=Path, metavar="RUN_DIR",
+                        help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
+    overwrite_argument(parser)
 
 
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",
@@ -71,7 +79,7 @@ def cmd_iso9283(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     model = load_model(args.model) if args.model else None
     out = _stdout()
-    result, report = run_iso9283(cfg, model, args.out, out)
+    result, report = run_iso9283(cfg, model, args.out, out, overwrite=args.overwrite)
     o = result.outcome
     if report is None:
         _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)

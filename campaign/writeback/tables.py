@@ -1,15 +1,16 @@
-"""CSV of corrected and rejected targets (exact floats, round trip)."""
+"""CSV of corrected and rejected targets (exact floats, round trip; text cells spreadsheet-safe, see
+:mod:`campaign.csv_cells`)."""
 
 from __future__ import annotations
 
 import csv
-import io
 import math
 import os
 import re
 from pathlib import Path
 from typing import Iterable, Sequence
 
+from ..csv_cells import render_rows, restore
 from ..fsutil import atomic_write
 from .bounds import CorrectedTarget, Rejected, _require_writable
 
@@ -28,17 +29,13 @@ def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequenc
                        q_max_deg: Sequence[float]) -> str:
     """Text of the targets CSV (see :func:`write_targets_csv`)."""
     items = _require_writable(targets, q_min_deg, q_max_deg)
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
     with_std = any(not math.isnan(float(t.predicted_std_mm)) for t in items)   # no all-nan column
-    writer.writerow(_csv_header(len(q_min_deg), with_std))
-    for t in items:
-        writer.writerow([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
-                         *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
-                         *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_residual_mm),
-                         _csv_float(t.predicted_rot_err_deg)]
-                        + ([_csv_float(t.predicted_std_mm)] if with_std else []))
-    return buf.getvalue()
+    rows = ([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
+             *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
+             *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_residual_mm),
+             _csv_float(t.predicted_rot_err_deg)] + ([_csv_float(t.predicted_std_mm)] if with_std else [])
+            for t in items)
+    return render_rows(_csv_header(len(q_min_deg), with_std), rows, text_columns=(0,))
 
 
 def write_targets_csv(path: str | os.PathLike, targets: Iterable[CorrectedTarget], *,
@@ -78,16 +75,13 @@ def read_corrected_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]
             std = float(row[2 * n + 14]) if with_std else math.nan
         except ValueError as e:
             raise ValueError(f"{path}: line {k}: {e}") from None
-        out.append(CorrectedTarget(row[0], tuple(nums[n:2 * n]), tuple(nums[:n]), tuple(nums[2 * n:2 * n + 3]),
+        out.append(CorrectedTarget(restore(row[0]), tuple(nums[n:2 * n]), tuple(nums[:n]), tuple(nums[2 * n:2 * n + 3]),
                                    tuple(nums[2 * n + 3:2 * n + 7]), conf, res, rot, std))
     return out
 
 
 def write_rejected_csv(path: str | os.PathLike, rejected: Iterable[Rejected]) -> Path:
     """Write ``target_id,reason`` rows of the rejected targets atomically; return the path."""
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(["target_id", "reason"])
-    for r in rejected:
-        writer.writerow([r.target_id, " ".join(str(r.reason).split())])
-    return atomic_write(path, buf.getvalue().encode("utf-8"))
+    text = render_rows(["target_id", "reason"], ([r.target_id, " ".join(str(r.reason).split())] for r in rejected),
+                       text_columns=(0, 1))
+    return atomic_write(path, text.encode("utf-8"))

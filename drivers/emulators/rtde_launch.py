@@ -66,6 +66,8 @@ class EmulatorProcess:
             except (OSError, RuntimeError):
                 pass
         _reap(self.process, timeout_s)
+        if self.process.stdout is not None:
+            self.process.stdout.close()
         try:
             os.unlink(self.log_path)
         except OSError:

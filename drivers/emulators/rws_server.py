@@ -90,7 +90,7 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
                  robtarget_hook: Callable[[tuple[float, ...], tuple[float, ...], tuple[int, ...]],
                                           Sequence[float] | None] | None = None,
                  customer_program: str | None = "auto", implicit_mastership: bool = True,
-                 serial: str = "6700-104512", robot_type: str = "IRB 6700-150/3.20", absacc: bool = False) -> None:
+                 serial: str = "2600-104512", robot_type: str = "IRB 2600-12/1.65", absacc: bool = False) -> None:
         if version not in (1, 2):
             raise ValueError("version must be 1 or 2")
         if not ipaddress.ip_address(host).is_loopback:
@@ -410,9 +410,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--password-env", default="RWS_PASSWORD",
                    help="environment variable holding the password (default RWS_PASSWORD, else 'robotics')")
     p.add_argument("--joint-speed", type=float, default=200.0, help="simulated joint speed (deg/s)")
+    p.add_argument("--robot-type", default="IRB 2600-12/1.65", help="robot type the controller reports")
+    p.add_argument("--serial", default="2600-104512", help="controller serial number (ctrl-id)")
     a = p.parse_args(argv)
     emu = RwsEmulator(a.version, host=a.host, port=a.port, tls=False if a.http else None, user=a.user,
-                      password=os.environ.get(a.password_env, "robotics"), joint_speed_deg_s=a.joint_speed)
+                      password=os.environ.get(a.password_env, "robotics"), joint_speed_deg_s=a.joint_speed,
+                      robot_type=a.robot_type, serial=a.serial)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     with emu:

@@ -1,16 +1,15 @@
 """Where the residual lies: regions of the workspace, joint ranges, base axes, time, approach direction and
-payload above the noise floor (``where_analysis``), maps for plots, and the test for structure left over."""
+payload above the noise floor (``where_analysis``), maps for plots, and the neighbour test that says along which
+inputs a leftover lies (``structure_test``)."""
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import numpy as np
 from scipy import sparse, stats
 from scipy.spatial import cKDTree
 
-from .engine import _Engine, _State
-from .records import DiagnosisInput, DiagnosisOptions, Region
+from .records import DiagnosisOptions, Region
 
 
 def _region_stats(r_b, w, floor_pt, idx):
@@ -205,98 +204,3 @@ def structure_test(w: np.ndarray, spaces: Mapping[str, np.ndarray], rng: np.rand
         z = float((S - Sp.mean()) / max(Sp.std(ddof=1), 1e-12))
         out[name] = {"S": S, "z": z}
     return out
-
-
-def _eval_set(eng: _Engine, st: _State, cv_w: np.ndarray):
-    """Held-out residuals (mm): CV on the calibration rows + test rows; their row indices."""
-    cv_mm = eng.to_mm(cv_w, eng.fit_rows)
-    rows = np.concatenate([eng.fit_rows, eng.test_rows])
-    r = np.concatenate([cv_mm, eng.resid(st)[eng.test_rows]]) if len(eng.test_rows) else cv_mm
-    return r, rows
-
-
-def _where_stages(inp, opt, eng, geo_state, st, stages):
-    out_regions, maps = [], {}
-    for name, state, stage in (("geometric", geo_state, stages[0]), ("final", st, stages[-1])):
-        r, rows = _eval_set(eng, state, stage["_cv_w"])
-        inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(eng.fit_rows))   # parameter error
-        cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
-        T = state.kin.T_tracker_base
-        p_base = (state.pred[rows] - T[:3, 3]) @ T[:3, :3]
-        Jq = state.J[rows][:, :, eng.joint_cols]
-        regs, mp = where_analysis(name, r, cov, p_base, inp.q_rad[rows], T,
-                                  None if inp.t_s is None else np.asarray(inp.t_s)[rows],
-                                  None if inp.approach is None else np.asarray(inp.approach)[rows],
-                                  None if inp.payload_kg is None else np.asarray(inp.payload_kg)[rows], Jq, opt)
-        maps[name] = mp
-        if name == "geometric":
-            out_regions += regs
-        else:
-            maps["_final_regions"] = regs
-    return out_regions, maps
-
-
-def _floor_scale(inp: DiagnosisInput) -> float:
-    """Factor on the covariance so that its RMS equals the reported noise floor."""
-    spec = math.sqrt(float(np.mean(np.trace(inp.cov_mm2, axis1=1, axis2=2))))
-    return (inp.noise_floor_mm / spec) ** 2 if spec > 0 and inp.noise_floor_mm > 0 else 1.0
-
-
-def _leftover(inp, opt, eng, st, stages, floor):
-    """Structure test on the final in-sample calibration residuals; unexplained flag and notes."""
-    rows = eng.fit_rows
-    p_eff = stages[-1]["n_params"]
-    cov = inp.cov_mm2[rows] * _floor_scale(inp)
-    r = eng.resid(st)[rows]
-    w = np.linalg.solve(np.linalg.cholesky(cov), r[:, :, None])[:, :, 0]
-    dof = 3 * len(rows) - p_eff
-    chi2 = float(np.sum(w**2) / max(dof, 1))
-    T = st.kin.T_tracker_base
-    p_base = (st.pred[rows] - T[:3, 3]) @ T[:3, :3]
-    q = inp.q_rad[rows]
-    spaces = {"joint space": q, "workspace": p_base, "reach": np.hypot(p_base[:, 0], p_base[:, 1]),
-              "height": p_base[:, 2]}
-    for j in range(q.shape[1]):
-        spaces[f"J{j + 1}"] = q[:, j]
-    if inp.t_s is not None and np.ptp(np.asarray(inp.t_s)[rows]) > 0:
-        spaces["time"] = np.asarray(inp.t_s)[rows]
-    tests = structure_test(w, spaces, np.random.default_rng(opt.seed), opt.neighbours, opt.permutations)
-    z_thr = opt.structure_z
-    best = max(tests, key=lambda s: tests[s]["z"]) if tests else None
-    s_val = tests[best]["S"] if best else 0.0
-    structured_rms = floor * math.sqrt(max(s_val, 0.0) / 3.0)
-    structured = bool(best and tests[best]["z"] >= z_thr and structured_rms >= opt.structure_min_fraction * floor)
-    along = sorted((n for n in tests if tests[n]["z"] >= z_thr), key=lambda n: -tests[n]["z"])
-    notes = []
-    if inp.noise_floor_dof:          # the floor is an estimate itself: F test of the two variances
-        chi_limit = float(stats.f.isf(opt.floor_f_alpha, max(dof, 1), 3 * inp.noise_floor_dof))
-    else:
-        chi_limit = 1.0 + opt.chi2_sigmas * math.sqrt(2.0 / max(dof, 1))
-    inflation = math.sqrt(1.0 + opt.cv_param_inflation * p_eff / (3.0 * len(rows)))
-    excess = stages[-1]["cv_rms_mm"] > opt.scatter_excess_ratio * floor * inflation
-    scatter = bool(chi2 > chi_limit and excess and not structured)
-    unexplained = structured or scatter
-    if scatter:
-        why = ("unlogged approach-direction dependence, a drift without timestamps, aliased high-frequency gear "
-               "error" + (", or a noise model that is too optimistic" if inp.noise_floor_source == "specs" else ""))
-        notes.append(f"unexplained residual scatter {math.sqrt(chi2):.2f}x the noise floor without spatial "
-                     f"structure: {why}")
-    structure = {"chi2_per_dof": chi2, "chi2_limit": chi_limit, "structured": structured, "scatter": scatter,
-                 "structured_rms_mm": structured_rms,
-                 "strongest_space": best, "structure_along": along,
-                 "tests": {k: {"S": v["S"], "z": v["z"]} for k, v in tests.items()},
-                 "excess_rms_mm": math.sqrt(max(stages[-1]["cv_rms_mm"] ** 2 - floor**2, 0.0))}
-    final_cv = stages[-1]["cv_rms_mm"]
-    if scatter and len(stages) > 1:
-        share = (stages[0]["cv_rms_mm"] ** 2 - final_cv**2) / max(stages[0]["cv_rms_mm"] ** 2 - floor**2, 1e-300)
-        if share < opt.partial_share:
-            notes.append(f"the accepted effects remove only {100 * share:.0f} % of the excess over the floor and the rest "
-                         "is unstructured scatter: treat the attribution as partial")
-    if inp.noise_floor_source == "repeats" and final_cv < opt.floor_overestimate_ratio * floor:
-        notes.append(f"the repeat scatter ({floor:.3f} mm) exceeds the final cross-validated residual "
-                     f"({final_cv:.3f} mm): the repeated poses probably include approach-direction or drift effects, "
-                     "so the floor is overestimated")
-    if structured:
-        notes.append(f"unexplained structured residual of about {structured_rms:.3f} mm RMS, strongest along "
-                     f"{', '.join(along[:4])}")
-    return structure, unexplained, notes

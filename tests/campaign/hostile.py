@@ -3,6 +3,9 @@ snapshot directories to prove nothing was written or modified."""
 from __future__ import annotations
 
 import hashlib
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 from campaign.cli import main
@@ -38,3 +41,35 @@ def snapshot(*roots: Path) -> dict[str, str]:
         for p in sorted([root, *root.rglob("*")]):
             state[str(p)] = "<dir>" if p.is_dir() else hashlib.sha256(p.read_bytes()).hexdigest()
     return state
+
+
+SECRET = "S3cr3t-pa55w0rd-7f1d"          # in every hostile subprocess's environment; must never be written
+
+
+def checksums(*roots: Path) -> dict[str, str]:
+    """path -> sha256 of every file under ``roots``."""
+    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest()
+            for root in roots for p in sorted(Path(root).rglob("*")) if p.is_file()}
+
+
+def run_campaign_process(argv, tmp: Path, env: dict | None = None, code: str | None = None,
+                         timeout: float = 300) -> tuple[int, str, str]:
+    """``python -m campaign ARGV`` (or ``python -c CODE ARGV``) with the repository on the path, crash reports
+    in TMP/tmp, the secret in RWS_PASSWORD and ResourceWarnings as errors; (exit code, stdout, stderr)."""
+    (tmp / "tmp").mkdir(exist_ok=True)
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "TMPDIR": str(tmp / "tmp"), "RWS_USER": "calib", "RWS_PASSWORD": SECRET,
+           "PYTHONWARNINGS": "error::ResourceWarning", "OPENBLAS_NUM_THREADS": "1", **(env or {})}
+    head = ["-c", code] if code is not None else ["-m", "campaign"]
+    proc = subprocess.run([sys.executable, *head, *map(str, argv)], cwd=root, env=env, capture_output=True,
+                          timeout=timeout)
+    return proc.returncode, proc.stdout.decode("utf-8", "replace"), proc.stderr.decode("utf-8", "replace")
+
+
+def secret_hits(root: Path, *texts: str, secret: str = SECRET, inputs: dict[str, str] | None = None) -> list[str]:
+    """Where ``secret`` was written: the texts (stdout, stderr) or any file under ``root`` (crash reports too) but
+    the ``inputs`` (path -> sha256 from :func:`checksums`) left as they were."""
+    inputs = inputs or {}
+    hits = [f"output {i}" for i, t in enumerate(texts) if secret in t]
+    return hits + [path for path, digest in checksums(root).items()
+                   if inputs.get(path) != digest and secret.encode() in Path(path).read_bytes()]

@@ -29,7 +29,11 @@ def test_effect_list_is_parsed(tmp_path):
 @pytest.mark.unit
 @pytest.mark.parametrize("key, value, path, words", [
     ("effects", "some", "calibration.effects", "auto, none"),
-    ("effects", [{"name": "registration_drift"}], "calibration.effects[0].name", "not a robot effect"),
+    ("effects", [{"name": "link_bending"}], "calibration.effects[0].name", "joint_compliance"),
+    ("effects", [{"name": "gear_cyclic", "params": {"joint": 2, "order": 3}}], "calibration.effects[0].params.order",
+     "unknown parameter of gear_cyclic (expected one of: harmonics, joint)"),
+    ("effects", [{"name": "axis_coupling", "params": {"joints": [4]}}], "calibration.effects[0].params.joints",
+     "expected one of: none"),
     ("effects", [{"name": "backlash", "scale": 2}], "calibration.effects[0].scale", "simulated effects only"),
     ("outliers", "igg3", "calibration.outliers", "local, none"),
     ("residual", "krige", "calibration.residual", "auto"),
@@ -53,3 +57,20 @@ def test_forced_effect_list_reaches_model_json(tmp_path):
     assert model["effects"][0]["name"] == "joint_compliance" and set(model["effects"][0]["params"]) == {"c2", "c3"}
     assert report["effects"]["selection"] is None and "elastic" in report["stages"]
     assert model["residual"] is None
+
+
+@pytest.mark.unit
+def test_gravity_model_keys_of_the_robot(tmp_path):
+    from campaign.effects_stage import gravity_model
+
+    cfg = load_config(small_config(tmp_path, **{"robot.mass_kg": 272, "robot.gravity_direction_base": [1, 0, 0]}))
+    g = gravity_model(cfg)
+    assert g.source == "mass class" and g.gravity_base == (1.0, 0.0, 0.0)
+    assert sum(g.link_masses_kg) == pytest.approx(0.7 * 272)
+    for key, value, words in (("robot.link_masses_kg", [1, 2], "a list of 6 numbers"),
+                              ("robot.link_masses_kg", [0, -1, 0, 0, 0, 0], ">= 0 kg"),
+                              ("robot.mass_kg", -5, "robot.mass_kg"),
+                              ("robot.gravity_direction_base", [0, 0, 0], "non-zero")):
+        with pytest.raises(ConfigError) as err:
+            load_config(small_config(tmp_path, **{key: value}))
+        assert key in str(err.value) and words in str(err.value) and len(str(err.value).splitlines()) == 1

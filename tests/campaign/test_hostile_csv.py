@@ -26,7 +26,7 @@ def base(tmp_path_factory):
     cfg = small_config(root, "irb2600")
     other = small_config(root, "irb4600")
     assert main(["run", str(cfg), "--out", str(root / "run")]) == 0
-    rows = list(csv.reader(open(root / "run" / "data.csv", newline="")))
+    rows = list(csv.reader((root / "run" / "data.csv").read_text().splitlines()))
     return {"rows": rows, "config": cfg, "irb4600": other}
 
 
@@ -80,8 +80,8 @@ def add_col(name: str, value: str) -> Callable[[Rows], Rows]:
 
 def only_calib(n: int) -> Callable[[Rows], Rows]:
     def apply(rows: Rows) -> Rows:
-        calib = [r for r in rows[1:] if r[1] == "calib"][:n]
-        return [rows[0]] + calib + [r for r in rows[1:] if r[1] != "calib"]
+        keep = {id(r) for r in [r for r in rows[1:] if r[1] == "calib"][:n]}
+        return [rows[0]] + [r for r in rows[1:] if r[1] != "calib" or id(r) in keep]     # measurement order kept
     return apply
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from campaign.outputs import MARKER
 from campaign.runlog import encode_record, read_log
 from tests.campaign.helpers import ROOT, small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
@@ -190,7 +191,7 @@ IO_CASES: dict[str, IOCase] = {
     "resume_missing_dir": IOCase(lambda b, t: ["run", b["config"], "--resume", t / "nope"], 2, ("nope",)),
     "resume_dir_without_log": IOCase(lambda b, t: ["run", b["config"], "--resume", t], 2, ("log.jsonl",)),
     "plan_csv_into_missing_dir": IOCase(lambda b, t: ["plan", b["config"], "--csv", t / "nope" / "plan.csv"], 2,
-                                        ("nope/plan.csv", "No such file")),
+                                        ("nope/plan.csv", "does not exist")),
     "reprocess_missing_source": IOCase(lambda b, t: ["reprocess", t / "nope.csv", "--config", b["config"],
                                                      "--out", t / "o"], 2, ("nope.csv",)),
     "reprocess_dir_without_log": IOCase(lambda b, t: ["reprocess", t, "--config", b["config"], "--out", t / "o"], 2,
@@ -355,7 +356,7 @@ def test_correct_all_rejected_exits_1_with_the_reasons(base, tmp_path, capsys):
                          "--targets", targets, "--out", out_dir)
     assert_one_line(code, out, err, 1, "nothing to write", "all 2 targets rejected", "FAR1")
     assert "2 of 2 targets rejected" in out and "FAR2: unreachable" in out
-    assert sorted(p.name for p in out_dir.iterdir()) == ["rejected.csv"]
+    assert sorted(p.name for p in out_dir.iterdir()) == [MARKER, "rejected.csv"]
     assert (out_dir / "rejected.csv").read_text().count("unreachable") == 2
 
 
@@ -378,6 +379,6 @@ def test_correct_long_id_is_rejected_with_its_reason_and_only_the_controllers_fo
                          "--targets", targets, "--out", out_dir)
     assert code == 0, err
     assert "1 of 2 targets rejected" in out and "at most 80 characters" in out
-    assert sorted(p.name for p in out_dir.iterdir()) == ["CalTargets.mod", "rejected.csv", "targets.csv"]  # ABB
+    assert sorted(p.name for p in out_dir.iterdir()) == [MARKER, "CalTargets.mod", "rejected.csv", "targets.csv"]  # ABB
     header = (out_dir / "targets.csv").read_text().splitlines()[0]
     assert "predicted_std_mm" not in header            # IDW model: no all-nan column

@@ -66,7 +66,7 @@ def mock_run(tmp_path_factory):
 def test_run_writes_report_html_and_png_figures(mock_run):
     run_dir, _ = mock_run
     html = (run_dir / "report.html").read_text()
-    pngs = sorted(p.name for p in (run_dir / "figures").glob("*.png"))
+    pngs = sorted(p.name for p in (run_dir / "report_figures").glob("*.png"))
     assert len(pngs) >= 6 and html.count("<figure") == len(pngs)
     report = json.loads((run_dir / "report.json").read_text())
     assert len(report["points"]["point_id"]) == sum(report["n"][k] for k in ("calib", "test", "check"))

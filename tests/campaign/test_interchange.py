@@ -272,6 +272,10 @@ BAD_CASES = {
         "line 5: duplicate point_id 'P2' (first on line 3)",
     ),
     "empty_point_id": (replace_line(GOOD, 1, ",calib,0,10,20,30,40,50,1,2,3"), "line 2: point_id is empty"),
+    "point_id_over_256_characters": (
+        replace_line(GOOD, 2, "P" * 257 + ",calib,5,10,15,30,45,50,1001.5,201.25,301.125"),
+        f"line 3: point_id {'P' * 40!r}... is 257 characters long (at most 256)",
+    ),
     "too_few_fields": (
         replace_line(GOOD, 2, "P2,calib,5,10,15,30,45,50,1001.5,201.25"),
         "line 3: expected 11 fields, got 10",
@@ -301,6 +305,12 @@ def test_bad_input_gives_one_line_data_error(tmp_path, case):
     assert message == f"{path}: {expected}"
     assert "\n" not in message
     assert isinstance(info.value, ValueError)
+
+
+@pytest.mark.unit
+def test_a_point_id_of_256_characters_is_read(tmp_path):
+    path = write(tmp_path, replace_line(GOOD, 2, "P" * 256 + ",calib,5,10,15,30,45,50,1001.5,201.25,301.125"))
+    assert read_csv(path).point_id[1] == "P" * 256
 
 
 @pytest.mark.unit

@@ -51,13 +51,15 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path):
                 time.sleep(0.002)
             time.sleep(rng.uniform(0.0, 0.03))              # ... plus a random fraction of a point
             proc.send_signal(signal.SIGKILL)
-            assert proc.wait(timeout=10) == -signal.SIGKILL, "the campaign finished before it could be killed"
+            proc.communicate(timeout=10)
+            assert proc.returncode == -signal.SIGKILL, "the campaign finished before it could be killed"
             kills += 1
             if log_path.exists():
                 contents = read_log(log_path)
                 prefixes.append(log_path.read_bytes()[: contents.n_good_bytes])
             continue
-        assert proc.wait(timeout=120) == 0, proc.stderr.read().decode()
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 0, err.decode()
         break
     assert kills == KILLS
     final = log_path.read_bytes()

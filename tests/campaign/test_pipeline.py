@@ -94,15 +94,16 @@ def test_resume_refuses_a_changed_config(tmp_path, capsys):
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     cfg.write_text(cfg.read_text().replace("samples: 5", "samples: 4"))
     before = (run / "log.jsonl").read_bytes()
-    assert main(["run", str(cfg), "--resume", str(run)]) == 1
-    assert "config file changed" in capsys.readouterr().err
+    assert main(["run", str(cfg), "--resume", str(run)]) == 2
+    assert "not the config" in capsys.readouterr().err
     assert (run / "log.jsonl").read_bytes() == before
 
 
 def test_reprocess_bad_csv_is_one_line_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("point_id,set,q1,q2,q3,q4,q5,q6,x,y,z\nP1,calib,0,0,0,0,0,0,1,2,abc\n")
-    assert main(["reprocess", str(bad), "--config", str(ROOT / "configs/irb2600.yaml"), "--out", str(tmp_path)]) == 2
+    assert main(["reprocess", str(bad), "--config", str(ROOT / "configs/irb2600.yaml"), "--out",
+                 str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "bad.csv" in err and "line 2" in err
 
@@ -111,7 +112,8 @@ def test_reprocess_rejects_wrong_joint_count(tmp_path, capsys):
     csv = tmp_path / "seven.csv"
     rows = ["point_id,set,q1,q2,q3,q4,q5,q6,q7,x,y,z"] + [f"P{i},calib,{i},0,0,0,0,0,0,{i},2,3" for i in range(12)]
     csv.write_text("\n".join(rows) + "\n")
-    assert main(["reprocess", str(csv), "--config", str(ROOT / "configs/irb2600.yaml"), "--out", str(tmp_path)]) == 2
+    assert main(["reprocess", str(csv), "--config", str(ROOT / "configs/irb2600.yaml"), "--out",
+                 str(tmp_path / "out")]) == 2
     assert "7 joint columns" in capsys.readouterr().err
 
 
@@ -142,10 +144,11 @@ def test_sigint_stops_cleanly_with_exit_130(tmp_path):
     while time.monotonic() < deadline and not ((run / "log.jsonl").exists() and len(read_log(run).points) >= 5):
         time.sleep(0.01)
     proc.send_signal(signal.SIGINT)
-    assert proc.wait(timeout=20) == 130
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130
     contents = read_log(run)
     assert contents.stops[-1]["exit_status"] == "abort" and not contents.torn_tail
-    assert "interrupted" in proc.stderr.read().decode()
+    assert "interrupted" in err.decode()
 
 
 def test_cross_validation_tells_structure_from_noise(full_run, tmp_path):

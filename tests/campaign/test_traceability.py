@@ -67,7 +67,8 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
 @pytest.mark.system
 def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
     cfg = load_config(small_config(tmp_path, **SMALL))
-    slow = load_config(small_config(tmp_path, **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
+    (tmp_path / "slow").mkdir()                           # its own file: the run copies cfg's, unchanged
+    slow = load_config(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
     kin = nominal_kinematics(cfg)
     plan = build_plan(cfg, kin)
     n = len(plan.points)
@@ -133,3 +134,33 @@ def test_driver_warnings_reach_campaign_log_even_before_the_run_directory_exists
     assert "WARNING drivers.some_driver" in text
     assert "motors off" in out.getvalue() and "first point" not in out.getvalue()   # console: warnings only
     assert not logging.getLogger("drivers").handlers                                    # detached afterwards
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("configured, reported, same", [
+    ("ABB IRB 2600-12/1.65", "IRB 2600-12/1.65", True), ("IRB 2600", "IRB2600-12/1.85", True),
+    ("ABB IRB 2600-12/1.65", "IRB2600", True), ("Universal Robots UR10 (CB3)", "UR10", True),
+    ("UR10e", "UR10", True), ("Leica AT960", "AT960-MR", True), ("API GTS3800", "GTS 3800", True),
+    ("ABB IRB 2600-12/1.65", "IRB 6700-150/3.20", False), ("ABB IRB 2600-12/1.65", "IRB 2600-12/1.85", False),
+    ("Universal Robots UR10 (CB3)", "UR5", False), ("Leica AT960", "Leica AT930", False),
+    ("ABB IRB 2600-12/1.65", "simulated robot", None), ("Leica AT960", "emScon tracker", None),
+    ("Leica AT960", "unknown", None)])
+def test_model_names_match_across_vendor_formatting_but_not_across_models(configured, reported, same):
+    from campaign.traceability import same_model
+    assert same_model(configured, reported) is same
+
+
+@pytest.mark.unit
+def test_identity_check_names_the_mismatch_and_force_records_it(tmp_path):
+    from campaign.errors import PlausibilityError
+    from campaign.traceability import check_identity
+    cfg = load_config(small_config(tmp_path))
+    ident = {"robot_identity": {"model": "IRB 6700-150/3.20", "serial": "6700-1"},
+             "tracker_identity": {"model": "emScon tracker", "serial": "7"}}
+    with pytest.raises(PlausibilityError, match=r"robot.model is 'ABB IRB 2600-12/1.65' but .* 'IRB 6700-150/3.20'"):
+        check_identity(cfg, ident)
+    check = check_identity(cfg, ident, force=True)
+    assert check["robot"]["result"] == "mismatch" and check["tracker"]["result"] == "not compared"
+    assert len(check["overridden"]) == 1
+    ident["robot_identity"]["model"] = "IRB2600"
+    assert "overridden" not in check_identity(cfg, ident) and check_identity(cfg, ident)["robot"]["result"] == "match"

@@ -167,7 +167,8 @@ def test_nothing_rejected_is_written_by_any_writer(tmp_path):
             assert r.target_id not in text, (path.name, r.target_id)
         for t in accepted:
             assert t.target_id in text
-    assert {r["target_id"] for r in csv.DictReader(open(tmp_path / "rejected.csv"))} == {"T03", "T05", "T08"}
+    rows = csv.DictReader((tmp_path / "rejected.csv").read_text().splitlines())
+    assert {r["target_id"] for r in rows} == {"T03", "T05", "T08"}
 
 
 @pytest.mark.parametrize("writer", ["rapid", "ur_json", "urscript", "csv"])
@@ -539,7 +540,7 @@ def test_rejected_csv(tmp_path):
     rejected = [Rejected("P1", "j2 corrected 200 deg outside limits [-95, 155] deg"),
                 Rejected('odd,"id"', "multi\nline reason")]
     path = wb.write_rejected_csv(tmp_path / "rejected.csv", rejected)
-    rows = list(csv.reader(open(path, newline="")))
+    rows = list(csv.reader(path.read_text().splitlines(keepends=True)))
     assert rows == [["target_id", "reason"], [rejected[0].target_id, rejected[0].reason],
                     ['odd,"id"', "multi line reason"]]
 

@@ -639,7 +639,7 @@ def test_emulator_cli_prints_port():
         assert resp.status_code == 401 and resp.headers["www-authenticate"].startswith("Digest")
     finally:
         proc.terminate()
-        proc.wait(timeout=3)
+        proc.communicate(timeout=3)
 
 
 def test_emulator_refuses_non_loopback():

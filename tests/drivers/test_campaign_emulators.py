@@ -111,3 +111,22 @@ def test_motors_off_mid_run_stops_cleanly_and_resume_completes(tmp_path, capsys)
         contents, _ = _finished(run)
         ids = [p["point_id"] for p in contents.points]
         assert len(ids) == len(set(ids)) and (run / "log.jsonl").read_bytes().startswith(prefix)
+
+
+def test_controller_of_another_model_stops_before_the_first_move(tmp_path, capsys):
+    """The config is an IRB 2600's; the controller reports an IRB 6700: exit 2 with the reason, nothing moved, no
+    run directory. With --force the run goes ahead and the override is recorded in the log and the report."""
+    with RwsEmulator(1, joint_speed_deg_s=5000.0, robot_type="IRB 6700-150/3.20", serial="6700-104512") as emu:
+        cfg = small_config(tmp_path, **SMALL, **{"robot.url": emu.url, "robot.options": RWS_OPTIONS})
+        run = tmp_path / "run"
+        assert main(["run", str(cfg), "--out", str(run)]) == 2
+        err = capsys.readouterr().err.strip()
+        print(err)
+        assert len(err.splitlines()) == 1 and "IRB 6700-150/3.20" in err and "6700-104512" in err
+        assert "robot.model" in err and "--force" in err
+        assert emu.moves == [] and not run.exists()
+        assert main(["run", str(cfg), "--out", str(run), "--force"]) == 0
+        contents, report = _finished(run)
+    for doc in (contents.start, report):
+        check = doc["identity_check"]
+        assert check["robot"]["result"] == "mismatch" and "IRB 6700-150/3.20" in check["overridden"][0]

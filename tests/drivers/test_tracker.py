@@ -314,9 +314,11 @@ def test_emulator_dropped_reply_is_retried(emulator):
 
 
 def test_emulator_late_reply_in_flight_is_dropped_by_seq():
-    """The late reply to request 1 arrives while request 2 is pending: recognised by its seq and dropped."""
-    with TrackerEmulator(position_source=counter_source(), faults={"delay_s": T + 0.1}) as emu:
-        with driver(emu) as tracker:
+    """The late reply to request 1 arrives while request 2 is pending: recognised by its seq and dropped.
+    A longer timeout than T here: request 2's reply must arrive within it after the late reply (load-proof)."""
+    timeout_s = 1.0
+    with TrackerEmulator(position_source=counter_source(), faults={"delay_s": timeout_s + 0.2}) as emu:
+        with open_tracker(emu.url, {"timeout_s": timeout_s}) as tracker:
             emu.inject("delay")
             assert isinstance(measure_error(tracker), TrackerTimeout)
             assert emu.replies_sent == 1           # READY only: the late reply is still pending

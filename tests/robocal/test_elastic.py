@@ -1,39 +1,32 @@
-"""Elasto-geometric calibration: physical effects identified with the geometry, selected by CV, used by AP(q)."""
+"""The one effect engine (robocal.elastic): blocked cross-validation, candidates and what cannot be told, forward
+selection on independent truth campaigns (robocal/truth.py), the joint fit, the physical reading, the model."""
 import json
 
 import numpy as np
 import pytest
 
-from robocal.effects import apply_effects, gear_cyclic, joint_compliance, lumped_compliance
-from robocal.elastic import EffectChoice, calibrate_elastic, candidate_effects, select_effects
+from robocal.effects import GravityModel, apply_effects, joint_compliance
+from robocal.elastic import (BlockedCV, Blocking, EffectChoice, FittedEffect, calibrate_elastic, candidates,
+                             order_blocks, pose_blocks, reading, run_engine, select)
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.model import CalibratedModel
-from robocal.noise import TrackerUncertainty
-from robocal.simulate import random_geometric_errors
+from robocal.selfcheck import truth_input
+from robocal.truth import TruthProtocol, simulate
 from tests.cells import T_SEED000, irb2600
 
-LO, HI = np.radians([-60, -40, -60, -120, -100, -180]), np.radians([60, 70, 40, 120, 100, 180])
+SMALL = TruthProtocol(n_calib=200, n_test=60, check_poses=6, check_repeats=4)
 
 
-def campaign(seed, effects, n=260, payload_kg=10.0):
-    rng = np.random.default_rng(seed)
-    nominal = irb2600()
-    truth = random_geometric_errors(nominal, rng).with_(T_tracker_base=T_SEED000)
-    q = rng.uniform(LO, HI, (n, 6))
-    meta = {"payload_kg": np.full(n, payload_kg)}
-    p = apply_effects(truth, q, meta, effects)
-    cov = TrackerUncertainty().covariance(p)
-    p = p + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal(p.shape))
-    return nominal, truth, q, p, cov, meta
-
-
-def fit(nominal, q, p, cov, meta, sl):
-    geo = calibrate(nominal, q[sl], p[sl], cov[sl], CalibrationOptions(method="lm"))
-    cols = np.array([ParamLayout.of(nominal).index(n) for n in geo.identified])
-    sub = {k: v[sl] for k, v in meta.items()}
-    sel = select_effects(geo.kinematics, cols, q[sl], p[sl], cov[sl], sub, candidate_effects(geo.kinematics, q[sl], sub))
-    return geo, cols, sel, sub
+def engine_on(camp, **kw):
+    """Geometric LM fit of the calib rows of a truth campaign, then the engine on them."""
+    inp = truth_input(camp)
+    cal = np.flatnonzero(inp.calib)
+    geo = calibrate(inp.kin, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], CalibrationOptions(method="lm"))
+    cols = np.array([ParamLayout.of(inp.kin).index(n) for n in geo.identified])
+    meta = {k: (None if v is None else np.asarray(v)[cal]) for k, v in inp.meta().items()}
+    return inp, geo, cols, meta, run_engine(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal],
+                                            meta, **kw)
 
 
 def rms(e):
@@ -41,49 +34,168 @@ def rms(e):
 
 
 @pytest.mark.unit
-def test_compliance_of_another_functional_form_is_selected_and_used_by_the_model():
-    """Truth: lumped-mass compliance with off-line centres of mass and an offset payload (not the candidate's own
-    form) + a gear harmonic on J1; the model takes compliance (and the harmonic), and its test error approaches
-    the noise while the geometric model's does not."""
-    truth_effects = [(lumped_compliance((2, 3), (0, 30, 45, 10, 5, 1), 0.4, 40.0, (0, 0, 120.0)), np.array([1.5e-6, 2.5e-6])),
-                     (gear_cyclic(1, (1,)), np.array([1.2e-4, -0.8e-4]))]
-    nominal, truth, q, p, cov, meta = campaign(3, truth_effects)
-    cal, test = slice(0, 200), slice(200, None)
-    geo, cols, sel, sub = fit(nominal, q, p, cov, meta, cal)
-    taken = [c.label for c in sel.taken]
-    print("taken", taken, {t.label: round(t.gain, 3) for t in sel.trials if t.round == 1})
-    assert taken[0] == "joint_compliance(J2,3)" and "gear_cyclic(J1)" in taken
-    el = calibrate_elastic(geo.kinematics, cols, q[cal], p[cal], cov[cal], sub, sel.taken)
-    model = CalibratedModel(el.kinematics, None, None, el.effects, 10.0)
-    floor = float(np.sqrt(np.mean(np.trace(cov[test], axis1=1, axis2=2))))
-    e_geo, e_el = rms(p[test] - smr_tracker(geo.kinematics, q[test])), rms(p[test] - model.smr_tracker(q[test]))
-    print(f"test RMS geometric {e_geo:.4f}, elasto-geometric {e_el:.4f}, floor {floor:.4f} mm")
-    assert e_el < 1.3 * floor < 0.5 * e_geo
-    again = CalibratedModel.from_dict(json.loads(json.dumps(model.to_dict())))
-    assert np.allclose(again.smr_tracker(q[test]), model.smr_tracker(q[test]), atol=1e-9)
-    comp = model.to_dict()["effects"][0]["params"]
-    assert comp["c2"]["unit"] == "rad/(N*m)" and comp["c2"]["stiffness_Nm_per_rad"] == pytest.approx(1 / comp["c2"]["value"])
+def test_blocked_cv_equals_a_brute_force_refit_per_fold():
+    rng = np.random.default_rng(0)
+    N, P = 120, 5
+    A = rng.normal(size=(N, 3, P))
+    y = A @ rng.normal(size=P) + rng.normal(0, 0.1, (N, 3))
+    W = np.broadcast_to(np.diag([1.0, 2.0, 0.5]), (N, 3, 3)).copy()
+    fold = pose_blocks(rng.normal(size=(N, 6)), 4, seed=1)
+    cv = BlockedCV(A, y, W, [Blocking("pose", fold)])
+    cols = np.array([0, 2, 4])
+    se = cv.squared_errors(cols)["pose"]
+    ref = np.empty(N)
+    for f in np.unique(fold):
+        tr, te = fold != f, fold == f
+        Aw = np.einsum("nij,njk->nik", W[tr], A[tr][:, :, cols]).reshape(-1, 3)
+        x = np.linalg.lstsq(Aw, np.einsum("nij,nj->ni", W[tr], y[tr]).reshape(-1), rcond=None)[0]
+        ref[te] = np.sum((y[te] - A[te][:, :, cols] @ x) ** 2, axis=1)
+    np.testing.assert_allclose(se, ref, rtol=1e-6)
 
 
 @pytest.mark.unit
-def test_no_effect_is_taken_on_geometric_only_data():
-    for seed in range(5):
-        nominal, truth, q, p, cov, meta = campaign(20 + seed, [], n=150)
-        _, _, sel, _ = fit(nominal, q, p, cov, meta, slice(None))
-        assert sel.taken == (), [c.label for c in sel.taken]
-        assert len({t.label for t in sel.trials}) >= 8
+def test_pose_blocks_hold_neighbours_out_together_and_order_blocks_are_contiguous():
+    rng = np.random.default_rng(1)
+    q = np.concatenate([rng.normal(c, 0.01, (30, 6)) for c in rng.uniform(-2, 2, (8, 6))])
+    fold = pose_blocks(q, 4, seed=0, block_points=30)
+    for c in range(8):                                    # each tight cluster lands in one fold
+        assert len(set(fold[c * 30:(c + 1) * 30])) == 1
+    assert len(set(fold)) == 4
+    ob = order_blocks(np.arange(200.0), 5)
+    assert np.all(ob[:10] == ob[0]) and len(np.flatnonzero(np.diff(ob))) == 19
+
+
+@pytest.mark.unit
+def test_what_the_data_cannot_tell_is_named_with_the_reason():
+    kin = irb2600()
+    q = np.random.default_rng(2).uniform(-1, 1, (80, 6))
+    q[:, 3] = 0.2                                           # J4 fixed: no gear error can show on it
+    meta = {"payload_kg": np.zeros(80), "approach": None, "move": None, "order": None, "t_s": None}
+    cands, cannot = candidates(kin, q, meta, GravityModel())
+    why = {(u["effect"], tuple(u["joints"])): u["reason"] for u in cannot}
+    assert "no measurement order" in why[("readback_lag", (1, 2, 3, 4, 5, 6))]
+    assert "no measurement order" in why[("backlash", (1, 2, 3, 4, 5, 6))]
+    assert "no timestamps and no measurement order" in why[("registration_drift", ())]
+    assert "covers only" in why[("gear_cyclic", (4,))] and "payload" in why[("payload_deflection", (2, 3))]
+    assert "J4 and J5" in why[("axis_coupling", (4, 5, 6))]
+    assert {c.name for c in cands} == {"joint_compliance", "gear_cyclic"}
+
+
+@pytest.mark.system
+def test_compliance_of_the_truth_module_is_taken_and_predicts_the_test_rows():
+    camp = simulate(["joint_compliance"], 11, SMALL)
+    inp, geo, cols, meta, eng = engine_on(camp)
+    assert [c.name for c in eng.taken] == ["joint_compliance"]
+    test = np.flatnonzero(inp.test)
+    model = CalibratedModel(eng.elastic.kinematics, None, None, eng.elastic.effects)
+    tmeta = {k: (None if v is None else np.asarray(v)[test]) for k, v in inp.meta().items()}
+    e_geo = rms(inp.p_mm[test] - smr_tracker(geo.kinematics, inp.q_rad[test]))
+    e_el = rms(inp.p_mm[test] - model.smr_tracker(inp.q_rad[test], tmeta))
+    assert e_el < 1.3 * inp.noise_floor_mm < 0.5 * e_geo
+    again = CalibratedModel.from_dict(json.loads(json.dumps(model.to_dict())))
+    np.testing.assert_allclose(again.smr_tracker(inp.q_rad[test], tmeta), model.smr_tracker(inp.q_rad[test], tmeta),
+                               atol=1e-9)
+
+
+@pytest.mark.system
+def test_nothing_is_taken_on_geometric_only_data():
+    for seed in (21, 22, 23):
+        _, _, _, _, eng = engine_on(simulate([], seed, SMALL))
+        assert eng.taken == () and eng.elastic is None
+        assert len({t.label for t in eng.selection.trials}) >= 10
+
+
+@pytest.mark.system
+def test_readback_lag_is_taken_for_a_lag_and_backlash_for_backlash():
+    for truth, other in (("readback_lag", "backlash"), ("backlash", "readback_lag")):
+        camp = simulate([truth], 31, TruthProtocol(**{**SMALL.__dict__, "timestamps": False}))
+        *_, eng = engine_on(camp)
+        names = [c.name for c in eng.taken]
+        assert truth in names and other not in names, names
+    lag = camp.truths[0] if truth == "readback_lag" else None
+    assert lag is None or lag.name == "readback_lag"
+
+
+@pytest.mark.system
+def test_a_drift_in_measurement_order_is_taken_without_timestamps_and_is_zero_for_a_commanded_target():
+    camp = simulate(["registration_drift"], 41, TruthProtocol(**{**SMALL.__dict__, "timestamps": False}), scale=2.0)
+    inp, _, _, meta, eng = engine_on(camp)
+    drift = [fe for fe in eng.elastic.effects if fe.choice.name == "registration_drift"]
+    assert drift and dict(drift[0].choice.options)["clock"] == "order"
+    model = CalibratedModel(eng.elastic.kinematics, None, None, eng.elastic.effects)
+    q = inp.q_rad[:5]
+    late = {"order": np.full(5, float(np.max(meta["order"])))}
+    assert np.max(np.abs(model.smr_tracker(q, late) - model.smr_tracker(q, {}))) > 0.02
+    np.testing.assert_allclose(model.smr_tracker(q, {}), model.smr_tracker(q, {"order": np.zeros(5)}), atol=1e-12)
+
+
+@pytest.mark.system
+def test_gravity_direction_of_a_wall_mount_is_used():
+    """A wall-mounted robot (gravity along +x of its base): with the config's direction the compliance fit (mass
+    distribution free) reaches the floor; with the floor direction it does not."""
+    wall = (1.0, 0.0, 0.0)
+    camp = simulate(["joint_compliance"], 51, TruthProtocol(**{**SMALL.__dict__, "gravity_base": wall}))
+    inp, geo, cols, meta, _ = engine_on(camp)
+    cal = np.flatnonzero(inp.calib)
+    out = {}
+    for name, g in (("wall", GravityModel(gravity_base=wall)), ("floor", GravityModel())):
+        choice = EffectChoice("joint_compliance", (("joints", (1, 2, 3)), ("form", "levers"),
+                                                   ("gravity_base", g.gravity_base)))
+        el = calibrate_elastic(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], meta, [choice])
+        out[name] = rms(el.residual_tracker_mm)
+    assert out["wall"] < 1.3 * inp.noise_floor_mm < out["floor"]
+
+
+@pytest.mark.unit
+def test_gravity_model_from_config_masses_mass_class_or_default():
+    g = GravityModel.of_robot(6, link_masses_kg=(0, 10, 8, 2, 1, 0.5))
+    assert g.source == "config" and g.link_masses_kg[1] == 10
+    g = GravityModel.of_robot(6, mass_kg=100.0, gravity_base=(0, 0, -2))
+    assert g.source == "mass class" and sum(g.link_masses_kg) == pytest.approx(70.0)
+    assert g.gravity_base == (0.0, 0.0, -1.0)
+    assert GravityModel.of_robot(6).source == "default"
+
+
+@pytest.mark.unit
+def test_physical_reading_flags_values_outside_their_range_without_dropping_them():
+    kin = irb2600().with_(T_tracker_base=T_SEED000)
+    q = np.random.default_rng(5).uniform(-1, 1, (50, 6))
+    meta = {"payload_kg": np.zeros(50)}
+    comp = FittedEffect(EffectChoice("joint_compliance", (("joints", (2, 3)),)), np.array([-2e-6, 5e-7]),
+                        np.full(2, np.nan), ("c2", "c3"), "rad/(N*m)")
+    r = reading(comp, kin, q, meta, GravityModel())
+    assert not r["plausible"] and "negative" in r["outside"][0] and "gravity direction" in r["check"]
+    assert r["quantities"]["J3"]["stiffness_nm_per_rad"] == pytest.approx(2e6, rel=1e-6)
+    gear = FittedEffect(EffectChoice("gear_cyclic", (("joint", 1), ("harmonics", (1,)))), np.array([2e-3, 0.0]),
+                        np.full(2, np.nan), ("sin1", "cos1"), "rad")
+    r = reading(gear, kin, q, meta, GravityModel())
+    assert not r["plausible"] and r["quantities"]["amplitude_arcsec"]["h1"] == pytest.approx(412.5, rel=1e-3)
 
 
 @pytest.mark.unit
 def test_identifiability_reports_an_effect_parameter_the_poses_cannot_separate():
     """J1 gear harmonic with J1 fixed: its columns are constant, redundant with the base registration."""
-    nominal, truth, q, p, cov, meta = campaign(5, [(joint_compliance((2, 3)), np.array([1e-6, 2e-6]))], n=120)
+    rng = np.random.default_rng(5)
+    nominal = irb2600()
+    truth = nominal.with_(T_tracker_base=T_SEED000)
+    q = rng.uniform(-1, 1, (120, 6))
     q[:, 0] = 0.3
+    meta = {"payload_kg": np.full(120, 10.0)}
     p = apply_effects(truth, q, meta, [(joint_compliance((2, 3)), np.array([1e-6, 2e-6]))])
     geo = calibrate(nominal, q, p, None, CalibrationOptions(method="lm"))
     cols = np.array([ParamLayout.of(nominal).index(n) for n in geo.identified])
     el = calibrate_elastic(geo.kinematics, cols, q, p, None, meta,
-                           [EffectChoice("joint_compliance", (("joints", (2, 3)),)), EffectChoice("gear_cyclic", (("joint", 1),))])
+                           [EffectChoice("joint_compliance", (("joints", (2, 3)),)),
+                            EffectChoice("gear_cyclic", (("joint", 1),))])
     names = {u.name for u in el.unidentifiable}
     assert {"gear_cyclic(J1).sin1", "gear_cyclic(J1).cos1"} & names
     assert el.effects[0].values[0] == pytest.approx(1e-6, rel=0.05)
+
+
+@pytest.mark.unit
+def test_select_is_deterministic():
+    camp = simulate(["backlash"], 61, TruthProtocol(n_calib=120, n_test=20, check_poses=4, check_repeats=3))
+    inp, geo, cols, meta, eng = engine_on(camp)
+    cal = np.flatnonzero(inp.calib)
+    again = select(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], meta)
+    assert again.selection.to_dict() == eng.selection.to_dict()

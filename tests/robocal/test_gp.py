@@ -10,12 +10,13 @@ from campaign.cli import main
 from campaign.interchange import read_csv, write_csv
 from campaign.process import load_model
 from robocal.effects import joint_compliance
-from robocal.gp import (GaussianProcess, GPRResidual, MultiOutputGP, RBFNetwork, fit_gpr_layer, gp_inputs,
+from robocal.gp import (GaussianProcess, GPRResidual, MultiOutputGP, fit_gpr_layer, gp_inputs,
                         neg_log_marginal_likelihood, se_ard)
 from robocal.identify import calibrate
 from robocal.kinematics import fk, smr_tracker
 from robocal.model import CalibratedModel
 from robocal.payload import DeflectionModel, HeavyPayloadCell, deflected_flange, irb4600, random_configurations
+from robocal.rbf import RBFNetwork
 from robocal.stats import error_stats
 from tests.campaign.helpers import small_config
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
@@ -136,8 +137,9 @@ def test_payload_as_an_input_and_the_deflection_grows_with_payload():
 
 
 @pytest.mark.system
-def test_campaign_reprocess_with_gpr_residual(tmp_path):
-    """`campaign run` then `campaign reprocess` with calibration.residual: gpr on a simulated dataset."""
+def test_campaign_reprocess_with_gpr_residual(tmp_path, capsys):
+    """`campaign run` then `campaign reprocess` with calibration.residual: gpr on a simulated dataset; the layer's
+    calibration RMS is shown next to its CV-predicted held-out RMS, labelled, in the terminal, report and HTML."""
     cfg = small_config(tmp_path, "irb4600", **{"calibration.residual": "gpr", "tool.payload_kg": 40.0,
                                                 "simulation.effects": [{"name": "joint_compliance", "scale": 3.0}]})
     assert yaml.safe_load(cfg.read_text())["calibration"]["residual"] == "gpr"
@@ -147,6 +149,18 @@ def test_campaign_reprocess_with_gpr_residual(tmp_path):
     assert main(["reprocess", str(run / "data.csv"), "--config", str(cfg), "--out", str(out)]) == 0
     live, again = (json.loads((d / "report.json").read_text()) for d in (run, out))
     comp = again["stages"]["compensated"]
+    lay = comp["layer"]
+    assert lay["kind"] == "gpr" and lay["approximation"] == "exact" and 0 < lay["n_train"] <= again["n"]["calib"]
+    assert lay["calib_rms_mm"] == comp["calib"]["rms_mm"] and lay["test_rms_mm"] == comp["test"]["rms_mm"]
+    assert lay["cv_predicted_rms_mm"] == again["residual_choice"]["candidates"]["gpr"]["cv_rms_mm"]
+    assert lay["noise_floor_mm"] == again["noise_floor_mm"] and lay["noise_mm"] >= lay["noise_floor_mm"] * (1 - 1e-9)
+    shown = capsys.readouterr().out
+    assert f"calibration RMS {lay['calib_rms_mm']:.3f} mm is a fit to its own points, not an accuracy; " \
+           f"CV-predicted held-out RMS {lay['cv_predicted_rms_mm']:.3f} mm" in shown
+    html = (out / "report.html").read_text()
+    assert 'id="layer-honesty"' in html and "not an accuracy" in html
+    assert f'data-key="stages.compensated.layer.cv_predicted_rms_mm" data-scale="1.0" data-fmt=".4f" ' \
+           f'data-value="{lay["cv_predicted_rms_mm"]!r}"' in html
     assert again["method"]["residual"] == "gpr"
     assert comp["test"]["rms_mm"] == pytest.approx(live["stages"]["compensated"]["test"]["rms_mm"], rel=1e-9)
     std = comp["test_pred_std_mm"]

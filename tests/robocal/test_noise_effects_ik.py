@@ -53,7 +53,8 @@ def test_effect_regressor_is_the_linearisation_of_the_simulation(effect):
     rng = np.random.default_rng(3)
     q = rng.uniform(-1, 1, (20, 6))
     meta = {"t_s": np.linspace(0, 7200, 20), "payload_kg": rng.choice([0.0, 12.0], 20),
-            "approach": rng.choice([-1.0, 1.0], (20, 6)), "temp_c": None}
+            "approach": rng.choice([-1.0, 1.0], (20, 6)), "temp_c": None, "order": np.arange(20.0) * 5.0,
+            "move": rng.uniform(-1.0, 1.0, (20, 6)), "prev_move": rng.uniform(-1.0, 1.0, (20, 6))}
     params = np.array(effect.typical)
     base = apply_effects(kin, q, meta, [])
     exact = apply_effects(kin, q, meta, [(effect, params)]) - base

@@ -1,0 +1,121 @@
+"""Evidence on the engine's answer, never a gate: confusable classes (rivals that predicted as well), confounds
+with the measurement order, and the consistency of an effect's parameters between near/far reach and the first
+and second half of the run. Everything here works on the linearised design of the fit rows (N x P, no N^2)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .prose import DRIFT_EXPERIMENT, separating_experiment
+
+DRIFT = "registration_drift"
+
+
+def _project_out(X: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """X (M, k) minus its least-squares fit by the columns of G (M, g)."""
+    if G.shape[1] == 0:
+        return X
+    nrm = np.linalg.norm(G, axis=0)
+    nrm[nrm == 0] = 1.0
+    beta = np.linalg.lstsq(G / nrm, X, rcond=1e-10)[0]
+    return X - (G / nrm) @ beta
+
+
+def follows_order(x: np.ndarray, order: np.ndarray, window: int | None = None) -> float:
+    """r in [0, 1]: how closely x (N,) or (N, k) follows a smooth function of the measurement order: the share of
+    its variance that a running mean over ``window`` neighbours in the order (default N / 20) reproduces, square
+    root. Random order gives about 1 / sqrt(window); a sweep that follows the order gives close to 1."""
+    x = np.asarray(x, float).reshape(len(x), -1)
+    n = len(x)
+    w = max(5, n // 20) if window is None else window
+    xs = x[np.argsort(np.asarray(order, float), kind="stable")]
+    xs = xs - xs.mean(axis=0)
+    tot = float(np.sum(xs**2))
+    if tot <= 0 or n < 2 * w:
+        return 0.0
+    c = np.cumsum(np.vstack([np.zeros((1, xs.shape[1])), xs]), axis=0)
+    lo = np.clip(np.arange(n) - w // 2, 0, n - w)
+    smooth = (c[lo + w] - c[lo]) / w
+    return math.sqrt(max(0.0, 1.0 - float(np.sum((xs - smooth) ** 2)) / tot))
+
+
+def visible(d_mm: np.ndarray, J_geo: np.ndarray) -> np.ndarray:
+    """The part of a displacement d (N, 3) mm that the geometry (``J_geo`` (N, 3, P)) cannot absorb."""
+    N = len(d_mm)
+    return _project_out(d_mm.reshape(-1, 1), J_geo.reshape(3 * N, -1))[:, 0].reshape(N, 3)
+
+
+def joints_following_order(q_rad: np.ndarray, order: np.ndarray, r_min: float) -> list[tuple[int, float]]:
+    """[(joint, r)] of the joints whose angle correlates with the measurement order by |r| > ``r_min``."""
+    out = []
+    for j in range(q_rad.shape[1]):
+        if np.std(q_rad[:, j]) > 0:
+            r = float(np.corrcoef(q_rad[:, j], order)[0, 1])
+            if abs(r) > r_min:
+                out.append((j + 1, r))
+    return out
+
+
+def confound(name: str, label: str, signal: np.ndarray, q_rad, order, clock: str | None, r_min: float
+             ) -> dict | None:
+    """The effect and a drift in measurement order as one class when the effect's regressor (``signal``: its joint
+    deviations, or its visible displacement) follows the order (r > ``r_min``), or, for the drift itself, when
+    joint angles follow the order (then the drift may be those joints' effects). None when the data tell them
+    apart."""
+    if order is None:
+        return None
+    if name == DRIFT:
+        follow = joints_following_order(q_rad, order, r_min)
+        if not follow:
+            return None
+        js = ", ".join(f"J{j} (r = {r:+.2f})" for j, r in follow)
+        return {"class": [label] + [f"effects of J{j} (gear_cyclic J{j}, ...)" for j, _ in follow],
+                "joints_following_order": {f"J{j}": r for j, r in follow},
+                "text": f"the drift {'in time' if clock == 't_s' else 'in measurement order'} is confounded with "
+                        f"effects of {js}: the poses were measured in an order that follows those joints",
+                "experiment": DRIFT_EXPERIMENT}
+    r = follows_order(signal, order)
+    if r <= r_min:
+        return None
+    return {"class": [label, "drift in measurement order (registration_drift)"], "r_order": r,
+            "text": f"{label} follows the measurement order (r = {r:.2f} > {r_min:g}): it and a drift in time are "
+                    "one class in these data", "experiment": DRIFT_EXPERIMENT}
+
+
+def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict[str, np.ndarray],
+                geo_cols: np.ndarray) -> dict:
+    """For each split {name: (M,) bool} of the fit rows: fit the linear model (A_w (M, 3, P) whitened, y_w (M, 3))
+    on each half and compare the effect's parameters (``cols``) by the visible displacement of their difference,
+    as a share of the effect's own visible displacement (a physical effect has one set of parameters)."""
+    M, _, P = A_w.shape
+    A = A_w.reshape(3 * M, P)
+    nrm = np.linalg.norm(A, axis=0)
+    nrm[nrm == 0] = 1.0
+    As = A / nrm
+    full = np.linalg.lstsq(As, y_w.reshape(-1), rcond=1e-10)[0]
+    Xv = _project_out(As[:, cols], As[:, geo_cols])
+    own = float(np.linalg.norm(Xv @ full[cols]))
+    out = {}
+    for name, mask in halves.items():
+        est = []
+        for half in (mask, ~mask):
+            r3 = np.repeat(half, 3)
+            if half.sum() < max(10, P // 3 + 1):
+                break
+            est.append(np.linalg.lstsq(As[r3], y_w.reshape(-1)[r3], rcond=1e-10)[0][cols])
+        if len(est) == 2 and own > 0:
+            out[name] = float(np.linalg.norm(Xv @ (est[0] - est[1])) / own)
+    return out
+
+
+def rival_class(step) -> list[dict]:
+    """Rivals of a taken effect with another name that predicted held-out points as well (the winner's paired t
+    over them < 2): one confusable class, with the experiment that separates each."""
+    out = []
+    for label, name, rms, t in step.rivals:
+        if name == step.choice.name:
+            continue
+        out.append({"effect": name, "label": label, "cv_rms_mm": rms, "t_winner_over_it": t,
+                    "experiment": separating_experiment(step.choice.name, name, f"{step.choice.label} {label}")})
+    return out

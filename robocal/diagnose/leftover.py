@@ -1,0 +1,125 @@
+"""Where the residual lies (geometric and final model, held-out residuals) and what is left unexplained.
+
+Unexplained structure has one definition (``leftover``): the excess of the final model's held-out RMS over the
+noise floor, sqrt(max(R^2 - F^2, 0)), and how much a non-parametric layer (GPR over the joints, reprocess's residual
+layer, fitted on the calibration residuals) removes of it on held-out points. The terminal, the JSON and the HTML report print these
+same numbers; ``unexplained`` is true when R exceeds the floor (inflated for the fitted parameters) by more than
+``unexplained_ratio`` (and, for a floor from repeats, significantly: F test with the floor's degrees of freedom). The neighbour test (``structure_test``) then says along which inputs the leftover lies.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kinematics import ParamLayout, identification_jacobian
+from ..layers import fit_layer
+from .records import DiagnosisInput
+from .regions import structure_test, where_analysis
+
+
+def _floor_scale(inp: DiagnosisInput) -> float:
+    """Factor on the covariance so that its RMS equals the reported noise floor."""
+    spec = math.sqrt(float(np.mean(np.trace(inp.cov_mm2, axis1=1, axis2=2))))
+    return (inp.noise_floor_mm / spec) ** 2 if spec > 0 and inp.noise_floor_mm > 0 else 1.0
+
+
+def _base(kin, p_tracker):
+    T = kin.T_tracker_base
+    return (np.asarray(p_tracker, float) - T[:3, 3]) @ T[:3, :3]
+
+
+def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
+    """(regions of the geometric model, maps of both) from held-out residuals: cross-validated on the fit rows,
+    plus the test rows. The final model's regions are in ``maps["_final_regions"]``."""
+    out, maps = [], {}
+    rows = np.concatenate([fit, test])
+    for name, model, r, cv, stage in zip(("geometric", "final"), models, resid, cv_vec, stages):
+        kin = getattr(model, "kinematics", model)
+        held = np.concatenate([cv, r[test]]) if len(test) else cv
+        inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit))
+        cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
+        p_model, J = identification_jacobian(kin, inp.q_rad[rows])
+        jc = [c for c, i, k in ParamLayout.of(kin).joint_cols if k == 0]
+        sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
+        regs, mp = where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base,
+                                  sub("t_s"), sub("approach"), sub("payload_kg"), J[:, :, jc], opt)
+        maps[name] = mp
+        if name == "geometric":
+            out += regs
+        else:
+            maps["_final_regions"] = regs
+    return out, maps
+
+
+def _layer_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray, str]:
+    """Residual vectors (M, 3) mm left on held-out points once the non-parametric layer of the calibration (GPR over
+    the joints, ``robocal.layers.fit_layer``) is fitted on the final model's calibration residuals (at most
+    ``layer_max_points`` of them, a seeded subset): on the test rows, or over the fit rows' pose blocks."""
+    kin = model.kinematics
+    rng = np.random.default_rng(opt.seed)
+    sub = lambda rows: {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}  # noqa: E731
+
+    def layer_errors(tr, te):
+        if len(tr) > opt.layer_max_points:
+            tr = np.sort(rng.choice(tr, opt.layer_max_points, replace=False))
+        lay = fit_layer("gpr", model, q[tr], p[tr], sub(tr), seed=opt.seed)
+        pm = model.kinematic_smr_base(q[te], sub(te))
+        return _base(kin, p[te]) - pm - lay.predict(q[te], pm)
+    if len(test):
+        return layer_errors(fit, test), "test"
+    out = np.empty((len(fit), 3))
+    for f in np.unique(fold):
+        out[fold == f] = layer_errors(fit[fold != f], fit[fold == f])
+    return out, "cv"
+
+
+def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
+    """(unexplained_structure dict, neighbour structure tests, notes) of the final model."""
+    F = float(inp.noise_floor_mm)
+    held = resid[test] if len(test) else cv_final
+    R = float(np.sqrt(np.mean(np.sum(held**2, axis=1))))
+    lay, where = _layer_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit, test,
+                              fold, meta)
+    R_lay = float(np.sqrt(np.mean(np.sum(lay**2, axis=1))))
+    inflate = math.sqrt(1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit)))
+    excess = math.sqrt(max(R**2 - F**2, 0.0))
+    removes = math.sqrt(max(R**2 - R_lay**2, 0.0))
+    ratio = opt.unexplained_ratio
+    if inp.noise_floor_dof:              # a floor measured from repeats is an estimate: F test of the two variances
+        from scipy import stats
+        ratio = max(ratio, math.sqrt(float(stats.f.isf(opt.floor_f_alpha, 3 * len(held), 3 * inp.noise_floor_dof))))
+    flagged = bool(R > ratio * F * inflate)
+    # along which inputs the leftover lies (in-sample residuals of the fit rows, whitened to the floor; at most
+    # ``structure_max_points`` of them, a seeded subset: the permutation test holds N x 3 x permutations numbers)
+    rows = fit if len(fit) <= opt.structure_max_points else \
+        np.sort(np.random.default_rng(opt.seed).choice(fit, opt.structure_max_points, replace=False))
+    cov = inp.cov_mm2[rows] * _floor_scale(inp)
+    w = np.linalg.solve(np.linalg.cholesky(cov), resid[rows][:, :, None])[:, :, 0]
+    pb = _base(model.kinematics, inp.p_mm[rows] - resid[rows])
+    q = np.asarray(inp.q_rad, float)[rows]
+    spaces = {"joint space": q, "workspace": pb, "reach": np.hypot(pb[:, 0], pb[:, 1]), "height": pb[:, 2]}
+    spaces.update({f"J{j + 1}": q[:, j] for j in range(q.shape[1])})
+    for key, name in (("t_s", "time"), ("order", "measurement order")):
+        v = meta.get(key)
+        if v is not None and np.ptp(np.asarray(v, float)[rows]) > 0:
+            spaces[name] = np.asarray(v, float)[rows]
+    tests = structure_test(w, spaces, np.random.default_rng(opt.seed), opt.neighbours, opt.permutations)
+    along = sorted((s for s in tests if tests[s]["z"] >= opt.structure_z), key=lambda s: -tests[s]["z"])
+    evaluated = "held-out test points" if where == "test" else "cross-validated calibration points"
+    text = (f"unexplained structure: {excess:.3f} mm RMS over the noise floor after the final model (held-out "
+            f"{R:.3f} mm vs floor {F:.3f} mm, {evaluated}); a non-parametric layer (GPR over the joints) removes "
+            f"{removes:.3f} mm of it ({R:.3f} -> {R_lay:.3f} mm on the same points)")
+    if along:
+        text += f"; strongest along {', '.join(along[:4])}"
+    out = {"unexplained": flagged, "heldout_rms_mm": R, "floor_mm": F, "excess_over_floor_mm": excess,
+           "layer": "GPR over the joints (the residual layer of reprocess)",
+           "layer_heldout_rms_mm": R_lay, "layer_removes_mm": removes, "evaluation": where, "along": along,
+           "text": text if flagged else f"nothing unexplained: held-out {R:.3f} mm vs floor {F:.3f} mm "
+                                          f"(a non-parametric layer gives {R_lay:.3f} mm)"}
+    notes = [text] if flagged else []
+    if inp.noise_floor_source == "repeats" and R < 0.8 * F:
+        notes.append(f"the repeat scatter ({F:.3f} mm) exceeds the final held-out residual ({R:.3f} mm): the repeated "
+                     "poses probably include approach-direction or drift effects, so the floor is overestimated")
+    structure = {"tests": tests, "structure_along": along}
+    return out, structure, notes

@@ -1,0 +1,202 @@
+"""The candidates the engine tries on a dataset, what the data cannot tell, the parts of an effect that can be
+pruned, and the physical reading of fitted values against their physical range.
+
+Every candidate is an ``EffectChoice`` of a ``robocal.effects`` factory, so whatever the selection takes is a
+parameter of the calibrated model (model.json). Gravity enters through the one ``GravityModel``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from ..effects import GravityModel, gravity_torques
+from ..kinematics import Kinematics
+from .model import EffectChoice
+
+ARCMIN = math.pi / 180.0 / 60.0
+
+
+@dataclass(frozen=True)
+class LibraryOptions:
+    """When the data can reveal an effect, and the physical ranges of fitted values."""
+    gear_min_span_deg: float = 20.0       # a joint covering less cannot show a cyclic error
+    harmonics: tuple[int, ...] = (1, 2, 3, 4)
+    degrees_per_harmonic: float = 45.0    # a joint covering S degrees is offered the first S / 45 harmonics (1-4):
+    #                                       over a narrow range more harmonics only add polynomial terms
+    backlash_min_side: int = 5            # approaches from each side needed on a joint, at least ...
+    backlash_min_side_fraction: float = 0.05   # ... and this share of the rows
+    lag_min_move_std_deg: float = 1.0     # joints whose moves vary less cannot show a read-back lag
+    time_min_span_s: float = 900.0        # timestamps must span this much to profile a drift or warm-up
+    temp_min_span_c: float = 0.2
+    warmup_tau_s: tuple[float, ...] = (1800.0, 3600.0, 7200.0)
+    min_order_points: int = 40            # a drift in measurement order needs this many points
+    # physical ranges (a fitted value outside is reported as the best available description, never dropped)
+    stiffness_range_nm_per_rad: tuple[float, float] = (1e3, 1e8)
+    max_deflection_arcmin: float = 30.0   # compliance: joint deflection over the data
+    max_gear_arcsec: float = 120.0        # amplitude of one harmonic
+    max_backlash_arcmin: float = 5.0      # half-width
+    max_lag: float = 5e-3                 # read-back lag, rad per rad of move
+    max_growth: float = 1e-3              # thermal length growth
+    max_zero_drift_arcmin: float = 7.0
+    max_coupling: float = 0.02
+    max_drift_mm: float = 1.0             # registration drift over the run: translation ...
+    max_drift_rad: float = 5e-4           # ... and rotation
+
+
+def loaded_joints(kin: Kinematics, q_rad: np.ndarray, gravity: GravityModel, payload) -> tuple[int, ...]:
+    """Main-axis joints (J1-J3) whose gravity torque varies over the data (> 5 % of the largest spread)."""
+    tau = gravity_torques(kin, q_rad, gravity.link_masses_kg, payload, gravity.payload_cog_flange_mm,
+                          gravity.gravity_base)
+    spread = tau.std(axis=0)
+    if spread.max() <= 0:
+        return ()
+    return tuple(int(j) + 1 for j in np.flatnonzero(spread > 0.05 * spread.max()) if j < 3)
+
+
+def _payload(meta: Mapping, n: int) -> np.ndarray:
+    p = meta.get("payload_kg")
+    return np.zeros(n) if p is None else np.asarray(p, float)
+
+
+def _varies(values: np.ndarray, min_share: float = 0.05) -> bool:
+    """At least two distinct values, the rarer ones on >= ``min_share`` of the rows."""
+    _, counts = np.unique(np.round(values, 3), return_counts=True)
+    return len(counts) >= 2 and np.sort(counts)[-2] >= min_share * len(values)
+
+
+def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: GravityModel,
+               opt: LibraryOptions = LibraryOptions()) -> tuple[list[EffectChoice], list[dict]]:
+    """(candidates, cannot_tell): the effects these data can reveal as ``EffectChoice`` s, and for the others
+    {"effect", "joints", "reason"}."""
+    q = np.atleast_2d(q_rad)
+    N, n = q.shape
+    g = gravity.options()
+    out, cannot = [], []
+    pay = _payload(meta, N)
+    loaded = loaded_joints(kin, q, gravity, pay)
+    if loaded:
+        out.append(EffectChoice("joint_compliance", (("joints", loaded),) + g))
+    else:
+        cannot.append({"effect": "joint_compliance", "joints": [2, 3],
+                       "reason": "the gravity torque of the main axes does not vary over the poses"})
+    if _varies(pay) and loaded:
+        out.append(EffectChoice("payload_deflection", (("joints", loaded),) + g[1:]))
+    else:
+        cannot.append({"effect": "payload_deflection", "joints": list(loaded or (2, 3)),
+                       "reason": "one payload only: a payload-dependent deflection cannot be told from the link "
+                                 "masses' compliance and the geometry" if meta.get("payload_kg") is not None
+                       else "no payload logged: a payload-dependent deflection cannot be told from geometry"})
+    for j in range(1, n + 1):
+        span = math.degrees(float(np.ptp(q[:, j - 1])))
+        if span >= opt.gear_min_span_deg:
+            k = int(np.clip(span // opt.degrees_per_harmonic, 1, len(opt.harmonics)))
+            out.append(EffectChoice("gear_cyclic", (("joint", j), ("harmonics", opt.harmonics[:k]))))
+        else:
+            cannot.append({"effect": "gear_cyclic", "joints": [j],
+                           "reason": f"J{j} covers only {span:.0f} deg: a cyclic error cannot be told from its zero"})
+    out += _backlash(meta, N, n, opt, cannot)
+    out += _lag(meta, n, opt, cannot)
+    out += _time(meta, N, opt, cannot)
+    if n >= 6 and np.ptp(q[:, 3]) > 0 and np.ptp(q[:, 4]) > 0:
+        out.append(EffectChoice("axis_coupling"))
+    else:
+        cannot.append({"effect": "axis_coupling", "joints": [4, 5, 6], "reason": "needs a 6-axis wrist whose J4 and J5 "
+                       "move" if n >= 6 else "needs a 6-axis wrist"})
+    return out, cannot
+
+
+def _backlash(meta, N, n, opt, cannot) -> list[EffectChoice]:
+    s = meta.get("approach")
+    if s is None:
+        cannot.append({"effect": "backlash", "joints": list(range(1, n + 1)),
+                       "reason": "no measurement order: approach directions unknown"})
+        return []
+    s = np.asarray(s, float)
+    need = max(opt.backlash_min_side, opt.backlash_min_side_fraction * N)
+    joints = tuple(j for j in range(1, n + 1) if min(np.sum(s[:, j - 1] > 0), np.sum(s[:, j - 1] < 0)) >= need)
+    if not joints:
+        cannot.append({"effect": "backlash", "joints": list(range(1, n + 1)),
+                       "reason": "approach directions never change (every joint is reached from the same side)"})
+        return []
+    return [EffectChoice("backlash", (("joints", joints),))]
+
+
+def _lag(meta, n, opt, cannot) -> list[EffectChoice]:
+    move = meta.get("move")
+    if move is None:
+        cannot.append({"effect": "readback_lag", "joints": list(range(1, n + 1)),
+                       "reason": "no measurement order: the moves between points are unknown"})
+        return []
+    sd = np.degrees(np.std(np.asarray(move, float), axis=0))
+    joints = tuple(j for j in range(1, n + 1) if sd[j - 1] >= opt.lag_min_move_std_deg)
+    if not joints:
+        cannot.append({"effect": "readback_lag", "joints": list(range(1, n + 1)),
+                       "reason": "the joints hardly move between points"})
+        return []
+    return [EffectChoice("readback_lag", (("joints", joints), ("memory_joints", joints)))]
+
+
+def _time(meta, N, opt, cannot) -> list[EffectChoice]:
+    """Warm-up (timestamps or temperatures) and drift of the registration (in time, else in measurement order)."""
+    out = []
+    t, temp, order = meta.get("t_s"), meta.get("temp_c"), meta.get("order")
+    timed = t is not None and np.ptp(np.asarray(t, float)) >= opt.time_min_span_s
+    warm = temp is not None and np.ptp(np.asarray(temp, float)) >= opt.temp_min_span_c
+    if timed or warm:
+        taus = opt.warmup_tau_s if (timed and not warm) else opt.warmup_tau_s[:1]
+        out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", (1, 2, 3)))) for tau in taus]
+    else:
+        cannot.append({"effect": "thermal_drift", "joints": [1, 2, 3],
+                       "reason": "no timestamps or temperatures in the data" if t is None and temp is None
+                       else "the data span too short a time to reveal a warm-up"})
+    if timed:
+        clock, span = "t_s", float(np.max(np.asarray(t, float)))
+    elif order is not None and N >= opt.min_order_points and np.ptp(np.asarray(order, float)) > 0:
+        clock, span = "order", float(np.max(np.asarray(order, float)))
+    else:
+        cannot.append({"effect": "registration_drift", "joints": [],
+                       "reason": "no timestamps and no measurement order" if order is None else
+                       "too few points in measurement order"})
+        return out
+    out += [EffectChoice("registration_drift", (("clock", clock), ("degree", d), ("span", max(span, 1e-9))))
+            for d in (1, 2)]
+    return out
+
+
+def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
+    """Candidates that refine an accepted effect: the free mass distribution of gravity compliance."""
+    opts = dict(choice.options)
+    if choice.name == "joint_compliance" and opts.get("form", "gravity") == "gravity":
+        return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", "levers"),
+                                                  ("payload_cog_flange_mm", opts.get("payload_cog_flange_mm")),
+                                                  ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))]
+    return []
+
+
+def parts(choice: EffectChoice) -> list[tuple[str, EffectChoice]]:
+    """(label, the effect without that part) for every part the data may not need: one joint of backlash or a
+    read-back lag, one harmonic, a lag's memory term, a thermal zero drift, the quadratic term of a drift. The
+    joints of gravity compliance are not pruned: every loaded joint yields under its torque."""
+    opts = dict(choice.options)
+    out = []
+    joints = tuple(opts.get("joints", ()))
+    if choice.name == "backlash" and len(joints) > 1:   # compliance: every loaded joint yields (no joint pruned)
+        out += [(f"J{j}", choice.with_options(joints=tuple(x for x in joints if x != j))) for j in joints]
+    if choice.name == "gear_cyclic" and len(opts.get("harmonics", ())) > 1:
+        hs = tuple(opts["harmonics"])
+        out += [(f"h{h}", choice.with_options(harmonics=tuple(x for x in hs if x != h))) for h in hs]
+    if choice.name == "readback_lag":
+        mem = tuple(opts.get("memory_joints", ()))
+        out += [(f"J{j} memory", choice.with_options(memory_joints=tuple(x for x in mem if x != j))) for j in mem]
+        if len(joints) > 1:
+            out += [(f"J{j}", choice.with_options(joints=tuple(x for x in joints if x != j),
+                                                   memory_joints=tuple(x for x in mem if x != j)))
+                    for j in joints if j not in mem]
+    if choice.name == "thermal_drift" and joints:
+        out += [(f"zero drift J{j}", choice.with_options(joints=tuple(x for x in joints if x != j))) for j in joints]
+    if choice.name == "registration_drift" and opts.get("degree", 1) > 1:
+        out.append(("quadratic term", choice.with_options(degree=opts["degree"] - 1)))
+    return out
