@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.cell import measurement_covariance, nominal_kinematics  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.devices import mock_world  # noqa: E402
-from campaign.plan import build_plan  # noqa: E402
-from campaign.runlog import RunLog  # noqa: E402
-from campaign.runner import Runner  # noqa: E402
+from campaign.config.cell_model import measurement_covariance, nominal_kinematics  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.run.devices import mock_world  # noqa: E402
+from campaign.plan.build import build_plan  # noqa: E402
+from campaign.run.log_writer import RunLog  # noqa: E402
+from campaign.run.runner import Runner  # noqa: E402
 from drivers.base import TrackerReading  # noqa: E402
 from drivers.mock import MockRobot, MockTracker, VirtualClock  # noqa: E402
 

@@ -31,9 +31,10 @@ sys.path.insert(0, str(ROOT))
 
 from rich.console import Console  # noqa: E402
 
-from campaign.config import CalibrationConfig, load_config  # noqa: E402
-from campaign.interchange import read_csv, write_csv  # noqa: E402
-from campaign.pipeline import reprocess, run_campaign  # noqa: E402
+from campaign.config.schema import CalibrationConfig  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.data.interchange_csv import read_csv, write_csv  # noqa: E402
+from campaign.workflows import reprocess, run_campaign  # noqa: E402
 
 NESTS = [{"id": "N1", "p_base_mm": [1500, -1200, 0]}, {"id": "N2", "p_base_mm": [1600, 1300, 50]},
          {"id": "N3", "p_base_mm": [-700, 100, 0]}]

@@ -6,7 +6,7 @@ cyclic gear error of J2 (first and second harmonic, 0.008 / 0.004 deg); the trut
      of a third of the grid's points (`plan.kind: optimal`), and a seeded random third of the grid; every design
      is judged on the same measured test set (same poses, same noise) of its seed. Then held-out RMS vs number
      of points: coarser grids (step 400 / 300 / 250 mm), optimal plans and random subsets of the grid of the same
-     sizes. Plan durations from the motion caps (`campaign.eta`).
+     sizes. Plan durations from the motion caps (`campaign.run.eta`).
   B. `plan.stop: auto` runs on the mock cell (`campaign run`, max_points = the grid's count): where each run
      stopped, the held-out RMS it predicted there and the one measured on its test set.
   C. Time to choose 100 of 3000 candidates (the criterion's rows prepared), median of 3, against greedy forward
@@ -33,16 +33,17 @@ sys.path.insert(0, str(ROOT))
 
 from rich.console import Console  # noqa: E402
 
-from campaign.cell import nominal_kinematics, simulated_cell  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.dataset import Dataset  # noqa: E402
+from campaign.config.cell_model import nominal_kinematics  # noqa: E402
+from campaign.config.simulation import simulated_cell  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.errors import ConfigError  # noqa: E402
-from campaign.eta import estimate_duration_s  # noqa: E402
-from campaign.motion_safety import PathGuard  # noqa: E402
-from campaign.pipeline import run_campaign  # noqa: E402
-from campaign.plan import build_plan  # noqa: E402
-from campaign.plan_optimal import candidate_pool  # noqa: E402
-from campaign.process import process  # noqa: E402
+from campaign.run.eta import estimate_duration_s  # noqa: E402
+from campaign.plan.motion_safety import PathGuard  # noqa: E402
+from campaign.workflows import run_campaign  # noqa: E402
+from campaign.plan.build import build_plan  # noqa: E402
+from campaign.plan.optimal import candidate_pool  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.design import d_optimal, greedy_order  # noqa: E402
 
 EFFECTS = [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},
@@ -71,7 +72,7 @@ def held_out_rms(cfg, cell, q_cal, q_test, p_test, rng) -> float:
     ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
                  ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
                  np.vstack([p_cal, p_test]), source="bench")
-    return float(process(ds, cfg).report.stages["compensated"]["test"]["rms_mm"])
+    return float(calibrate_dataset(ds, cfg).report.stages["compensated"]["test"]["rms_mm"])
 
 
 GRID_STEPS_MM = (400, 300, 250)       # coarser grids: the grid design at fewer points (the plan's own step is 200)

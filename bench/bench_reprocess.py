@@ -1,4 +1,4 @@
-"""Calibration time of the DEFAULT `reprocess` (campaign.process.process: preparation, plausibility, geometry, fault
+"""Calibration time of the DEFAULT `reprocess` (campaign.calibrate.stages.calibrate_dataset: preparation, plausibility, geometry, fault
 screen, effects selection, residual-layer choice and the stage table; report.json / model.json / report.html not
 written) for 1000 and 3000 simulated points and the public UR5 campaign. Targets: <= 3 s (1000), <= 10 s (3000).
 
@@ -24,15 +24,15 @@ from scipy.linalg import cho_factor, cho_solve  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.cell import nominal_kinematics, tracker_uncertainty  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.dataset import Dataset  # noqa: E402
-from campaign.importers import import_target_dif  # noqa: E402
-from campaign.process import process  # noqa: E402
+from campaign.config.cell_model import nominal_kinematics, tracker_uncertainty  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
+from campaign.data.importers import import_target_dif  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.effects import joint_compliance  # noqa: E402
 from robocal.frames import make_T, rotvec_to_matrix  # noqa: E402
 from robocal.gp import cholesky_inverse, nlml_shared, se_ard  # noqa: E402
-from robocal.simulate import SimulatedCell, random_geometric_errors  # noqa: E402
+from robocal.sim_cell import SimulatedCell, random_geometric_errors  # noqa: E402
 
 UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 TARGETS_S = {1000: 3.0, 3000: 10.0}
@@ -58,7 +58,7 @@ def timed(ds, cfg, repeats: int) -> tuple[float, float, dict]:
     wall, cpu = [], []
     for _ in range(repeats):
         t, c = time.perf_counter(), time.process_time()
-        report = process(ds, cfg).report.to_dict()
+        report = calibrate_dataset(ds, cfg).report.to_dict()
         wall.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     return float(np.median(wall)), float(np.median(cpu)), report
@@ -95,7 +95,7 @@ def main() -> None:
     cases.append(("public UR5 campaign, 1000 calib + 20 test points",
                   import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv",
                                     UR5 / "3D_UR5_uncalibrated_random_cleaned.csv"), TARGETS_S[1000]))
-    process(cases[0][1], cfg)                                    # imports, caches: not part of the figure
+    calibrate_dataset(cases[0][1], cfg)                                    # imports, caches: not part of the figure
     for label, ds, target in cases:
         wall, cpu, rep = timed(ds, cfg, args.repeats)
         eff = ",".join(e["name"] for e in rep["effects"]["fitted"]) or "none"

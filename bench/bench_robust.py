@@ -24,8 +24,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.cell import measurement_covariance  # noqa: E402
-from campaign.process import process  # noqa: E402
+from campaign.config.cell_model import measurement_covariance  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.identify import CalibrationOptions, calibrate  # noqa: E402
 from robocal.kinematics import smr_tracker  # noqa: E402
 from tests.campaign.screen_campaigns import CFG, KIN0, sparse_campaign  # noqa: E402
@@ -46,7 +46,7 @@ def scenario(name, seeds, **kw):
     for s in seeds:
         c = sparse_campaign(s, **kw)
         n_bad += int(c.fault.sum())
-        rep = process(c.ds, CFG).report
+        rep = calibrate_dataset(c.ds, CFG).report
         t = rep["stages"]["compensated"]["test"]
         rows["default"].append((t["rms_mm"], t["max_mm"]))
         ids = {e["point_id"] for e in rep["excluded_points"]}

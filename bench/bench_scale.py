@@ -25,9 +25,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from campaign.cell import simulated_cell  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.interchange import Dataset, write_csv  # noqa: E402
+from campaign.config.simulation import simulated_cell  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
+from campaign.data.interchange_csv import write_csv  # noqa: E402
 
 CONFIG = ROOT / "configs" / "irb2600.yaml"
 TARGETS = {"reprocess": (90.0, 2048.0), "diagnose": (120.0, 2048.0)}     # s, MiB at 200 000 rows

@@ -11,9 +11,9 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.cell import nominal_kinematics  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.plan import build_plan  # noqa: E402
+from campaign.config.cell_model import nominal_kinematics  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.plan.build import build_plan  # noqa: E402
 from robocal.sweep import (Boxes, check_segments, clearances_mm, flange_points_base, lever_arms_mm,  # noqa: E402
                            sample_segments)
 

@@ -27,10 +27,10 @@ import yaml  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.config import load_config  # noqa: E402
-from campaign.importers import import_target_dif, read_target_dif_file  # noqa: E402
-from campaign.plausibility import check_dataset  # noqa: E402
-from campaign.process import process  # noqa: E402
+from campaign.config.load import load_config  # noqa: E402
+from campaign.data.importers import import_target_dif, read_target_dif_file  # noqa: E402
+from campaign.calibrate.plausibility import check_dataset  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.elastic import elastic_flange  # noqa: E402
 from robocal.frames import transform_points  # noqa: E402
 
@@ -73,7 +73,7 @@ def dif_sign(tmp: Path) -> None:
         on_grid = np.mean(np.abs(scaled - np.round(scaled)) < 1e-3)
         ds = import_target_dif(GRID, dif_sign=sign)
         nominal = check_dataset(ds, cfg)[1].nominal_rms_mm
-        model = process(ds, cfg).model
+        model = calibrate_dataset(ds, cfg).model
         comp = ", ".join(f"{n} {v:+.2e} ({v / s:+.0f} std)" for e in model.effects
                          for n, v, s in zip(e.param_names, e.values, e.std))
         dz, corr = gravity_sag(model, np.radians(ds.q_deg))
@@ -85,7 +85,7 @@ def dif_sign(tmp: Path) -> None:
 def stages(tmp: Path) -> list:
     print("2. default reprocess (configs/ur5.yaml, no calibration section), 20 random held-out poses, mm")
     ds = import_target_dif(GRID, RANDOM)
-    report = process(ds, config(tmp)).report.to_dict()
+    report = calibrate_dataset(ds, config(tmp)).report.to_dict()
     raw = np.linalg.norm(read_target_dif_file(RANDOM)[2], axis=1).mean()
     print(f"   {'stage':34s} {'mean':>7s} {'RMS':>7s} {'max':>7s}")
     for label, mean in PUBLISHED:
@@ -110,7 +110,7 @@ def rough_offsets(tmp: Path, right) -> None:
     ref = None
     for off in (0.0, -30.0, 30.0, 90.0):
         tool = [right[0], right[1], right[2] + off]
-        rep = process(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report.to_dict()
+        rep = calibrate_dataset(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report.to_dict()
         f, k = rep["stages"]["compensated"]["test"], rep["stages"]["kinematic"]["test"]
         ref = ref or f
         said = rep["plausibility"]["tool"]["notes"]

@@ -14,10 +14,10 @@ from .base import DriverConfigError, DriverError, Robot, Tracker
 # scheme -> "module:factory"; factories take (url, options, **context)
 ROBOT_DRIVERS = {"mock": "drivers.mock_factory:robot", "abb-rws": "drivers.abb_rws:open_robot",
                  "ur-rtde": "drivers.ur:open_robot"}
-TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.tracker:open_tracker",
-                   "tracker+serial": "drivers.tracker:open_tracker", "tracker+rfc2217": "drivers.tracker:open_tracker",
-                   "tracker+loop": "drivers.tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
-ROBOT_SCHEMES = frozenset(ROBOT_DRIVERS)        # the url schemes a cell config may name (campaign.config)
+TRACKER_DRIVERS = {"mock": "drivers.mock_factory:tracker", "tracker+socket": "drivers.line_tracker:open_tracker",
+                   "tracker+serial": "drivers.line_tracker:open_tracker", "tracker+rfc2217": "drivers.line_tracker:open_tracker",
+                   "tracker+loop": "drivers.line_tracker:open_tracker", "emscon": "drivers.emscon:open_tracker"}
+ROBOT_SCHEMES = frozenset(ROBOT_DRIVERS)        # the url schemes a cell config may name (campaign.config.load)
 TRACKER_SCHEMES = frozenset(TRACKER_DRIVERS)
 
 

@@ -44,12 +44,12 @@ def command(name: str, help: str, configure: Configure) -> Callable[[Handler], H
 
 
 def _stdout() -> Console:
-    from campaign.terminal import stdout_console
+    from campaign.io.terminal_text import stdout_console
     return stdout_console()
 
 
 def _stderr() -> Console:
-    from campaign.terminal import stderr_console
+    from campaign.io.terminal_text import stderr_console
     return stderr_console()
 
 
@@ -62,7 +62,7 @@ def overwrite_argument(parser: argparse.ArgumentParser) -> None:
 
 def print_plausibility(out: Console, plaus: dict | None) -> None:
     """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
-    from campaign.plausibility import plausibility_lines
+    from campaign.calibrate.plausibility import plausibility_lines
 
     for line, style in plausibility_lines(plaus):
         out.print(line, style=style, markup=False)

@@ -46,7 +46,7 @@ from drivers import emscon_protocol as P
 from robocal.noise import TrackerUncertainty
 
 from .faults import FaultDeck
-from .line_server import TcpServer, wait_for_shutdown
+from .tcp import TcpServer, wait_for_shutdown
 
 HOST = "127.0.0.1"
 POLL_S = 0.02
@@ -394,8 +394,8 @@ def cell_position_source(config_path: str, robot_url: str | None = None) -> tupl
     """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
     function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
     released by the close function), else it stays at the plan's q_ref."""
-    from campaign.config import load_config
-    from campaign.devices import mock_world
+    from campaign.config.load import load_config
+    from campaign.run.devices import mock_world
     from drivers.mock import MockTracker
     from drivers.registry import open_robot
 

@@ -8,7 +8,7 @@ from typing import Any, Iterable
 from .lexer import (_BINOPS, _CONTINUE_WORDS, _DECL_WORDS, _END_WORDS, _MODULE_ATTRS, _MODULE_LEVEL, _RAPID_TYPES,
                     _ROUTINE_END, _STATEMENT_WORDS, RapidExpr, _Agg, _Decl, _Expr, _Lit, _ParseError, _strip_percent_header,
                     _Tok, _tokenize)
-from .literals import _RAPID_RESERVED, _rapid_ident_problem
+from .literals import _RAPID_RESERVED, rapid_ident_problem
 
 class _RapidParser:
     """Recursive-descent checker of a RAPID module; collects errors and module-level declarations."""
@@ -201,7 +201,7 @@ class _RapidParser:
             tok = self.next()
             if tok.kind == "num" and isinstance(tok.value, int) and tok.value > 0:
                 dims.append(tok.value)
-            elif tok.kind == "id" and not _rapid_ident_problem(tok.text):
+            elif tok.kind == "id" and not rapid_ident_problem(tok.text):
                 dims.append(tok.text)  # a named constant: not checked
             else:
                 raise _ParseError(tok.line, f"array dimension must be an integer > 0, got '{tok.text}'")

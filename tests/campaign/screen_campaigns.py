@@ -1,21 +1,22 @@
 """Simulated IRB 2600 campaigns for the measurement-fault screen: the plan's grid (dense, fixed tool direction)
 plus a few poses sampled sparsely at extreme configurations (|J1| 100-150 deg, J2 leaning far back), where strong
 gravity compliance leaves structure a geometric model cannot fit; optionally isolated 1-3 mm faults on grid
-points. Shared by tests/campaign/test_robust_default.py and bench/bench_robust.py."""
+points. Shared by tests/campaign/calibrate/test_robust_default.py and bench/bench_robust.py."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from campaign.cell import measurement_covariance, nominal_kinematics, simulated_cell
-from campaign.config import load_config
-from campaign.interchange import Dataset
-from campaign.plan import build_plan
+from campaign.config.cell_model import measurement_covariance, nominal_kinematics
+from campaign.config.simulation import simulated_cell
+from campaign.config.load import load_config
+from campaign.data.dataset import Dataset
+from campaign.plan.build import build_plan
 from robocal.effects import joint_compliance
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import smr_base, smr_tracker
-from robocal.simulate import random_geometric_errors
+from robocal.sim_cell import random_geometric_errors
 from tests.campaign.helpers import ROOT
 
 BASE = load_config(ROOT / "configs/irb2600.yaml")

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config import load_config
-from campaign.interchange import Dataset, read_csv, write_csv
-from campaign.log_dataset import dataset_from_log
-from campaign.prepare import prepare
-from campaign.runlog import LogContents, read_log
+from campaign.config.load import load_config
+from campaign.data.dataset import Dataset
+from campaign.data.interchange_csv import read_csv, write_csv
+from campaign.data.log_dataset import dataset_from_log
+from campaign.calibrate.prepare import prepare
+from campaign.run.log_reader import LogContents, read_log
 from tests.campaign.helpers import small_config
 
 NESTS = [{"id": "N1", "p_base_mm": [1500, -1200, 0]}, {"id": "N2", "p_base_mm": [1600, 1300, 50]},
@@ -192,8 +193,8 @@ def test_bad_phenomena_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, ca
 
 @pytest.mark.system
 def test_plan_nest_rounds_and_random_order(tmp_path):
-    from campaign.cell import nominal_kinematics
-    from campaign.plan import build_plan
+    from campaign.config.cell_model import nominal_kinematics
+    from campaign.plan.build import build_plan
 
     cfg = load_config(phenomena_config(tmp_path))
     kin = nominal_kinematics(cfg)
@@ -252,11 +253,11 @@ class _AimByPosition:
 @pytest.mark.unit
 def test_nests_with_a_position_only_tracker(tmp_path):
     from drivers.base import DriverError
-    from campaign.devices import mock_world
-    from campaign.plan import build_plan
-    from campaign.cell import nominal_kinematics
-    from campaign.runlog import RunLog
-    from campaign.runner import Runner
+    from campaign.run.devices import mock_world
+    from campaign.plan.build import build_plan
+    from campaign.config.cell_model import nominal_kinematics
+    from campaign.run.log_writer import RunLog
+    from campaign.run.runner import Runner
     from drivers.mock import MockRobot, MockTracker
 
     cfg = load_config(phenomena_config(tmp_path))

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config import load_config
-from campaign.interchange import read_csv, write_csv
-from campaign.process import process
+from campaign.config.load import load_config
+from campaign.data.interchange_csv import read_csv, write_csv
+from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import ROOT
 from tests.campaign.hostile import cli
 
@@ -23,11 +23,11 @@ N_POINTS, N_RANDOM = 100, 10
 
 
 def _held_out_mean_mm(ds, cfg) -> float:
-    return float(process(ds, cfg).report.stages["compensated"]["test"]["mean_mm"])
+    return float(calibrate_dataset(ds, cfg).report.stages["compensated"]["test"]["mean_mm"])
 
 
 def test_select_100_of_1000_ur5_poses_against_all_and_random_subsets(tmp_path, capsys):
-    importers = pytest.importorskip("campaign.importers", reason="needs the UR5 importer (campaign import)")
+    importers = pytest.importorskip("campaign.data.importers", reason="needs the UR5 importer (campaign import)")
     if not (UR5.exists() and CONFIG.exists()):
         pytest.skip("needs the vendored UR5 campaign and configs/ur5.yaml")
     data, subset, out = tmp_path / "data.csv", tmp_path / "subset.csv", tmp_path / "out"

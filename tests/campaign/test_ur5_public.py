@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from campaign.config import load_config
-from campaign.process import process
+from campaign.config.load import load_config
+from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import small_config
 from tests.campaign.hostile import cli
 
@@ -64,8 +64,8 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
 def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
     """Configs whose SMR offset is 30 mm short / 90 mm long along the tool axis: accepted, the same held-out figures
     (within 1 %) as with the offset the data determine."""
-    from campaign.importers import import_target_dif
-    from campaign.plausibility import check_dataset
+    from campaign.data.importers import import_target_dif
+    from campaign.calibrate.plausibility import check_dataset
 
     ds = import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv", UR5 / "3D_UR5_uncalibrated_random_cleaned.csv")
     plaus = check_dataset(ds, load_config(ROOT / "configs" / "ur5.yaml"))[1]
@@ -75,7 +75,7 @@ def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
         where = tmp_path / f"off{off_mm:+.0f}"
         where.mkdir()
         cfg = small_config(where, "ur5", **{"tool.p_flange_smr_mm": [right[0], right[1], right[2] + off_mm]})
-        reports[off_mm] = process(ds, load_config(cfg)).report.to_dict()
+        reports[off_mm] = calibrate_dataset(ds, load_config(cfg)).report.to_dict()
     assert reports[0.0]["plausibility"]["tool"]["notes"] == []
     for off_mm in (-30.0, 90.0):
         assert len(reports[off_mm]["plausibility"]["tool"]["notes"]) == 1

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config import load_config
-from campaign.devices import mock_world
-from campaign.runlog import read_log
-from drivers.emulators.rtde_server import start_emulator
+from campaign.config.load import load_config
+from campaign.run.devices import mock_world
+from campaign.run.log_reader import read_log
+from drivers.emulators.rtde_launch import start_emulator
 from drivers.emulators.rws_server import RwsEmulator
-from drivers.emulators.tracker_server import TrackerEmulator
+from drivers.emulators.line_tracker_server import TrackerEmulator
 from tests.campaign.helpers import small_config
 
 pytestmark = pytest.mark.system

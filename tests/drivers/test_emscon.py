@@ -302,8 +302,8 @@ def test_cesapi_client_initialises_configures_measures_and_decodes():
 
 @pytest.mark.system
 def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
-    from campaign.config import load_config
-    from campaign.devices import mock_world
+    from campaign.config.load import load_config
+    from campaign.run.devices import mock_world
     from tests.campaign.helpers import small_config
 
     cfg_path = small_config(tmp_path)
@@ -337,8 +337,8 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
     SMR there."""
     import numpy as np
 
-    from campaign.cell import simulated_cell
-    from campaign.config import load_config
+    from campaign.config.simulation import simulated_cell
+    from campaign.config.load import load_config
     from drivers.emulators.rws_server import RwsEmulator
     from robocal.kinematics import smr_tracker
     from tests.campaign.helpers import small_config

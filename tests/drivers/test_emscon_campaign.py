@@ -2,7 +2,7 @@
 mock tracker, and every tracker fault through the runner, each ending measured or paused with the reason, bounded
 in time, losing no point.
 
-The emulator measures the same simulated cell the mock robot moves (``campaign.devices.mock_world`` is pointed at
+The emulator measures the same simulated cell the mock robot moves (``campaign.run.devices.mock_world`` is pointed at
 one shared world), so its readings are the cell's SMR + the cell's per-point tracker error + the emulator's own noise.
 """
 from __future__ import annotations
@@ -14,15 +14,16 @@ import time
 import numpy as np
 import pytest
 
-import campaign.devices as devices
-from campaign.cell import device_measurement_covariance, measurement_covariance, nominal_kinematics
+from campaign.run import devices
+from campaign.config.cell_model import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from campaign.cli import main
-from campaign.config import load_config
-from campaign.log_dataset import dataset_from_log
-from campaign.plan import build_plan
-from campaign.runlog import RunLog, read_log
-from campaign.runner import Runner
-from campaign.tracker_quality import SmrPredictor
+from campaign.config.load import load_config
+from campaign.data.log_dataset import dataset_from_log
+from campaign.plan.build import build_plan
+from campaign.run.log_writer import RunLog
+from campaign.run.log_reader import read_log
+from campaign.run.runner import Runner
+from campaign.run.tracker_quality import SmrPredictor
 from drivers.emscon import open_tracker
 from drivers.emulators.emscon_server import EmsconEmulator
 from drivers.mock import MockRobot

@@ -1,6 +1,6 @@
 """The reference bridge (drivers/bridge/line_bridge.py) with its CSV replay back end against the line-protocol driver.
 
-The driver-vs-emulator tests of tests/drivers/test_tracker.py are run here unchanged, with the emulator replaced by
+The driver-vs-emulator tests of tests/drivers/test_line_tracker.py are run here unchanged, with the emulator replaced by
 the bridge replaying a CSV of the readings the emulator would have produced (same points, std devs, environment,
 same fault hooks). Only the spherical-mode test is left out: the bridge contract is Cartesian xyz.
 """
@@ -15,22 +15,21 @@ import pytest
 from drivers.base import TargetNotFound, TrackerError
 from drivers.bridge.line_bridge import (BackendError, FaroSdkBackend, LineBridge, Measurement, ReplayBackend,
                                         SpatialAnalyzerBackend)
-from drivers.emulators.tracker_server import DEFAULT_POINT_MM
-from drivers.tracker import open_tracker
-from tests.drivers import test_tracker as contract
+from drivers.emulators.line_tracker_server import DEFAULT_POINT_MM
+from drivers.line_tracker import open_tracker
+from tests.drivers import test_line_tracker as contract
 from tests.drivers.helpers import served_port
-from tests.drivers.test_tracker import (no_leftover_threads,  # noqa: F401 (autouse fixture)
-                                        test_connection_refused_is_connection_lost,
-                                        test_emulator_disconnect_is_connection_lost_and_reconnect_works,
-                                        test_emulator_dropped_reply_is_retried,
-                                        test_emulator_dropped_reply_times_out_within_the_timeout,
-                                        test_emulator_faults_map_to_errors_and_recover,
-                                        test_emulator_late_reply_already_arrived_is_flushed,
-                                        test_emulator_late_reply_in_flight_is_dropped_by_seq,
-                                        test_emulator_late_reply_without_flush_is_dropped_by_seq,
-                                        test_emulator_position_source_and_environment,
-                                        test_emulator_random_faults_are_seeded,
-                                        test_emulator_readings_with_default_options)
+from tests.drivers.test_line_tracker import (no_leftover_threads, test_connection_refused_is_connection_lost,
+                                             test_emulator_disconnect_is_connection_lost_and_reconnect_works,
+                                             test_emulator_dropped_reply_is_retried,
+                                             test_emulator_dropped_reply_times_out_within_the_timeout,
+                                             test_emulator_faults_map_to_errors_and_recover,
+                                             test_emulator_late_reply_already_arrived_is_flushed,
+                                             test_emulator_late_reply_in_flight_is_dropped_by_seq,
+                                             test_emulator_late_reply_without_flush_is_dropped_by_seq,
+                                             test_emulator_position_source_and_environment,
+                                             test_emulator_random_faults_are_seeded,
+                                             test_emulator_readings_with_default_options)
 
 pytestmark = pytest.mark.system
 CONTRACT_TESTS = (test_connection_refused_is_connection_lost,
@@ -163,13 +162,14 @@ def test_measurement_record():
 
 def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path):
     """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
-    from campaign.cell import measurement_covariance, nominal_kinematics
-    from campaign.config import load_config
-    from campaign.devices import mock_world
-    from campaign.plan import build_plan
-    from campaign.runlog import RunLog, read_log
-    from campaign.runner import Runner
-    from campaign.tracker_quality import SmrPredictor
+    from campaign.config.cell_model import measurement_covariance, nominal_kinematics
+    from campaign.config.load import load_config
+    from campaign.run.devices import mock_world
+    from campaign.plan.build import build_plan
+    from campaign.run.log_writer import RunLog
+    from campaign.run.log_reader import read_log
+    from campaign.run.runner import Runner
+    from campaign.run.tracker_quality import SmrPredictor
     from drivers.mock import MockRobot
     from tests.campaign.helpers import small_config
 

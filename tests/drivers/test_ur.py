@@ -23,7 +23,7 @@ from drivers.base import (ConnectionLost, DriverError, MotionError, MotionLimits
                           RobotNotReady)
 from drivers.emulators import rtde_protocol as proto
 from drivers.emulators.rtde_controller import JointMove
-from drivers.emulators.rtde_server import start_emulator
+from drivers.emulators.rtde_launch import start_emulator
 from drivers.registry import open_robot
 from drivers.ur import InvalidTarget, URRobot
 from robocal.kinematics import fk

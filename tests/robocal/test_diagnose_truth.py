@@ -1,4 +1,4 @@
-"""Diagnosis on campaigns from the independent truth generator (robocal/truth.py, written from the physics, not from
+"""Diagnosis on campaigns from the independent truth generator (robocal/diagnose/truth_cell.py, written from the physics, not from
 the engine): the failure classes of real campaigns (compliance + misalignment + gear on a small arm, compliance
 sampled sparsely at the extremes, a drift that follows J1 through the measurement order, a read-back lag with
 compliance), read-back lag vs backlash, and a reduced self-check (the full one: bench/bench_diagnose.py)."""
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from robocal.diagnose import diagnose
-from robocal.selfcheck import FORMS, run_self_check, run_trial, truth_input
-from robocal.truth import TruthProtocol, gravity_torque_nm, random_mass_model, simulate
+from robocal.diagnose.selfcheck import FORMS, run_self_check, run_trial, truth_input
+from robocal.diagnose.truth_cell import TruthProtocol, gravity_torque_nm, random_mass_model, simulate
 
 SMALL = TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4, timestamps=False)
 
@@ -21,9 +21,9 @@ def accepted(d):
 
 @pytest.mark.unit
 def test_truth_generator_is_independent_of_the_engine():
-    tree = ast.parse((Path(__file__).resolve().parents[2] / "robocal" / "truth.py").read_text())
-    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not imported & {"diagnose", "effects", "elastic", "selfcheck"}, imported
+    tree = ast.parse((Path(__file__).resolve().parents[2] / "robocal" / "diagnose" / "truth_cell.py").read_text())
+    imported = {"." * n.level + (n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert not [m for m in imported if m.startswith((".", "robocal.diagnose", "robocal.effects", "robocal.elastic"))], imported
 
 
 @pytest.mark.unit

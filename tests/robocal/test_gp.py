@@ -7,11 +7,11 @@ import pytest
 import yaml
 
 from campaign.cli import main
-from campaign.interchange import read_csv, write_csv
-from campaign.process import load_model
+from campaign.data.interchange_csv import read_csv, write_csv
+from campaign.calibrate.outputs import load_model
 from robocal.effects import joint_compliance
-from robocal.gp import (GaussianProcess, GPRResidual, MultiOutputGP, fit_gpr_layer, gp_inputs,
-                        neg_log_marginal_likelihood, se_ard)
+from robocal.gp import GaussianProcess, MultiOutputGP, neg_log_marginal_likelihood, se_ard
+from robocal.gp_layer import GPRResidual, fit_gpr_layer, gp_inputs
 from robocal.identify import calibrate
 from robocal.kinematics import fk, smr_tracker
 from robocal.model import CalibratedModel
