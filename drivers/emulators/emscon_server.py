@@ -394,13 +394,14 @@ def cell_position_source(config_path: str, robot_url: str | None = None) -> tupl
     """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
     function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
     released by the close function), else it stays at the plan's q_ref."""
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.run.devices import mock_world
     from drivers.mock import MockTracker
     from drivers.registry import open_robot
 
-    cfg = load_config(config_path)
-    world = mock_world(cfg)
+    cell = load_cell(config_path)
+    cfg = cell.config
+    world = mock_world(cell)
     world.faults = {}
     robot = None
     if robot_url:

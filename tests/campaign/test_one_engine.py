@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.calibrate.diagnosis import diagnose_dataset
 from campaign.data.importers import import_target_dif
 from campaign.data.interchange_csv import read_csv, write_csv
@@ -64,9 +64,9 @@ DATASETS: list[Case] = [       # measured campaigns, one line each
 @pytest.mark.parametrize("case", CAMPAIGNS + DATASETS, ids=lambda c: c.name)
 def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_path, case):
     csv, cfg_path = case.make(tmp_path)
-    cfg = load_config(cfg_path)
-    rep = calibrate_dataset(read_csv(csv), cfg).report.to_dict()
-    diag = diagnose_dataset(read_csv(csv), cfg).report
+    cell = load_cell(cfg_path)
+    rep = calibrate_dataset(read_csv(csv), cell).report.to_dict()
+    diag = diagnose_dataset(read_csv(csv), cell).report
     fitted = rep["effects"]["fitted"]
     accepted = [f for f in diag["findings"] if f["accepted"]]
     print(case.name, [f["evidence"]["label"] for f in accepted], diag["final_test_rms_mm"])

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import ROOT
@@ -22,8 +22,8 @@ CONFIG = ROOT / "configs" / "ur5.yaml"
 N_POINTS, N_RANDOM = 100, 10
 
 
-def _held_out_mean_mm(ds, cfg) -> float:
-    return float(calibrate_dataset(ds, cfg).report.stages["compensated"]["test"]["mean_mm"])
+def _held_out_mean_mm(ds, cell) -> float:
+    return float(calibrate_dataset(ds, cell).report.stages["compensated"]["test"]["mean_mm"])
 
 
 def test_select_100_of_1000_ur5_poses_against_all_and_random_subsets(tmp_path, capsys):
@@ -41,15 +41,15 @@ def test_select_100_of_1000_ur5_poses_against_all_and_random_subsets(tmp_path, c
     report = json.loads((out / "report.json").read_text())
     assert report["n"]["calib"] == N_POINTS and report["n"]["test"] == 20
     chosen = report["stages"]["compensated"]["test"]["mean_mm"]
-    cfg = load_config(CONFIG)
+    cell = load_cell(CONFIG)
     full = read_csv(data)
-    everything = _held_out_mean_mm(full, cfg)
+    everything = _held_out_mean_mm(full, cell)
     cal = np.flatnonzero(full.mask("calib"))
     random = []
     for seed in range(N_RANDOM):
         keep = ~full.mask("calib")
         keep[np.random.default_rng(seed).choice(cal, N_POINTS, replace=False)] = True
-        random.append(_held_out_mean_mm(full.subset(keep), cfg))
+        random.append(_held_out_mean_mm(full.subset(keep), cell))
     median = float(np.median(random))
     with capsys.disabled():
         print(f"\nUR5 public campaign, mean error on the 20 random held-out poses (mm), default reprocess: "

@@ -302,12 +302,12 @@ def test_cesapi_client_initialises_configures_measures_and_decodes():
 
 @pytest.mark.system
 def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.run.devices import mock_world
     from tests.campaign.helpers import small_config
 
     cfg_path = small_config(tmp_path)
-    world = mock_world(load_config(cfg_path))
+    world = mock_world(load_cell(cfg_path))
     expected = world.p_smr_tracker_mm + world.point_error_mm
     with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), wait_s=30) as (proc, port):
         with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=2.0)) as tracker:
@@ -338,7 +338,7 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
     import numpy as np
 
     from campaign.config.simulation import simulated_cell
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from drivers.emulators.rws_server import RwsEmulator
     from robocal.kinematics import smr_tracker
     from tests.campaign.helpers import small_config
@@ -346,7 +346,7 @@ def test_command_line_with_a_cell_follows_a_robot(tmp_path):
     with RwsEmulator(1) as rws:
         cfg_path = small_config(tmp_path, **{"robot.url": rws.url,
                                              "robot.options": {"credentials": {"use_default": True}}})
-        truth = simulated_cell(load_config(cfg_path)).truth
+        truth = simulated_cell(load_cell(cfg_path)).truth
         with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), "--robot-url", rws.url,
                          wait_s=30) as (proc, port):
             with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=5.0)) as tracker:

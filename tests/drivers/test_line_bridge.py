@@ -162,8 +162,7 @@ def test_measurement_record():
 
 def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path):
     """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
-    from campaign.config.cell_model import measurement_covariance, nominal_kinematics
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.run.devices import mock_world
     from campaign.plan.build import build_plan
     from campaign.run.log_writer import RunLog
@@ -173,23 +172,24 @@ def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path
     from drivers.mock import MockRobot
     from tests.campaign.helpers import small_config
 
-    cfg = load_config(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
-    world = mock_world(cfg)
+    cell = load_cell(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
+    cfg = cell.config
+    world = mock_world(cell)
     world.faults = {}
 
     class CellBackend(ReplayBackend):
         def measure(self):
             return Measurement(tuple(world.p_smr_tracker_mm + world.point_error_mm))
 
-    points = build_plan(cfg, nominal_kinematics(cfg)).points[:5]
+    points = build_plan(cell).points[:5]
     backend = CellBackend([{"x": "0", "y": "0", "z": "0"}])
     with LineBridge(backend) as bridge:
         tracker = open_tracker(bridge.url, {"timeout_s": 0.5, "environment": None,
                                             "goto": "GOTO {seq} {x:.3f} {y:.3f} {z:.3f}", "find": "FIND {seq}"})
         tracker.connect()
-        predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+        predict = SmrPredictor(cell.kinematics, cfg.tracker.position_in_base_mm)
         runner = Runner(MockRobot(world), tracker, cfg.tracker.measurement, world.clock,
-                        lambda p: measurement_covariance(cfg, p[None])[0], predict_p_tracker_mm=predict)
+                        lambda p: cell.covariance(p[None])[0], predict_p_tracker_mm=predict)
         runner.on_point = lambda point, record: (predict.observe(record.q_read_deg, record.p_tracker_mm),
                                                  bridge.inject("beam_break") if point is points[2] else None)
         outcome = runner.execute(points, RunLog.create(tmp_path / "run", {"config_sha256": "t", "plan_sha256": "t"}))

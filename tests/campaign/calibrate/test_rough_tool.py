@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
@@ -59,7 +59,7 @@ def _process(tmp_path, data, tool_z):
     where = tmp_path / f"z{tool_z:g}"
     where.mkdir()
     cfg = small_config(where, "ur10", **{"tool.p_flange_smr_mm": [0.0, 0.0, tool_z]})
-    return calibrate_dataset(read_csv(data), load_config(cfg)).report.to_dict()
+    return calibrate_dataset(read_csv(data), load_cell(cfg)).report.to_dict()
 
 
 @pytest.mark.system

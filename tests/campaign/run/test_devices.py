@@ -68,7 +68,7 @@ def test_open_cell_closes_both_devices_on_error(monkeypatch):
     monkeypatch.setattr(devices, "open_cell_robot", lambda ctx, url, opts: Dev("robot"))
     monkeypatch.setattr(devices, "open_cell_tracker", lambda ctx, url, opts, robot: Dev("tracker"))
 
-    class Cfg:                                              # the config fields open_cell reads
+    class Cfg:                                              # the config fields open_devices reads
         class robot:
             joints, url, options = [None] * 6, "x://", {}
 
@@ -77,8 +77,11 @@ def test_open_cell_closes_both_devices_on_error(monkeypatch):
 
             class measurement:
                 timeout_s = 1.0
+
+    class Cell:                                             # the cell model of that config
+        config = Cfg
     with pytest.raises(RuntimeError):
-        with devices.open_devices(Cfg) as cell:
+        with devices.open_devices(Cell) as cell:
             assert isinstance(cell.clock, SystemClock)
             raise RuntimeError("boom")
     assert closed == ["tracker", "robot"]

@@ -11,8 +11,7 @@ import time
 
 import numpy as np
 
-from campaign.config.cell_model import nominal_kinematics
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
 from tests.campaign.helpers import ROOT, small_config
@@ -67,8 +66,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path):
         assert final.startswith(prefix)
     contents = read_log(log_path)
     ids = [p["point_id"] for p in contents.points]
-    c = load_config(cfg)
-    planned = [p.point_id for p in build_plan(c, nominal_kinematics(c)).points]
+    planned = [p.point_id for p in build_plan(load_cell(cfg)).points]
     assert sorted(ids) == sorted(planned), "every planned point exactly once"
     assert contents.stops[-1]["exit_status"] == "success"
     assert (run_dir / "report.json").exists()

@@ -2,9 +2,8 @@
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.config.simulation import simulated_cell
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.run.tracker_quality import SmrPredictor, check_device_stability, device_covariance
 from drivers.base import TrackerReading, Unstable
 from robocal.kinematics import smr_tracker
@@ -39,9 +38,10 @@ def test_device_std_beyond_the_stability_limit_is_unstable():
 def test_prediction_after_registration_is_within_a_few_mm(tmp_path, name):
     """Rotated tracker frame (the configs' simulated T_tracker_base), true geometry with errors: after 3 measured
     points the nominal model + registration predicts the SMR to a few mm (what FindReflector needs)."""
-    cfg = load_config(small_config(tmp_path, name))
-    truth = simulated_cell(cfg).truth
-    kin = nominal_kinematics(cfg)
+    cell = load_cell(small_config(tmp_path, name))
+    cfg = cell.config
+    truth = simulated_cell(cell).truth
+    kin = cell.kinematics
     rng = np.random.default_rng(4)
     lo, hi = np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad)
     q_deg = rng.uniform(0.6 * lo, 0.6 * hi, size=(12, kin.n))
