@@ -131,7 +131,7 @@ def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
                     options: DiagnosisOptions | None = None) -> DiagnosisReport:
     """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
     ``calibration.cv_folds``, as in reprocess)."""
-    return diagnose_dataset(load_source(source), cfg, options)
+    return diagnose_dataset(load_source(source).dataset, cfg, options)
 
 
 def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:
