@@ -77,13 +77,14 @@ def dataset_from_log(contents: LogContents) -> Dataset:
     if not contents.points:
         raise DataError(src, "no data rows (no point records)")
     recs = contents.records(foreign=True)
-    check_records(recs, src)
+    lines = contents.point_lines
+    check_records(recs, src, lines)
     ids = [r.point_id for r in recs]
     sets = [r.set for r in recs]
     _check_ids(
         ids,
         sets,
-        lambda i, what: DataError(src, f"point record {i + 1}: {what}"),
+        lambda i, what: DataError(src, f"point record {i + 1}: {what}", line=lines[i] if i < len(lines) else None),
         lambda k: f"in point record {k + 1}",
     )
     robot = [isinstance(r, PointRecord) for r in recs]

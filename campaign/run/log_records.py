@@ -301,27 +301,30 @@ OPTIONAL_FIELDS = (
 )
 
 
-def _where(records: Sequence[Record], i: int) -> str:
-    return f"point record {i + 1} (point_id {records[i].point_id!r})"
+def check_records(records: Sequence[Record], source: str, lines: Sequence[int] | None = None) -> None:
+    """The rules the point records of one log obey together: sets the plan knows, nest records with a ``nest_id``,
+    one joint count, every :data:`OPTIONAL_FIELDS` value in all records or none, nest records timed (``t_end_s``:
+    drift is a function of time). A broken rule is one :class:`DataError` line naming ``source``, the record's
+    line (``lines[i]``: 1-based line of record i in ``source``, when known) and its point id."""
+    def fail(i: int, what: str) -> DataError:
+        line = lines[i] if lines is not None and i < len(lines) else None
+        return DataError(source, f"point record {i + 1} (point_id {records[i].point_id!r}): {what}", line=line)
 
-
-def check_records(records: Sequence[Record], source: str) -> None:
-    """The rules the point records of one log obey together (DataError naming ``source`` and the record): sets
-    the plan knows, nest records with a ``nest_id``, one joint count, every :data:`OPTIONAL_FIELDS` value in
-    all records or none, nest records timed (``t_end_s``: drift is a function of time)."""
     for i, rec in enumerate(records):
         if rec.set not in SETS:
-            raise DataError(source, f"{_where(records, i)}: set must be calib, test, check or nest, got {rec.set!r}")
+            raise fail(i, f"set must be calib, test, check or nest, got {rec.set!r}")
         if isinstance(rec, NestRecord) and not rec.nest_id:
-            raise DataError(source, f"{_where(records, i)}: a nest record without 'nest_id'")
+            raise fail(i, "a nest record without 'nest_id'")
     robot = [i for i, rec in enumerate(records) if isinstance(rec, PointRecord)]
-    widths = {records[i].n_joints for i in robot}
-    if len(widths) > 1:
-        raise DataError(source, f"point records have different joint counts {sorted(widths)}")
+    odd = next((i for i in robot if records[i].n_joints != records[robot[0]].n_joints), None)
+    if odd is not None:
+        raise fail(odd, f"{records[odd].n_joints} joint values, point record {robot[0] + 1} has "
+                        f"{records[robot[0]].n_joints} (point records have different joint counts)")
     for field in OPTIONAL_FIELDS:
         rows = range(len(records)) if field.nests else robot
         missing = [i for i in rows if field.get(records[i]) is None]
         if missing and len(missing) < len(rows) and not field.gaps_ok([records[i] for i in rows]):
-            raise DataError(source, f"{_where(records, missing[0])}: has no '{field.name}' while other points do")
+            raise fail(missing[0], f"has no '{field.name}' while other points do")
     if len(robot) < len(records) and all(rec.t_end_s is None for rec in records):
-        raise DataError(source, "nest records need 't_end_s' (drift is a function of time)")
+        nest = next(i for i, rec in enumerate(records) if isinstance(rec, NestRecord))
+        raise fail(nest, "nest records need 't_end_s' (drift is a function of time)")

@@ -129,4 +129,8 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
             line = lines[k] if k < len(lines) else None
             raise RunLogError(str(path), f"{problem}: the log cannot be resumed (nothing was moved)", line=line)
         seen.add(rec.point_id)
-    check_records(records, str(path))
+    try:
+        check_records(records, str(path), lines)
+    except DataError as exc:
+        raise RunLogError(exc.file, f"{exc.message}: the log cannot be resumed (nothing was moved)",
+                          line=exc.line) from None
