@@ -6,7 +6,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from campaign.plan.points import SETS
+from campaign.run.log_records import SETS
 from robocal.approach import approach_signs
 
 _SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order

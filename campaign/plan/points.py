@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-SETS = ("calib", "test", "check", "nest")                # the sets a plan point (and a measured row) belongs to
-
 
 @dataclass(frozen=True)
 class PlanPoint:

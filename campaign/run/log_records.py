@@ -29,10 +29,10 @@ from typing import Any, Callable, Sequence
 from campaign.errors import DataError
 from campaign.io.json_fields import (RecordError, count_field, float_list, float_rows, mat3_field, number_field,
                                      object_field, text_field, vector_field)
-from campaign.plan.points import SETS
 
+SETS = ("calib", "test", "check", "nest")       # the sets a point record (and a dataset row) belongs to
 
-__all__ = ["SmrReading", "PointRecord", "NestRecord", "point_from_dict", "migrate", "check_records", "temp_c_of",
+__all__ = ["SETS", "SmrReading", "PointRecord", "NestRecord", "point_from_dict", "migrate", "check_records", "temp_c_of",
            "sigma_of", "OptionalField", "OPTIONAL_FIELDS"]
 
 
