@@ -13,8 +13,9 @@ before a record is read. A record of this software's log is read as the runner w
 always written must be there). ``foreign=True`` reads a point of any log (a log of another tool or written by
 hand, which ``campaign reprocess``/``diagnose`` turn into a dataset): only ``point_id``, ``set``, ``p_tracker_mm``
 and the joints (``q_cmd_deg`` and/or ``q_read_deg``; a nest: ``nest_id``) are required, the fields the runner
-always writes may be absent (None). :func:`check_records` holds the rules a log's point records obey together (set names,
-one joint count, an optional field in all records or none), used by the resume checks and the dataset conversion.
+always writes may be absent (None). :func:`check_records` holds the rules a log's point records obey together
+(set names, one joint count, an optional field in all records or none), used by the resume checks and the dataset
+conversion; its errors name the file and the record's line.
 Units are in the field names (``_mm``, ``_mm2``, ``_deg``, ``_s``, ``_kg``, ``_c``); frames as in the log
 (``p_tracker_mm`` tracker frame, ``p_target_base_mm`` robot base frame). The reports are read-only mappings too
 (``report["stages"]``), so code and tests that read them by key keep working.
@@ -32,8 +33,8 @@ from campaign.io.json_fields import (RecordError, count_field, float_list, float
 
 SETS = ("calib", "test", "check", "nest")       # the sets a point record (and a dataset row) belongs to
 
-__all__ = ["SETS", "SmrReading", "PointRecord", "NestRecord", "point_from_dict", "migrate", "check_records", "temp_c_of",
-           "sigma_of", "OptionalField", "OPTIONAL_FIELDS"]
+__all__ = ["SETS", "SmrReading", "PointRecord", "NestRecord", "point_from_dict", "migrate", "check_records",
+           "temp_c_of", "sigma_of", "OptionalField", "OPTIONAL_FIELDS"]
 
 
 # --------------------------------------------------------------------------
@@ -159,9 +160,11 @@ class PointRecord:
         smrs = tuple(s for s in (SmrReading.from_dict(data, k, foreign) for k in (2, 3)) if s is not None)
         return cls(
             text_field(data, "point_id"), text_field(data, "set"), q_cmd, vector_field(data, "q_read_deg", n, opt),
-            vector_field(data, "p_tracker_mm", 3), mat3_field(data, "cov_mm2", opt), text_field(data, "cov_source", True),
-            number_field(data, "spread_mm", opt), count_field(data, "n_samples", opt), number_field(data, "t_start_s", opt),
-            number_field(data, "t_measure_s", True), number_field(data, "t_end_s", opt), vector_field(data, "approach", n, opt),
+            vector_field(data, "p_tracker_mm", 3), mat3_field(data, "cov_mm2", opt),
+            text_field(data, "cov_source", True), number_field(data, "spread_mm", opt),
+            count_field(data, "n_samples", opt), number_field(data, "t_start_s", opt),
+            number_field(data, "t_measure_s", True), number_field(data, "t_end_s", opt),
+            vector_field(data, "approach", n, opt),
             number_field(data, "payload_kg", opt), count_field(data, "retries", opt),
             vector_field(data, "p_target_base_mm", 3, opt), object_field(data, "temperatures", True),
             vector_field(data, "joint_temp_c", n, True), vector_field(data, "payload_cog_flange_mm", 3, True),
