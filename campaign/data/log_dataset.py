@@ -73,7 +73,7 @@ def dataset_from_log(contents: LogContents) -> Dataset:
     environment (``temperatures``: temp_c, pressure_hpa, humidity_pct) gives
     ``env_temp_c``, ``env_pressure_hpa``, ``env_humidity_pct`` (NaN where not read).
     """
-    src = getattr(contents, "path", "") or "<run log>"
+    src = contents.path or "<run log>"
     if not contents.points:
         raise DataError(src, "no data rows (no point records)")
     recs = contents.records(foreign=True)
@@ -104,9 +104,9 @@ def dataset_from_log(contents: LogContents) -> Dataset:
         if not all(robot):
             extra["nest_id"] = tuple("" if r else rec.nest_id for r, rec in zip(robot, recs))
         q_all = _with_nan(_spread([_joints(r) for r in rob], idx, len(recs)), robot, n_joints)
-        if all(r.cov_source == "device" and r.cov_mm2 is not None for r in rob):   # all robot rows or none; nest
-            # rows: their logged cov
-            extra["cov_mm2"] = [r.cov_mm2 if r.cov_mm2 is not None else [[math.nan] * 3] * 3 for r in recs]
+        if all(r.cov_source == "device" and r.cov_mm2 is not None for r in rob):   # all robot rows or none
+            blank = [[math.nan] * 3] * 3                                            # nest rows keep theirs
+            extra["cov_mm2"] = [r.cov_mm2 if r.cov_mm2 is not None else blank for r in recs]
         p = [r.p_tracker_mm for r in recs]
         return Dataset(tuple(ids), tuple(sets), q_all, p, source=src, **extra)
     except DataError:
