@@ -14,8 +14,8 @@ from rich.console import Console
 from campaign.calibrate.plausibility import is_forced
 from campaign.config.cell_model import CellModel
 from campaign.config.load import load_cell
-from campaign.data.interchange_csv import read_csv, write_csv
-from campaign.data.log_dataset import dataset_from_log
+from campaign.data.interchange_csv import write_csv
+from campaign.data.source import load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
 from campaign.plan.iso9283 import IsoCube, iso_cube, iso_plan
@@ -112,19 +112,17 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         iso = finish(cell, run_dir)
         write_report(run_dir)
         return RunResult(run_dir, outcome, None, iso)
-    contents = read_log(run_dir)
-    dataset = dataset_from_log(contents)
-    write_csv(run_dir / "data.csv", dataset)
-    return RunResult(run_dir, outcome, _calibrate(dataset, cell, run_dir, contents))
+    source = load_source(run_dir)
+    write_csv(run_dir / "data.csv", source.dataset)
+    return RunResult(run_dir, outcome, _calibrate(source.dataset, cell, run_dir, source.contents))
 
 
 def reprocess(source: Path, cell: CellModel, out_dir: Path, overwrite: bool = False) -> Calibrated:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file into ``out_dir``:
     new, empty, or written by reprocess from the same source (any but a run's with ``overwrite``)."""
     claim = check_dir(out_dir, "reprocess", overwrite, source=source_key(source))
-    contents = read_log(source) if source.is_dir() else None
-    dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
-    return _calibrate(dataset, cell, claim, contents)
+    data = load_source(source)
+    return _calibrate(data.dataset, cell, claim, data.contents)
 
 
 def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -> Calibrated:

@@ -39,10 +39,7 @@ KNOWN_UPWARD = {   # (importer, imported): arrows from a lower package to a high
     ("drivers.emulators.emscon_server", "campaign.config.load"): "--cell builds the mock world from a campaign config",
     ("drivers.emulators.emscon_server", "campaign.run.devices"): "--cell builds the mock world from a campaign config",
 }
-KNOWN_DOWNWARD: dict[tuple[str, str], str] = {  # (importer, imported): a campaign room importing a room above it
-    ("campaign.run.resume_checks", "campaign.data.log_dataset"):
-        "resume builds a dataset to check the log (one log schema, check_records: phase 2b)",
-}
+KNOWN_DOWNWARD: dict[tuple[str, str], str] = {}  # (importer, imported): a campaign room importing a room above it
 KNOWN_PRIVATE = {
     ("robocal.elastic.fit", "robocal.identify", "_whiten"): "whitening shared with the effect engine (phase 2b)",
 }

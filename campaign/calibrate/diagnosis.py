@@ -131,7 +131,7 @@ def diagnose_source(source: str | os.PathLike, cell: CellModel,
                     options: DiagnosisOptions | None = None) -> DiagnosisReport:
     """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
     ``calibration.cv_folds``, as in reprocess)."""
-    return diagnose_dataset(load_source(source), cell, options)
+    return diagnose_dataset(load_source(source).dataset, cell, options)
 
 
 def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:

@@ -34,7 +34,7 @@ from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload,
 from campaign.config.schema import MeasurementConfig, NestsConfig
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import PlanPoint
-from .log_records import PointRecord, SmrReading
+from .log_records import NestRecord, PointRecord, SmrReading
 from .runner_nests import NestReadings, PointFailed
 from .log_writer import RunLog
 from .log_reader import RunLogError
@@ -54,13 +54,16 @@ class RunOutcome:
 
 
 class Runner(NestReadings):
-    """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty. ``limits``
-    (caps sent to the driver before the first move), ``payload``, ``guard`` (swept-path checks and routes) and
-    ``first_pass_limits`` (a reduced-speed traverse of the plan before measuring): None = none."""
+    """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty;
+    ``on_point(point, record)`` is called after each record is on disk (a :class:`PointRecord`, or a
+    :class:`NestRecord` for a nest point). ``limits`` (caps sent to the driver before the first move),
+    ``payload``, ``guard`` (swept-path checks and routes) and ``first_pass_limits`` (a reduced-speed traverse of
+    the plan before measuring): None = none."""
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
-                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1,
+                 on_point: Callable[[PlanPoint, PointRecord | NestRecord], None] | None = None,
+                 n_smrs: int = 1,
                  predict_p_tracker_mm: Callable[[np.ndarray], np.ndarray] | None = None,
                  covariance_from_device: Callable[[np.ndarray], np.ndarray] | None = None,
                  nests: NestsConfig | None = None, *, limits: MotionLimits | None = None,

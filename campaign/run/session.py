@@ -112,7 +112,7 @@ def continue_clock(clock, contents) -> None:
     keep increasing across sessions (a real cell's clock is the wall clock and needs nothing)."""
     if isinstance(clock, SystemClock) or contents is None:
         return
-    times = [p.get("t_end_s") for p in contents.points] + [e.get("t_s") for e in contents.events]
+    times = [r.t_end_s for r in contents.records()] + [e.get("t_s") for e in contents.events]
     last = max((t for t in times if isinstance(t, (int, float))), default=0.0)
     if last > clock.now():
         clock.sleep(last - clock.now())
