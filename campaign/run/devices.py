@@ -1,4 +1,4 @@
-"""The cell's devices: ``open_cell(cfg)`` opens and connects robot and tracker and closes them on exit.
+"""The cell's devices: ``open_devices(cfg)`` opens and connects robot and tracker and closes them on exit.
 
 Which drivers run is the registry's business (by URL); the simulated world behind ``mock://`` drivers is built
 by the mock drivers themselves from the config's simulation section (``mock_world``), only when one is used."""
@@ -12,7 +12,7 @@ import numpy as np
 
 from drivers.base import Clock, Robot, SystemClock, Tracker
 from drivers.mock import MockWorld
-from drivers.registry import CellContext, open_cell_robot, open_cell_tracker
+from drivers.registry import CellContext, open_robot, open_tracker
 
 from campaign.config.simulation import simulated_cell
 from campaign.config.schema import CampaignConfig
@@ -31,10 +31,10 @@ def open_devices(cfg: CampaignConfig) -> Iterator[Devices]:
     """Open and connect the config's robot and tracker; both are closed on exit whatever happens."""
     with ExitStack() as stack:
         context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cfg))
-        robot = open_cell_robot(context, cfg.robot.url, cfg.robot.options)
+        robot = open_robot(cfg.robot.url, cfg.robot.options, context)
         stack.callback(robot.close)
         options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set
-        tracker = open_cell_tracker(context, cfg.tracker.url, options, robot)
+        tracker = open_tracker(cfg.tracker.url, options, context, robot)
         stack.callback(tracker.close)
         robot.connect()
         tracker.connect()
