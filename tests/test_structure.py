@@ -40,9 +40,7 @@ KNOWN_DOWNWARD: dict[tuple[str, str], str] = {  # (importer, imported): a campai
     ("campaign.run.resume_checks", "campaign.data.log_dataset"):
         "resume builds a dataset to check the log (one log schema, check_records: phase 2b)",
 }
-KNOWN_PRIVATE = {
-    ("robocal.elastic.fit", "robocal.identify", "_whiten"): "whitening shared with the effect engine (phase 2b)",
-}
+KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}   # (importer, defining module, name)
 
 
 @dataclass(frozen=True)
