@@ -26,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from robocal.noise import repeatability_sigma_mm
-from robocal.sim_cell import SimulatedCell, readback_joints_deg, tracker_drift_mm
+from robocal.simulation.mock_cell import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
 from robocal.sweep import move_durations_s, peak_speed_per_unit_s
 

@@ -11,7 +11,7 @@ def _world_builder(calls):
     from tests.cells import irb2600
     from drivers.mock import MockWorld
     from robocal.noise import TrackerUncertainty
-    from robocal.sim_cell import SimulatedCell
+    from robocal.simulation.mock_cell import SimulatedCell
 
     def build():
         calls.append(1)
