@@ -247,7 +247,10 @@ def priority_order(layout: ParamLayout) -> list[int]:
 
 
 def observability_indices(A: np.ndarray) -> dict:
-    """Indices O1..O5 (effects.md §3.2) of a column-scaled Jacobian A (m, L)."""
+    """Observability indices of a column-scaled Jacobian A (m, L) with singular values s1 >= ... >= sL: O1 =
+    (s1 s2 ... sL)^(1/L) / sqrt(m) (Borm & Menq 1991), O2 = sL / s1 (Driels & Pathre 1990), O3 = sL (Nahvi,
+    Hollerbach & Hayward 1994), O4 = sL^2 / s1 (Nahvi & Hollerbach 1996), O5 = 1 / sum(1 / s) (Sun & Hollerbach
+    2008)."""
     s = np.linalg.svd(A, compute_uv=False)
     m, L = A.shape
     if L == 0 or s[-1] <= 0:
