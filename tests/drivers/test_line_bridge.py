@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import csv
 import random
-import select
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -165,22 +162,12 @@ def test_a_copied_drivers_folder_runs_without_site_packages(tmp_path):
     alone (``-S``: no site-packages, so neither numpy nor this installed project; ``-E``: no PYTHONPATH)."""
     shutil.copytree(REPO / "drivers", tmp_path / "drivers", ignore=shutil.ignore_patterns("__pycache__"))
     (tmp_path / "session.csv").write_text("x,y,z\n1200.0,-300.0,150.0\n")
-    args = ["-S", "-E", "-m", "drivers.bridge.line_bridge", "--csv", "session.csv", "--port", "0", "--print-port"]
-    proc = subprocess.Popen([sys.executable, *args], cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    try:
-        assert select.select([proc.stdout], [], [], 10)[0], proc.stderr.read().decode()
-        port = int(proc.stdout.readline())
+    with served_port("drivers.bridge.line_bridge", "--csv", "session.csv", python_flags=("-S", "-E"),
+                     cwd=tmp_path) as (proc, port):
         with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
             assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
         proc.stdin.close()
         assert proc.wait(5) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        proc.stdout.close()
-        proc.stderr.close()
 
 
 def test_measurement_record():
