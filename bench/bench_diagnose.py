@@ -1,6 +1,6 @@
 """Diagnosis and effect-engine timing, the self-check on truth campaigns, and both commands on one CSV.
 
-1. Time on 1000 points (700 calibration + 300 test poses of a truth campaign, robocal/diagnose/truth_cell.py, carrying
+1. Time on 1000 points (700 calibration + 300 test poses of a truth campaign, robocal/simulation/truth_cell.py, carrying
    compliance, backlash, a read-back lag and a warm-up): ``robocal.diagnose.diagnose`` (target <= 3 s), the
    ``campaign diagnose`` path on the same campaign written as a CSV, and the default ``reprocess`` calibration work
    (``campaign.calibrate.stages.calibrate_dataset``: preparation, geometric fit, effect engine, residual layer, evaluation; no HTML;
@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from robocal.diagnose import diagnose  # noqa: E402
 from robocal.diagnose.selfcheck import format_confusion, run_self_check, truth_input  # noqa: E402
-from robocal.diagnose.truth_cell import TruthProtocol, simulate  # noqa: E402
+from robocal.simulation.truth_cell import TruthProtocol, simulate  # noqa: E402
 
 ROBOT = ("joint_compliance", "backlash", "readback_lag", "thermal_drift")
 

@@ -2,7 +2,7 @@
 
 The IRB 2600 cell of configs/irb2600.yaml with gravity compliance of J2/J3 (c2 1e-6, c3 2e-6 rad/(N m)) and a
 cyclic gear error of J2 (first and second harmonic, 0.008 / 0.004 deg); the truth geometry changes with the seed.
-  A. Held-out RMS of the final model (`process`, default calibration settings) for the grid plan, an optimal plan
+  A. Held-out RMS of the final model (`calibrate_dataset`, default calibration settings) for the grid plan, an optimal plan
      of a third of the grid's points (`plan.kind: optimal`), and a seeded random third of the grid; every design
      is judged on the same measured test set (same poses, same noise) of its seed. Then held-out RMS vs number
      of points: coarser grids (step 400 / 300 / 250 mm), optimal plans and random subsets of the grid of the same

@@ -31,7 +31,7 @@ from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.effects import joint_compliance  # noqa: E402
 from robocal.frames import make_T, rotvec_to_matrix  # noqa: E402
 from robocal.gp import cholesky_inverse, nlml_shared, se_ard  # noqa: E402
-from robocal.sim_cell import SimulatedCell, random_geometric_errors  # noqa: E402
+from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors  # noqa: E402
 
 UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 TARGETS_S = {1000: 3.0, 3000: 10.0}

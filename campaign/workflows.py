@@ -1,4 +1,6 @@
-"""The whole campaign in one place: config -> plan -> drivers -> durable log -> calibration -> report."""
+"""The commands' workflows, built from the rooms: ``run_campaign`` (config -> plan -> devices -> durable log ->
+calibration -> report), ``reprocess`` (a log or CSV -> model + report), ``verify`` (closed-loop passes with
+corrected targets) and ``run_iso9283`` (the ISO 9283 acceptance run). The library API the CLI and the tests call."""
 from __future__ import annotations
 
 from contextlib import ExitStack

@@ -122,7 +122,7 @@ def _self_check(args: argparse.Namespace) -> int:
 
     out = _stdout()
     total = len(trial_plan(args.seeds))
-    out.print(f"self-check: {total} simulated campaigns from robocal/diagnose/truth_cell.py ({args.seeds} seeds per effect, controls, "
+    out.print(f"self-check: {total} simulated campaigns from robocal/simulation/truth_cell.py ({args.seeds} seeds per effect, controls, "
               "two-effect cases, an effect outside the library)", markup=False)
     with Progress(TextColumn("diagnosing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=out, disable=not out.is_terminal) as bar:

@@ -25,10 +25,10 @@ import yaml
 
 from campaign.config.bounded_yaml import load_limited, read_limited
 from campaign.config.reader import _Reader, _describe, _fmt, _keys
-from campaign.config.schema import (CONVENTIONS, CalibrationConfig, CampaignConfig, CorrectionConfig, JointConfig,
-                                    MAX_JOINTS, MeasurementConfig, OutputConfig, PlanConfig, RobotConfig,
-                                    SimulationConfig, ToolConfig, TrackerConfig, _NAME_RE, FILE_NAME_MAX,
-                                    MAX_NAME_CHARS)
+from campaign.config.plan_schema import PlanConfig
+from campaign.config.schema import (CalibrationConfig, CampaignConfig, CorrectionConfig, JointConfig, MeasurementConfig,
+                                    OutputConfig, RobotConfig, SimulationConfig, ToolConfig, TrackerConfig)
+from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, _NAME_RE
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
 from robocal.noise import TrackerUncertainty

@@ -6,7 +6,7 @@ import numpy as np
 
 from campaign.errors import ConfigError
 from robocal.effects import by_name
-from robocal.sim_cell import SimulatedCell, random_geometric_errors
+from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors
 
 from .cell_model import CellModel
 from .schema import CampaignConfig

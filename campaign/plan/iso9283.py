@@ -1,5 +1,7 @@
-"""The ISO 9283 acceptance-test plan: the largest reachable cube inside the plan's box, its poses P1..P5 and their
-cycles P1 -> P5 -> P4 -> P3 -> P2 (ids ``N:Pk.cNN`` nominal, ``C:Pk.cNN`` corrected)."""
+"""The ISO 9283 acceptance-test plan (``plan.kind: iso9283``): the largest cube inside the plan's box (or
+``plan.iso9283.edge_mm``), shrunk in 5 % steps until P1..P5 are reachable on the plan's robot configuration with the
+fixed SMR orientation, and ``cycles`` cycles P1 -> P5 -> P4 -> P3 -> P2, so each pose is always approached from the
+same neighbour (ids ``N:Pk.cNN`` nominal, ``C:Pk.cNN`` corrected)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

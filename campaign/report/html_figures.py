@@ -59,7 +59,7 @@ def _stages(err: dict) -> tuple:
 
 def _points(report: dict):
     """(sets (N,), p_base (N, 3), q_deg (N, n), {stage: |err| (N,)}) of report.json's points section."""
-    pts = PointTable.of(report.get("points") or None)      # inline, or read from points.csv by html_report
+    pts = PointTable.of(report.get("points") or None)      # inline, or read from points.csv by report.html
     if pts is None:
         return None
     err = {k: np.linalg.norm(v, axis=1) for k, v in pts.err_base_mm.items()}

@@ -1,10 +1,10 @@
-"""ISO 9283 acceptance test on the cell: the standard cube, its cycles through the runner and the durable log,
-and AP / RP / AD / RD (``robocal.iso9283``) with nominal and, given a calibrated model, corrected targets.
+"""ISO 9283 characteristics of an acceptance run: AP / RP / AD / RD (``robocal.iso9283``) of the logged cycles,
+with nominal and, given a calibrated model, corrected targets, as the run's ``report.json``
+(``campaign-iso9283/1``). The cube and its plan are in :mod:`campaign.plan.iso9283`; the run itself is
+``campaign.workflows.run_iso9283``.
 
-Plan (``plan.kind: iso9283``): the largest cube inside the grid box (or ``plan.iso9283.edge_mm``), shrunk in 5 %
-steps until P1..P5 are reachable on the plan's robot configuration with the fixed SMR orientation; ``cycles``
-cycles P1 -> P5 -> P4 -> P3 -> P2, so each pose is always approached from the same neighbour. Rows are logged
-as set ``check`` (repeated poses) with ids ``N:P3.c07`` (nominal targets) or ``C:P3.c07`` (corrected targets).
+Rows are logged as set ``check`` (repeated poses) with ids ``N:P3.c07`` (nominal targets) or ``C:P3.c07``
+(corrected targets).
 
 Frame: the attained positions are measured in the tracker frame. With a calibrated model its registration
 ``T_tracker_base`` maps them into the robot base frame (the certificate). Without one, the base frame is the

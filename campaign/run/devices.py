@@ -12,7 +12,7 @@ import numpy as np
 
 from drivers.base import Clock, Robot, SystemClock, Tracker
 from drivers.mock import MockWorld
-from drivers.registry import CellContext, open_cell_robot, open_cell_tracker
+from drivers.registry import CellContext, open_robot, open_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
@@ -33,10 +33,10 @@ def open_devices(cell: CellModel) -> Iterator[Devices]:
     cfg = cell.config
     with ExitStack() as stack:
         context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cell))
-        robot = open_cell_robot(context, cfg.robot.url, cfg.robot.options)
+        robot = open_robot(cfg.robot.url, cfg.robot.options, context)
         stack.callback(robot.close)
         options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set
-        tracker = open_cell_tracker(context, cfg.tracker.url, options, robot)
+        tracker = open_tracker(cfg.tracker.url, options, context, robot)
         stack.callback(tracker.close)
         robot.connect()
         tracker.connect()

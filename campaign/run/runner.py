@@ -31,7 +31,8 @@ from robocal.approach import next_approach
 from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
                           Unstable, average_samples)
 
-from campaign.config.schema import MeasurementConfig, NestsConfig
+from campaign.config.plan_schema import NestsConfig
+from campaign.config.schema import MeasurementConfig
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import PlanPoint
 from .log_records import NestRecord, PointRecord, SmrReading

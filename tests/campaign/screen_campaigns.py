@@ -16,7 +16,7 @@ from campaign.plan.build import build_plan
 from robocal.effects import joint_compliance
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import smr_base, smr_tracker
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 from tests.campaign.helpers import ROOT
 
 BASE = load_config(ROOT / "configs/irb2600.yaml")

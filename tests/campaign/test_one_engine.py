@@ -2,7 +2,7 @@
 section: the defaults): the same accepted effects, the same parameter values (1e-9 relative) and the same "after"
 RMS on the test rows as reprocess's elastic stage.
 
-20 simulated campaigns of robocal/diagnose/truth_cell.py (the failure classes of real campaigns and single effects) and the
+20 simulated campaigns of robocal/simulation/truth_cell.py (the failure classes of real campaigns and single effects) and the
 measured campaigns of DATASETS (the public UR5 campaign). Adding a dataset is one line: ``Case(name, make)`` with
 ``make(tmp_path) -> (csv_path, config_path)``.
 """
@@ -21,7 +21,7 @@ from campaign.data.importers import import_target_dif
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
 from robocal.diagnose.selfcheck import FORMS, trial_setting
-from robocal.diagnose.truth_cell import TruthProtocol, simulate, small_arm_nominal
+from robocal.simulation.truth_cell import TruthProtocol, simulate, small_arm_nominal
 from tests.campaign.helpers import ROOT, truth_csv
 
 SMALL = dict(n_calib=160, n_test=50, check_poses=6, check_repeats=4)

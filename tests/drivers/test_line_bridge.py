@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import random
+import shutil
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from drivers.bridge.line_bridge import (BackendError, FaroSdkBackend, LineBridge
 from drivers.emulators.line_tracker_server import DEFAULT_POINT_MM
 from drivers.line_tracker import open_tracker
 from tests.drivers import test_line_tracker as contract
-from tests.drivers.helpers import served_port
+from tests.drivers.helpers import REPO, served_port
 from tests.drivers.test_line_tracker import (no_leftover_threads, test_connection_refused_is_connection_lost,
                                              test_emulator_disconnect_is_connection_lost_and_reconnect_works,
                                              test_emulator_dropped_reply_is_retried,
@@ -150,6 +151,19 @@ def test_command_line_replays_a_csv(tmp_path):
     path = tmp_path / "session.csv"
     path.write_text("x,y,z\n1200.0,-300.0,150.0\n")
     with served_port("drivers.bridge.line_bridge", "--csv", str(path)) as (proc, port):
+        with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
+            assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
+        proc.stdin.close()
+        assert proc.wait(5) == 0
+
+
+def test_a_copied_drivers_folder_runs_without_site_packages(tmp_path):
+    """The documented deployment: only the ``drivers/`` folder, copied to a PC, run with the standard library
+    alone (``-S``: no site-packages, so neither numpy nor this installed project; ``-E``: no PYTHONPATH)."""
+    shutil.copytree(REPO / "drivers", tmp_path / "drivers", ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "session.csv").write_text("x,y,z\n1200.0,-300.0,150.0\n")
+    with served_port("drivers.bridge.line_bridge", "--csv", "session.csv", python_flags=("-S", "-E"),
+                     cwd=tmp_path) as (proc, port):
         with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
             assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
         proc.stdin.close()

@@ -25,7 +25,7 @@ def simulated_dataset(seed: int):
     hi = np.radians([60, 70, 40, 120, 100, 180])
     q = rng.uniform(lo, hi, (N_CAL + N_TEST, 6))
     cell = simulated_cell(CELL)
-    from robocal.sim_cell import random_geometric_errors
+    from robocal.simulation.mock_cell import random_geometric_errors
     cell = type(cell)(random_geometric_errors(CELL.kinematics, rng).with_(
         T_tracker_base=cell.truth.T_tracker_base, p_flange_smr_mm=cell.truth.p_flange_smr_mm),
         cell.effects, cell.tracker, cell.repeatability_rp_mm)

@@ -14,7 +14,7 @@ from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.prepare import prepare
 from campaign.calibrate.stages import calibrate_dataset
 from campaign.run.log_reader import read_log
-from robocal.diagnose.truth_cell import TruthProtocol, simulate, warmup
+from robocal.simulation.truth_cell import TruthProtocol, simulate, warmup
 from tests.campaign.helpers import ROOT, small_config
 from tests.campaign.test_phenomena import phenomena_config
 
@@ -23,7 +23,7 @@ CFG = CELL.config
 
 
 def truth_dataset(camp) -> Dataset:
-    """A simulated campaign (robocal.diagnose.truth_cell) as the interchange dataset: robot rows with the commanded joints, each
+    """A simulated campaign (robocal.simulation.truth_cell) as the interchange dataset: robot rows with the commanded joints, each
     followed by the nest readings taken after it (set ``nest``, no joints)."""
     after: dict[int, list[int]] = {}
     for k, r in enumerate(camp.nest_after_row):
@@ -48,7 +48,7 @@ def truth_dataset(camp) -> Dataset:
 
 
 def true_drift_mm(camp, ds: Dataset) -> np.ndarray:
-    """The simulated stand drift (N, 3) mm at the robot rows of ``ds`` (robocal.diagnose.truth_cell's registration_drift)."""
+    """The simulated stand drift (N, 3) mm at the robot rows of ``ds`` (robocal.simulation.truth_cell's registration_drift)."""
     v = camp.truths[0].values
     robot = ~ds.mask("nest")
     t = ds.t_s[robot]

@@ -9,7 +9,7 @@ from campaign.config.load import load_cell
 from campaign.report.export import export, robodk_text, urdf_text
 from robocal.kinematics import Kinematics, fk, smr_base
 from robocal.model import CalibratedModel
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 
 yourdfpy = pytest.importorskip("yourdfpy")
 pytestmark = pytest.mark.unit
