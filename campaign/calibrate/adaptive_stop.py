@@ -32,7 +32,6 @@ from campaign.data.log_dataset import dataset_from_log
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_reader import LogContents, read_log
 
-from .calibration_report import CalibrationReport
 from .report_sections import StopSummary
 
 logger = logging.getLogger(__name__)
@@ -227,17 +226,16 @@ class AdaptivePasses:
         return todo or None
 
 
-def stop_summary(contents: LogContents, report: CalibrationReport) -> StopSummary | None:
+def stop_summary(contents: LogContents, measured_rms_mm: float | None) -> StopSummary | None:
     """``report.json``'s ``stop``: every refit of a ``stop: auto`` run (predicted curve, decision) and, beside the
     prediction at the stop, the held-out RMS the final model reached on the test set."""
     checks = [c for c in stop_checks(contents) if "predicted_rms_mm" in c]
     if not checks:
         return None
     last = checks[-1]
-    measured = None if report.final is None else report.final.test.rms_mm
     return StopSummary("refit after every block; stop when the next block is predicted to lower the held-out RMS by "
                        "less than plan.stop_gain_pct % of the noise floor, or at plan.max_points / plan.max_minutes",
-                       tuple(checks), last["n_calib"], last["predicted_rms_mm"], measured, last["reason"])
+                       tuple(checks), last["n_calib"], last["predicted_rms_mm"], measured_rms_mm, last["reason"])
 
 
 def stopped_after(run_dir: Path) -> int | None:
