@@ -23,7 +23,7 @@ N_POINTS, N_RANDOM = 100, 10
 
 
 def _held_out_mean_mm(ds, cfg) -> float:
-    return float(calibrate_dataset(ds, cfg).report.stages["compensated"]["test"]["mean_mm"])
+    return float(calibrate_dataset(ds, cfg).report.final.test.mean_mm)
 
 
 def test_select_100_of_1000_ur5_poses_against_all_and_random_subsets(tmp_path, capsys):

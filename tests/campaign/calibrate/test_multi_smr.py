@@ -41,11 +41,11 @@ def test_corrupted_smr_readings_are_set_aside_on_calib_and_test_rows():
     P[1, [3, 130]] += [1.5, 0.0, 0.0]                     # SMR 2 misread on a calib and a test row
     P[2, 50] += [0.0, -2.0, 0.5]                          # SMR 3 on a calib row
     rep = calibrate_dataset(dataset(q, P, sets), cfg).report
-    listed = {e["point_id"]: e for e in rep["excluded_points"]}
-    print({k: v["reason"] for k, v in listed.items()})
-    assert set(listed) == {"P3", "P50", "P130"} and listed["P130"]["set"] == "test"
-    assert "(SMR 2)" in listed["P3"]["reason"] and "(SMR 3)" in listed["P50"]["reason"]
-    assert rep["stages"]["kinematic"]["test"]["n"] == 39 and rep["n"]["calib"] == 118
+    listed = {e.point_id: e for e in rep.excluded_points}
+    print({k: v.reason for k, v in listed.items()})
+    assert set(listed) == {"P3", "P50", "P130"} and listed["P130"].set == "test"
+    assert "(SMR 2)" in listed["P3"].reason and "(SMR 3)" in listed["P50"].reason
+    assert rep.stages["kinematic"].test.n == 39 and rep.n.calib == 118
 
 
 @pytest.mark.unit

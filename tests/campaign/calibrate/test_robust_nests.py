@@ -91,7 +91,7 @@ def test_misread_nests_are_set_aside_and_the_drift_and_result_stay():
             assert all("misread" in e["reason"] for e in drift["excluded"])
             err = (ds.p_tracker_mm[robot] - prep.dataset.p_tracker_mm) - true
             err_um = 1000 * np.sqrt(np.mean(np.sum(err**2, axis=1)))
-            rms[name] = calibrate_dataset(ds, cfg).report["stages"]["compensated"]["test"]["rms_mm"]
+            rms[name] = calibrate_dataset(ds, cfg).report.final.test.rms_mm
             print(f"seed {seed} {name}: {len(excluded)} nest readings excluded of {len(bad)} misread, drift "
                   f"{drift['model']['degree']}{'+rotation' if drift['model']['rotation'] else ''} (CV RMS "
                   f"{drift['cv_rms_mm']:.4f} mm), drift error {err_um:.1f} um RMS (drift itself "
