@@ -28,6 +28,7 @@ from campaign.config.cell_model import nominal_kinematics, tracker_uncertainty  
 from campaign.config.load import load_config  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.data.importers import import_target_dif  # noqa: E402
+from campaign.calibrate.calibration_report import CalibrationReport  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.effects import joint_compliance  # noqa: E402
 from robocal.frames import make_T, rotvec_to_matrix  # noqa: E402
@@ -53,12 +54,12 @@ def simulated(cfg, n_calib: int, n_test: int = 100, seed: int = 1) -> Dataset:
                    source="simulated")
 
 
-def timed(ds, cfg, repeats: int) -> tuple[float, float, dict]:
+def timed(ds, cfg, repeats: int) -> tuple[float, float, CalibrationReport]:
     """(median wall s, median CPU s, report of the last run)."""
     wall, cpu = [], []
     for _ in range(repeats):
         t, c = time.perf_counter(), time.process_time()
-        report = calibrate_dataset(ds, cfg).report.to_dict()
+        report = calibrate_dataset(ds, cfg).report
         wall.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     return float(np.median(wall)), float(np.median(cpu)), report
@@ -98,9 +99,9 @@ def main() -> None:
     calibrate_dataset(cases[0][1], cfg)                                    # imports, caches: not part of the figure
     for label, ds, target in cases:
         wall, cpu, rep = timed(ds, cfg, args.repeats)
-        eff = ",".join(e["name"] for e in rep["effects"]["fitted"]) or "none"
+        eff = ",".join(e["name"] for e in rep.effects.fitted) or "none"
         print(f"  {label:50s} wall {wall:6.2f} s, CPU {cpu:6.2f} s (target <= {target:g} s); "
-              f"effects {eff}; layer {rep['method']['residual']}; final test RMS {rep['stages']['compensated']['test']['rms_mm']:.4f} mm")
+              f"effects {eff}; layer {rep.method.residual}; final test RMS {rep.final.test.rms_mm:.4f} mm")
     likelihood_unit()
 
 
