@@ -1,6 +1,5 @@
 """Misread reference nests: set aside and listed before the drift model is fitted (``preparation.drift.excluded``),
 re-read once during a run, and a nest read only once is bad input."""
-import json
 from dataclasses import replace
 
 import numpy as np
@@ -14,7 +13,7 @@ from campaign.calibrate.prepare import prepare
 from campaign.calibrate.stages import calibrate_dataset
 from campaign.run.log_reader import read_log
 from robocal.diagnose.truth_cell import TruthProtocol, simulate, warmup
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 from tests.campaign.test_phenomena import phenomena_config
 
 CFG = load_config(ROOT / "configs/irb2600.yaml")
@@ -142,5 +141,4 @@ def test_a_misread_nest_is_read_again_before_the_run_pauses(tmp_path, monkeypatc
     first = np.array(rereads[0]["first_reading"]["p_tracker_mm"])
     kept = next(np.array(r["p_tracker_mm"]) for r in log.points if r["point_id"] == "N2@002")
     assert 399 < np.linalg.norm(first - kept) < 401
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
-    assert report["preparation"]["drift"]["excluded"] == []
+    assert read_report(tmp_path / "run").preparation["drift"]["excluded"] == []
