@@ -88,8 +88,8 @@ def collect(directory: str | os.PathLike) -> ReportSources:
             raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
         found[kind] = _checked(doc, d / "report.json", CalibrationReport) if kind == "calibration" else doc
         files[kind], docs[kind] = "report.json", doc
-        if kind == "calibration" and doc.get("points"):
-            points = PointTable.of(doc["points"], d)                     # inline, or points.csv of a large run
+        if kind == "calibration" and found[kind].points:
+            points = PointTable.of(found[kind].points, d)                # inline, or points.csv of a large run
     if (d / "diagnosis.json").exists():
         found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"
     verify = []
