@@ -73,10 +73,10 @@ def bench_time(repeats: int = 3) -> None:
         pr, wall, cpu = _timed(lambda: calibrate_dataset(ds, cell), repeats)
         st = pr.report.stages
         print(f"  default reprocess calibration work (process(): prepare, geometric fit, effect engine, residual layer "
-              f"{pr.report.residual_choice['chosen']}, evaluation; no HTML): median wall {wall:.2f} s, median CPU "
-              f"{cpu:.2f} s (target <= 5 s); test RMS kinematic {st['kinematic']['test']['rms_mm']:.4f} -> elastic "
-              f"{st.get('elastic', st['kinematic'])['test']['rms_mm']:.4f} -> compensated "
-              f"{st['compensated']['test']['rms_mm']:.4f} mm (diagnose final {rep['final_test_rms_mm']:.4f} mm)")
+              f"{pr.report.residual_choice.chosen}, evaluation; no HTML): median wall {wall:.2f} s, median CPU "
+              f"{cpu:.2f} s (target <= 5 s); test RMS kinematic {st['kinematic'].test.rms_mm:.4f} -> elastic "
+              f"{st.get('elastic', st['kinematic']).test.rms_mm:.4f} -> compensated "
+              f"{st['compensated'].test.rms_mm:.4f} mm (diagnose final {rep['final_test_rms_mm']:.4f} mm)")
 
 
 def bench_self_check(seeds: int) -> None:
@@ -138,15 +138,15 @@ def bench_csv(csv: str, config: str) -> None:
 
     cell = load_cell(config)
     t0 = time.process_time()
-    rep = calibrate_dataset(read_csv(csv), cell).report.to_dict()
+    rep = calibrate_dataset(read_csv(csv), cell).report
     t1 = time.process_time()
     diag = diagnose_dataset(read_csv(csv), cell).report
     t2 = time.process_time()
     print(f"\n{csv} with {config}:")
-    sel = rep["effects"]["selection"]
-    print(f"  reprocess ({t1 - t0:.2f} s CPU): effects {sel['taken'] if sel else rep['method']['effects']}")
-    for name, st in rep["stages"].items():
-        print(f"    {name:12s} test mean {st['test']['mean_mm']:.4f} mm, RMS {st['test']['rms_mm']:.4f} mm")
+    sel = rep.effects.selection
+    print(f"  reprocess ({t1 - t0:.2f} s CPU): effects {sel['taken'] if sel else rep.method.effects}")
+    for name, st in rep.stages.items():
+        print(f"    {name:12s} test mean {st.test.mean_mm:.4f} mm, RMS {st.test.rms_mm:.4f} mm")
     acc = [f for f in diag["findings"] if f["accepted"]]
     print(f"  diagnose ({t2 - t1:.2f} s CPU): accepted {[f['evidence']['label'] for f in acc]}; geometric "
           f"{diag['baseline_test_rms_mm']:.4f} -> final {diag['final_test_rms_mm']:.4f} mm RMS")

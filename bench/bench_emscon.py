@@ -43,9 +43,9 @@ def one(tmp: Path, seed: int) -> None:
     ds = dataset_from_log(read_log(tmp / f"run{seed}"))
     device = calibrate_dataset(ds, cell).report
     spec = calibrate_dataset(dataclasses.replace(ds, cov_mm2=None), cell).report
-    rms = lambda r: r["stages"]["kinematic"]["test"]["rms_mm"]  # noqa: E731
+    rms = lambda r: r.stages["kinematic"].test.rms_mm  # noqa: E731
     print(f"seed {seed}: {len(ds.point_id)} points; test RMS device weights {rms(device):.4f} mm, spec weights "
-          f"{rms(spec):.4f} mm (ratio {rms(device) / rms(spec):.3f}); noise floor {device['noise_floor_mm']:.4f} mm; "
+          f"{rms(spec):.4f} mm (ratio {rms(device) / rms(spec):.3f}); noise floor {device.noise_floor_mm:.4f} mm; "
           f"run incl. calibration {wall:.1f} s ({1000 * wall / len(ds.point_id):.0f} ms/point)")
 
 

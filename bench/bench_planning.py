@@ -19,7 +19,6 @@ of 5 seeds with the prediction within 15 % of the measurement; C <= 2 s.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -71,7 +70,7 @@ def held_out_rms(model, cell, q_cal, q_test, p_test, rng) -> float:
     ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
                  ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
                  np.vstack([p_cal, p_test]), source="bench")
-    return float(calibrate_dataset(ds, model).report.stages["compensated"]["test"]["rms_mm"])
+    return float(calibrate_dataset(ds, model).report.final.test.rms_mm)
 
 
 GRID_STEPS_MM = (400, 300, 250)       # coarser grids: the grid design at fewer points (the plan's own step is 200)
@@ -151,8 +150,8 @@ def part_b(tmp: Path, seeds: list[int], out: Console) -> None:
     for seed in seeds:
         path = write_config(tmp, seed, kind="optimal", stop="auto", max_points=n_grid)
         res = run_campaign(load_cell(path), tmp / f"stop-{seed}", console=Console(file=open("/dev/null", "w")))
-        stop = json.loads((res.run_dir / "report.json").read_text())["stop"]
-        n, pred, meas = stop["n_calib_at_stop"], stop["predicted_rms_mm"], stop["measured_rms_mm"]
+        stop = res.processed.report.stop
+        n, pred, meas = stop.n_calib_at_stop, stop.predicted_rms_mm, stop.measured_rms_mm
         good = n < 0.5 * n_grid and abs(pred / meas - 1) <= 0.15
         ok += good
         out.print(f"   seed {seed}: stopped after {n} points ({100 * n / n_grid:.0f} % of the grid), predicted "

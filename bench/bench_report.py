@@ -62,9 +62,9 @@ def main() -> None:
     cell = load_cell(thousand_point_config(tmp))
     result = run_campaign(cell, tmp / "run", console=Console(quiet=True))
     run_dir = result.run_dir
-    n = result.processed.report["n"]
-    rows = len(result.processed.report["points"]["point_id"])
-    print(f"run: {n['calib']} calib + {n['test']} test + {n['check']} check = {rows} points")
+    n = result.processed.report.n
+    rows = len(result.processed.points)
+    print(f"run: {n.calib} calib + {n.test} test + {n.check} check = {rows} points")
     ds = read_csv(run_dir / "data.csv")
     t_cal = median_s(lambda: calibrate_dataset(ds, cell), args.repeats)
     src = collect(run_dir)

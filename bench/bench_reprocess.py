@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.data.importers import import_target_dif  # noqa: E402
+from campaign.calibrate.calibration_report import CalibrationReport  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.effects import joint_compliance  # noqa: E402
 from robocal.frames import make_T, rotvec_to_matrix  # noqa: E402
@@ -52,12 +53,12 @@ def simulated(cell, n_calib: int, n_test: int = 100, seed: int = 1) -> Dataset:
                    source="simulated")
 
 
-def timed(ds, cell, repeats: int) -> tuple[float, float, dict]:
+def timed(ds, cell, repeats: int) -> tuple[float, float, CalibrationReport]:
     """(median wall s, median CPU s, report of the last run)."""
     wall, cpu = [], []
     for _ in range(repeats):
         t, c = time.perf_counter(), time.process_time()
-        report = calibrate_dataset(ds, cell).report.to_dict()
+        report = calibrate_dataset(ds, cell).report
         wall.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     return float(np.median(wall)), float(np.median(cpu)), report
@@ -97,9 +98,9 @@ def main() -> None:
     calibrate_dataset(cases[0][1], cell)                                    # imports, caches: not part of the figure
     for label, ds, target in cases:
         wall, cpu, rep = timed(ds, cell, args.repeats)
-        eff = ",".join(e["name"] for e in rep["effects"]["fitted"]) or "none"
+        eff = ",".join(e["name"] for e in rep.effects.fitted) or "none"
         print(f"  {label:50s} wall {wall:6.2f} s, CPU {cpu:6.2f} s (target <= {target:g} s); "
-              f"effects {eff}; layer {rep['method']['residual']}; final test RMS {rep['stages']['compensated']['test']['rms_mm']:.4f} mm")
+              f"effects {eff}; layer {rep.method.residual}; final test RMS {rep.final.test.rms_mm:.4f} mm")
     likelihood_unit()
 
 

@@ -46,12 +46,12 @@ def scenario(name, seeds, **kw):
         c = sparse_campaign(s, **kw)
         n_bad += int(c.fault.sum())
         rep = calibrate_dataset(c.ds, CELL).report
-        t = rep["stages"]["compensated"]["test"]
-        rows["default"].append((t["rms_mm"], t["max_mm"]))
-        ids = {e["point_id"] for e in rep["excluded_points"]}
+        t = rep.final.test
+        rows["default"].append((t.rms_mm, t.max_mm))
+        ids = {e.point_id for e in rep.excluded_points}
         idx = [i for i, pid in enumerate(c.ds.point_id) if pid in ids]
         excl["default"] = [a + b for a, b in zip(excl["default"], (len(idx), c.fault[idx].sum(), c.sparse[idx].sum()))]
-        for e in rep["effects"]["selection"]["taken"]:
+        for e in rep.effects.selection["taken"]:
             taken[e] = taken.get(e, 0) + 1
         for key, opt in (("plain LM", CalibrationOptions(method="lm")),
                          ("robust ridge + IGG3", CalibrationOptions(method="robust_ridge", weights="igg3"))):

@@ -85,22 +85,22 @@ def dif_sign(tmp: Path) -> None:
 def stages(tmp: Path) -> list:
     print("2. default reprocess (configs/ur5.yaml, no calibration section), 20 random held-out poses, mm")
     ds = import_target_dif(GRID, RANDOM)
-    report = calibrate_dataset(ds, config(tmp)).report.to_dict()
+    report = calibrate_dataset(ds, config(tmp)).report
     raw = np.linalg.norm(read_target_dif_file(RANDOM)[2], axis=1).mean()
     print(f"   {'stage':34s} {'mean':>7s} {'RMS':>7s} {'max':>7s}")
     for label, mean in PUBLISHED:
         print(f"   {label:34s} {mean:7.4f}")
     print(f"   {'as delivered (|dif|)':34s} {raw:7.4f}")
-    for name, s in report["stages"].items():
-        t = s["test"]
-        print(f"   {name:34s} {t['mean_mm']:7.4f} {t['rms_mm']:7.4f} {t['max_mm']:7.4f}")
+    for name, s in report.stages.items():
+        t = s.test
+        print(f"   {name:34s} {t.mean_mm:7.4f} {t.rms_mm:7.4f} {t.max_mm:7.4f}")
     eff = ", ".join(f"{e['name']}{e['options'].get('joint', e['options'].get('joints', ''))}"
-                    for e in report["effects"]["fitted"]) or "none"
-    print(f"   noise floor (specs) {report['noise_floor_mm']:.4f}; effects taken: {eff}; residual layer: "
-          f"{report['method']['residual']}; excluded points: {len(report['excluded_points'])}")
-    for note in report["plausibility"]["notes"]:
+                    for e in report.effects.fitted) or "none"
+    print(f"   noise floor (specs) {report.noise_floor_mm:.4f}; effects taken: {eff}; residual layer: "
+          f"{report.method.residual}; excluded points: {len(report.excluded_points)}")
+    for note in report.plausibility.notes:
         print(f"   note: {note}")
-    return report["plausibility"]["tool"]["registered_mm"][0]
+    return report.plausibility.tool.registered_mm[0]
 
 
 def rough_offsets(tmp: Path, right) -> None:
@@ -110,12 +110,12 @@ def rough_offsets(tmp: Path, right) -> None:
     ref = None
     for off in (0.0, -30.0, 30.0, 90.0):
         tool = [right[0], right[1], right[2] + off]
-        rep = calibrate_dataset(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report.to_dict()
-        f, k = rep["stages"]["compensated"]["test"], rep["stages"]["kinematic"]["test"]
+        rep = calibrate_dataset(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report
+        f, k = rep.final.test, rep.stages["kinematic"].test
         ref = ref or f
-        said = rep["plausibility"]["tool"]["notes"]
-        print(f"   tool z {tool[2]:6.1f} ({off:+5.0f}): final mean {f['mean_mm']:.4f} RMS {f['rms_mm']:.4f} "
-              f"({100 * (f['rms_mm'] / ref['rms_mm'] - 1):+.2f} %), kinematic mean {k['mean_mm']:.4f}; "
+        said = rep.plausibility.tool.notes()
+        print(f"   tool z {tool[2]:6.1f} ({off:+5.0f}): final mean {f.mean_mm:.4f} RMS {f.rms_mm:.4f} "
+              f"({100 * (f.rms_mm / ref.rms_mm - 1):+.2f} %), kinematic mean {k.mean_mm:.4f}; "
               f"{'says: put ' + said[0].split('put ')[1] if said else 'no offset note'}")
 
 

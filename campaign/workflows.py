@@ -136,7 +136,8 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
         from campaign.calibrate.adaptive_stop import stop_summary
-        stop = stop_summary(contents, processed.report)
+        final = processed.report.final
+        stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
     if isinstance(out_dir, Claim):

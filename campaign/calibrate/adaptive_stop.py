@@ -31,6 +31,8 @@ from campaign.data.log_dataset import dataset_from_log
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_reader import LogContents, read_log
 
+from .report_sections import StopSummary
+
 logger = logging.getLogger(__name__)
 STOP_EVENT = "stop_check"
 
@@ -222,18 +224,16 @@ class AdaptivePasses:
         return todo or None
 
 
-def stop_summary(contents: LogContents, report) -> dict | None:
+def stop_summary(contents: LogContents, measured_rms_mm: float | None) -> StopSummary | None:
     """``report.json``'s ``stop``: every refit of a ``stop: auto`` run (predicted curve, decision) and, beside the
     prediction at the stop, the held-out RMS the final model reached on the test set."""
     checks = [c for c in stop_checks(contents) if "predicted_rms_mm" in c]
     if not checks:
         return None
     last = checks[-1]
-    measured = ((report.stages.get("compensated") or {}).get("test") or {}).get("rms_mm")
-    return {"rule": "refit after every block; stop when the next block is predicted to lower the held-out RMS by "
-                    "less than plan.stop_gain_pct % of the noise floor, or at plan.max_points / plan.max_minutes",
-            "checks": checks, "n_calib_at_stop": last["n_calib"], "predicted_rms_mm": last["predicted_rms_mm"],
-            "measured_rms_mm": measured, "reason": last["reason"]}
+    return StopSummary("refit after every block; stop when the next block is predicted to lower the held-out RMS by "
+                       "less than plan.stop_gain_pct % of the noise floor, or at plan.max_points / plan.max_minutes",
+                       tuple(checks), last["n_calib"], last["predicted_rms_mm"], measured_rms_mm, last["reason"])
 
 
 def stopped_after(run_dir: Path) -> int | None:

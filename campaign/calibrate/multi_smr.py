@@ -26,6 +26,8 @@ from campaign.errors import DataError
 from campaign.data.dataset import Dataset
 from campaign.run.log_records import PointRecord
 
+from .report_sections import AngleStats, ErrorFigures, ExcludedPoint, MultiSmrReport
+
 MIN_TRAINING_STOPS = 20           # calibration stops with all three SMRs needed to train the SMR 2/3 predictors
 
 
@@ -34,8 +36,8 @@ def smr_clouds(ds: Dataset) -> list[np.ndarray]:
     return [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
 
 
-def screen_smrs(ds: Dataset, cell: CellModel) -> tuple[np.ndarray, list[dict]]:
-    """(keep (N,) bool, excluded [{point_id, set, reason}]) of the SMR-triangle screen (all True and [] with one
+def screen_smrs(ds: Dataset, cell: CellModel) -> tuple[np.ndarray, list[ExcludedPoint]]:
+    """(keep (N,) bool, excluded points) of the SMR-triangle screen (all True and [] with one
     SMR; the tracker's uncertainty model weighs each distance); DataError when the SMR distances are not those
     of one rigid tool."""
     clouds = smr_clouds(ds)
@@ -45,20 +47,19 @@ def screen_smrs(ds: Dataset, cell: CellModel) -> tuple[np.ndarray, list[dict]]:
     if not tri.rigid:
         raise DataError(ds.source, f"{tri.why} (x..z{len(clouds)} columns from another target, or in another "
                                    "order?)")
-    return tri.keep, [{"point_id": ds.point_id[e.index], "set": ds.set[e.index], "reason": e.reason}
-                      for e in tri.excluded]
+    return tri.keep, [ExcludedPoint(ds.point_id[e.index], ds.set[e.index], e.reason) for e in tri.excluded]
 
 
 def multi_smr_report(ds: Dataset, cell: CellModel, kin0, kept_rows: np.ndarray, test: np.ndarray,
-                     offsets0=None) -> dict:
+                     offsets0=None) -> MultiSmrReport:
     """Multi-SMR identification (one robot, one flange offset per SMR, from ``offsets0``: the registered ones, by
     default the configured ones) on the kept calib rows and its test figures per SMR; with three SMRs, the flange
     orientation error on the test set (arc seconds)."""
     clouds = smr_clouds(ds)
     offsets0 = cell.config.tool.smrs_mm if offsets0 is None else offsets0
     if len(offsets0) < len(clouds):
-        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
-                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
+        return MultiSmrReport(len(clouds), skipped=f"the data has {len(clouds)} SMRs but the config's tool names "
+                              f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)")
     P = np.stack(clouds)
     q = np.radians(ds.q_deg)
     cov = np.stack([cell.covariance(c[kept_rows]) for c in clouds])
@@ -67,17 +68,15 @@ def multi_smr_report(ds: Dataset, cell: CellModel, kin0, kept_rows: np.ndarray, 
                                   cell.options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
-    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
-           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
-           "test": {}}
+    test_figures, orientation = {}, None
     if test.any():
         pred = res.predict_tracker(q[test])
-        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
+        test_figures = {f"smr{s + 1}": ErrorFigures.of(error_stats(P[s, test] - pred[s])) for s in range(len(clouds))}
         if len(clouds) == 3:
-            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
-            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
-                                               "max": float(a.max()), "n": int(len(a))}
-    return out
+            orientation = angle_stats(orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test],
+                                                                P[:, test]))
+    return MultiSmrReport(len(clouds), None, res.p_flange_smr_mm.tolist(), res.sigma0, res.converged,
+                          tuple(res.unidentifiable), test_figures, orientation)
 
 
 def identified_offsets(model) -> np.ndarray | None:
@@ -115,7 +114,7 @@ def measured_flange_poses(offsets_mm: np.ndarray, points: list[PointRecord]) -> 
     return fit_points_pose(offsets_mm, P)
 
 
-def angle_stats(a_arcsec: np.ndarray, source: str) -> dict:
+def angle_stats(a_arcsec: np.ndarray, source: str | None = None) -> AngleStats:
     """mean / rms / max / n of orientation errors (arc seconds) and how the poses were obtained."""
-    return {"mean": float(a_arcsec.mean()), "rms": float(np.sqrt(np.mean(a_arcsec**2))), "max": float(a_arcsec.max()),
-            "n": int(len(a_arcsec)), "source": source}
+    return AngleStats(float(a_arcsec.mean()), float(np.sqrt(np.mean(a_arcsec**2))), float(a_arcsec.max()),
+                      int(len(a_arcsec)), source)

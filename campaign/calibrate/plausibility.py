@@ -23,12 +23,13 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Mapping
 
 import numpy as np
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import DataError, PlausibilityError
+from campaign.io.json_fields import count_field, figure_field, get_field, list_field, record_field, text_field
 
 REACH_FRACTION = 0.01           # nominal RMS after registration must be < 1 % of the reach
 LENGTH_DELTA_MM = 5.0           # identified length change bound: max(5 mm, 2 % of the nominal length)
@@ -83,6 +84,12 @@ class ToolCheck:
                 "registered_mm": [list(r) for r in self.registered_mm], "difference_mm": list(self.difference_mm),
                 "directions_determined": self.determined, "note_above_mm": TOOL_NOTE_MM, "notes": list(self.notes())}
 
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ToolCheck":
+        """The check of a report's ``plausibility.tool`` (differences and notes follow from the offsets)."""
+        rows = lambda name: tuple(tuple(v) for v in list_field(d, name))  # noqa: E731
+        return cls(rows("configured_mm"), rows("registered_mm"), count_field(d, "directions_determined"))
+
 
 def _vec(v) -> str:
     return "[" + ", ".join(f"{x:.1f}" for x in v) + "]"
@@ -109,6 +116,15 @@ class Plausibility:
                 "overridden": list(self.overridden), "forced": self.forced,
                 "max_length_delta_mm": self.max_length_delta_mm, "max_angle_delta_deg": self.max_angle_delta_deg,
                 "tool": None if self.tool is None else self.tool.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "Plausibility":
+        """A report's ``plausibility`` section (keys added later than the report format are optional)."""
+        texts = lambda name: tuple(list_field(d, name, True) or ())  # noqa: E731
+        return cls(text_field(d, "unit", True) or "mm", figure_field(d, "scale"), figure_field(d, "nominal_rms_mm"),
+                   figure_field(d, "bound_mm"), texts("rejected_rows"), texts("notes"), texts("overridden"),
+                   bool(get_field(d, "forced", True)), figure_field(d, "max_length_delta_mm"),
+                   figure_field(d, "max_angle_delta_deg"), record_field(d, "tool", ToolCheck.from_dict, True))
 
 
 def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
@@ -361,17 +377,14 @@ def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
 
 
 
-def plausibility_lines(plaus: dict | None) -> list[tuple[str, str]]:
+def plausibility_lines(plaus: Plausibility | None) -> list[tuple[str, str]]:
     """(text, rich style) lines stating what the plausibility checks found, for the terminal."""
-    if not plaus:
+    if plaus is None:
         return []
-    lines = []
-    scale = plaus.get("scale")
-    unit = f"xyz unit: {plaus.get('unit')}" + (f" (scale {scale:.3f} of the nominal model)" if scale else "")
-    if plaus.get("nominal_rms_mm") is not None:
-        unit += (f"; nominal RMS after registration {plaus['nominal_rms_mm']:.3f} mm "
-                 f"(plausible below {plaus['bound_mm']:.0f} mm)")
-    lines.append((unit, ""))
-    lines += [(note, "yellow") for note in plaus.get("notes", [])]
-    lines += [(f"OVERRIDDEN with --force: {what}", "bold red") for what in plaus.get("overridden", [])]
-    return lines
+    scale = plaus.scale
+    unit = f"xyz unit: {plaus.unit}" + (f" (scale {scale:.3f} of the nominal model)" if scale else "")
+    if plaus.nominal_rms_mm is not None:
+        unit += (f"; nominal RMS after registration {plaus.nominal_rms_mm:.3f} mm "
+                 f"(plausible below {plaus.bound_mm:.0f} mm)")
+    return ([(unit, "")] + [(note, "yellow") for note in plaus.notes]
+            + [(f"OVERRIDDEN with --force: {what}", "bold red") for what in plaus.overridden])

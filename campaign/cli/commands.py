@@ -68,7 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
     render_stop(out, result.processed.report)
-    print_plausibility(out, result.processed.report.get("plausibility"))
+    print_plausibility(out, result.processed.report.plausibility)
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
     return EXIT_OK
@@ -127,7 +127,7 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
     render_stop(out, processed.report)
-    print_plausibility(out, processed.report.get("plausibility"))
+    print_plausibility(out, processed.report.plausibility)
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
     return EXIT_OK
 

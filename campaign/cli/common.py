@@ -8,8 +8,12 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from rich.console import Console
+
+if TYPE_CHECKING:                      # the calibration modules load when a command needs them
+    from campaign.calibrate.plausibility import Plausibility
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -60,7 +64,7 @@ def overwrite_argument(parser: argparse.ArgumentParser) -> None:
                              "directory of other files or of another dataset's outputs); never into another run")
 
 
-def print_plausibility(out: Console, plaus: dict | None) -> None:
+def print_plausibility(out: Console, plaus: Plausibility | None) -> None:
     """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
     from campaign.calibrate.plausibility import plausibility_lines
 

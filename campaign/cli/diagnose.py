@@ -58,7 +58,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from campaign.calibrate.diagnosis import diagnose_source, write_diagnosis_json
     from campaign.report.diagnosis_text import render
     from campaign.report.diagnosis_plots import write_plots
-    from campaign.calibrate.plausibility import forced
+    from campaign.calibrate.plausibility import Plausibility, forced
 
     cell = load_cell(args.config)
     plots = _check_outputs(args)                  # every output path refused or accepted before any work
@@ -66,7 +66,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         result = diagnose_source(args.source, cell)
     out = _stdout()
     render(out, result.report)
-    print_plausibility(out, result.report.get("plausibility"))
+    plaus = result.report.get("plausibility")                 # the diagnosis document carries its JSON
+    print_plausibility(out, None if plaus is None else Plausibility.from_dict(plaus))
     if args.json:
         write_diagnosis_json(args.json, result.report)
         out.print(f"wrote {args.json}", markup=False)

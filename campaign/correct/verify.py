@@ -2,13 +2,14 @@
 (``VerifyPasses``), and ``verify.json``."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
 from campaign.calibrate.multi_smr import angle_stats, measured_flange_poses, tool_orientation_errors_arcsec
+from campaign.calibrate.report_sections import ErrorFigures, VerifyPass
 from campaign.config.cell_model import CellModel
 from campaign.io.durable import write_json
 from campaign.plan.points import PlanPoint
@@ -20,7 +21,7 @@ from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
 from .targets import _limits_deg, model_pose_fn, run_correction
-from .verify_report import VerifyReport
+from .verify_report import VERIFY_FORMAT, VerifyReport
 
 
 # ---------------------------------------------------------------- closed-loop verification
@@ -50,14 +51,18 @@ def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray
     return out
 
 
-def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str | None]) -> dict:
+def pass_summary(stage: str, err: np.ndarray, safe: np.ndarray, held: list[str | None]) -> VerifyPass:
     """One verify pass: counts of corrected and held points, held reasons, stats over all and corrected points."""
     reasons: dict[str, int] = {}
     for h in held:
         if h is not None:
             reasons[h] = reasons.get(h, 0) + 1
-    return {"stage": stage, "n_corrected": int(safe.sum()), "n_held": int((~safe).sum()), "held": reasons,
-            "all": error_stats(err).to_dict(), "corrected": error_stats(err[safe]).to_dict() if safe.any() else None}
+    return VerifyPass(stage, int(safe.sum()), int((~safe).sum()), reasons, _figures(err),
+                      _figures(err[safe]) if safe.any() else None)
+
+
+def _figures(err_mm: np.ndarray) -> ErrorFigures:
+    return ErrorFigures.of(error_stats(err_mm))
 
 
 @dataclass(frozen=True)
@@ -142,9 +147,8 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     target_tracker = transform_points(T_tb, p_d)
     before = np.array([p.p_tracker_mm for p in test_points]) - target_tracker
     floor = float(np.sqrt(np.mean(np.trace(cell.covariance(target_tracker), axis1=1, axis2=2))))
-    rows = {UNCORRECTED: error_stats(before).to_dict()}
-    passes = [{"stage": UNCORRECTED, "n_corrected": 0, "n_held": len(ids), "held": {},
-               "all": rows[UNCORRECTED], "corrected": None}]
+    rows = {UNCORRECTED: _figures(before)}
+    passes = [VerifyPass(UNCORRECTED, 0, len(ids), {}, rows[UNCORRECTED], None)]
     R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
@@ -153,28 +157,27 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     if estimator is not None:
         poses = measured_flange_poses(estimator.tool.p_flange_mm, test_points)
         if poses is not None:
-            passes[0]["orientation_error_arcsec"] = angle_stats(tool_orientation_errors_arcsec(
-                poses, T_tb, plan.R_planned, T_tool[:3, :3]), "measured: the three SMRs of the run")
+            passes[0] = replace(passes[0], orientation_error_arcsec=angle_stats(tool_orientation_errors_arcsec(
+                poses, T_tb, plan.R_planned, T_tool[:3, :3]), "measured: the three SMRs of the run"))
     outcome = execute_passes(plan)
     status, reason, safe = outcome.exit_status, outcome.reason, plan.safe
     corrected, corrected_only = [], []                    # every measurement; those of corrected points
     for stage, err, safe_k, held in plan.results:
-        rows[stage] = error_stats(err).to_dict()
+        rows[stage] = _figures(err)
         passes.append(pass_summary(stage, err, safe_k, held))
         if stage in plan.orientation:
-            passes[-1]["orientation_error_arcsec"] = angle_stats(plan.orientation[stage], "estimated (seed 003): "
-                                                                 "SMR 1 measured, SMRs 2-3 predicted, adjusted")
+            passes[-1] = replace(passes[-1], orientation_error_arcsec=angle_stats(
+                plan.orientation[stage], "estimated (seed 003): SMR 1 measured, SMRs 2-3 predicted, adjusted"))
         corrected.append(err)
         corrected_only.append(err[safe_k])
     if corrected:
         pooled = np.concatenate(corrected_only)
-        rows[POOLED] = error_stats(np.concatenate(corrected)).to_dict()
-        passes.append({"stage": POOLED, "n_corrected": int(len(pooled)),
-                       "n_held": int(sum(len(e) for e in corrected) - len(pooled)), "held": {},
-                       "all": rows[POOLED], "corrected": error_stats(pooled).to_dict() if len(pooled) else None})
+        rows[POOLED] = _figures(np.concatenate(corrected))
+        passes.append(VerifyPass(POOLED, int(len(pooled)), int(sum(len(e) for e in corrected) - len(pooled)), {},
+                                 rows[POOLED], _figures(pooled) if len(pooled) else None))
     report = VerifyReport(
-        "campaign-verify/2", str(run_dir), len(ids), floor, int(np.sum(~safe)) if corrected else None,
-        rows, passes, status, reason,
+        VERIFY_FORMAT, str(run_dir), len(ids), floor, int(np.sum(~safe)) if corrected else None,
+        rows, tuple(passes), status, reason,
         definitions={UNCORRECTED: "the test points commanded at their planned (nominal-IK) joints, "
                                   "measured against the targets through the calibrated registration",
                      "held": "points commanded at their planned joints in a corrected pass because the "

@@ -1,9 +1,7 @@
-"""Typed frozen records of a campaign: what the runner logs per point and what the reports hold.
+"""Typed frozen records of what the runner logs per point.
 
 * :class:`PointRecord` -- one robot measurement (a ``point`` record of ``log.jsonl``, kind plan/check/test/verify);
-* :class:`NestRecord` -- one reference-nest reading (a ``point`` record with ``set`` and ``kind`` "nest");
-* :class:`CalibrationReport` -- ``report.json`` of ``campaign run``/``reprocess``;
-* :class:`VerifyReport` -- ``verify.json`` of ``campaign verify``.
+* :class:`NestRecord` -- one reference-nest reading (a ``point`` record with ``set`` and ``kind`` "nest").
 
 Each has ``to_dict()`` giving exactly the JSON written today (same keys, same order, optional keys left out when
 they are absent) and ``from_dict()`` that checks the types and raises :class:`RecordError` naming the field.
@@ -17,8 +15,8 @@ always writes may be absent (None). :func:`check_records` holds the rules a log'
 (set names, one joint count, an optional field in all records or none), used by the resume checks and the dataset
 conversion; its errors name the file and the record's line.
 Units are in the field names (``_mm``, ``_mm2``, ``_deg``, ``_s``, ``_kg``, ``_c``); frames as in the log
-(``p_tracker_mm`` tracker frame, ``p_target_base_mm`` robot base frame). The reports are read-only mappings too
-(``report["stages"]``), so code and tests that read them by key keep working.
+(``p_tracker_mm`` tracker frame, ``p_target_base_mm`` robot base frame). The reports are records of their own
+(``campaign.calibrate.calibration_report``, ``campaign.correct.verify_report``).
 """
 from __future__ import annotations
 

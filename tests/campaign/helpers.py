@@ -1,9 +1,13 @@
-"""Small configs derived from the shipped ones, for fast campaign tests."""
+"""Small configs derived from the shipped ones, for fast campaign tests; the reports a command wrote, typed."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import yaml
+
+from campaign.calibrate.calibration_report import CalibrationReport
+from campaign.correct.verify_report import VerifyReport
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -61,3 +65,13 @@ def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.c
         doc.setdefault("calibration", {})[key.split(".", 1)[1]] = value
     cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
     return csv, cfg
+
+
+def read_report(directory: Path) -> CalibrationReport:
+    """``report.json`` of a run or output directory, as the typed record (RecordError when a field is wrong)."""
+    return CalibrationReport.from_dict(json.loads((Path(directory) / "report.json").read_text()))
+
+
+def read_verify(path: Path) -> VerifyReport:
+    """A ``verify.json``, as the typed record."""
+    return VerifyReport.from_dict(json.loads(Path(path).read_text()))

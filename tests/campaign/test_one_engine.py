@@ -65,12 +65,12 @@ DATASETS: list[Case] = [       # measured campaigns, one line each
 def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_path, case):
     csv, cfg_path = case.make(tmp_path)
     cell = load_cell(cfg_path)
-    rep = calibrate_dataset(read_csv(csv), cell).report.to_dict()
+    rep = calibrate_dataset(read_csv(csv), cell).report
     diag = diagnose_dataset(read_csv(csv), cell).report
-    fitted = rep["effects"]["fitted"]
+    fitted = rep.effects.fitted
     accepted = [f for f in diag["findings"] if f["accepted"]]
     print(case.name, [f["evidence"]["label"] for f in accepted], diag["final_test_rms_mm"])
-    assert [f["evidence"]["label"] for f in accepted] == rep["effects"]["selection"]["taken"]
+    assert [f["evidence"]["label"] for f in accepted] == rep.effects.selection["taken"]
     assert [e["name"] for e in diag["effects"]] == [e["name"] for e in fitted]
     for mine, theirs in zip(diag["effects"], fitted):
         assert mine["options"] == theirs["options"]
@@ -79,7 +79,7 @@ def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_p
             if "stiffness_Nm_per_rad" in row:
                 assert mine["params"][name]["stiffness_Nm_per_rad"] == pytest.approx(row["stiffness_Nm_per_rad"],
                                                                                      rel=1e-9)
-    after = rep["stages"]["elastic" if fitted else "kinematic"]["test"]["rms_mm"]
+    after = rep.stages["elastic" if fitted else "kinematic"].test.rms_mm
     assert diag["final_test_rms_mm"] == pytest.approx(after, rel=1e-9)
-    assert diag["baseline_test_rms_mm"] == pytest.approx(rep["stages"]["kinematic"]["test"]["rms_mm"], rel=1e-9)
+    assert diag["baseline_test_rms_mm"] == pytest.approx(rep.stages["kinematic"].test.rms_mm, rel=1e-9)
     assert np.isfinite(diag["unexplained_structure"]["excess_over_floor_mm"])

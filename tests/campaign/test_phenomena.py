@@ -1,6 +1,5 @@
 """Real-cell phenomena end to end on the mock cell: commanded vs read-back joints, reference nests and tracker
 drift, environment columns, and bad input in the interchange CSV (exit 2, one line, nothing written)."""
-import json
 
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.data.log_dataset import dataset_from_log
 from campaign.calibrate.prepare import prepare
 from campaign.run.log_reader import LogContents, read_log
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 NESTS = [{"id": "N1", "p_base_mm": [1500, -1200, 0]}, {"id": "N2", "p_base_mm": [1600, 1300, 50]},
          {"id": "N3", "p_base_mm": [-700, 100, 0]}]
@@ -97,7 +96,7 @@ def test_auto_keeps_readback_joints_when_the_robot_stood_there(lag_run):
 def test_reprocess_reports_the_choice(lag_run, tmp_path):
     cfg, run = lag_run
     assert main(["reprocess", str(run / "data.csv"), "--config", str(cfg), "--out", str(tmp_path / "rp")]) == 0
-    rep = json.loads((tmp_path / "rp" / "report.json").read_text())["preparation"]
+    rep = read_report(tmp_path / "rp").preparation
     assert rep["joints"]["used"] == "commanded" and rep["drift"]["nests"] == 3
 
 

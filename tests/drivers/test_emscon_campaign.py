@@ -8,7 +8,6 @@ one shared world), so its readings are the cell's SMR + the cell's per-point tra
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 
 import numpy as np
@@ -26,7 +25,7 @@ from campaign.run.tracker_quality import SmrPredictor
 from drivers.emscon import open_tracker
 from drivers.emulators.emscon_server import EmsconEmulator
 from drivers.mock import MockRobot
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 8, "plan.check_poses": {"count": 0, "every_n_points": 50},
          "tracker.measurement.samples": 2, "tracker.measurement.settle_s": 0.0, "calibration.residual": "none"}
@@ -58,18 +57,16 @@ def test_campaign_run_with_emscon_matches_the_mock_tracker(tmp_path, monkeypatch
     p_mock = np.array([p["p_tracker_mm"] for p in mock.points])
     p_emscon = np.array([p["p_tracker_mm"] for p in emscon.points])
     diff = np.linalg.norm(p_emscon - p_mock, axis=1)
-    r_mock = json.loads((tmp_path / "mock" / "report.json").read_text())
-    r_emscon = json.loads((tmp_path / "emscon" / "report.json").read_text())
-    floor = r_mock["noise_floor_mm"]
+    r_mock, r_emscon = read_report(tmp_path / "mock"), read_report(tmp_path / "emscon")
+    floor = r_mock.noise_floor_mm
+    rms_mock = r_mock.stages["kinematic"].test.rms_mm
+    rms_emscon = r_emscon.stages["kinematic"].test.rms_mm
     print(f"\nper-point |emscon - mock| median {np.median(diff):.4f} max {diff.max():.4f} mm; test RMS kinematic "
-          f"mock {r_mock['stages']['kinematic']['test']['rms_mm']:.4f} emscon "
-          f"{r_emscon['stages']['kinematic']['test']['rms_mm']:.4f} mm; noise floor {floor:.4f} mm")
+          f"mock {rms_mock:.4f} emscon {rms_emscon:.4f} mm; noise floor {floor:.4f} mm")
     assert diff.max() < 3 * floor                     # same cell, independent noise draws
-    rms_mock = r_mock["stages"]["kinematic"]["test"]["rms_mm"]
-    rms_emscon = r_emscon["stages"]["kinematic"]["test"]["rms_mm"]
     assert abs(rms_emscon - rms_mock) < floor and rms_emscon < 3 * floor
-    assert r_emscon["method"]["measurement_covariance"] == "device"
-    assert r_mock["method"]["measurement_covariance"] == "spec"
+    assert r_emscon.method.measurement_covariance == "device"
+    assert r_mock.method.measurement_covariance == "spec"
     for record in emscon.points:                       # device statistics and environment in every point record
         assert record["cov_source"] == "device" and all(0 < s < 0.05 for s in record["device_std_mm"])
         assert record["temperatures"] == {"temp_c": 20.5, "pressure_hpa": 1008.0, "humidity_pct": 42.0}

@@ -49,9 +49,9 @@ def test_default_is_never_worse_than_plain_lm_without_gross_outliers():
     for seed in range(20):
         ds, q, p = simulated_dataset(seed)
         rep = calibrate_dataset(ds, CELL).report
-        ratios.append(rep["stages"]["compensated"]["test"]["rms_mm"] / plain_lm_test_rms(q, p))
-        excluded += len(rep["excluded_points"])
-        extra += len(rep["effects"]["selection"]["taken"]) + (rep["residual_choice"]["chosen"] != "none")
+        ratios.append(rep.final.test.rms_mm / plain_lm_test_rms(q, p))
+        excluded += len(rep.excluded_points)
+        extra += len(rep.effects.selection["taken"]) + (rep.residual_choice.chosen != "none")
     print(f"default / plain LM held-out RMS over 20 seeds: max {max(ratios):.4f}, median {np.median(ratios):.4f}; "
           f"{excluded} points excluded, {extra} effects/layers taken")
     assert max(ratios) <= 1.03
@@ -91,14 +91,15 @@ def test_structure_is_kept_and_faults_found_under_strong_compliance():
     for seed in (200, 201):
         c = sparse_campaign(seed, fault_fraction=0.05)
         rep = calibrate_dataset(c.ds, GRID).report
-        excluded = {r["point_id"]: r["reason"] for r in rep["excluded_points"]}
-        print(f"seed {seed}: taken {rep['effects']['selection']['taken']}, excluded {len(excluded)} of "
-              f"{c.fault.sum()} corrupted; test RMS kinematic {rep['stages']['kinematic']['test']['rms_mm']:.4f} "
-              f"-> final {rep['stages']['compensated']['test']['rms_mm']:.4f} mm")
+        excluded = {r.point_id: r.reason for r in rep.excluded_points}
+        taken = rep.effects.selection["taken"]
+        kinematic, final = rep.stages["kinematic"].test.rms_mm, rep.final.test.rms_mm
+        print(f"seed {seed}: taken {taken}, excluded {len(excluded)} of {c.fault.sum()} corrupted; test RMS "
+              f"kinematic {kinematic:.4f} -> final {final:.4f} mm")
         assert set(excluded) == {c.ds.point_id[i] for i in np.flatnonzero(c.fault)}
         assert all("isolated against its" in r and "near neighbours" in r for r in excluded.values())
-        assert rep["effects"]["selection"]["taken"][0] == "joint_compliance(J2,3)"
-        assert rep["stages"]["compensated"]["test"]["rms_mm"] < 0.7 * rep["stages"]["kinematic"]["test"]["rms_mm"]
+        assert taken[0] == "joint_compliance(J2,3)"
+        assert final < 0.7 * kinematic
 
 
 @pytest.mark.unit
@@ -114,8 +115,9 @@ def test_three_smr_dataset_reports_offsets_and_orientation():
     P = predict_multi(truth, offsets, q) + rng.normal(0, 0.01, (3, 160, 3))
     ds = Dataset(tuple(f"P{i}" for i in range(160)), tuple(["calib"] * 120 + ["test"] * 40), np.degrees(q), P[0],
                  p2_tracker_mm=P[1], p3_tracker_mm=P[2], source="sim3")
-    multi = calibrate_dataset(ds, CellModel.from_config(cfg)).report["multi_smr"]
-    print(multi["test"], multi["orientation_error_arcsec"])
-    assert multi["n_smr"] == 3 and multi["converged"]
-    assert set(multi["orientation_error_arcsec"]) == {"mean", "rms", "max", "n"}
-    assert all(v["rms_mm"] < 0.03 for v in multi["test"].values())
+    multi = calibrate_dataset(ds, CellModel.from_config(cfg)).report.multi_smr
+    print(multi.test, multi.orientation_error_arcsec)
+    assert multi.n_smr == 3 and multi.converged
+    angles = multi.orientation_error_arcsec
+    assert angles.n == 40 and 0 < angles.mean <= angles.rms <= angles.max and angles.source is None
+    assert all(v.rms_mm < 0.03 for v in multi.test.values())

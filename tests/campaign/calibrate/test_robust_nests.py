@@ -1,6 +1,5 @@
 """Misread reference nests: set aside and listed before the drift model is fitted (``preparation.drift.excluded``),
 re-read once during a run, and a nest read only once is bad input."""
-import json
 from dataclasses import replace
 
 import numpy as np
@@ -15,7 +14,7 @@ from campaign.calibrate.prepare import prepare
 from campaign.calibrate.stages import calibrate_dataset
 from campaign.run.log_reader import read_log
 from robocal.simulation.truth_cell import TruthProtocol, simulate, warmup
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 from tests.campaign.test_phenomena import phenomena_config
 
 CELL = load_cell(ROOT / "configs/irb2600.yaml")
@@ -93,7 +92,7 @@ def test_misread_nests_are_set_aside_and_the_drift_and_result_stay():
             assert all("misread" in e["reason"] for e in drift["excluded"])
             err = (ds.p_tracker_mm[robot] - prep.dataset.p_tracker_mm) - true
             err_um = 1000 * np.sqrt(np.mean(np.sum(err**2, axis=1)))
-            rms[name] = calibrate_dataset(ds, cell).report["stages"]["compensated"]["test"]["rms_mm"]
+            rms[name] = calibrate_dataset(ds, cell).report.final.test.rms_mm
             print(f"seed {seed} {name}: {len(excluded)} nest readings excluded of {len(bad)} misread, drift "
                   f"{drift['model']['degree']}{'+rotation' if drift['model']['rotation'] else ''} (CV RMS "
                   f"{drift['cv_rms_mm']:.4f} mm), drift error {err_um:.1f} um RMS (drift itself "
@@ -144,5 +143,4 @@ def test_a_misread_nest_is_read_again_before_the_run_pauses(tmp_path, monkeypatc
     first = np.array(rereads[0]["first_reading"]["p_tracker_mm"])
     kept = next(np.array(r["p_tracker_mm"]) for r in log.points if r["point_id"] == "N2@002")
     assert 399 < np.linalg.norm(first - kept) < 401
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
-    assert report["preparation"]["drift"]["excluded"] == []
+    assert read_report(tmp_path / "run").preparation["drift"]["excluded"] == []

@@ -7,7 +7,7 @@ import yaml
 from campaign.cli import main
 from campaign.config.load import load_config
 from campaign.errors import ConfigError
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 
 
 def _with(tmp_path, **calibration):
@@ -53,9 +53,9 @@ def test_forced_effect_list_reaches_model_json(tmp_path):
     run = tmp_path / "r"
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     model = json.loads((run / "model.json").read_text())
-    report = json.loads((run / "report.json").read_text())
+    report = read_report(run)
     assert model["effects"][0]["name"] == "joint_compliance" and set(model["effects"][0]["params"]) == {"c2", "c3"}
-    assert report["effects"]["selection"] is None and "elastic" in report["stages"]
+    assert report.effects.selection is None and "elastic" in report.stages
     assert model["residual"] is None
 
 

@@ -1,6 +1,5 @@
 """Traceability and ETA: identification in the start record and report.json, campaign.log, a keep-out run whose
 every executed move stays clear, and an ETA that converges during the run."""
-import json
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
 from drivers.mock import MockRobot
 from robocal.sweep import Boxes, flange_points_base, sample_segments
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 6, "plan.check_poses": {"count": 0, "every_n_points": 50},
          "tracker.measurement.samples": 2, "tracker.measurement.settle_s": 0.0, "calibration.residual": "none"}
@@ -26,8 +25,7 @@ def test_mock_run_carries_identification_and_writes_campaign_log(tmp_path):
     run = tmp_path / "run"
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     start = read_log(run).start
-    report = json.loads((run / "report.json").read_text())
-    for doc in (start, report):
+    for doc in (start, dict(read_report(run).identification)):
         assert doc["robot_identity"]["serial"] == "MOCK-R-0001"
         assert set(doc["robot_identity"]) >= {"vendor", "model", "controller_type", "serial", "software_version"}
         assert doc["tracker_identity"]["serial"] == "MOCK-T-0001"
