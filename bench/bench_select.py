@@ -1,6 +1,6 @@
 """Which selection criterion ``campaign select`` should use, judged by held-out prediction on forms it was not tuned on.
 
-Protocol (fixed before any result was looked at):
+Protocol (fixed before the comparison was run; one smoke row of UR10 seen, nothing changed after):
   * Forms: the public real UR5 campaign (1000 grid rows, 100 chosen, its 20 random held-out poses) and four
     simulated cells (``simulated_cell``, seeds 1 2 3 each), every one with other effects: IRB 2600 with J2/J3
     gravity compliance + a J2 gear error; IRB 4600 with a J3 gear error + wrist coupling; UR10 geometry only;
@@ -171,7 +171,8 @@ def choose(ctx, n: int, name: str) -> np.ndarray:
 METRIC = ["rms_mm"]             # the protocol's score; --metric mean_mm: the same comparison on the mean error
 
 
-def rms(ds: Dataset, cfg) -> float:
+def held_out(ds: Dataset, cfg) -> float:
+    """Held-out statistic (``METRIC``, mm) of the default ``process`` of ``ds``."""
     return float(process(ds, cfg).report.stages["compensated"]["test"][METRIC[0]])
 
 
@@ -223,13 +224,13 @@ def evaluate(ds: Dataset, cfg, n: int | None, criteria) -> dict[str, float]:
     ctx = crit_of(ds, cfg)
     if n is None:
         n = max(round(len(cal) / 3), math.ceil(1.2 * ctx[0].identifiable))
-    everything = rms(ds, cfg)
+    everything = held_out(ds, cfg)
     out = {"all_mm": everything, "n": n, "M": len(cal)}
 
     def subset(idx):
         keep = ~ds.mask("calib")
         keep[cal[np.asarray(idx, int)]] = True
-        return rms(ds.subset(keep), cfg) / everything
+        return held_out(ds.subset(keep), cfg) / everything
     for c in criteria:
         out[c] = subset(choose(ctx, n, c))
     out["random"] = float(np.median([subset(np.random.default_rng(s).choice(len(cal), n, replace=False))
