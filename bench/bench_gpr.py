@@ -39,17 +39,18 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.gp import GaussianProcess, MultiOutputGP, gp_inputs  # noqa: E402
+from robocal.gp import GaussianProcess, MultiOutputGP  # noqa: E402
+from robocal.gp_layer import gp_inputs  # noqa: E402
 from robocal.rbf import RBFNetwork  # noqa: E402
 from robocal.identify import calibrate, register  # noqa: E402
 from robocal.ik import solve_on_branch  # noqa: E402
 from robocal.kinematics import smr_tracker  # noqa: E402
-from robocal.multismr import (MultiSMRPoseEstimator, fit_points_pose, measured_covariance,  # noqa: E402
-                              orientation_error_deg, seed003_tool)
+from robocal.three_smr_pose import (MultiSMRPoseEstimator, fit_points_pose, measured_covariance, orientation_error_deg,
+                                    seed003_tool)
 from robocal.noise import TrackerUncertainty  # noqa: E402
 from robocal.payload import (SEED003_PAYLOADS_KG, HeavyPayloadCell, irb4600,  # noqa: E402
                              random_configurations)
-from robocal.simulate import random_geometric_errors  # noqa: E402
+from robocal.simulation.mock_cell import random_geometric_errors  # noqa: E402
 from tests.cells import tool_frame  # noqa: E402
 
 TOOL = seed003_tool()

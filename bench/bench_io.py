@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.interchange import Dataset, read_csv, write_csv  # noqa: E402
-from campaign.runlog import RunLog  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
+from campaign.data.interchange_csv import read_csv, write_csv  # noqa: E402
+from campaign.run.log_writer import RunLog  # noqa: E402
 
 
 def main(n: int = 100_000, repeats: int = 3) -> None:

@@ -30,11 +30,11 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.cell import nominal_kinematics, simulated_cell, weights_covariance  # noqa: E402
-from campaign.config import load_config  # noqa: E402
-from campaign.dataset import Dataset  # noqa: E402
-from campaign.plan import build_plan  # noqa: E402
-from campaign.process import process  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
+from campaign.config.simulation import simulated_cell  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
+from campaign.plan.build import build_plan  # noqa: E402
 from robocal.design import _Design, criterion, criterion_effects, d_optimal, design_columns  # noqa: E402
 from robocal.identify import register  # noqa: E402
 from robocal.kinematics import ParamLayout  # noqa: E402
@@ -171,19 +171,19 @@ def choose(ctx, n: int, name: str) -> np.ndarray:
 METRIC = ["rms_mm"]             # the protocol's score; --metric mean_mm: the same comparison on the mean error
 
 
-def held_out(ds: Dataset, cfg) -> float:
-    """Held-out statistic (``METRIC``, mm) of the default ``process`` of ``ds``."""
-    return float(process(ds, cfg).report.stages["compensated"]["test"][METRIC[0]])
+def held_out(ds: Dataset, cell) -> float:
+    """Held-out statistic (``METRIC``, mm) of the default calibration of ``ds``."""
+    return float(getattr(calibrate_dataset(ds, cell).report.final.test, METRIC[0]))
 
 
-def crit_of(ds: Dataset, cfg):
+def crit_of(ds: Dataset, cell):
     """The criterion ``campaign select`` builds on the calibration rows (registered nominal model), the pool's
     H (L, L), the coverage coordinates (M, n) mm and the per-row noise (M,) mm^2."""
     cal = np.flatnonzero(ds.mask("calib"))
     q = np.radians(ds.q_deg[cal])
-    kin = register(nominal_kinematics(cfg), q, ds.p_tracker_mm[cal])
-    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else float(cfg.tool.payload_kg or 0.0)
-    cov = weights_covariance(cfg, ds)[0][cal]
+    kin = register(cell.kinematics, q, ds.p_tracker_mm[cal])
+    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else float(cell.payload_kg or 0.0)
+    cov = cell.weights(ds)[0][cal]
     crit = criterion(kin, q, cov, payload)
     J, _, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), payload)}, criterion_effects(kin, q, payload))
     B = J * prior
@@ -198,39 +198,39 @@ def sim_dataset(tmp: Path, name: str, seed: int):
     d.setdefault("simulation", {}).update(seed=seed, effects=effects)
     path = tmp / f"{cfg_name}-{seed}.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
-    cfg = load_config(path)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    cell = load_cell(path)
+    plan = build_plan(cell)
     cal = [p for p in plan.points if p.set == "calib"]
     test = sorted((p for p in plan.points if p.set == "test"), key=lambda p: p.point_id)
-    cell = simulated_cell(cfg)
+    sim = simulated_cell(cell)
     q_cal, q_test = np.radians([p.q_deg for p in cal]), np.radians([p.q_deg for p in test])
-    p_cal, _ = cell.measure(q_cal, np.random.default_rng(seed))
-    p_test, _ = cell.measure(q_test, np.random.default_rng(10_000 + seed))
+    p_cal, _ = sim.measure(q_cal, np.random.default_rng(seed))
+    p_test, _ = sim.measure(q_test, np.random.default_rng(10_000 + seed))
     ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
                  ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
                  np.vstack([p_cal, p_test]), source="bench")
-    return ds, cfg
+    return ds, cell
 
 
 def ur5_dataset(tmp: Path):
-    from campaign.importers import import_target_dif
+    from campaign.data.importers import import_target_dif
     return (import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv",
-                              UR5 / "3D_UR5_uncalibrated_random_cleaned.csv"), load_config(ROOT / "configs/ur5.yaml"))
+                              UR5 / "3D_UR5_uncalibrated_random_cleaned.csv"), load_cell(ROOT / "configs/ur5.yaml"))
 
 
-def evaluate(ds: Dataset, cfg, n: int | None, criteria) -> dict[str, float]:
+def evaluate(ds: Dataset, cell, n: int | None, criteria) -> dict[str, float]:
     """Held-out RMS ratio to all rows per criterion, plus 'random' (median of N_RANDOM) and 'all' (mm)."""
     cal = np.flatnonzero(ds.mask("calib"))
-    ctx = crit_of(ds, cfg)
+    ctx = crit_of(ds, cell)
     if n is None:
         n = max(round(len(cal) / 3), math.ceil(1.2 * ctx[0].identifiable))
-    everything = held_out(ds, cfg)
+    everything = held_out(ds, cell)
     out = {"all_mm": everything, "n": n, "M": len(cal)}
 
     def subset(idx):
         keep = ~ds.mask("calib")
         keep[cal[np.asarray(idx, int)]] = True
-        return held_out(ds.subset(keep), cfg) / everything
+        return held_out(ds.subset(keep), cell) / everything
     for c in criteria:
         out[c] = subset(choose(ctx, n, c))
     out["random"] = float(np.median([subset(np.random.default_rng(s).choice(len(cal), n, replace=False))
@@ -256,8 +256,8 @@ def main() -> None:
         for form in args.forms:
             runs = [(0, *ur5_dataset(tmp), 100)] if form == "ur5-real" else \
                 [(s, *sim_dataset(tmp, form, s), None) for s in args.seeds]
-            for seed, ds, cfg, n in runs:
-                r = evaluate(ds, cfg, n, args.criteria)
+            for seed, ds, cell, n in runs:
+                r = evaluate(ds, cell, n, args.criteria)
                 table.setdefault(form, []).append(r)
                 print(f"{form:26s}{seed:5d}{r['n']:>5d}/{r['M']:<4d}{r['all_mm']:8.4f}"
                       + "".join(f"{r[c]:10.3f}" for c in cols), flush=True)

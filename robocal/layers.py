@@ -18,7 +18,8 @@ from typing import Mapping
 import numpy as np
 
 from .elastic import kfold
-from .gp import GPRResidual, MultiOutputGP, gp_inputs
+from .gp_layer import GPRResidual, gp_inputs
+from .gp import MultiOutputGP
 from .model import CalibratedModel
 from .residual import IDWResidual
 from .sparse_gp import EXACT_MAX_POINTS, SparseGP

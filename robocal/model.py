@@ -16,7 +16,7 @@ from .frames import transform_points
 from .kinematics import Kinematics, fk
 from .effects import effect_state
 from .elastic import FittedEffect, elastic_flange
-from .gp import GPRResidual
+from .gp_layer import GPRResidual
 from .residual import IDWResidual
 
 FORMAT = "robocal-model/1"

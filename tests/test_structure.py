@@ -1,82 +1,401 @@
-"""Structure guards: no import cycle between the project's modules, and no module over 600 lines."""
+"""Structure guards over EVERY import statement of the product (module level, inside functions, under
+``TYPE_CHECKING``): no import cycle, no upward arrow between the top packages (robocal imports nothing of
+campaign or drivers; drivers nothing of campaign), campaign's sub-packages import only the rooms below them, no
+private name imported from another package, no module over the line cap, the line bridge's import closure is
+the standard library only, and the cell model is built where a command starts (one nominal-model call site).
+
+Known debt is listed with the reason it is still here; every list fails when an entry goes stale, so it cannot
+outlive the debt. ``test_checker_*`` run the same checks on small fake trees so that each check is shown to fail.
+"""
 from __future__ import annotations
 
 import ast
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("campaign", "robocal", "drivers")
-MAX_LINES = 600
-# Known debt, to be split next (each entry names why it is still here); the test fails when a listed module
-# shrinks below the limit, so the list cannot go stale.
-OVER_LIMIT = {
+RANK = {"robocal": 0, "drivers": 1, "campaign": 2}        # a package may import only packages of lower rank
+MAX_LINES = 500
+# campaign's rooms along the data flow, lowest first; a room imports only rooms listed before it. The shared
+# bottom (errors; io: durable files, JSON fields, safe CSV cells and terminal text) imports no room above it.
+# Checked once campaign/config/ is a package (issue 23).
+CAMPAIGN_LAYERS = ("errors", "io", "config", "plan", "run", "data", "calibrate", "correct", "report", "workflows",
+                   "cli", "__main__")
+SHARED_LEAVES = {"errors", "io"}
+BRIDGE = "drivers.bridge.line_bridge"
+
+# Known debt (issue 23 removes every entry). Each entry says why it is here.
+OVER_LIMIT: dict[str, str] = {}      # file -> why it is still over MAX_LINES
+KNOWN_CYCLES = {}
+KNOWN_UPWARD: dict[tuple[str, str], str] = {}   # (importer, imported): arrows from a lower package to a higher one
+KNOWN_DOWNWARD: dict[tuple[str, str], str] = {}  # (importer, imported): a campaign room importing a room above it
+KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}   # (importer, defining module, name)
+# The numerics of a config are built once per command and passed down (campaign.config.cell_model.CellModel):
+# call (or import, for a function) -> the only files (a folder ends in /) that may make it.
+CELL_BUILDERS = {
+    "nominal_kinematics": ("campaign/config/cell_model.py",),
+    "CellModel.from_config": ("campaign/config/load.py",),                      # inside load_cell
+    "load_cell": ("campaign/cli/", "campaign/workflows.py", "campaign/config/load.py",
+                  "campaign/run/emscon_cell.py"),                              # the emulator's command entry
 }
+KNOWN_CELL_BUILDERS: dict[tuple[str, str], str] = {}   # (file, call): a builder outside CELL_BUILDERS
 
 
-def _modules() -> dict[str, Path]:
+@dataclass(frozen=True)
+class Edge:
+    """One imported project module (``target``) named by an import statement of ``source`` at ``line``;
+    ``name`` is the imported name when the statement is ``from target import name`` (else None)."""
+    source: str
+    target: str
+    name: str | None
+    line: int
+
+
+def modules(root: Path, packages=PACKAGES) -> dict[str, Path]:
+    """Dotted module name -> file, for every .py file under the packages."""
     out = {}
-    for pkg in PACKAGES:
-        for path in (ROOT / pkg).rglob("*.py"):
-            parts = path.relative_to(ROOT).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-            out[name] = path
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
     return out
 
 
-def _imports(name: str, path: Path, known: set[str]) -> set[str]:
-    """Project modules imported at module level (not inside functions: those are deliberate lazy imports)."""
-    is_pkg = path.name == "__init__.py"
-    base = name.split(".") if is_pkg else name.split(".")[:-1]
-    found = set()
-    for node in ast.parse(path.read_text()).body:
-        targets = []
+def package_of(name: str, path: Path) -> str:
+    """The package a module belongs to (a package's ``__init__`` belongs to the package itself)."""
+    return name if path.name == "__init__.py" else name.rpartition(".")[0]
+
+
+def import_edges(name: str, path: Path, known: dict[str, Path]) -> list[Edge]:
+    """Every import statement of the file (``ast.walk``: functions, classes, ``if`` blocks included), resolved
+    to project modules; ``from pkg import submodule`` names the submodule."""
+    base = package_of(name, path).split(".")
+    edges = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
+            pairs = [(a.name, None) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             mod = node.module or ""
             if node.level:
                 mod = ".".join(base[: len(base) - node.level + 1] + ([mod] if mod else []))
-            targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
-        for t in targets:
-            while t and t not in known:
-                t = t.rpartition(".")[0]
-            if t and t != name:
-                found.add(t)
+            pairs = [(f"{mod}.{a.name}", None) if f"{mod}.{a.name}" in known else (mod, a.name) for a in node.names]
+        else:
+            continue
+        for target, imported in pairs:
+            while target and target not in known:
+                target, imported = target.rpartition(".")[0], None
+            if target and target != name:
+                edges.append(Edge(name, target, imported, node.lineno))
+    return edges
+
+
+def graph(root: Path, packages=PACKAGES) -> tuple[dict[str, Path], list[Edge]]:
+    """The modules and every import edge between them (a package's ``__init__`` importing its own submodules
+    is no edge: it only hands names on)."""
+    mods = modules(root, packages)
+    edges = [e for n, p in mods.items() for e in import_edges(n, p, mods)
+             if not (mods[n].name == "__init__.py" and e.target.startswith(n + "."))]
+    return mods, edges
+
+
+def cycles(mods: dict[str, Path], edges: list[Edge]) -> list[frozenset[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    succ: dict[str, set[str]] = {n: set() for n in mods}
+    for e in edges:
+        succ[e.source].add(e.target)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    found = []
+    for start in sorted(mods):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(succ[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on.add(start)
+        while work:
+            node, it = work[-1]
+            nxt = next(it, None)
+            if nxt is not None:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = len(index)
+                    stack.append(nxt)
+                    on.add(nxt)
+                    work.append((nxt, iter(sorted(succ[nxt]))))
+                elif nxt in on:
+                    low[node] = min(low[node], index[nxt])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                comp = set()
+                while True:
+                    m = stack.pop()
+                    on.discard(m)
+                    comp.add(m)
+                    if m == node:
+                        break
+                if len(comp) > 1:
+                    found.append(frozenset(comp))
     return found
 
 
+def describe(comp: frozenset[str], edges: list[Edge], mods: dict[str, Path], root: Path) -> str:
+    """The edges inside one cycle, as ``file:line -> module``."""
+    inner = sorted({(str(mods[e.source].relative_to(root)), e.line, e.target) for e in edges
+                    if e.source in comp and e.target in comp})
+    return "; ".join(f"{f}:{line} -> {t}" for f, line, t in inner)
+
+
+def upward(edges: list[Edge]) -> set[tuple[str, str]]:
+    """(importer, imported) pairs from a lower top package to a higher one."""
+    return {(e.source, e.target) for e in edges
+            if RANK.get(e.target.split(".")[0], -1) > RANK.get(e.source.split(".")[0], 99)}
+
+
+def layer_violations(mods: dict[str, Path], edges: list[Edge]) -> list[str]:
+    """campaign modules outside the layer table, and imports of a room at or above the importer's own room
+    (siblings inside one room are free; the shared bottom, errors and io, imports no other room)."""
+    def layer(module: str) -> int | None:
+        parts = module.split(".")
+        if parts[0] != "campaign" or len(parts) == 1:
+            return None
+        return CAMPAIGN_LAYERS.index(parts[1]) if parts[1] in CAMPAIGN_LAYERS else -1
+
+    out = [f"{m}: in no room of CAMPAIGN_LAYERS" for m in sorted(mods) if layer(m) == -1]
+    for e in edges:
+        a, b = layer(e.source), layer(e.target)
+        if a is None or b is None or a < 0 or b < 0:
+            continue
+        src, dst = e.source.split(".")[1], e.target.split(".")[1]
+        if src != dst and (b > a or (src in SHARED_LEAVES and dst not in SHARED_LEAVES)):
+            out.append(f"{e.source}:{e.line} imports {e.target} (a room above it)")
+    return out
+
+
+def private_imports(mods: dict[str, Path], edges: list[Edge]) -> set[tuple[str, str, str]]:
+    """(importer, defining module, name) of ``_private`` names imported from a module of another package."""
+    return {(e.source, e.target, e.name) for e in edges
+            if e.name and e.name.startswith("_") and not e.name.startswith("__")
+            and package_of(e.source, mods[e.source]) != package_of(e.target, mods[e.target])}
+
+
+def third_party_closure(root: Path, start: str) -> dict[str, set[str]]:
+    """Module of the import closure of ``start`` (project modules followed) -> the non-standard-library,
+    non-project top-level modules it imports."""
+    mods = modules(root)
+    todo, seen, out = [start], set(), {}
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        tree = ast.parse(mods[name].read_text(encoding="utf-8"))
+        tops = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        tops |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                 and n.module and not n.level}
+        out[name] = {t for t in tops if t not in sys.stdlib_module_names and t not in PACKAGES}
+        todo += [e.target for e in import_edges(name, mods[name], mods)]
+    return out
+
+
+def builder_sites(root: Path, builders=CELL_BUILDERS, packages=PACKAGES) -> set[tuple[str, str, int]]:
+    """(file, builder, line) of every call of a ``builders`` key outside the files it allows: a call whose dotted
+    callee is the key or ends with ``.key``; for a plain function also any import of it (an alias is a call site)."""
+    out = set()
+    for path in modules(root, packages).values():
+        rel = path.relative_to(root).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.ImportFrom) else []
+            if isinstance(node, ast.Call):
+                names = [dotted(node.func)]
+            for key, allowed in builders.items():
+                if any(n == key or n.endswith(f".{key}") for n in names) \
+                        and not any(rel == a or (a.endswith("/") and rel.startswith(a)) for a in allowed):
+                    out.add((rel, key, node.lineno))
+    return out
+
+
+def dotted(func: ast.expr) -> str:
+    """``a.b.c`` of a callee made of names and attributes ("" for anything else: a call's result, a subscript)."""
+    parts = []
+    while isinstance(func, ast.Attribute):
+        parts.append(func.attr)
+        func = func.value
+    return ".".join([func.id, *reversed(parts)]) if isinstance(func, ast.Name) else ""
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the product
+
+@pytest.fixture(scope="module")
+def product():
+    return graph(ROOT)
+
+
 @pytest.mark.unit
-def test_no_import_cycle():
-    modules = _modules()
-    graph = {n: _imports(n, p, set(modules)) for n, p in modules.items()}
-    # a package's __init__ importing its own submodules is not a cycle through the package's users
-    graph = {n: {d for d in deps if not (d.startswith(n + ".") and modules[n].name == "__init__.py")}
-             for n, deps in graph.items()}
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(n: str) -> None:
-        state[n] = 1
-        stack.append(n)
-        for d in sorted(graph[n]):
-            if state.get(d) == 1:
-                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(d):] + [d]))
-            if d not in state:
-                visit(d)
-        stack.pop()
-        state[n] = 2
-
-    for n in sorted(graph):
-        if n not in state:
-            visit(n)
+def test_no_import_cycle(product):
+    mods, edges = product
+    found = cycles(mods, edges)
+    new = [c for c in found if not any(c <= known for known in KNOWN_CYCLES)]
+    assert not new, "import cycle (imports inside functions count): " + " | ".join(
+        describe(c, edges, mods, ROOT) for c in new)
+    stale = [sorted(k) for k in KNOWN_CYCLES if not any(c & k for c in found)]
+    assert not stale, f"no longer a cycle, remove from KNOWN_CYCLES: {stale}"
 
 
 @pytest.mark.unit
-def test_no_module_over_600_lines():
-    sizes = {str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in _modules().values()}
+def test_no_upward_import(product):
+    _, edges = product
+    found = upward(edges)
+    assert found <= set(KNOWN_UPWARD), f"upward (robocal < drivers < campaign): {sorted(found - set(KNOWN_UPWARD))}"
+    assert not set(KNOWN_UPWARD) - found, f"gone, remove from KNOWN_UPWARD: {sorted(set(KNOWN_UPWARD) - found)}"
+
+
+@pytest.mark.unit
+def test_campaign_rooms_import_downward(product):
+    """Once campaign/ is in rooms (issue 23): every module is in a room and imports only rooms below it."""
+    mods, edges = product
+    if not (ROOT / "campaign" / "config" / "__init__.py").is_file():
+        pytest.skip("campaign/ is not in sub-packages yet (issue 23, phase 2)")
+    found = layer_violations(mods, edges)
+    known = {v for v in found for a, b in KNOWN_DOWNWARD if v.startswith(f"{a}:") and f" imports {b} " in v}
+    assert set(found) <= known, f"rooms importing upward: {sorted(set(found) - known)}"
+    stale = [k for k in KNOWN_DOWNWARD if not any(v.startswith(f"{k[0]}:") and f" imports {k[1]} " in v for v in found)]
+    assert not stale, f"gone, remove from KNOWN_DOWNWARD: {stale}"
+
+
+@pytest.mark.unit
+def test_no_private_name_imported_from_another_package(product):
+    mods, edges = product
+    found = private_imports(mods, edges)
+    assert found <= set(KNOWN_PRIVATE), ("private names imported from another package (make them public or "
+                                         f"move them): {sorted(found - set(KNOWN_PRIVATE))}")
+    assert not set(KNOWN_PRIVATE) - found, f"gone, remove from KNOWN_PRIVATE: {sorted(set(KNOWN_PRIVATE) - found)}"
+
+
+@pytest.mark.unit
+def test_module_size_cap():
+    sizes = {str(p.relative_to(ROOT)): len(p.read_text(encoding="utf-8").splitlines()) for p in modules(ROOT).values()}
     over = {f: n for f, n in sizes.items() if n > MAX_LINES}
     assert set(over) <= set(OVER_LIMIT), f"over {MAX_LINES} lines: {sorted(set(over) - set(OVER_LIMIT))}"
     stale = sorted(f for f in OVER_LIMIT if sizes.get(f, 0) <= MAX_LINES)
     assert not stale, f"no longer over the limit, remove from OVER_LIMIT: {stale}"
+
+
+@pytest.mark.unit
+def test_cell_model_is_built_once_where_a_command_starts():
+    """One call of ``nominal_kinematics`` (in CellModel.from_config); the cell model is built by ``load_cell`` in
+    the CLI and the workflows and passed down, never rebuilt from a config below them."""
+    found = builder_sites(ROOT)
+    new = sorted(f for f in found if f[:2] not in KNOWN_CELL_BUILDERS)
+    assert not new, f"cell model built outside {CELL_BUILDERS} (pass the CellModel down instead): {new}"
+    stale = sorted(set(KNOWN_CELL_BUILDERS) - {f[:2] for f in found})
+    assert not stale, f"gone, remove from KNOWN_CELL_BUILDERS: {stale}"
+    text = (ROOT / "campaign/config/cell_model.py").read_text(encoding="utf-8")
+    calls = [n for n in ast.walk(ast.parse(text)) if isinstance(n, ast.Call)
+             and dotted(n.func).split(".")[-1] == "nominal_kinematics"]
+    assert len(calls) == 1, f"campaign/config/cell_model.py calls nominal_kinematics {len(calls)} times, expected 1"
+
+
+@pytest.mark.unit
+def test_line_bridge_needs_no_third_party_package():
+    """The reference bridge runs on a PC with only Python and the vendor SDK: its import closure is the standard
+    library and the project's own stdlib-only modules."""
+    closure = third_party_closure(ROOT, BRIDGE)
+    assert not {m: t for m, t in closure.items() if t}, closure
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the checks themselves, on fake trees
+
+def _tree(root: Path, files: dict[str, str]) -> Path:
+    for rel, text in files.items():
+        path = root / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return root
+
+
+CLEAN = {"robocal/__init__.py": "", "robocal/kin.py": "import numpy\n",
+         "drivers/__init__.py": "", "drivers/mock.py": "from robocal.kin import numpy\n",
+         "campaign/__init__.py": "", "campaign/config/__init__.py": "",
+         "campaign/config/schema.py": "from campaign.errors import E\n", "campaign/errors.py": "E = 1\n",
+         "campaign/run/__init__.py": "",
+         "campaign/run/runner.py": "from ..config.schema import E\nfrom .log import _x\n",
+         "campaign/run/log.py": "_x = 1\n"}
+
+
+def _clean_plus(tmp_path: Path, extra: dict[str, str]):
+    """The graph of CLEAN with ``extra`` text appended to (or forming) some of its files."""
+    files = dict(CLEAN)
+    for rel, text in extra.items():
+        files[rel] = files.get(rel, "") + text
+    return graph(_tree(tmp_path, files))
+
+
+@pytest.mark.unit
+def test_checker_passes_a_clean_tree(tmp_path):
+    mods, edges = graph(_tree(tmp_path, CLEAN))
+    assert not cycles(mods, edges) and not upward(edges) and not private_imports(mods, edges)
+    assert not layer_violations(mods, edges)
+    assert ("campaign.run.runner", "campaign.run.log", "_x") not in private_imports(mods, edges)   # same package
+
+
+@pytest.mark.unit
+def test_checker_finds_a_cycle_through_an_import_inside_a_function(tmp_path):
+    mods, edges = _clean_plus(tmp_path, {"campaign/config/schema.py":
+                                         "def load():\n    from campaign.run.runner import E\n    return E\n"})
+    assert cycles(mods, edges) == [frozenset({"campaign.config.schema", "campaign.run.runner"})]
+    assert "campaign/config/schema.py:3 -> campaign.run.runner" in describe(cycles(mods, edges)[0], edges, mods,
+                                                                             tmp_path)
+    assert any("imports campaign.run.runner" in v for v in layer_violations(mods, edges))
+
+
+@pytest.mark.unit
+def test_checker_finds_a_cycle_under_type_checking_and_a_relative_one(tmp_path):
+    typing_only = "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import runner\n"
+    mods, edges = _clean_plus(tmp_path, {"campaign/run/log.py": typing_only})
+    assert cycles(mods, edges) == [frozenset({"campaign.run.log", "campaign.run.runner"})]
+
+
+@pytest.mark.unit
+def test_checker_finds_upward_arrows_private_names_and_closures(tmp_path):
+    mods, edges = _clean_plus(tmp_path, {
+        "robocal/kin.py": "def f():\n    import campaign.errors\n",
+        "drivers/mock.py": "from campaign.run.log import _x\n",
+        "campaign/cli/__init__.py": "", "campaign/cli/main.py": "from campaign.config.schema import E\n",
+        "campaign/oddity.py": "", "campaign/io/__init__.py": "",
+        "campaign/io/json_fields.py": "from campaign.errors import E\nfrom campaign.config.schema import E\n"})
+    assert upward(edges) == {("robocal.kin", "campaign.errors"), ("drivers.mock", "campaign.run.log")}
+    assert private_imports(mods, edges) == {("drivers.mock", "campaign.run.log", "_x")}
+    assert layer_violations(mods, edges) == [              # io, the shared bottom, may import errors only
+        "campaign.oddity: in no room of CAMPAIGN_LAYERS",
+        "campaign.io.json_fields:2 imports campaign.config.schema (a room above it)"]
+    assert third_party_closure(tmp_path, "drivers.mock") == {"drivers.mock": set(), "robocal.kin": {"numpy"},
+                                                             "campaign.run.log": set(), "campaign.errors": set()}
+
+
+@pytest.mark.unit
+def test_checker_finds_a_second_cell_builder(tmp_path):
+    root = _tree(tmp_path, {**CLEAN, "campaign/config/cell_model.py": "def nominal_kinematics(cfg):\n    pass\n"
+                                                                      "k = nominal_kinematics(1)\n",
+                            "campaign/cli/main.py": "from campaign.config.load import load_cell\nc = load_cell(1)\n"})
+    assert not builder_sites(root)
+    _tree(tmp_path, {"campaign/plan/build.py": "from campaign.config import cell_model as cm\n"
+                                               "def f(cfg):\n    return cm.nominal_kinematics(cfg)\n",
+                     "campaign/run/eta.py": "from campaign.config.cell_model import nominal_kinematics as nk\n",
+                     "campaign/data/x.py": "from campaign.config.cell_model import CellModel\n"
+                                           "c = CellModel.from_config(1)\n",
+                     "drivers/mock.py": "import campaign.config.load\ncampaign.config.load.load_cell(2)\n"})
+    assert builder_sites(root) == {("campaign/plan/build.py", "nominal_kinematics", 3),
+                                   ("campaign/run/eta.py", "nominal_kinematics", 1),
+                                   ("campaign/data/x.py", "CellModel.from_config", 2),
+                                   ("drivers/mock.py", "load_cell", 2)}

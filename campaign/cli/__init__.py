@@ -3,10 +3,10 @@
 :mod:`.common` holds the exit codes, the command registry and the consoles; :mod:`.commands`,
 :mod:`.diagnose` and :mod:`.report` register subcommands into it (they import ``common``, never each
 other); :mod:`.entry` builds the parser and translates errors into exit codes. All terminal rendering
-lives in :mod:`campaign.report`.
+lives in :mod:`campaign.report.terminal`.
 
 This package module itself stays light: the console script calls :func:`main` without arguments, which installs
-the signal handlers (:mod:`campaign.signals`) before the rest of the CLI is imported. The other names are loaded
+the signal handlers (:mod:`campaign.cli.signals`) before the rest of the CLI is imported. The other names are loaded
 on first use.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv is not None:
         from campaign.cli.entry import main as run
         return run(argv)
-    from campaign.boundary import run_process
+    from campaign.cli.boundary import run_process
 
     def run_argv() -> int:
         from campaign.cli.entry import main as run
@@ -39,7 +39,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _signal_line(text: str) -> None:
-    from campaign.terminal import stderr_console
+    from campaign.io.terminal_text import stderr_console
     stderr_console().print(text, style="red")
 
 

@@ -13,9 +13,9 @@ from rich.console import Console
 
 from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
                                  overwrite_argument, print_plausibility)
-from campaign.config import load_config
+from campaign.config.load import load_cell
 from campaign.errors import DataError
-from campaign.plausibility import forced
+from campaign.calibrate.plausibility import forced
 
 
 
@@ -25,8 +25,9 @@ def _config_argument(parser: argparse.ArgumentParser) -> None:
 
 @command("validate", "check a campaign config file and print a summary", _config_argument)
 def cmd_validate(args: argparse.Namespace) -> int:
-    """Load and validate CONFIG; print a one-line summary."""
-    cfg = load_config(args.config)
+    """Load and validate CONFIG (the checks of every command, the cell model's included); print a one-line
+    summary."""
+    cfg = load_cell(args.config).config
     _stdout().print(
         f"OK {cfg.source_path}: {cfg.name}: {cfg.robot.model}, {cfg.robot.n_joints} joints, "
         f"robot {cfg.robot.url}, tracker {cfg.tracker.url}",
@@ -47,27 +48,27 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
 def cmd_run(args: argparse.Namespace) -> int:
-    from campaign.pipeline import run_campaign
-    from campaign.report import render_parameters, render_stages, render_stop
+    from campaign.workflows import run_campaign
+    from campaign.report.terminal import render_parameters, render_stages, render_stop
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     out = _stdout()
     with forced(args.force):
-        result = run_campaign(cfg, args.out, args.resume, out, overwrite=args.overwrite)
+        result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
         _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     if result.iso9283 is not None:                     # plan.kind: iso9283
-        from campaign.iso_run import render_iso
+        from campaign.report.terminal import render_iso
         render_iso(out, result.iso9283)
         out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
         return EXIT_OK
     render_stages(out, result.processed.report)
     render_parameters(out, result.processed.report)
     render_stop(out, result.processed.report)
-    print_plausibility(out, result.processed.report.get("plausibility"))
+    print_plausibility(out, result.processed.report.plausibility)
     out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
               markup=False)
     return EXIT_OK
@@ -81,23 +82,22 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
 def cmd_plan(args: argparse.Namespace) -> int:
-    from campaign.cell import nominal_kinematics
-    from campaign.eta import estimate_duration_s
-    from campaign.plan import build_plan, write_plan_csv
-    from campaign.report import render_plan
+    from campaign.run.eta import estimate_duration_s
+    from campaign.plan.build import build_plan
+    from campaign.plan.points import write_plan_csv
+    from campaign.report.terminal import render_plan
 
-    from campaign.outputs import check_file
+    from campaign.run.output_dirs import check_file
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if args.csv:
         check_file(args.csv, args.overwrite, "--csv")
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, kin))
-    if cfg.plan.kind != "iso9283" and plan.count("calib"):
-        from campaign.plan_optimal import plan_forecast
-        from campaign.report import render_forecast
-        render_forecast(_stdout(), plan_forecast(cfg, kin, plan), plan.blocks)
+    plan = build_plan(cell)
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
+    if cell.config.plan.kind != "iso9283" and plan.count("calib"):
+        from campaign.plan.optimal import plan_forecast
+        from campaign.report.terminal import render_forecast
+        render_forecast(_stdout(), plan_forecast(cell, plan), plan.blocks)
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -115,19 +115,19 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
 def cmd_reprocess(args: argparse.Namespace) -> int:
-    from campaign.pipeline import reprocess
-    from campaign.report import render_parameters, render_stages, render_stop
+    from campaign.workflows import reprocess
+    from campaign.report.terminal import render_parameters, render_stages, render_stop
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
     with forced(args.force):
-        processed = reprocess(args.source, cfg, args.out, args.overwrite)
+        processed = reprocess(args.source, cell, args.out, args.overwrite)
     out = _stdout()
     render_stages(out, processed.report)
     render_parameters(out, processed.report)
     render_stop(out, processed.report)
-    print_plausibility(out, processed.report.get("plausibility"))
+    print_plausibility(out, processed.report.plausibility)
     out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
     return EXIT_OK
 
@@ -143,19 +143,19 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
 @command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
-    from campaign.interchange import read_csv, write_csv
-    from campaign.select import select_rows
+    from campaign.data.interchange_csv import read_csv, write_csv
+    from campaign.calibrate.select_rows import select_rows
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if args.points < 1:
         raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
     if args.out.resolve() == args.data.resolve():
         raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
-    from campaign.outputs import check_file
+    from campaign.run.output_dirs import check_file
 
     check_file(args.out, args.overwrite)
     ds = read_csv(args.data)
-    keep = select_rows(ds, cfg, args.points)
+    keep = select_rows(ds, cell, args.points)
     write_csv(args.out, ds.subset(keep))
     n_cal = int(ds.mask("calib").sum())
     _stdout().print(f"selected {args.points} of {n_cal} calibration rows by the optimal-plan criterion (D-optimal, "
@@ -181,22 +181,22 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correction import (check_model_fits, correct_targets, read_rejected, read_targets_csv,
-                                     recorded_identity, write_corrected)
-    from campaign.outputs import check_dir, source_key
-    from campaign.plan import tool_rotation
-    from campaign.process import load_model
+    from campaign.correct.targets import check_model_fits, correct_targets, read_targets_csv, recorded_identity
+    from campaign.correct.write_back import read_rejected, write_corrected
+    from campaign.run.output_dirs import check_dir, source_key
+    from campaign.plan.poses import tool_rotation
+    from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
     model = load_model(args.model)
     with forced(args.force):
-        check_model_fits(cfg, model, str(args.model))
-    targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
+        check_model_fits(cell, model, str(args.model))
+    targets = read_targets_csv(args.targets, tool_rotation(cell.config.plan.tool_direction))
+    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
-        paths = write_corrected(cfg, accepted, rejected, claim.take(), tuple(args.format or ()))
+        paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
         _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]
@@ -208,7 +208,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
 
 def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
     """Summary of the rejected targets (all of them are in rejected.csv with their reason)."""
-    from campaign.correction import read_rejected
+    from campaign.correct.write_back import read_rejected
 
     rows = read_rejected(out_dir)
     if not rows:
@@ -229,8 +229,8 @@ def _verify_arguments(parser: argparse.ArgumentParser) -> None:
 @command("verify", "measure the run's test points after correction (closed loop) and report before/after",
          _verify_arguments)
 def cmd_verify(args: argparse.Namespace) -> int:
-    from campaign.pipeline import verify
-    from campaign.report import render_verify
+    from campaign.workflows import verify
+    from campaign.report.terminal import render_verify
 
     with forced(args.force):
         result = verify(args.run_dir, _stdout())

@@ -8,8 +8,12 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from rich.console import Console
+
+if TYPE_CHECKING:                      # the calibration modules load when a command needs them
+    from campaign.calibrate.plausibility import Plausibility
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -44,12 +48,12 @@ def command(name: str, help: str, configure: Configure) -> Callable[[Handler], H
 
 
 def _stdout() -> Console:
-    from campaign.terminal import stdout_console
+    from campaign.io.terminal_text import stdout_console
     return stdout_console()
 
 
 def _stderr() -> Console:
-    from campaign.terminal import stderr_console
+    from campaign.io.terminal_text import stderr_console
     return stderr_console()
 
 
@@ -60,9 +64,9 @@ def overwrite_argument(parser: argparse.ArgumentParser) -> None:
                              "directory of other files or of another dataset's outputs); never into another run")
 
 
-def print_plausibility(out: Console, plaus: dict | None) -> None:
+def print_plausibility(out: Console, plaus: Plausibility | None) -> None:
     """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
-    from campaign.plausibility import plausibility_lines
+    from campaign.calibrate.plausibility import plausibility_lines
 
     for line, style in plausibility_lines(plaus):
         out.print(line, style=style, markup=False)

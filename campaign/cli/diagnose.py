@@ -54,17 +54,20 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.source is None or not args.config:
         raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
     from campaign.cli.common import print_plausibility
-    from campaign.config import load_config
-    from campaign.diagnose import diagnose_source, render, write_diagnosis_json, write_plots
-    from campaign.plausibility import forced
+    from campaign.config.load import load_cell
+    from campaign.calibrate.diagnosis import diagnose_source, write_diagnosis_json
+    from campaign.report.diagnosis_text import render
+    from campaign.report.diagnosis_plots import write_plots
+    from campaign.calibrate.plausibility import Plausibility, forced
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     plots = _check_outputs(args)                  # every output path refused or accepted before any work
     with forced(args.force):
-        result = diagnose_source(args.source, cfg)
+        result = diagnose_source(args.source, cell)
     out = _stdout()
     render(out, result.report)
-    print_plausibility(out, result.report.get("plausibility"))
+    plaus = result.report.get("plausibility")                 # the diagnosis document carries its JSON
+    print_plausibility(out, None if plaus is None else Plausibility.from_dict(plaus))
     if args.json:
         write_diagnosis_json(args.json, result.report)
         out.print(f"wrote {args.json}", markup=False)
@@ -79,9 +82,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
 def _check_outputs(args: argparse.Namespace):
     """--json FILE, --plots DIR, --html FILE (or the run directory's diagnosis.json and report.html) checked
-    (:mod:`campaign.outputs`); returns the claim of the plots directory (None without --plots)."""
-    from campaign.html_report import report_targets
-    from campaign.outputs import check_campaign_dir, check_dir, check_file, source_key
+    (:mod:`campaign.run.output_dirs`); returns the claim of the plots directory (None without --plots)."""
+    from campaign.report.html import report_targets
+    from campaign.run.output_dirs import check_campaign_dir, check_dir, check_file, source_key
 
     if args.json:
         check_file(args.json, args.overwrite, "--json")
@@ -98,8 +101,8 @@ def _check_outputs(args: argparse.Namespace):
 def _write_html(args: argparse.Namespace, report: dict) -> Path | None:
     """The diagnosis as an HTML report: --html FILE (from the diagnosis alone), or the run directory's
     report.html with diagnosis.json beside it."""
-    from campaign.diagnose import write_diagnosis_json
-    from campaign.html_report import ReportSources, write_report
+    from campaign.calibrate.diagnosis import write_diagnosis_json
+    from campaign.report.html import ReportSources, write_report
 
     if args.html is not None:
         title = f"{report.get('config', 'diagnosis')}: {args.html.stem}"
@@ -114,12 +117,13 @@ def _write_html(args: argparse.Namespace, report: dict) -> Path | None:
 def _self_check(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from campaign.diagnose import render_self_check, write_diagnosis_json
-    from robocal.selfcheck import run_self_check, trial_plan
+    from campaign.report.diagnosis_text import render_self_check
+    from campaign.calibrate.diagnosis import write_diagnosis_json
+    from robocal.diagnose.selfcheck import run_self_check, trial_plan
 
     out = _stdout()
     total = len(trial_plan(args.seeds))
-    out.print(f"self-check: {total} simulated campaigns from robocal/truth.py ({args.seeds} seeds per effect, controls, "
+    out.print(f"self-check: {total} simulated campaigns from robocal/simulation/truth_cell.py ({args.seeds} seeds per effect, controls, "
               "two-effect cases, an effect outside the library)", markup=False)
     with Progress(TextColumn("diagnosing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=out, disable=not out.is_terminal) as bar:

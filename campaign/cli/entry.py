@@ -6,7 +6,7 @@ Operator-facing errors are printed as one red line on stderr, never as a traceba
 * any other ``CampaignError`` or ``DriverError`` (e.g. a lost connection) -> exit 1
 * ``OSError`` -> one line with the path and the cause: exit 2 (unusable path) or 1 (system failure)
 * Ctrl-C, SIGTERM, SIGHUP -> exit 130
-* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.boundary`)
+* anything else -> crash report file named on one line, exit 3 (see :mod:`campaign.cli.boundary`)
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    from campaign.boundary import guarded
+    from campaign.cli.boundary import guarded
 
     argv_text = list(argv) if argv is not None else sys.argv[1:]
     return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
@@ -58,7 +58,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run_dir_hint(args: argparse.Namespace) -> Path | None:
     """The run directory a crash report should go to, if the command names one written by campaign (never a
     directory of the user's: the report then goes to a temporary file)."""
-    from campaign.outputs import LOG_NAME, read_marker
+    from campaign.run.log_reader import LOG_NAME
+    from campaign.run.output_dirs import read_marker
 
     for name in ("resume", "run_dir", "out"):
         value = getattr(args, name, None)

@@ -2,7 +2,7 @@
 
     campaign import target-dif CALIB.csv [TEST.csv] --out data.csv [--dif-sign +1|-1]
 
-Imported by :mod:`campaign.cli`, which registers it. The layouts and their rules are in :mod:`campaign.importers`.
+Imported by :mod:`campaign.cli`, which registers it. The layouts and their rules are in :mod:`campaign.data.importers`.
 """
 from __future__ import annotations
 
@@ -26,9 +26,9 @@ def _import_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("import", "convert a campaign measured in another layout to the interchange CSV", _import_arguments)
 def cmd_import(args: argparse.Namespace) -> int:
-    from campaign.importers import import_target_dif
-    from campaign.interchange import write_csv
-    from campaign.outputs import check_file
+    from campaign.data.importers import import_target_dif
+    from campaign.data.interchange_csv import write_csv
+    from campaign.run.output_dirs import check_file
 
     check_file(args.out, args.overwrite)
     ds = import_target_dif(args.calib, args.test, float(args.dif_sign))

@@ -26,7 +26,7 @@ def _report_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("report", "write the self-contained HTML report of a run (figures also as PNG)", _report_arguments)
 def cmd_report(args: argparse.Namespace) -> int:
-    from campaign.html_report import figures_dir, write_report
+    from campaign.report.html import figures_dir, write_report
 
     path = write_report(args.run_dir, args.out, args.overwrite)
     _stdout().print(f"wrote {path} (figures as PNG in {figures_dir(path)})", markup=False)
@@ -44,10 +44,10 @@ def _export_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("export", "export a calibrated model as URDF, a DH table (CSV) or a RoboDK DH(M) table", _export_arguments)
 def cmd_export(args: argparse.Namespace) -> int:
-    from campaign.export import export
-    from campaign.process import load_model
+    from campaign.report.export import export
+    from campaign.calibrate.outputs import load_model
 
-    from campaign.outputs import check_file
+    from campaign.run.output_dirs import check_file
 
     if not (args.urdf or args.dh_csv or args.robodk):
         raise DataError("export", "nothing to write: give --urdf, --dh-csv and/or --robodk")
@@ -72,14 +72,15 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",
          _iso_arguments)
 def cmd_iso9283(args: argparse.Namespace) -> int:
-    from campaign.config import load_config
-    from campaign.iso_run import render_iso, run_iso9283
-    from campaign.process import load_model
+    from campaign.config.load import load_cell
+    from campaign.report.terminal import render_iso
+    from campaign.workflows import run_iso9283
+    from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     model = load_model(args.model) if args.model else None
     out = _stdout()
-    result, report = run_iso9283(cfg, model, args.out, out, overwrite=args.overwrite)
+    result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite)
     o = result.outcome
     if report is None:
         _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)

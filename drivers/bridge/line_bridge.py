@@ -2,7 +2,11 @@
 pluggable back end, so a tracker without a public wire protocol (FARO, API, Leica LMF, SpatialAnalyzer) can be
 driven by ``tracker+socket://HOST:PORT`` with ``options: {}`` plus ``goto``/``find`` if the back end can aim.
 
-Standard library only: copy this one file next to the vendor SDK (usually on the Windows PC that runs it).
+Standard library only, nothing to pip install, but not a single file: it uses the TCP plumbing, fault deck and
+reply encoding of ``drivers/emulators/``. Copy the repository's whole ``drivers/`` folder next to the vendor SDK
+(usually on the Windows PC that runs it) and run the module from the folder that holds ``drivers/`` as below
+(``python drivers/bridge/line_bridge.py`` does not find the package). ``tests/test_structure.py`` keeps the import
+closure free of third-party packages; ``tests/drivers/test_line_bridge.py`` runs such a copy with ``python -S``.
 
 Back ends implement ``Backend``: ``open()``, ``measure() -> Measurement`` (xyz mm in the tracker frame, optional
 1-sigma std devs in mm, optional environment), ``environment()``, ``close()``, and optionally ``goto(x, y, z)`` and
@@ -14,8 +18,8 @@ Back ends implement ``Backend``: ``open()``, ``measure() -> Measurement`` (xyz m
 * ``FaroSdkBackend``, ``SpatialAnalyzerBackend``: UNTESTED SKELETONS showing where the vendor calls go. They were
   written without access to either SDK and have never run against a device; they raise until completed.
 
-Run: ``python line_bridge.py --backend replay --csv session.csv --port 7000`` (``--port 0 --print-port`` prints the
-bound port). One client at a time; binds 127.0.0.1 unless ``--host`` is given.
+Run: ``python -m drivers.bridge.line_bridge --backend replay --csv session.csv --port 7000`` (``--port 0
+--print-port`` prints the bound port). One client at a time; binds 127.0.0.1 unless ``--host`` is given.
 """
 from __future__ import annotations
 
@@ -29,9 +33,9 @@ from dataclasses import dataclass
 from typing import Mapping, Protocol, Sequence
 
 from drivers.emulators.faults import FaultDeck
-from drivers.emulators.line_server import TcpServer, wait_for_shutdown
-from drivers.emulators.tracker_server import FAULT_ORDER, encode_line, fault_response, join_with_seq
-from drivers.emulators.tracker_server import Response as Reply  # the sample protocol's reply (one owner)
+from drivers.emulators.tcp import TcpServer, wait_for_shutdown
+from drivers.emulators.line_tracker_server import FAULT_ORDER, encode_line, fault_response, join_with_seq
+from drivers.emulators.line_tracker_server import Response as Reply  # the sample protocol's reply (one owner)
 
 ERROR_WORDS = {"beam_broken": "BEAM_BROKEN", "no_target": "NO_TARGET", "unstable": "UNSTABLE", "timeout": "TIMEOUT",
                "error": "DEVICE_ERROR"}

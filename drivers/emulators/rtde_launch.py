@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from .line_server import listen
+from .tcp import listen
 from .rtde_protocol import FIXED_PORTS
 
 # --------------------------------------------------------------------------------------------- helper

@@ -1,6 +1,6 @@
 """RAPID literals and layout: identifiers, strings, numbers, aggregates wrapped to the line limit.
 
-Pure text functions shared by the target writer (``campaign.writeback``) and the ABB driver.
+Pure text functions shared by the target writer (``campaign.correct.rapid_module``) and the ABB driver.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ RAPID_UNUSED = "9E9"      # value of an unused external axis
 RAPID_UNUSED_AXIS = 9e9   # the same as a number
 
 
-def _fixed(x: float, decimals: int) -> str:
+def fixed_literal(x: float, decimals: int) -> str:
     """``x`` with ``decimals`` decimals, trailing zeros dropped, never ``-0`` (RAPID/URScript literal)."""
     s = f"{float(x):.{decimals}f}"
     if "." in s:
@@ -36,7 +36,7 @@ THEN TO TRAP TRUE TRYNEXT UNDO VAR VIEWONLY WHILE WITH XOR""".split())
 _RAPID_IDENT_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
 
-def _rapid_ident_problem(name: str) -> str | None:
+def rapid_ident_problem(name: str) -> str | None:
     """Why ``name`` is not a RAPID identifier (None when it is)."""
     if not _RAPID_IDENT_RE.match(name):
         return f"bad identifier '{name}': a letter, then letters, digits or '_'"
@@ -47,7 +47,7 @@ def _rapid_ident_problem(name: str) -> str | None:
     return None
 
 
-def _rapid_string(text: str) -> str:
+def rapid_string(text: str) -> str:
     """RAPID string literal of ``text`` (ISO 8859-1, at most 80 characters); ValueError otherwise."""
     if len(text) > RAPID_MAX_STRING:
         raise ValueError(f"{text!r}: RAPID strings hold at most {RAPID_MAX_STRING} characters")
@@ -68,7 +68,7 @@ def _rapid_string(text: str) -> str:
 
 
 
-def _agg(parts: Iterable[str]) -> str:
+def rapid_aggregate(parts: Iterable[str]) -> str:
     """RAPID aggregate ``[a,b,...]``."""
     return "[" + ",".join(parts) + "]"
 
@@ -127,7 +127,7 @@ def _wrap(text: str, indent: str, width: int = RAPID_MAX_LINE) -> list[str]:
     return lines
 
 
-def _rapid_array(storage: str, type_name: str, name: str, elements: Sequence[str]) -> list[str]:
+def rapid_array_lines(storage: str, type_name: str, name: str, elements: Sequence[str]) -> list[str]:
     """Lines of ``STORAGE type name{N}:=[e1, ..., eN];``, one element per line (wrapped)."""
     lines = [f"    {storage} {type_name} {name}{{{len(elements)}}}:=["]
     for k, element in enumerate(elements):

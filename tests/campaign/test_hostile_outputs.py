@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from campaign.outputs import MARKER
-from campaign.runlog import encode_record
-from tests.campaign.helpers import small_config
+from campaign.run.output_dirs import MARKER
+from campaign.run.log_reader import encode_record
+from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import SECRET, checksums, run_campaign_process, secret_hits
 
 pytestmark = pytest.mark.system
@@ -130,14 +130,14 @@ def _spreadsheet_safe(w: Path, out: str, err: str) -> None:
     assert any(v.startswith("-") for r in rows[1:] for v in r[1:]), "negative numbers must stay numbers"
     rejected = list(csv.reader((w / "out" / "rejected.csv").read_text().splitlines()))
     assert [r[0] for r in rejected[1:]] == HOSTILE_IDS[4:]
-    from campaign.writeback import read_corrected_targets_csv
+    from campaign.correct.target_csv import read_corrected_targets_csv
     assert [t.target_id for t in read_corrected_targets_csv(w / "out" / "targets.csv")] == HOSTILE_IDS[:4]
 
 
 def _no_test_rows_reported(w: Path, out: str, err: str) -> None:
     assert "held-out test set: none" in out
-    report = json.loads((w / "out" / "report.json").read_text())
-    assert report["n"]["test"] == 0 and any("no test rows" in n for n in report["plausibility"]["notes"])
+    report = read_report(w / "out")
+    assert report.n.test == 0 and any("no test rows" in n for n in report.plausibility.notes)
     assert "Held-out test set: none" in (w / "out" / "report.html").read_text()
 
 

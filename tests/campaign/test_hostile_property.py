@@ -115,7 +115,7 @@ def test_500_mutated_configs(tmp_path, capsys, monkeypatch):
 
 def _stop_status(run_dir) -> str | None:
     """exit_status of the run log's last stop record (None without a log or a stop)."""
-    from campaign.runlog import read_log
+    from campaign.run.log_reader import read_log
 
     try:
         stops = read_log(run_dir).stops

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from campaign.runlog import read_log
+from campaign.run.log_reader import read_log
 from tests.campaign.helpers import ROOT, small_config
 
 pytestmark = [pytest.mark.system,

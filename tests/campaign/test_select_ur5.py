@@ -9,17 +9,16 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
-from campaign.config import load_config
+from campaign.config.load import load_cell
 from campaign.cli import main
-from campaign.interchange import read_csv, write_csv
-from campaign.process import process
-from tests.campaign.helpers import ROOT
+from campaign.data.interchange_csv import read_csv, write_csv
+from campaign.calibrate.stages import calibrate_dataset
+from tests.campaign.helpers import ROOT, read_report
 
 pytestmark = pytest.mark.system
 
@@ -29,8 +28,8 @@ N_POINTS, N_RANDOM = 100, 10
 GOAL = 1.2                      # issue 22: 100 chosen poses within 1.2 x the held-out error of all 1000
 
 
-def _held_out_mean_mm(ds, cfg) -> float:
-    return float(process(ds, cfg).report.stages["compensated"]["test"]["mean_mm"])
+def _held_out_mean_mm(ds, cell) -> float:
+    return float(calibrate_dataset(ds, cell).report.final.test.mean_mm)
 
 
 def _cli(*argv) -> tuple[int, str]:
@@ -51,7 +50,7 @@ class Figures:
 
 @pytest.fixture(scope="module")
 def figures(tmp_path_factory) -> Figures:
-    importers = pytest.importorskip("campaign.importers", reason="needs the UR5 importer (campaign import)")
+    importers = pytest.importorskip("campaign.data.importers", reason="needs the UR5 importer (campaign import)")
     if not (UR5.exists() and CONFIG.exists()):
         pytest.skip("needs the vendored UR5 campaign and configs/ur5.yaml")
     tmp = tmp_path_factory.mktemp("select_ur5")
@@ -62,17 +61,17 @@ def figures(tmp_path_factory) -> Figures:
     assert code == 0, err
     code, err = _cli("reprocess", subset, "--config", CONFIG, "--out", out)
     assert code == 0, err
-    report = json.loads((out / "report.json").read_text())
-    assert report["n"]["calib"] == N_POINTS and report["n"]["test"] == 20
-    cfg = load_config(CONFIG)
+    report = read_report(out)
+    assert report.n.calib == N_POINTS and report.n.test == 20
+    cell = load_cell(CONFIG)
     full = read_csv(data)
     cal = np.flatnonzero(full.mask("calib"))
     random = []
     for seed in range(N_RANDOM):
         keep = ~full.mask("calib")
         keep[np.random.default_rng(seed).choice(cal, N_POINTS, replace=False)] = True
-        random.append(_held_out_mean_mm(full.subset(keep), cfg))
-    f = Figures(float(report["stages"]["compensated"]["test"]["mean_mm"]), _held_out_mean_mm(full, cfg),
+        random.append(_held_out_mean_mm(full.subset(keep), cell))
+    f = Figures(float(report.final.test.mean_mm), _held_out_mean_mm(full, cell),
                 tuple(random))
     print(f"\nUR5 public campaign, mean error on the 20 random held-out poses (mm), default reprocess: "
           f"all {len(cal)} grid poses {f.all_mm:.4f}; {N_POINTS} chosen by campaign select {f.chosen_mm:.4f} "

@@ -1,6 +1,6 @@
 """The reference bridge (drivers/bridge/line_bridge.py) with its CSV replay back end against the line-protocol driver.
 
-The driver-vs-emulator tests of tests/drivers/test_tracker.py are run here unchanged, with the emulator replaced by
+The driver-vs-emulator tests of tests/drivers/test_line_tracker.py are run here unchanged, with the emulator replaced by
 the bridge replaying a CSV of the readings the emulator would have produced (same points, std devs, environment,
 same fault hooks). Only the spherical-mode test is left out: the bridge contract is Cartesian xyz.
 """
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import random
+import shutil
 
 import numpy as np
 import pytest
@@ -15,22 +16,21 @@ import pytest
 from drivers.base import TargetNotFound, TrackerError
 from drivers.bridge.line_bridge import (BackendError, FaroSdkBackend, LineBridge, Measurement, ReplayBackend,
                                         SpatialAnalyzerBackend)
-from drivers.emulators.tracker_server import DEFAULT_POINT_MM
-from drivers.tracker import open_tracker
-from tests.drivers import test_tracker as contract
-from tests.drivers.helpers import served_port
-from tests.drivers.test_tracker import (no_leftover_threads,  # noqa: F401 (autouse fixture)
-                                        test_connection_refused_is_connection_lost,
-                                        test_emulator_disconnect_is_connection_lost_and_reconnect_works,
-                                        test_emulator_dropped_reply_is_retried,
-                                        test_emulator_dropped_reply_times_out_within_the_timeout,
-                                        test_emulator_faults_map_to_errors_and_recover,
-                                        test_emulator_late_reply_already_arrived_is_flushed,
-                                        test_emulator_late_reply_in_flight_is_dropped_by_seq,
-                                        test_emulator_late_reply_without_flush_is_dropped_by_seq,
-                                        test_emulator_position_source_and_environment,
-                                        test_emulator_random_faults_are_seeded,
-                                        test_emulator_readings_with_default_options)
+from drivers.emulators.line_tracker_server import DEFAULT_POINT_MM
+from drivers.line_tracker import open_tracker
+from tests.drivers import test_line_tracker as contract
+from tests.drivers.helpers import REPO, served_port
+from tests.drivers.test_line_tracker import (no_leftover_threads, test_connection_refused_is_connection_lost,
+                                             test_emulator_disconnect_is_connection_lost_and_reconnect_works,
+                                             test_emulator_dropped_reply_is_retried,
+                                             test_emulator_dropped_reply_times_out_within_the_timeout,
+                                             test_emulator_faults_map_to_errors_and_recover,
+                                             test_emulator_late_reply_already_arrived_is_flushed,
+                                             test_emulator_late_reply_in_flight_is_dropped_by_seq,
+                                             test_emulator_late_reply_without_flush_is_dropped_by_seq,
+                                             test_emulator_position_source_and_environment,
+                                             test_emulator_random_faults_are_seeded,
+                                             test_emulator_readings_with_default_options)
 
 pytestmark = pytest.mark.system
 CONTRACT_TESTS = (test_connection_refused_is_connection_lost,
@@ -157,39 +157,53 @@ def test_command_line_replays_a_csv(tmp_path):
         assert proc.wait(5) == 0
 
 
+def test_a_copied_drivers_folder_runs_without_site_packages(tmp_path):
+    """The documented deployment: only the ``drivers/`` folder, copied to a PC, run with the standard library
+    alone (``-S``: no site-packages, so neither numpy nor this installed project; ``-E``: no PYTHONPATH)."""
+    shutil.copytree(REPO / "drivers", tmp_path / "drivers", ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "session.csv").write_text("x,y,z\n1200.0,-300.0,150.0\n")
+    with served_port("drivers.bridge.line_bridge", "--csv", "session.csv", python_flags=("-S", "-E"),
+                     cwd=tmp_path) as (proc, port):
+        with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
+            assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
+        proc.stdin.close()
+        assert proc.wait(5) == 0
+
+
 def test_measurement_record():
     assert Measurement((1.0, 2.0, 3.0)).std_mm is None
 
 
 def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path):
     """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
-    from campaign.cell import measurement_covariance, nominal_kinematics
-    from campaign.config import load_config
-    from campaign.devices import mock_world
-    from campaign.plan import build_plan
-    from campaign.runlog import RunLog, read_log
-    from campaign.runner import Runner
-    from campaign.tracker_quality import SmrPredictor
+    from campaign.config.load import load_cell
+    from campaign.run.devices import mock_world
+    from campaign.plan.build import build_plan
+    from campaign.run.log_writer import RunLog
+    from campaign.run.log_reader import read_log
+    from campaign.run.runner import Runner
+    from campaign.run.tracker_quality import SmrPredictor
     from drivers.mock import MockRobot
     from tests.campaign.helpers import small_config
 
-    cfg = load_config(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
-    world = mock_world(cfg)
+    cell = load_cell(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
+    cfg = cell.config
+    world = mock_world(cell)
     world.faults = {}
 
     class CellBackend(ReplayBackend):
         def measure(self):
             return Measurement(tuple(world.p_smr_tracker_mm + world.point_error_mm))
 
-    points = build_plan(cfg, nominal_kinematics(cfg)).points[:5]
+    points = build_plan(cell).points[:5]
     backend = CellBackend([{"x": "0", "y": "0", "z": "0"}])
     with LineBridge(backend) as bridge:
         tracker = open_tracker(bridge.url, {"timeout_s": 0.5, "environment": None,
                                             "goto": "GOTO {seq} {x:.3f} {y:.3f} {z:.3f}", "find": "FIND {seq}"})
         tracker.connect()
-        predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+        predict = SmrPredictor(cell.kinematics, cfg.tracker.position_in_base_mm)
         runner = Runner(MockRobot(world), tracker, cfg.tracker.measurement, world.clock,
-                        lambda p: measurement_covariance(cfg, p[None])[0], predict_p_tracker_mm=predict)
+                        lambda p: cell.covariance(p[None])[0], predict_p_tracker_mm=predict)
         runner.on_point = lambda point, record: (predict.observe(record.q_read_deg, record.p_tracker_mm),
                                                  bridge.inject("beam_break") if point is points[2] else None)
         outcome = runner.execute(points, RunLog.create(tmp_path / "run", {"config_sha256": "t", "plan_sha256": "t"}))

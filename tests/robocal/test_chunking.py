@@ -5,7 +5,7 @@ import pytest
 
 from robocal import gp, kinematics, screen
 from robocal.elastic import BlockedCV, Blocking, cv, pose_blocks
-from robocal.truth import irb2600_nominal
+from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit
 KIN = irb2600_nominal()

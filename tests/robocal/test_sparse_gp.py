@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from robocal.elastic import kfold
-from robocal.gp import GPRResidual, MultiOutputGP
+from robocal.gp_layer import GPRResidual
+from robocal.gp import MultiOutputGP
 from robocal.layers import fit_gp, gp_cv_errors
 from robocal.sparse_gp import EXACT_MAX_POINTS, INDUCING_POINTS, SparseGP
 

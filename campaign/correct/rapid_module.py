@@ -1,0 +1,117 @@
+"""ABB RAPID module of corrected targets (:func:`render_rapid_module`, :func:`write_rapid_module`)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+from drivers.rapid import check_rapid_syntax
+from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggregate, fixed_literal, rapid_array_lines,
+                                    rapid_ident_problem, rapid_string)
+
+from campaign.io.durable import atomic_write
+from .bounds import (GENERATOR, JOINT_DECIMALS, POSITION_DECIMALS, QUAT_DECIMALS, RAPID_FORMAT, RESIDUAL_DECIMALS,
+                     CorrectedTarget, _as_float, _require_writable)
+
+def _rapid_quat(q: Sequence[float]) -> list[str]:
+    """Quaternion (w, x, y, z) renormalised and written with 9 decimals (unit to 1e-8)."""
+    v = [float(c) for c in q]
+    norm = math.sqrt(sum(c * c for c in v))
+    if not math.isfinite(norm) or norm == 0.0:
+        raise ValueError(f"quaternion {q!r} cannot be normalised")
+    r = [round(c / norm, QUAT_DECIMALS) for c in v]
+    # |norm(r) - 1| <= |r - v/|v|| <= 2 * 0.5e-9: always within 1e-8.
+    assert abs(math.sqrt(sum(c * c for c in r)) - 1.0) <= 1e-8
+    return [fixed_literal(c, QUAT_DECIMALS) for c in r]
+
+
+def _rapid_extax(external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None,
+                 target_id: str) -> list[str]:
+    """The 6 extjoint values (deg or mm) for a target, ``9E9`` for unused axes."""
+    if external_axes is None:
+        vals: Sequence[float] = ()
+    elif isinstance(external_axes, Mapping):
+        if target_id not in external_axes:
+            raise ValueError(f"external_axes has no values for target {target_id!r}")
+        vals = external_axes[target_id]
+    else:
+        vals = external_axes
+    vals = list(vals)
+    if len(vals) > 6 or any(_as_float(v) is None or not math.isfinite(_as_float(v)) for v in vals):
+        raise ValueError(f"external_axes for {target_id!r}: expected at most 6 finite numbers, got {vals!r}")
+    return [fixed_literal(v, JOINT_DECIMALS) for v in vals] + [RAPID_UNUSED] * (6 - len(vals))
+
+
+
+def _rapid_header(module_name: str, n: int, persistent: bool) -> list[str]:
+    """The comment block at the top of the module (deterministic: no date)."""
+    kind = "PERS" if persistent else "CONST"
+    return [
+        "    !" + "*" * 70,
+        f"    ! {module_name}: {n} corrected target{'' if n == 1 else 's'}.",
+        f"    ! Written by {GENERATOR} (format {RAPID_FORMAT}).",
+        "    ! Only targets that passed the safety bounds are here; rejected ones are",
+        "    ! listed in the rejected-targets CSV.  Index i of every array is one target:",
+        "    !   id_cal{i}      source target id",
+        "    !   jt_cal{i}      corrected joints (deg), for MoveAbsJ",
+        "    !   rt_cal{i}      command pose: position mm, quaternion w,x,y,z, robot base",
+        "    !                  frame, confdata cf1,cf4,cf6,cfx, for MoveJ/MoveL",
+        "    !   res_cal_mm{i}  predicted residual position error (mm)",
+        f"    ! Data are {kind}; unused external axes are 9E9.  Do not edit by hand.",
+        "    !" + "*" * 70,
+    ]
+
+
+def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str = "CalTargets",
+                        persistent: bool = False, q_min_deg: Sequence[float], q_max_deg: Sequence[float],
+                        external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None) -> str:
+    """Text of the RAPID module for ``targets`` (see :func:`write_rapid_module`)."""
+    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=6, allow_empty=False)
+    problem = rapid_ident_problem(module_name)
+    if problem:
+        raise ValueError(f"module_name: {problem}")
+    storage = "PERS" if persistent else "CONST"
+    jt, rt, ids, res = [], [], [], []
+    for t in items:
+        ext = rapid_aggregate(_rapid_extax(external_axes, t.target_id))
+        joints = rapid_aggregate(fixed_literal(q, JOINT_DECIMALS) for q in t.q_corrected_deg)
+        jt.append(rapid_aggregate([joints, ext]))
+        pos = rapid_aggregate(fixed_literal(p, POSITION_DECIMALS) for p in t.p_command_base_mm)
+        conf = rapid_aggregate(str(int(c)) for c in t.confdata)
+        rt.append(rapid_aggregate([pos, rapid_aggregate(_rapid_quat(t.quat_command_wxyz)), conf, ext]))
+        ids.append(rapid_string(t.target_id))
+        res.append(fixed_literal(t.predicted_residual_mm, RESIDUAL_DECIMALS))
+    lines = [f"MODULE {module_name}", *_rapid_header(module_name, len(items), persistent), "",
+             "    ! Number of targets.", f"    CONST num n_cal:={len(items)};",
+             "    ! Source target ids.", *rapid_array_lines(storage, "string", "id_cal", ids),
+             "    ! Corrected joints (deg).", *rapid_array_lines(storage, "jointtarget", "jt_cal", jt),
+             "    ! Command poses (mm, quaternion w-first, base frame).",
+             *rapid_array_lines(storage, "robtarget", "rt_cal", rt),
+             "    ! Predicted residual position errors (mm).", *rapid_array_lines(storage, "num", "res_cal_mm", res),
+             "ENDMODULE", ""]
+    text = "\n".join(lines)
+    errors = check_rapid_syntax(text, max_line_len=RAPID_MAX_LINE_ID)
+    if errors:  # pragma: no cover - a writer bug; never write an unchecked module
+        raise ValueError(f"generated RAPID module is invalid: {errors[0]}")
+    return text
+
+
+def write_rapid_module(path: str | os.PathLike, targets: Iterable[CorrectedTarget], *,
+                       module_name: str = "CalTargets", persistent: bool = False,
+                       q_min_deg: Sequence[float], q_max_deg: Sequence[float],
+                       external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None) -> Path:
+    """Write an ABB RAPID module of the accepted targets (6 joints) atomically; return the path.
+
+    Arrays ``id_cal{N}`` (string), ``jt_cal{N}`` (jointtarget, deg, 6 decimals),
+    ``rt_cal{N}`` (robtarget: mm 4 decimals, quaternion 9 decimals, confdata),
+    ``res_cal_mm{N}`` (num, mm) and ``CONST num n_cal``; ``CONST`` data, or
+    ``PERS`` when ``persistent``.  ``external_axes``: None (all ``9E9``), up to
+    6 values (deg or mm) for every target, or a mapping target id -> values.
+    Raises ValueError, writing nothing, for an invalid target or one outside
+    ``[q_min_deg, q_max_deg]``, ids over 80 characters or not ISO 8859-1.
+    """
+    text = render_rapid_module(targets, module_name=module_name, persistent=persistent,
+                               q_min_deg=q_min_deg, q_max_deg=q_max_deg, external_axes=external_axes)
+    return atomic_write(path, text.encode("ascii"))

@@ -1,0 +1,134 @@
+"""The interchange CSV: measured data in and out of the campaign controller.
+
+Format (one row per measurement, rows in measurement order)::
+
+    point_id,set,q1,q2,q3,q4,q5,q6,x,y,z[,x2,y2,z2[,x3,y3,z3]][,t_s][,temp_c][,payload_kg]
+
+* ``point_id``: non-empty text of at most 256 characters, unique; only ``check`` rows may repeat an id
+  (the same check pose measured again), and never an id of a calib/test row.
+* ``set``: ``calib`` | ``test`` | ``check`` | ``nest`` (case-insensitive).
+  ``nest`` rows are readings of a fixed reference nest (column ``nest_id``,
+  required on them, empty elsewhere; ``t_s`` required); their joint columns
+  may be empty (NaN) and their ``point_id`` may repeat among nest rows.
+* ``q1..qn``: joint values in degrees as the controller reports them; any
+  number n >= 1 of joints, contiguous from ``q1``.
+* optional ``qc1..qcn``: the commanded joints (deg) when ``q1..qn`` are the
+  read-back ones; exactly as many as ``q`` columns.
+* ``x,y,z``: SMR centre in mm in the tracker frame; ``x2..z2`` / ``x3..z3``
+  optional second and third SMR (all three columns of a group, and the
+  third only with the second).
+* optional ``t_s`` (s), ``temp_c`` (deg C), ``payload_kg`` (kg); when a
+  column is present every row needs a value (leave the column out if unknown),
+  except nest rows (may be empty). ``t_s`` is >= 0 and never decreases (rows
+  are in measurement order); ``payload_kg`` is >= 0.  Optional ``env_temp_c`` (deg C),
+  ``env_pressure_hpa`` (hPa), ``env_humidity_pct`` (%): the tracker's weather
+  station; an empty cell means not read (NaN).
+* There is no approach column: approach directions come from row order
+  (:meth:`Dataset.approach_sign`).
+
+Header names are matched case-insensitively and may come in any order;
+unknown or repeated columns are errors.  Blank lines and lines starting with
+``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
+when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
+Fields may be double-quoted but not span lines.  A text cell (``point_id``, ``nest_id``) that a spreadsheet would
+run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.io.csv_cells`).
+Numbers are plain decimal (``-12.5``, ``1e-3``); ``nan``/``inf``, ``1_000`` and hex are rejected.
+
+Every input problem raises :class:`campaign.errors.DataError` with a single
+line naming the file and the line/column, e.g.
+``data.csv: line 7, column 'q3': expected a number, got 'abc'``.
+
+:func:`write_csv` writes floats with ``repr`` (shortest text that round-trips
+exactly), so ``read_csv(write_csv(d))`` gives bit-identical numbers.
+
+:func:`read_csv` and :func:`write_csv` string together the steps of :mod:`campaign.data.interchange_reader` (header
+layout, cells, numbers, ids) and :mod:`campaign.data.interchange_writer` (column order, writability).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from campaign.errors import DataError
+from campaign.io.csv_cells import neutralise, restore
+from campaign.io.durable import atomic_write
+
+from .dataset import SETS, Dataset  # noqa: F401  (SETS and Dataset are re-exported)
+from .interchange_reader import (_SMR, _blank_cells, _check_ids, _check_scalars, _data_table, _is_skipped, _nest_ids,
+                                 _numbers, _parse_header, _parse_sets, _read_lines)
+from .interchange_writer import _blank_allowed, _check_writable, _header, _numeric_block
+
+__all__ = ["SETS", "Dataset", "read_csv", "write_csv"]
+
+
+def read_csv(path: str | os.PathLike) -> Dataset:
+    """Read and strictly validate an interchange CSV file (see module doc).
+
+    Returns a :class:`Dataset` (``sigma_mm`` None; ``source`` = ``str(path)``).
+    Raises :class:`DataError` (one line naming file and line/column) on any
+    problem.  Handles 10^5 rows in about a second or less.
+    """
+    src = str(path)
+    lines = _read_lines(path)
+    header_idx = next((i for i, ln in enumerate(lines) if not _is_skipped(ln)), None)
+    if header_idx is None:
+        raise DataError(src, "no data rows (empty file, no header)")
+    layout = _parse_header(lines[header_idx], src, header_idx + 1)
+    table = _data_table(lines, header_idx + 1, layout, src)
+    line_nos = table.line_nos
+    ids = [restore(v) for v in table.column(layout.index("point_id"))]
+    sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
+    nest_ids = _nest_ids(table, layout, sets, src)
+    blanks = _blank_cells(table, layout, sets)
+    _check_ids(
+        ids,
+        sets,
+        lambda i, what: DataError(src, what, line=line_nos[i]),
+        lambda k: f"on line {line_nos[k]}",
+    )
+    names = [f"q{k}" for k in range(1, layout.n_joints + 1)] + ["x", "y", "z"]
+    for k in layout.smr:
+        names += _SMR[k]
+    names += layout.scalars
+    tail = [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc + list(layout.env)
+    values = _numbers(table, layout, names + tail, src)
+    for name, rows in blanks.items():
+        values[rows, (names + tail).index(name)] = np.nan
+    n = layout.n_joints
+    extra: dict[str, Any] = {}
+    for j, k in enumerate(layout.smr):
+        extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
+    for j, name in enumerate(layout.scalars):
+        extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
+    _check_scalars(extra, layout, line_nos, src)
+    m = len(names)
+    if layout.has_qc:
+        extra["qc_deg"] = values[:, m : m + n]
+    for j, name in enumerate(layout.env):
+        extra[name] = values[:, m + n * layout.has_qc + j]
+    return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
+                   **extra)
+
+
+def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
+    """Write ``dataset`` as an interchange CSV (comma separated, ``\\n`` ends).
+
+    Only the columns present are written; ``sigma_mm`` is not part of the
+    format and is dropped.  Floats use ``repr`` (shortest exact round trip),
+    so reading the file back gives identical float64 values.  The file is
+    written to a temporary name and renamed into place.
+    """
+    src = str(path)
+    numbers = _numeric_block(dataset)
+    header = _header(dataset)
+    _check_writable(dataset, src, numbers, _blank_allowed(dataset, header))
+    lines = [",".join(header)]
+    nest_ids = dataset.nest_id if dataset.nest_id is not None else None
+    cell = (lambda v: "" if v != v else repr(v)) if np.isnan(numbers).any() else repr  # noqa: E731
+    for i, (pid, set_name, row) in enumerate(zip(dataset.point_id, dataset.set, numbers.tolist())):
+        tail = [neutralise(nest_ids[i])] if nest_ids is not None else []
+        lines.append(",".join([neutralise(pid), set_name, *map(cell, row), *tail]))
+    atomic_write(path, ("\n".join(lines) + "\n").encode("utf-8"))

@@ -1,0 +1,165 @@
+"""Export a calibrated model for other tools: URDF, a DH table as CSV, and a RoboDK-style DH(M) table.
+
+URDF (metres, radians): each revolute joint ``jK`` rotates about its own z axis by the controller's joint value
+q_K; its ``origin`` holds the fixed part of the chain between joint K-1 and joint K, so the URDF reproduces the
+project's forward kinematics exactly for standard DH, modified DH and Hayati's beta:
+
+* ``dh``  ``T_i = Rz(q_i) S_i`` with ``S_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)``:
+  origin of joint 1 = identity, of joint K = ``S_{K-1}``, fixed joint ``flange`` = ``S_n``;
+* ``mdh`` ``T_i = A_i Rz(q_i) B_i`` with ``A_i = Rx(alpha_i) Ry(beta_i) Tx(a_i) Rz(theta_i)``, ``B_i = Tz(d_i)``:
+  origin of joint K = ``B_{K-1} A_K``, fixed joint ``flange`` = ``B_n``.
+
+The tool (the SMR centre, ``p_flange_smr_mm``) is a fixed link ``tool`` on the flange. The registration
+``T_tracker_base`` and any residual layer (IDW/GPR: not a kinematic chain) are stated in comments.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from robocal.kinematics import Kinematics
+from robocal.model import CalibratedModel
+
+from campaign.io.csv_cells import render_rows
+from campaign.io.durable import atomic_write
+
+
+def _rot(axis: str, angle_rad: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler(axis, angle_rad).as_matrix()
+    return T
+
+
+def _trans(axis: str, length_mm: float) -> np.ndarray:
+    T = np.eye(4)
+    T["xyz".index(axis), 3] = length_mm
+    return T
+
+
+def joint_origins(kin: Kinematics) -> tuple[list[np.ndarray], np.ndarray]:
+    """Fixed transforms (4, 4) mm: the origin of each joint (n of them) and of the flange, such that
+    ``T_base_flange(q) = O_1 Rz(q_1) O_2 Rz(q_2) ... O_n Rz(q_n) O_flange``."""
+    n = kin.n
+    if kin.convention == "dh":
+        S = [_rot("z", kin.theta_rad[i]) @ _trans("z", kin.d_mm[i]) @ _trans("x", kin.a_mm[i])
+             @ _rot("x", kin.alpha_rad[i]) @ _rot("y", kin.beta_rad[i]) for i in range(n)]
+        return [np.eye(4)] + S[:-1], S[-1]
+    A = [_rot("x", kin.alpha_rad[i]) @ _rot("y", kin.beta_rad[i]) @ _trans("x", kin.a_mm[i])
+         @ _rot("z", kin.theta_rad[i]) for i in range(n)]
+    B = [_trans("z", kin.d_mm[i]) for i in range(n)]
+    return [A[0]] + [B[i - 1] @ A[i] for i in range(1, n)], B[-1]
+
+
+def _origin_xml(T_mm: np.ndarray) -> str:
+    xyz = T_mm[:3, 3] / 1000.0
+    rpy = Rotation.from_matrix(T_mm[:3, :3]).as_euler("xyz")          # extrinsic x-y-z = URDF roll, pitch, yaw
+    fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731  (full precision)
+    return f'<origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>'
+
+
+def urdf_text(model: CalibratedModel, name: str = "robot") -> str:
+    """The URDF document (links base_link, link1..linkN, flange, tool) of the model's kinematic layer."""
+    kin = model.kinematics
+    origins, O_flange = joint_origins(kin)
+    T = np.asarray(kin.T_tracker_base)
+    notes = [f"calibrated kinematic chain exported by robot-accuracy-campaign ({kin.convention.upper()}"
+             f"{' + Hayati beta on joints ' + ','.join(str(i + 1) for i, h in enumerate(kin.hayati) if h) if any(kin.hayati) else ''})",
+             "units: metres and radians; joint values are the controller's (the DH theta offsets are in the origins)",
+             "tool link = SMR centre p_flange_smr_mm = " + ", ".join(f"{v:.4f}" for v in kin.p_flange_smr_mm) + " mm",
+             "registration T_tracker_base (mm) rows: " + "; ".join(" ".join(f"{v:.6f}" for v in row) for row in T)]
+    if getattr(model, "effects", ()):
+        names = ", ".join(getattr(fe.choice, "label", type(fe).__name__) for fe in model.effects)
+        notes.append(f"NOT exported: the physical effects of the model ({names}: joint-angle dependent, not a fixed "
+                     "chain); this URDF is its geometric part only")
+    if model.residual is not None:
+        kind = type(model.residual).__name__
+        notes.append(f"NOT exported: the non-kinematic residual layer ({kind}) of the model corrects positions "
+                     "beyond this chain; use model.json with campaign correct for the full accuracy")
+    lines = ['<?xml version="1.0"?>'] + [f"<!-- {n.replace('--', '-')} -->" for n in notes]
+    lines.append(f"<robot name={quoteattr(name)}>")
+    links = ["base_link"] + [f"link{i + 1}" for i in range(kin.n)] + ["flange", "tool"]
+    lines += [f'  <link name="{ln}"/>' for ln in links]
+    for i in range(kin.n):
+        lo, hi = float(kin.q_min_rad[i]), float(kin.q_max_rad[i])
+        lines += [f'  <joint name="j{i + 1}" type="revolute">', f'    <parent link="{links[i]}"/>',
+                  f'    <child link="{links[i + 1]}"/>', f"    {_origin_xml(origins[i])}", '    <axis xyz="0 0 1"/>',
+                  f'    <limit lower="{lo!r}" upper="{hi!r}" effort="0" velocity="0"/>', "  </joint>"]
+    tool = np.eye(4)
+    tool[:3, 3] = kin.p_flange_smr_mm
+    for jname, parent, child, Tj in (("flange_joint", links[kin.n], "flange", O_flange),
+                                     ("tool_joint", "flange", "tool", tool)):
+        lines += [f'  <joint name="{jname}" type="fixed">', f'    <parent link="{parent}"/>',
+                  f'    <child link="{child}"/>', f"    {_origin_xml(Tj)}", "  </joint>"]
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def dh_rows(kin: Kinematics) -> list[dict]:
+    """One row per joint: theta offset, d, a, alpha, beta (deg / mm) and joint limits (deg)."""
+    return [{"joint": i + 1, "convention": kin.convention, "theta_deg": float(np.degrees(kin.theta_rad[i])),
+             "d_mm": float(kin.d_mm[i]), "a_mm": float(kin.a_mm[i]), "alpha_deg": float(np.degrees(kin.alpha_rad[i])),
+             "beta_deg": float(np.degrees(kin.beta_rad[i])), "q_min_deg": float(np.degrees(kin.q_min_rad[i])),
+             "q_max_deg": float(np.degrees(kin.q_max_rad[i]))} for i in range(kin.n)]
+
+
+def write_dh_csv(model: CalibratedModel, path: str | Path) -> Path:
+    """CSV of the calibrated table (``dh_rows``) plus a ``tool`` row (SMR centre in the flange frame, mm)."""
+    rows = dh_rows(model.kinematics)
+    p = model.kinematics.p_flange_smr_mm
+    table = [[r["joint"], r["convention"]] + [f"{r[k]:.9g}" for k in list(r)[2:]] for r in rows]
+    table.append(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""])
+    return atomic_write(path, render_rows(list(rows[0]), table, text_columns=(0, 1)).encode("utf-8"))
+
+
+def dhm_from_dh(kin: Kinematics) -> tuple[list[tuple[float, float, float, float]], tuple[float, float]]:
+    """Exact modified-DH (Craig) rows (alpha_deg, a_mm, theta_deg, d_mm) of a standard-DH chain without beta,
+    and the flange transform Tx(a_n) Rx(alpha_n) left over as (a_mm, alpha_deg): Tx(a) Rx(alpha) of joint i
+    moves to the front of joint i + 1 (they commute)."""
+    al, a = np.degrees(kin.alpha_rad), kin.a_mm
+    rows = [((0.0 if i == 0 else float(al[i - 1])), (0.0 if i == 0 else float(a[i - 1])),
+             float(np.degrees(kin.theta_rad[i])), float(kin.d_mm[i])) for i in range(kin.n)]
+    return rows, (float(a[-1]), float(al[-1]))
+
+
+def robodk_text(model: CalibratedModel) -> str:
+    """The calibrated table as RoboDK users type it by hand (DHM columns alpha, a, theta, d; mm and deg)."""
+    kin = model.kinematics
+    p = kin.p_flange_smr_mm
+    out = ["# Calibrated kinematics for manual entry (robot panel, DHM table). mm and deg.",
+           "# theta is the offset added to the controller's joint value."]
+    if kin.convention == "dh" and not np.any(kin.beta_rad):
+        rows, (a_f, al_f) = dhm_from_dh(kin)
+        out.append("# converted exactly from the standard-DH model: DHM row i takes alpha, a of DH joint i-1")
+        out.append(f"{'joint':>5} {'alpha_deg':>14} {'a_mm':>14} {'theta_deg':>14} {'d_mm':>14}")
+        out += [f"{i + 1:>5} {r[0]:>14.6f} {r[1]:>14.6f} {r[2]:>14.6f} {r[3]:>14.6f}" for i, r in enumerate(rows)]
+        out.append(f"# flange: then Tx({a_f:.6f} mm) Rx({al_f:.6f} deg) before the tool")
+    else:
+        label = "DHM (modified, Craig)" if kin.convention == "mdh" else "standard DH (Hayati beta: no exact DHM form)"
+        out.append(f"# convention: {label}; beta = Hayati rotation about y (RoboDK calibration: 'beta' column)")
+        out.append(f"{'joint':>5} {'alpha_deg':>14} {'a_mm':>14} {'theta_deg':>14} {'d_mm':>14} {'beta_deg':>14}")
+        for r in dh_rows(kin):
+            out.append(f"{r['joint']:>5} {r['alpha_deg']:>14.6f} {r['a_mm']:>14.6f} {r['theta_deg']:>14.6f} "
+                       f"{r['d_mm']:>14.6f} {r['beta_deg']:>14.6f}")
+    out.append(f"# tool (TCP = SMR centre, flange frame): X {p[0]:.6f}  Y {p[1]:.6f}  Z {p[2]:.6f} mm")
+    if model.residual is not None or getattr(model, "effects", ()):
+        out.append("# not representable here: the model's physical effects / residual layer (use model.json with "
+                   "campaign correct)")
+    return "\n".join(out) + "\n"
+
+
+def export(model: CalibratedModel, urdf: Path | None = None, dh_csv: Path | None = None,
+           robodk: Path | None = None, name: str = "robot") -> list[Path]:
+    """Write the requested files; returns their paths."""
+    written = []
+    if urdf:
+        atomic_write(Path(urdf), urdf_text(model, name).encode())
+        written.append(Path(urdf))
+    if dh_csv:
+        written.append(write_dh_csv(model, dh_csv))
+    if robodk:
+        atomic_write(Path(robodk), robodk_text(model).encode())
+        written.append(Path(robodk))
+    return written

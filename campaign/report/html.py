@@ -1,0 +1,205 @@
+"""``campaign report``: one self-contained HTML file (no network, images embedded) from a run's JSON documents.
+
+Sources, all optional but at least one, found in the run (or output) directory:
+
+* ``report.json`` -- the calibration report (``campaign-report/1``) or the ISO 9283 report (``campaign-iso9283/1``);
+* ``diagnosis.json`` -- written by ``campaign diagnose`` (``campaign-diagnosis/1``);
+* ``verify-*/verify.json`` -- closed-loop verification passes (``campaign-verify/1``).
+
+Nothing is computed here: every number printed comes from these documents through :func:`_num`, which also
+tags it with ``data-doc``/``data-key``/``data-value`` so a browser test can compare the page with the JSON.
+Figures are drawn from the same documents (``html_figures``) and also written as PNG files in a directory named
+after the HTML file (``report.html`` -> ``report_figures/``). Output paths are owned (:mod:`campaign.run.output_dirs`).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+from markupsafe import Markup
+
+from campaign.errors import DataError
+from drivers.redact import redact
+
+from campaign.io.durable import atomic_write
+from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file
+from campaign.calibrate.calibration_report import STAGES, CalibrationReport
+from campaign.io.json_fields import RecordError
+from campaign.correct.verify_report import VerifyReport
+from campaign.calibrate.report_points import PointTable
+
+CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
+
+
+@dataclass(frozen=True)
+class ReportSources:
+    """What one report is made of: the calibration and verification reports as records, the ISO 9283 and
+    diagnosis documents (JSON), the calibration's per-point rows, and the parsed JSON documents by name
+    (``calibration``, ``verify0``...: what :func:`_num` reads and tags); a record without its document is tagged
+    from its ``to_dict()``."""
+    title: str
+    calibration: CalibrationReport | None = None
+    iso9283: dict | None = None
+    diagnosis: dict | None = None
+    verify: tuple[VerifyReport, ...] = ()
+    files: dict = field(default_factory=dict)          # doc name -> relative path, for the page's source list
+    documents: dict = field(default_factory=dict)      # doc name -> parsed JSON document
+    points: PointTable | None = None                   # the calibration's per-point rows (inline or points.csv)
+
+    def docs(self) -> dict:
+        """Every document by name (the parsed one, else the record's ``to_dict()``)."""
+        out = {k: v for k, v in (("calibration", self.calibration), ("iso9283", self.iso9283),
+                                 ("diagnosis", self.diagnosis)) if v is not None}
+        out.update({f"verify{i}": v for i, v in enumerate(self.verify)})
+        return {k: self.documents.get(k) or (v.to_dict() if hasattr(v, "to_dict") else v) for k, v in out.items()}
+
+
+def _read(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DataError(str(path), f"not a readable JSON report: {exc}") from None
+
+
+def _checked(doc: dict, path: Path, record):
+    """``record.from_dict(doc)`` (a DataError names the file and the field otherwise)."""
+    try:
+        return record.from_dict(doc)
+    except RecordError as exc:
+        raise DataError(str(path), exc.message) from None
+
+
+def collect(directory: str | os.PathLike) -> ReportSources:
+    """Find the JSON documents of a run or output directory; DataError when there are none."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise DataError(str(d), "not a directory (campaign report takes a run or output directory)")
+    found: dict = {}
+    files, docs, points = {}, {}, None
+    if (d / "report.json").exists():
+        doc = _read(d / "report.json")
+        kind = {CALIBRATION: "calibration", ISO: "iso9283"}.get(doc.get("format"))
+        if kind is None:
+            raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
+        found[kind] = _checked(doc, d / "report.json", CalibrationReport) if kind == "calibration" else doc
+        files[kind], docs[kind] = "report.json", doc
+        if kind == "calibration" and found[kind].points:
+            points = PointTable.of(found[kind].points, d)                # inline, or points.csv of a large run
+    if (d / "diagnosis.json").exists():
+        found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"
+    verify = []
+    for i, p in enumerate(sorted(d.glob("verify-*/verify.json"))):
+        docs[f"verify{i}"] = doc = _read(p)
+        verify.append(_checked(doc, p, VerifyReport))
+        files[f"verify{i}"] = str(p.relative_to(d))
+    if not found and not verify:
+        raise DataError(str(d), "no report.json, diagnosis.json or verify-*/verify.json to report on")
+    first = next((docs.get(k, found[k]) for k in ("calibration", "iso9283", "diagnosis") if k in found), {})
+    return ReportSources(f"{first.get('config', d.name)}: {d.name}", verify=tuple(verify), files=files,
+                         documents=docs, points=points, **found)
+
+
+def _lookup(doc: dict, key: str):
+    node = doc
+    for part in key.split("."):
+        node = node[int(part)] if isinstance(node, list) else node[part]
+    return node
+
+
+def _num_factory(docs: dict):
+    """``num(doc, key, fmt)``: the value at dotted ``key`` of document ``doc``, formatted, in a tagged span."""
+    def num(doc: str, key: str, fmt: str = ".3f", scale: float = 1.0) -> Markup:
+        value = _lookup(docs[doc], key)
+        if value is None:
+            return Markup(f'<span class="num" data-doc="{doc}" data-key="{html.escape(key)}" data-value="null">-</span>')
+        text = format(value * scale, fmt) if scale != 1.0 else format(value, fmt)
+        return Markup(f'<span class="num" data-doc="{doc}" data-key="{html.escape(key)}" data-scale="{scale!r}" '
+                      f'data-fmt="{html.escape(fmt)}" data-value="{value!r}">{html.escape(text)}</span>')
+    return num
+
+
+def build_figures(src: ReportSources) -> dict[str, list]:
+    """Figures per section (lists of html_figures.Figure), drawn from the documents only."""
+    from . import html_figures as hf
+
+    figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": []}
+    if src.calibration:
+        figs["calibration"] = hf.calibration_figures(src.calibration, src.points)
+    for i, v in enumerate(src.verify):
+        if v.stages:
+            figs["verify"].append(hf.verify_figure(v, i))
+    if src.diagnosis and src.diagnosis.get("maps"):
+        figs["diagnosis"] = diagnosis_figures(src.diagnosis)
+    if src.iso9283:
+        figs["iso9283"] = hf.iso_figures(src.iso9283)
+    return figs
+
+
+def diagnosis_figures(report: dict) -> list:
+    """The diagnose command's maps (workspace, joints, time, shrinkage) as report figures."""
+    import tempfile
+
+    from .diagnosis_plots import write_plots
+    from .html_figures import Figure
+
+    titles = {"where_workspace": "Where the residual lies: workspace cells",
+              "where_joints": "Where the residual lies: each joint's range",
+              "where_time": "Where the residual lies: over time",
+              "shrinkage": "How far the error shrinks with each accepted effect"}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = write_plots(report, tmp)
+        if isinstance(paths, str):
+            return []
+        return [Figure(p.stem, titles.get(p.stem, p.stem), "From the diagnosis.", p.read_bytes()) for p in paths]
+
+
+def render_html(src: ReportSources, figures: dict[str, list]) -> str:
+    env = Environment(loader=PackageLoader("campaign.report", "templates"), autoescape=select_autoescape(["html", "j2"]),
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
+    return env.get_template("report.html.j2").render(
+        src=src, figures=figures, b64=b64, num=_num_factory(src.docs()), stages=STAGES,
+        n_figures=sum(len(v) for v in figures.values()))
+
+
+def figures_dir(html: Path) -> Path:
+    """Where a report's figures go as PNG: a directory named after it (``report.html`` -> ``report_figures/``)."""
+    return html.with_name(f"{html.stem}_figures")
+
+
+def report_targets(directory: str | os.PathLike, out: str | os.PathLike | None = None,
+                   overwrite: bool = False) -> tuple[Path, Claim]:
+    """The HTML file and the figures directory a report of DIRECTORY writes, checked before anything is computed:
+    DIRECTORY/report.html when DIRECTORY is a campaign directory (a run's or a command's output), else ``out``,
+    which must not exist unless ``overwrite``; the figures directory must be new, empty or this report's.
+    DataError (nothing written) otherwise (:mod:`campaign.run.output_dirs`)."""
+    directory = Path(directory)
+    default = directory / "report.html"
+    if out is None or Path(out).resolve() == default.resolve():
+        if not overwrite:
+            check_campaign_dir(directory, "report")
+        html = check_file(default, overwrite=True)           # the directory's own report, written again
+    else:
+        html = check_file(out, overwrite)
+    return html, check_dir(figures_dir(html), "figures", overwrite, source=html.name, option="figures directory")
+
+
+def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = None, overwrite: bool = False,
+                 sources: ReportSources | None = None) -> Path:
+    """Write DIRECTORY/report.html (or ``out``) from the documents in DIRECTORY (or ``sources``), and its figures as
+    PNG in the directory named after it (:func:`figures_dir`); every file atomically, after
+    :func:`report_targets` accepted the paths."""
+    src = sources if sources is not None else collect(directory)
+    html, figures_claim = report_targets(directory, out, overwrite)
+    figures = build_figures(src)
+    png_dir = figures_claim.take()
+    for fs in figures.values():
+        for f in fs:
+            atomic_write(png_dir / f"{f.name}.png", f.png)
+    atomic_write(html, redact(render_html(src, figures)).encode())
+    return html

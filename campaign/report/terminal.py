@@ -1,0 +1,242 @@
+"""Terminal rendering of plans and reports with rich (nothing here computes a figure)."""
+from __future__ import annotations
+
+import math
+
+from rich.console import Console
+from rich.table import Table
+
+from campaign.calibrate.calibration_report import STAGES, CalibrationReport
+from campaign.calibrate.report_sections import LayerSummary
+from campaign.correct.verify_report import VerifyReport
+from campaign.plan.points import Plan
+
+
+def _mm(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def render_stages(console: Console, report: CalibrationReport) -> None:
+    """Seed 000 Table 3 rows on the held-out test set, with the noise floor ("none" without test rows)."""
+    floor = report.noise_floor_mm
+    if not report.n.test:
+        console.print("Position error on the held-out test set: none (no test rows)", style="yellow")
+    else:
+        t = Table(title=f"Position error on the test set (n = {report.n.test}), mm")
+        for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
+            t.add_column(col, justify="left" if col == "stage" else "right")
+        for stage in STAGES:
+            if stage.name not in report.stages:
+                continue
+            s = report.stages[stage.name].test
+            ratio = "-" if s.rms_mm is None or not floor else f"{s.rms_mm / floor:.2f}"
+            t.add_row(stage.label, _mm(s.max_mm), _mm(s.mean_mm), _mm(s.rms_mm), ratio)
+        console.print(t)
+    layer = None if report.final is None else report.final.layer
+    if layer:
+        console.print(layer_line(layer), markup=False)
+    render_choices(console, report)
+    cv = report.residual_cv
+    if cv and report.residual_choice is None:
+        verdict = ("it predicts structure" if cv.gain > 0.02 else
+                   "no structured residual above the noise: the layer mostly interpolates noise")
+        console.print(f"residual layer ({report.method.residual}): {cv.folds}-fold CV on the calibration "
+                      f"points, RMS {cv.rms_without_mm:.4f} -> {cv.rms_with_mm:.4f} mm "
+                      f"({100 * cv.gain:+.0f} %): {verdict}")
+    render_preparation(console, report.preparation)
+    console.print(f"noise floor {_mm(floor)} mm (from {report.noise_floor_source}; specs "
+                  f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
+                  f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
+    render_identity(console, report)
+
+
+def layer_line(lay: LayerSummary) -> str:
+    """The fitted residual layer's calibration RMS next to its CV-predicted held-out RMS, labelled."""
+    gp = ""
+    if lay.approximation is not None:
+        how = "exact GP" if lay.approximation == "exact" else f"inducing-point GP, {lay.n_inducing} inputs"
+        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {_mm(lay.noise_floor_mm)} mm)"
+    return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
+            f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "
+            f"({lay.folds}-fold), test set {_mm(lay.test_rms_mm)} mm")
+
+
+def render_identity(console: Console, report: CalibrationReport) -> None:
+    """One line naming the hardware the data was measured with (when the report carries it)."""
+    ident = dict(report.identification)
+    r, t = ident.get("robot_identity"), ident.get("tracker_identity")
+    if r and t:
+        console.print(f"measured with {r.get('vendor')} {r.get('model')} ({r.get('controller_type')}, serial "
+                      f"{r.get('serial')}, {r.get('software_version')}) and {t.get('vendor')} {t.get('model')} "
+                      f"(serial {t.get('serial')}, firmware {t.get('firmware')})", markup=False)
+    for reason in (ident.get("identity_check") or {}).get("overridden", []):
+        console.print(f"identity check overridden with --force: {reason}", style="yellow", markup=False)
+
+
+def render_preparation(console: Console, prep: dict | None) -> None:
+    """Which joint set drove the model and why; the tracker drift the reference nests showed."""
+    if not prep:
+        return
+    j, d = prep["joints"], prep["drift"]
+    console.print(f"joints: {j['used']} ({j['why']})", markup=False)
+    if d["nests"]:
+        move = d["translation_at_end_mm"]
+        console.print(f"tracker drift from {d['nests']} nests ({d['readings']} readings, max nest move "
+                      f"{d['max_nest_move_mm']:.3f} mm): {'compensated' if d['applied'] else 'not compensated'}, "
+                      f"{d['why']}; translation at the end {sum(v * v for v in move) ** 0.5:.3f} mm"
+                      + (f"; CV RMS {d['cv_rms_mm']:.4f} mm" if d.get("cv_rms_mm") is not None else ""), markup=False)
+        for e in d.get("excluded", []):
+            console.print(f"  nest reading {e['point_id']} set aside: {e['reason']}", markup=False)
+
+
+def render_choices(console: Console, report: CalibrationReport) -> None:
+    """Which effects and which residual layer the data supported (CV figures), and the excluded points."""
+    effects = report.effects
+    sel = None if effects is None else effects.selection
+    if sel:
+        tried = {}
+        for t in sel["trials"]:
+            tried.setdefault(t["effect"], t)
+            if t["taken"]:
+                tried[t["effect"]] = t
+        figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
+        console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
+                      f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
+    for fe in () if effects is None else effects.fitted:
+        vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
+                                                                 if "stiffness_Nm_per_rad" in p else "")
+                         for n, p in fe["params"].items())
+        console.print(f"  {fe['name']}: {vals}")
+    for note in (effects and effects.notes) or ():
+        console.print(f"  note: {note}")
+    ch = report.residual_choice
+    if ch and ch.candidates:
+        figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
+                         for k, v in ch.candidates.items())
+        console.print(f"residual layer by {ch.folds}-fold CV on the calibration points (RMS mm): {figs} -> "
+                      f"{ch.chosen}")
+    for e in report.excluded_points:
+        console.print(f"excluded {e.point_id}: {e.reason}")
+    if report.structure_note:
+        console.print(report.structure_note)
+    multi = report.multi_smr
+    if multi and multi.skipped is None:
+        figs = ", ".join(f"{k} RMS {v.rms_mm:.4f}" for k, v in multi.test.items())
+        console.print(f"{multi.n_smr}-SMR calibration (one offset per SMR), test set: {figs} mm")
+        o = multi.orientation_error_arcsec
+        if o:
+            console.print(f"flange orientation error on the test set: mean {o.mean:.1f}, RMS {o.rms:.1f}, "
+                          f"max {o.max:.1f} arcsec")
+    elif multi:
+        console.print(f"multi-SMR calibration skipped: {multi.skipped}")
+
+
+def render_parameters(console: Console, report: CalibrationReport) -> None:
+    t = Table(title="Identified parameters (delta from nominal; base relative to the registered frame)")
+    for col in ("parameter", "delta", "std", "unit"):
+        t.add_column(col, justify="left" if col == "parameter" else "right")
+    for row in report.parameters:
+        if row.identified:
+            t.add_row(row.name, f"{row.delta:+.4f}", f"{row.std:.4f}", row.unit)
+    console.print(t)
+    if report.unidentifiable:
+        notes = ", ".join(f"{u.name} (~{'/'.join(u.redundant_with) or u.reason})" for u in report.unidentifiable)
+        console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
+
+
+def _vias(plan: Plan) -> str:
+    n = sum(len(p.via_deg) for p in plan.points)
+    return f", {n} via poses around keep-out boxes" if n else ""
+
+
+def render_stop(console: Console, report: CalibrationReport) -> None:
+    """``plan.stop: auto``: the predicted held-out RMS curve of the last refit, where the run stopped and why,
+    and the held-out RMS the final model reached."""
+    stop = report.stop
+    if not stop:
+        return
+    t = Table(title="Predicted held-out RMS vs calibration points (last refit), mm")
+    t.add_column("calibration points", justify="right")
+    t.add_column("predicted RMS", justify="right")
+    for n, rms in stop.last_curve:
+        t.add_row(str(n) + (" (stop)" if n == stop.n_calib_at_stop else ""), f"{rms:.4f}")
+    console.print(t)
+    console.print(f"stopped after {stop.n_calib_at_stop} calibration points ({stop.reason}): predicted "
+                  f"held-out RMS {stop.predicted_rms_mm:.4f} mm, measured {_mm(stop.measured_rms_mm)} mm "
+                  "(final model, test set)", markup=False)
+
+
+def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
+    """``campaign plan``: the parameter uncertainty the plan's calibration points predict, the calibrated model's
+    own error at the test poses from it (AP(theta) RMS) and the held-out RMS to expect with the noise floor."""
+    shown = [(n, math.degrees(s) if u == "rad" else float(s), "deg" if u == "rad" else u)
+             for n, u, s in zip(fc.names, fc.units, fc.std)]
+    text = ", ".join(f"{n} {v:.4f} {u}" for n, v, u in sorted(shown, key=lambda t: -t[1])[:4])
+    console.print(f"forecast (unit-weight error 1): {len(fc.names)} geometric parameters identifiable, largest std "
+                  f"{text}; O1 {fc.O1:.3g}, condition number {fc.condition_number:.0f}", markup=False)
+    held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
+    console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
+                  f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
+                  f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
+    if blocks:
+        console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
+
+
+def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
+    console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
+                  f"{plan.count('check')} check-pose measurements, "
+                  + (f"{plan.count('nest')} nest readings, " if plan.count("nest") else "")
+                  + f"{len(plan.skipped)} skipped{_vias(plan)}; "
+                  f"estimated duration {duration_s / 60:.1f} min")
+    if plan.skipped:
+        t = Table(title="Skipped points")
+        for col in ("point", "set", "x", "y", "z (mm, base)", "reason"):
+            t.add_column(col)
+        for s in plan.skipped:
+            t.add_row(s.point_id, s.set, *(f"{v:.0f}" for v in s.p_base_mm), s.reason)
+        console.print(t)
+
+
+def render_verify(console: Console, rep: VerifyReport) -> None:
+    """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
+    floor = rep.noise_floor_mm
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm); "
+                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
+    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
+        t.add_column(col, justify="left" if col == "stage" else "right")
+    fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
+    for p in rep.passes:
+        c = p.corrected
+        t.add_row(p.stage, str(p.n_corrected), str(p.n_held), fmt(p.all.rms_mm), fmt(c and c.rms_mm),
+                  fmt(c and c.max_mm), "-" if c is None else f"{c.rms_mm / floor:.2f}")
+    console.print(t)
+    for p in rep.passes:
+        for why, count in p.held.items():
+            console.print(f"{p.stage}: {count} held: {why}", markup=False)
+    for p in rep.passes:
+        a = p.orientation_error_arcsec
+        if a:
+            console.print(f"{p.stage}: tool orientation error {a.rms:.1f} arcsec RMS, max {a.max:.1f} "
+                          f"({a.source})", markup=False)
+
+
+def render_iso(console, report: dict) -> None:
+    """Rich table per target kind: AP, APx/y/z, RP per pose, and AD/RD."""
+    from rich.table import Table
+
+    for run in report["runs"]:
+        t = Table(title=f"ISO 9283 ({run['targets']} targets, {run['cycles']} cycles, cube edge "
+                        f"{report['cube']['edge_mm']:.0f} mm), mm")
+        for col in ("pose", "AP", "APx", "APy", "APz", "RP"):
+            t.add_column(col, justify="left" if col == "pose" else "right")
+        for pc in run["poses"]:
+            t.add_row(pc["pose"], f"{pc['ap_mm']:.4f}", f"{pc['apx_mm']:+.4f}", f"{pc['apy_mm']:+.4f}",
+                      f"{pc['apz_mm']:+.4f}", f"{pc['rp_mm']:.4f}")
+        console.print(t)
+        d = run["distance"]
+        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm, RP max {run['max_rp_mm']:.4f} mm; "
+                      f"distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, "
+                      f"RD +-{d['rd_mm']:.4f} mm", highlight=False)
+    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm", highlight=False)
+    if report["cube"]["note"]:
+        console.print(f"cube: {report['cube']['note']}", highlight=False)

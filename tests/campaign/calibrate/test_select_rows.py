@@ -1,0 +1,75 @@
+"""``campaign select``: N calibration rows of a measured campaign by the optimal-plan criterion."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from campaign.config.load import load_cell
+from campaign.data.dataset import Dataset
+from campaign.data.interchange_csv import read_csv, write_csv
+from robocal.design import criterion
+from robocal.identify import register
+from tests.campaign.helpers import ROOT
+from tests.campaign.hostile import assert_one_line, cli, snapshot
+from tests.cells import irb2600, irb2600_poses, make_cell, measure
+
+pytestmark = pytest.mark.unit
+CONFIG = ROOT / "configs" / "irb2600.yaml"
+
+
+def _campaign_csv(path):
+    kin = irb2600()
+    qc, qt = irb2600_poses()
+    rng = np.random.default_rng(11)
+    cell = make_cell(kin, rng)
+    q = np.vstack([qc, qt[:30]])
+    p, _ = measure(cell, q, rng)
+    ids = [f"G{i:03d}" for i in range(len(qc))] + [f"T{i:03d}" for i in range(30)]
+    sets = ["calib"] * len(qc) + ["test"] * 30
+    order = np.random.default_rng(0).permutation(len(q))          # test rows among the calib rows
+    write_csv(path, Dataset(tuple(np.array(ids)[order]), tuple(np.array(sets)[order]), np.degrees(q[order]),
+                            p[order], source=str(path)))
+    return path
+
+
+def _logdet(ds, cell):
+    cal = ds.mask("calib")
+    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
+    c = criterion(register(cell.kinematics, q, p), q, cell.weights(ds)[0][cal])
+    flat = c.A.reshape(-1, c.A.shape[2])
+    return np.linalg.slogdet(np.eye(flat.shape[1]) + flat.T @ flat)[1]
+
+
+def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path, capsys):
+    data, out = _campaign_csv(tmp_path / "data.csv"), tmp_path / "subset.csv"
+    code, text, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", out)
+    assert code == 0, err
+    assert "selected 80 of" in text
+    full, sub = read_csv(data), read_csv(out)
+    assert int(sub.mask("calib").sum()) == 80 and int(sub.mask("test").sum()) == 30
+    pos = [full.point_id.index(i) for i in sub.point_id]
+    assert pos == sorted(pos)                                        # measurement order kept
+    rows = np.array(pos)
+    np.testing.assert_array_equal(sub.q_deg, full.q_deg[rows])
+    np.testing.assert_array_equal(sub.p_tracker_mm, full.p_tracker_mm[rows])
+    cell = load_cell(CONFIG)
+    cal = np.flatnonzero(full.mask("calib"))
+    rand = []
+    for seed in range(5):
+        keep = ~full.mask("calib")
+        keep[np.random.default_rng(seed).choice(cal, 80, replace=False)] = True
+        rand.append(_logdet(full.subset(keep), cell))
+    assert _logdet(sub, cell) > max(rand)
+
+
+def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_path, capsys):
+    data = _campaign_csv(tmp_path / "data.csv")
+    n_cal = int(read_csv(data).mask("calib").sum())
+    before = snapshot(tmp_path)
+    code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", n_cal + 1, "--out", tmp_path / "s.csv")
+    assert_one_line(code, out, err, 2, f"has {n_cal} calibration rows", f"{n_cal + 1} requested")
+    code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 10, "--out", tmp_path / "s.csv")
+    assert_one_line(code, out, err, 2, "--points 10", "identifiable + 10 %")
+    code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", data)
+    assert_one_line(code, out, err, 2, "overwrite")
+    assert snapshot(tmp_path) == before

@@ -1,0 +1,104 @@
+"""URDF export checked by an independent parser (yourdfpy): its forward kinematics equal the project's."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from campaign.config.simulation import simulated_cell
+from campaign.config.load import load_cell
+from campaign.report.export import export, robodk_text, urdf_text
+from robocal.kinematics import Kinematics, fk, smr_base
+from robocal.model import CalibratedModel
+from robocal.simulation.mock_cell import random_geometric_errors
+
+yourdfpy = pytest.importorskip("yourdfpy")
+pytestmark = pytest.mark.unit
+ROOT = Path(__file__).resolve().parents[3]
+CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
+
+
+def _max_error_um(kin: Kinematics, tmp_path: Path, n: int = 1000, seed: int = 0) -> float:
+    path = tmp_path / "robot.urdf"
+    path.write_text(urdf_text(CalibratedModel(kin)))
+    robot = yourdfpy.URDF.load(str(path), load_meshes=False, build_scene_graph=True)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(kin.q_min_rad, kin.q_max_rad, (n, kin.n))
+    T_ours = fk(kin, q)
+    p_ours = smr_base(kin, q, T_ours)
+    names = [f"j{i + 1}" for i in range(kin.n)]
+    worst = 0.0
+    for k in range(n):
+        robot.update_cfg(dict(zip(names, q[k])))
+        T_flange = robot.get_transform("flange", "base_link")
+        T_tool = robot.get_transform("tool", "base_link")
+        worst = max(worst, np.max(np.abs(T_flange[:3, 3] * 1000 - T_ours[k, :3, 3])),
+                    np.max(np.abs(T_tool[:3, 3] * 1000 - p_ours[k])),
+                    1000 * np.max(np.abs(T_flange[:3, :3] - T_ours[k, :3, :3])))   # 1 m lever: rotation in um
+    return worst * 1000.0
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
+def test_urdf_of_each_shipped_cell_matches_fk(config, tmp_path):
+    err = _max_error_um(load_cell(config).kinematics, tmp_path)
+    print(f"{config.stem}: URDF vs FK max {err:.2e} um on 1000 poses")
+    assert err <= 1.0
+
+
+@pytest.mark.parametrize("convention", ["dh", "mdh"])
+def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
+    truth = simulated_cell(load_cell(ROOT / "configs" / "irb2600.yaml")).truth    # DH + errors + Hayati beta on J2
+    if convention == "mdh":
+        truth = random_geometric_errors(truth.with_(convention="mdh"), np.random.default_rng(4), 3.0)
+    assert np.any(truth.beta_rad != 0)
+    err = _max_error_um(truth, tmp_path, seed=1)
+    print(f"calibrated {convention}: URDF vs FK max {err:.2e} um on 1000 poses")
+    assert err <= 1.0
+
+
+def test_wrong_origin_would_be_caught(tmp_path):
+    """The comparison is sensitive: a 0.01 deg change of one alpha moves the tool by far more than 1 um."""
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
+    path = tmp_path / "robot.urdf"
+    bent = kin.with_(alpha_rad=kin.alpha_rad + np.r_[0, 0, np.radians(0.01), 0, 0, 0])
+    path.write_text(urdf_text(CalibratedModel(bent)))
+    robot = yourdfpy.URDF.load(str(path), load_meshes=False)
+    q = np.radians([10, 20, -30, 40, 50, 60])
+    robot.update_cfg(dict(zip([f"j{i + 1}" for i in range(6)], q)))
+    assert np.max(np.abs(robot.get_transform("tool", "base_link")[:3, 3] * 1000 - smr_base(kin, q[None])[0])) > 0.01
+
+
+def test_export_files_and_residual_note(tmp_path):
+    cell = load_cell(ROOT / "configs" / "irb2600.yaml")
+    from robocal.residual import IDWResidual
+    layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
+    model = CalibratedModel(simulated_cell(cell).truth, layer)
+    files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt")
+    assert [f.name for f in files] == ["r.urdf", "dh.csv", "robodk.txt"]
+    assert "NOT exported: the non-kinematic residual layer" in (tmp_path / "r.urdf").read_text()
+    rows = (tmp_path / "dh.csv").read_text().splitlines()
+    assert rows[0].startswith("joint,convention,theta_deg,d_mm,a_mm,alpha_deg,beta_deg") and len(rows) == 8
+    assert "beta_deg" in (tmp_path / "robodk.txt").read_text()     # Hayati beta: the table keeps the beta column
+
+
+def test_robodk_dhm_conversion_is_exact():
+    """Standard DH without beta -> DHM rows; rebuilding the chain from the DHM rows gives the same FK."""
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
+    text = robodk_text(CalibratedModel(kin))
+    rows = [ln.split() for ln in text.splitlines() if ln and ln[0] == " " and ln.split()[0].isdigit()]
+    table = np.array([[float(v) for v in r[1:5]] for r in rows])
+    mdh = Kinematics.from_table("mdh", table[:, 0], table[:, 1], table[:, 3], table[:, 2],
+                                np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad))
+    q = np.random.default_rng(2).uniform(-1, 1, (50, 6))
+    flange = [ln for ln in text.splitlines() if ln.startswith("# flange")][0]
+    a_f, al_f = float(flange.split("Tx(")[1].split(" mm")[0]), float(flange.split("Rx(")[1].split(" deg")[0])
+    from campaign.report.export import _rot, _trans
+    T = fk(mdh, q) @ _trans("x", a_f) @ _rot("x", np.radians(al_f))
+    assert np.max(np.abs(T[:, :3, 3] - fk(kin, q)[:, :3, 3])) < 1e-3
+
+
+def test_physical_effects_are_noted_not_exported(tmp_path):
+    from robocal.elastic import EffectChoice
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
+    fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
+    text = urdf_text(CalibratedModel(kin, None, None, (fake,)))
+    assert "NOT exported: the physical effects of the model (joint_compliance" in text
