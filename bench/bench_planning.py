@@ -42,6 +42,7 @@ from campaign.motion_safety import PathGuard  # noqa: E402
 from campaign.pipeline import run_campaign  # noqa: E402
 from campaign.plan import build_plan  # noqa: E402
 from campaign.plan_optimal import candidate_pool  # noqa: E402
+from tests.campaign.helpers import geometric_only  # noqa: E402
 from campaign.process import process  # noqa: E402
 from robocal.design import d_optimal, greedy_order  # noqa: E402
 
@@ -50,7 +51,7 @@ EFFECTS = [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},
 
 
 def write_config(tmp: Path, seed: int, **plan) -> Path:
-    d = yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text())
+    d = geometric_only(yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text()))   # the truth is EFFECTS only
     d["plan"].update(plan)
     d["simulation"].update(seed=seed, effects=EFFECTS)
     d["output"] = {"dir": str(tmp / "runs")}

@@ -20,7 +20,8 @@ pytestmark = pytest.mark.system
 @pytest.fixture(scope="module")
 def full_run(tmp_path_factory):
     """The README's main job: the shipped IRB 2600 config on the mock cell (the demo cell: geometry + J2/J3 gravity
-    compliance with the tool payload, a J1 gear term, read-back lag, tracker drift seen by three nests, random order)."""
+    compliance with the tool payload, a J1 gear term, read-back lag, tracker drift seen by three nests, random
+    order)."""
     out = tmp_path_factory.mktemp("run") / "irb2600"
     assert main(["run", str(ROOT / "configs/irb2600.yaml"), "--out", str(out)]) == 0
     return out
