@@ -42,9 +42,9 @@ from campaign.motion_safety import PathGuard  # noqa: E402
 from campaign.pipeline import run_campaign  # noqa: E402
 from campaign.plan import build_plan  # noqa: E402
 from campaign.plan_optimal import candidate_pool  # noqa: E402
-from tests.campaign.helpers import geometric_only  # noqa: E402
 from campaign.process import process  # noqa: E402
 from robocal.design import d_optimal, greedy_order  # noqa: E402
+from tests.campaign.helpers import geometric_only  # noqa: E402
 
 EFFECTS = [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},
            {"name": "gear_cyclic", "params": {"joint": 2, "values": [1.4e-4, 1.4e-4, 7.0e-5, 7.0e-5]}}]
