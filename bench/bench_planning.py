@@ -43,13 +43,14 @@ from campaign.plan.build import build_plan  # noqa: E402
 from campaign.plan.optimal import candidate_pool  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.design import d_optimal, greedy_order  # noqa: E402
+from tests.campaign.helpers import geometric_only  # noqa: E402
 
 EFFECTS = [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},
            {"name": "gear_cyclic", "params": {"joint": 2, "values": [1.4e-4, 1.4e-4, 7.0e-5, 7.0e-5]}}]
 
 
 def write_config(tmp: Path, seed: int, **plan) -> Path:
-    d = yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text())
+    d = geometric_only(yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text()))   # the truth is EFFECTS only
     d["plan"].update(plan)
     d["simulation"].update(seed=seed, effects=EFFECTS)
     d["output"] = {"dir": str(tmp / "runs")}

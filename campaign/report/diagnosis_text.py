@@ -6,6 +6,7 @@ from rich.table import Table
 from rich.text import Text
 
 from campaign.io.terminal_text import clean
+from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 
 
@@ -41,8 +42,9 @@ def _short_evidence(f: dict) -> str:
 
 
 def render(console: Console, report: dict) -> None:
-    """Rich tables: summary, findings (which effect, how far it shrinks), where it lies, what cannot be told, and
-    the unexplained structure (the same figures as the JSON's ``unexplained_structure``)."""
+    """Rich tables: summary, the preparation (joint set, tracker drift), findings (which effect, how far it
+    shrinks), where it lies, what cannot be told, and the unexplained structure (the same figures as the JSON's
+    ``unexplained_structure``)."""
     floor = report["noise_floor_mm"]
     n = report["n"]
     ev = "test set" if report.get("evaluation") == "test" else "cross-validation (no test rows)"
@@ -52,6 +54,7 @@ def render(console: Console, report: dict) -> None:
     console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
                   f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
+    render_preparation(console, report.get("preparation"))     # read-back lag -> joint set; nest drift
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
     for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),
                       ("after", "right"), ("after / floor", "right"), ("evidence", "left")):

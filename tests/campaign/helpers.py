@@ -12,9 +12,26 @@ from campaign.correct.verify_report import VerifyReport
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def small_config(tmp_path: Path, name: str = "irb2600", **overrides) -> Path:
-    """Copy configs/NAME.yaml with a coarser grid (fast) and apply dotted-key overrides."""
+def geometric_only(doc: dict) -> dict:
+    """The config ``doc`` with the real-cell phenomena of the demo cell switched off: no simulated effects, read-back
+    lag or tracker drift, no nests, serpentine order, no payload (a geometric-only truth, for tests of mechanics)."""
+    sim = doc.get("simulation", {})
+    sim["effects"] = []
+    for key in ("readback_lag_deg_per_deg", "readback_noise_deg", "tracker_drift_mm_per_h", "tracker_drift_urad_per_h",
+                "tracker_drift_tau_s"):
+        sim.pop(key, None)
+    for key in ("nests", "order", "order_seed"):
+        doc["plan"].pop(key, None)
+    doc["tool"].update(payload_kg=0.0, payload_cog_flange_mm=[0.0, 0.0, 0.0])
+    return doc
+
+
+def small_config(tmp_path: Path, name: str = "irb2600", phenomena: bool = False, **overrides) -> Path:
+    """Copy configs/NAME.yaml with a coarser grid (fast) and apply dotted-key overrides; ``phenomena`` False: the
+    ``geometric_only`` cell (the demo's effects, lag, drift, nests and random order off)."""
     doc = yaml.safe_load((ROOT / "configs" / f"{name}.yaml").read_text())
+    if not phenomena:
+        doc = geometric_only(doc)
     doc["plan"]["grid"]["step_mm"] = 400
     doc["plan"]["test"]["count"] = 30
     doc["plan"]["check_poses"] = {"count": 3, "every_n_points": 20}

@@ -1,5 +1,5 @@
-"""The figures of one small mock run are pinned (rel 1e-7, room only for BLAS rounding across CPUs): a refactor
-that changes any of them fails here.
+"""The figures of one small mock run of the demo cell are pinned (rel 1e-7, room only for BLAS rounding across
+CPUs): a refactor that changes any of them fails here.
 
 Regenerate deliberately (a numerical change that is meant) with:
 ``PIN_UPDATE=1 OPENBLAS_NUM_THREADS=1 python3 -m pytest tests/campaign/test_pinned_run.py``
@@ -48,7 +48,7 @@ def _close(a, b, path="") -> list[str]:
 
 @pytest.mark.system
 def test_mock_run_figures_are_pinned(tmp_path):
-    cfg = small_config(tmp_path, "irb2600")
+    cfg = small_config(tmp_path, "irb2600", phenomena=True)      # the demo cell, its real-cell phenomena on
     assert main(["run", str(cfg), "--out", str(tmp_path / "run")]) == 0
     got = _figures(json.loads((tmp_path / "run" / "report.json").read_text()))
     if os.environ.get("PIN_UPDATE"):

@@ -78,7 +78,8 @@ def test_reference_values_are_typed_floats_and_tuples() -> None:
     assert cfg.tracker.measurement.samples == 5 and isinstance(cfg.tracker.measurement.samples, int)
     assert cfg.calibration.ridge_mu == pytest.approx(1e-6)
     assert cfg.simulation.T_tracker_base[3] == (0.0, 0.0, 0.0, 1.0)
-    assert cfg.simulation.effects == ()
+    assert [e.name for e in cfg.simulation.effects] == ["joint_compliance", "gear_cyclic"]     # the demo cell
+    assert cfg.tool.payload_kg == 3.0 and cfg.plan.order == "random" and len(cfg.plan.nests.points) == 3
     assert cfg.output.dir == "runs"
 
 
