@@ -44,7 +44,8 @@ class CheckPosesConfig:
 @dataclass(frozen=True, slots=True)
 class NestConfig:
     """One fixed reference nest: ``id`` (text), its approximate position ``p_base_mm`` in the robot base frame and,
-    optionally, ``p_tracker_mm`` in the tracker frame (where a tracker without ``select_nest`` first aims)."""
+    ``p_tracker_mm`` in the tracker frame: where a tracker that cannot find a nest by itself (emScon, the line
+    protocol) aims; required for those trackers (checked before the first move), optional for the mock tracker."""
 
     id: str
     p_base_mm: Vec3

@@ -37,6 +37,8 @@ def make_runner(cell: CellModel, devices: Devices, *, first_pass: bool = False, 
     repeatability), and the beam-break SMR predictor seeded with ``records``; every SMR of the tool and the
     reference nests, or (``smr1_only``) SMR 1 without nests."""
     cfg = cell.config
+    if not smr1_only:
+        check_nest_aiming(cfg, devices.tracker)
     pct = cfg.robot.first_pass_speed_pct
     tool = {} if smr1_only else {"n_smrs": len(cfg.tool.smrs_mm), "nests": cfg.plan.nests}
     return Runner(devices.robot, devices.tracker, cfg.tracker.measurement, devices.clock,
@@ -44,6 +46,18 @@ def make_runner(cell: CellModel, devices: Devices, *, first_pass: bool = False, 
                   predict_p_tracker_mm=smr_predictor(cell, records), covariance_from_device=cell.device_covariance,
                   limits=motion_limits(cfg), payload=payload(cfg), guard=PathGuard.for_cell(cell),
                   first_pass_limits=motion_limits(cfg, pct) if first_pass and pct is not None else None)
+
+
+def check_nest_aiming(cfg, tracker) -> None:
+    """ConfigError (before anything moves) when a reference nest has no ``p_tracker_mm`` and the tracker cannot
+    find a nest by itself (no ``select_nest``: emScon, the line protocol): it would not know where to aim."""
+    if callable(getattr(tracker, "select_nest", None)):
+        return
+    for k, nest in enumerate(cfg.plan.nests.points):
+        if nest.p_tracker_mm is None:
+            raise ConfigError(cfg.source_path, f"plan.nests.points[{k}].p_tracker_mm",
+                              f"nest {nest.id!r}: this tracker aims at a nest only from its tracker-frame position: "
+                              "give p_tracker_mm (mm, tracker frame)")
 
 
 def smr_predictor(cell: CellModel, records=()) -> SmrPredictor:
