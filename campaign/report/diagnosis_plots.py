@@ -9,10 +9,10 @@ import numpy as np
 from campaign.run.output_dirs import Claim
 
 
-PLOTS_MISSING = "matplotlib is not installed: no plots (pip install 'robot-accuracy-campaign[plots]')"
+PLOTS_MISSING = "matplotlib is not importable: no plots (it is a dependency: reinstall the package)"
 
 
-# ============================================================================ plots (optional extra)
+# ============================================================================ plots
 def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] | str:
     """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect into ``out_dir``
     (a checked output directory is taken, i.e. created and marked, only once matplotlib imports). Returns the

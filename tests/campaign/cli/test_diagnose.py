@@ -158,7 +158,7 @@ def test_plots_or_a_one_line_note(tmp_path, capsys, monkeypatch):
     csv, cfg = truth_csv(tmp_path, simulate(["gear_cyclic"], 56, SMALL))
     if importlib.util.find_spec("matplotlib") is None:
         assert main(["diagnose", str(csv), "--config", str(cfg), "--plots", str(tmp_path / "png")]) == 0
-        assert "matplotlib is not installed: no plots" in capsys.readouterr().out
+        assert "matplotlib is not importable: no plots" in capsys.readouterr().out
         assert not (tmp_path / "png").exists()
     else:
         assert main(["diagnose", str(csv), "--config", str(cfg), "--plots", str(tmp_path / "png")]) == 0
@@ -173,7 +173,7 @@ def test_plots_or_a_one_line_note(tmp_path, capsys, monkeypatch):
             return real_import(name, *a, **k)
         monkeypatch.setattr(builtins, "__import__", no_matplotlib)
         assert main(["diagnose", str(csv), "--config", str(cfg), "--plots", str(tmp_path / "png2")]) == 0
-        assert "matplotlib is not installed: no plots" in capsys.readouterr().out
+        assert "matplotlib is not importable: no plots" in capsys.readouterr().out
 
 
 @pytest.mark.system
