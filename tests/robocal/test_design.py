@@ -14,7 +14,6 @@ from robocal.pool import incidence_rad, tilted_rotations, wrist_flipped
 from robocal.kinematics import fk
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
-pytestmark = pytest.mark.unit
 
 
 def _logdet(A, idx):
@@ -23,6 +22,7 @@ def _logdet(A, idx):
     return np.linalg.slogdet(np.eye(L) + flat.T @ flat)[1]
 
 
+@pytest.mark.unit
 def test_rank3_updates_match_the_direct_inverse():
     rng = np.random.default_rng(0)
     A = rng.normal(size=(40, 3, 7))
@@ -38,6 +38,7 @@ def test_rank3_updates_match_the_direct_inverse():
     assert gain == pytest.approx(_logdet(A, (3, 5, 30, 8)) - _logdet(A, (3, 5, 30)))
 
 
+@pytest.mark.unit
 def test_d_optimal_finds_the_brute_force_optimum_of_a_small_problem():
     rng = np.random.default_rng(1)
     A = rng.normal(size=(12, 3, 5)) * rng.uniform(0.2, 2.0, (12, 1, 1))
@@ -47,6 +48,7 @@ def test_d_optimal_finds_the_brute_force_optimum_of_a_small_problem():
     assert res.logdet == pytest.approx(_logdet(A, best))
 
 
+@pytest.mark.unit
 def test_d_optimal_beats_random_designs_and_orders_by_gain():
     rng = np.random.default_rng(2)
     A = rng.normal(size=(600, 3, 20)) * rng.uniform(0.1, 1.0, (600, 1, 1))
@@ -58,6 +60,7 @@ def test_d_optimal_beats_random_designs_and_orders_by_gain():
     assert _logdet(A, res.chosen[:10]) > max(_logdet(A, rng.choice(600, 10, replace=False)) for _ in range(20))
 
 
+@pytest.mark.unit
 def test_spread_fills_each_joint_range_at_every_prefix():
     """One joint, the information growing with |q|: pure D-optimality piles up at the ends; with the spread
     constraint the (t+1)-th point always lands in a bin of t + 1 equal-count bins that the first t left empty,
@@ -76,6 +79,7 @@ def test_spread_fills_each_joint_range_at_every_prefix():
         assert np.max(np.diff(np.concatenate([[-1.0], np.sort(q[plain[:n]]), [1.0]]))) > 0.8
 
 
+@pytest.mark.unit
 def test_short_tour_is_a_shorter_permutation():
     rng = np.random.default_rng(4)
     q = rng.uniform(-2, 2, (150, 6))
@@ -87,6 +91,7 @@ def test_short_tour_is_a_shorter_permutation():
     assert order[0] == int(np.argmin(move_cost(start, q)))
 
 
+@pytest.mark.unit
 def test_pool_geometry():
     R0 = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))[0]
     R0 *= np.sign(np.linalg.det(R0))
@@ -103,6 +108,7 @@ def test_pool_geometry():
     np.testing.assert_allclose(fk(kin, wrist_flipped(q)), fk(kin, q), atol=1e-9)
 
 
+@pytest.mark.system                 # a Monte-Carlo study (many calibrations)
 def test_forecast_std_matches_monte_carlo_calibrations():
     kin = irb2600()
     qc, qt = irb2600_poses()
@@ -126,6 +132,7 @@ def test_forecast_std_matches_monte_carlo_calibrations():
     assert np.sqrt(np.mean(errs)) == pytest.approx(fc.model_rms_mm, rel=0.35)
 
 
+@pytest.mark.unit
 def test_predicted_curve_matches_simulated_refits():
     """A linear model y = G x + noise: the predicted held-out RMS of the fit on the first n points against the
     RMS of actual fits on n points judged on fresh test points; blocked CV finds no unmodelled part here and
@@ -158,6 +165,7 @@ def test_predicted_curve_matches_simulated_refits():
     assert np.mean(se2) - 3.0 - np.mean(var2) > 1.0
 
 
+@pytest.mark.unit
 def test_criterion_counts_the_parameters_a_pose_set_identifies():
     kin = irb2600()
     qc, _ = irb2600_poses()

@@ -20,7 +20,7 @@ def rms(e):
     return float(np.sqrt(np.mean(np.sum(np.square(e), axis=1))))
 
 
-@pytest.mark.unit
+@pytest.mark.system             # a seeded study (3 seeds x 300 points)
 def test_noise_bounded_by_the_floor_keeps_the_calibration_rms_at_the_floor():
     """Residuals that are pure measurement noise at the floor (no structure), 300 points, 3 seeds. Without the
     bound, marginal likelihood can trade the noise for a short-length-scale signal and interpolate the points
@@ -46,7 +46,7 @@ def test_noise_bounded_by_the_floor_keeps_the_calibration_rms_at_the_floor():
     assert min(free_calib) < 0.5 * FLOOR_MM           # the failure mode the bound removes does occur here
 
 
-@pytest.mark.unit
+@pytest.mark.system             # a seeded recovery study
 def test_cv_predicted_held_out_rms_of_the_chosen_layer_matches_the_test_set():
     """A simulated IRB 2600 with 3x typical gravity compliance the geometric model cannot express: the GPR layer
     is chosen, its calibration RMS is reported as a fit (below its CV figure), and the CV-predicted held-out RMS

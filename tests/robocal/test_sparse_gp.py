@@ -60,7 +60,7 @@ def test_few_inducing_inputs_agree_with_the_exact_gp_within_a_tenth_of_its_error
     assert diff < 0.1 * err_exact
 
 
-@pytest.mark.unit
+@pytest.mark.system             # 20 000+ points: a memory study
 def test_many_points_take_the_inducing_point_path_in_bounded_memory():
     """20 000 points: the layer's GP is the inducing-point one, and fitting it plus its 5-fold CV peaks at
     O(N m) memory (below N m doubles; the exact GP's kernel alone would be N^2 doubles, 3.2 GB)."""

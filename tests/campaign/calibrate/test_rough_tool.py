@@ -91,7 +91,7 @@ def test_the_terminal_prints_the_offset_to_configure(ur10_data, tmp_path, capsys
     assert (tmp_path / "out" / "model.json").exists()
 
 
-@pytest.mark.unit
+@pytest.mark.system             # calibrations through the CLI
 @pytest.mark.parametrize("case,needle", [("irb2600_data_irb120_config", "belong to this robot"),
                                          ("ur10_data_ur10e_table", "not a calibration of this robot"),
                                          ("ur10_data_ur5_table", "belong to this robot")])

@@ -13,7 +13,7 @@ from tests.campaign.helpers import ROOT
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.system          # `campaign select` through the CLI on simulated campaigns
 CONFIG = ROOT / "configs" / "irb2600.yaml"
 
 

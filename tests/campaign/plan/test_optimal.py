@@ -10,7 +10,6 @@ from robocal.design import move_cost
 from tests.campaign.helpers import small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 
-pytestmark = pytest.mark.unit
 
 POOL = {"plan.pool": {"step_mm": 200, "tilts": 2}}      # a small pool: fast
 
@@ -24,6 +23,7 @@ def _config(tmp_path, **over):
     return small_config(tmp_path, **{**POOL, "plan.kind": "optimal", "plan.points": 60, **over})
 
 
+@pytest.mark.system
 def test_optimal_plan_chooses_points_from_the_pool_and_keeps_the_grid_test_set(tmp_path):
     plan = build_plan(load_cell(_config(tmp_path)))
     grid = build_plan(load_cell(_grid_config(tmp_path)))
@@ -41,6 +41,7 @@ def test_optimal_plan_chooses_points_from_the_pool_and_keeps_the_grid_test_set(t
     assert len(tilted) > 1                              # orientations other than tool_direction were chosen
 
 
+@pytest.mark.system
 def test_stop_auto_plan_has_blocks_and_the_test_set_last(tmp_path):
     plan = build_plan(load_cell(_config(tmp_path, **{"plan.stop": "auto", "plan.points": 80,
                                                      "plan.block_points": 10})))
@@ -50,6 +51,7 @@ def test_stop_auto_plan_has_blocks_and_the_test_set_last(tmp_path):
     assert all(b - a == 10 for a, b in zip(plan.blocks[:-1], plan.blocks[1:-1]))
 
 
+@pytest.mark.system
 def test_campaign_plan_prints_the_forecast_for_grid_and_optimal_plans(tmp_path, capsys):
     for path in (_grid_config(tmp_path), _config(tmp_path)):
         code, out, err = cli(capsys, "plan", path)
@@ -58,6 +60,7 @@ def test_campaign_plan_prints_the_forecast_for_grid_and_optimal_plans(tmp_path, 
         assert "estimated duration" in out
 
 
+@pytest.mark.system
 @pytest.mark.parametrize("over, needles", [
     ({"plan.points": 5000}, ("plan.points", "5000", "candidate pool holds only")),
     ({"plan.points": 12}, ("plan.points", "12", "identifiable + 10 %")),
@@ -75,6 +78,7 @@ def test_bad_counts_and_an_emptied_pool_exit_2_before_anything_moves(tmp_path, c
     assert not runs.exists() and snapshot(tmp_path) == before
 
 
+@pytest.mark.unit
 def test_optimal_keys_are_checked_by_validate(tmp_path, capsys):
     for over, needle in (({"plan.points": None}, "plan.points"),
                          ({"plan.kind": "grid", "plan.stop": "auto"}, "plan.stop"),
@@ -85,6 +89,7 @@ def test_optimal_keys_are_checked_by_validate(tmp_path, capsys):
         assert_one_line(code, out, err, 2, needle)
 
 
+@pytest.mark.unit
 def test_stop_rule_decisions(tmp_path):
     """The decision after a refit: the gain of the next block against stop_gain_pct % of the floor, the time
     budget, the last block."""
