@@ -78,9 +78,9 @@ class VerifyPasses:
     """The passes of closed-loop verification, a plan the runner executes: the model-corrected pass, then up to
     ``closed_loop_iterations`` passes re-solved from the previous pass's measurements (seed 001 §4.2). Every pass
     holds a correction beyond a bound at the planned joints (``held_reasons``). With reference nests (``drift``)
-    a round of nest readings opens the first pass and closes every pass, and each pass's readings are moved into
-    the calibration's tracker frame before anything is computed from them. ``results``: (stage, err (N, 3) mm
-    tracker frame, safe (N,), held) per measured pass."""
+    rounds of nest readings open the first pass, follow every ``every_n_points`` points and close every pass, and
+    each pass's readings are moved into the calibration's tracker frame before anything is computed from them.
+    ``results``: (stage, err (N, 3) mm tracker frame, safe (N,), held) per measured pass."""
 
     def __init__(self, cell: CellModel, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
                  q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray,
