@@ -22,7 +22,7 @@ from tests.campaign.helpers import geometric_only  # noqa: E402
 
 def main(passes: int = 8) -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        # the closed loop on the geometric-only cell: verify does not follow the demo cell's tracker drift
+        # the closed loop on the geometric-only cell: the robot's own scatter, no tracker drift to remove
         doc = geometric_only(yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text()))
         doc["correction"]["closed_loop_iterations"] = passes
         cfg = Path(tmp) / "irb2600.yaml"

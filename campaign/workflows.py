@@ -149,15 +149,19 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
 
 def verify(run_dir: Path, console: Console | None = None):
     """Closed-loop verification of a finished run: corrected test points measured on the cell (logged durably
-    in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
+    in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3; with reference nests in the
+    config they are read at the start and after every pass, and every measurement is compared in the
+    calibration's tracker frame (``campaign.correct.verify_drift``)."""
     from campaign.correct.verify import verify_run
+    from campaign.correct.verify_drift import VerifyDrift
     from campaign.calibrate.multi_smr import pose_estimator
     from campaign.calibrate.outputs import load_model
 
     cell = load_cell(run_dir / "config.yaml")
     cfg = cell.config
     model = load_model(run_dir / "model.json")
-    records = read_log(run_dir).records()
+    contents = read_log(run_dir)
+    records = contents.records()
     tests = [p for p in records if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
@@ -170,6 +174,7 @@ def verify(run_dir: Path, console: Console | None = None):
         logging_ = stack.enter_context(run_logging(console))
         devices = stack.enter_context(open_devices(cell))
         robot, tracker = devices.robot, devices.tracker
+        continue_clock(devices.clock, contents)             # a simulated cell's time (and drift) goes on from the run
         identity = device_identity(robot, tracker)
         identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
@@ -178,8 +183,12 @@ def verify(run_dir: Path, console: Console | None = None):
         claim.take()
         logging_.to_file(out_dir)
         runner = make_runner(cell, devices, records=records, smr1_only=True)
-        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cell, model, tests, out_dir,
-                            estimator)
+
+        def execute(plan):
+            runner.on_point = plan.observe                   # nest readings and point times, once on disk
+            return runner.execute_passes(plan, log)
+        result = verify_run(run_dir, execute, cell, model, tests, out_dir, estimator,
+                            VerifyDrift(cfg.plan.nests, records, str(run_dir)))
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
 

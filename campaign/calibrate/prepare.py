@@ -97,34 +97,41 @@ def choose_joints(ds: Dataset, setting: str, cell: CellModel | None = None) -> t
 
 
 def _nest_drift(ds: Dataset) -> tuple[DriftModel | None, dict]:
-    """Drift model from the nest rows (None without nests): misread readings (a jump against the same nest's
-    readings before and after, robocal.screen.nest_misreads) are set aside and listed, the model is fitted on
-    the rest. A nest read only once is bad input (DataError)."""
+    """Drift model of the dataset's nest rows (None without nests), see :func:`fit_nest_drift`."""
     nest = ds.mask("nest")
     if not nest.any():
         return None, {"nests": 0, "applied": False, "why": "no reference-nest readings in the data", "excluded": []}
     if ds.t_s is None:
         raise DataError(ds.source, "nest rows need 't_s' (drift is a function of time)")
-    ids = np.array(ds.nest_id)[nest]
+    return fit_nest_drift(ds.source, ds.t_s[nest], np.array(ds.nest_id)[nest], ds.p_tracker_mm[nest],
+                          np.array(ds.point_id)[nest], float(np.max(ds.t_s)))
+
+
+def fit_nest_drift(source: str, t_s: np.ndarray, nest_id: np.ndarray, p_tracker_mm: np.ndarray,
+                   point_id: np.ndarray, t_end_s: float) -> tuple[DriftModel, dict]:
+    """Drift model from nest readings (times t_s (M,) s from the registration's frame, nest ids (M,), readings
+    (M, 3) mm tracker frame, point ids (M,)) and its report section (translation at ``t_end_s``): misread
+    readings (a jump against the same nest's readings before and after, robocal.screen.nest_misreads) are set
+    aside and listed, the model is fitted on the rest. A nest read only once is bad input (DataError)."""
+    t, ids, p = np.asarray(t_s, float), np.asarray(nest_id), np.asarray(p_tracker_mm, float)
     names, index, counts = np.unique(ids, return_inverse=True, return_counts=True)
     if (counts < 2).any():
         once = names[counts < 2]
-        raise DataError(ds.source, f"nest_id {str(once[0])!r} has a single reading{_more_names(once)}: a reference nest "
-                                   "must be read at least twice (start and end of the run) to show a drift")
-    t, p = ds.t_s[nest], ds.p_tracker_mm[nest]
+        raise DataError(source, f"nest_id {str(once[0])!r} has a single reading{_more_names(once)}: a reference nest "
+                                "must be read at least twice (start and end of the run) to show a drift")
     sc = nest_misreads(t, index, p)
     keep = sc.keep
     model = fit_drift(t[keep], index[keep], p[keep], tuple(names.tolist()), rounds=nest_rounds(index, t)[keep])
-    pid = np.array(ds.point_id)[nest]
+    pid = np.asarray(point_id)
     excluded = [{"point_id": str(pid[e.index]), "nest_id": str(ids[e.index]), "t_s": float(t[e.index]),
                  "reason": e.reason} for e in sc.excluded]
     tk, pk, ik = t[keep], p[keep], index[keep]
     first = np.array([pk[ik == k][np.argmin(tk[ik == k])] for k in range(len(names))])
     moved = np.linalg.norm(pk - first[ik], axis=1)
-    t_end = np.array([float(np.max(ds.t_s))])
+    t_end = np.array([float(t_end_s)])
     key = f"{model.degree}{'+rotation' if model.rotation else ''}"
     aside = f"; {len(excluded)} misread readings set aside (listed in 'excluded')" if excluded else ""
-    report = {"nests": len(names), "readings": int(nest.sum()), "applied": model.degree > 0,
+    report = {"nests": len(names), "readings": int(len(t)), "applied": model.degree > 0,
               "why": ("drift is significant: leave-one-round-out CV prefers degree "
                       f"{model.degree}{' with rotation' if model.rotation else ' (translation)'} over no drift"
                       if model.degree > 0 else

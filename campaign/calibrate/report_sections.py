@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, object_field, record_dict,
-                                     record_field, record_map_field, records_field, text_field)
+                                     record_field, record_map_field, records_field, text_field, vector_field)
 from robocal.identify import Unidentifiable
 from robocal.stats import ErrorStats
 
@@ -338,7 +338,8 @@ class MultiSmrReport:
 @dataclass(frozen=True)
 class VerifyPass:
     """One verification pass: points corrected and held (count per reason), the error over all points and over
-    the corrected ones (mm, None when none was corrected), the tool orientation error with three SMRs."""
+    the corrected ones (mm, None when none was corrected), the tool orientation error with three SMRs, the
+    tracker drift removed from its readings (mean translation, mm, tracker frame; None without nests)."""
     stage: str
     n_corrected: int
     n_held: int
@@ -346,13 +347,15 @@ class VerifyPass:
     all: ErrorFigures
     corrected: ErrorFigures | None
     orientation_error_arcsec: AngleStats | None = None
+    drift_translation_mm: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict:
-        return record_dict(self, omit_none=("orientation_error_arcsec",))
+        return record_dict(self, omit_none=("orientation_error_arcsec", "drift_translation_mm"))
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "VerifyPass":
         return cls(text_field(d, "stage"), count_field(d, "n_corrected"), count_field(d, "n_held"),
                    object_field(d, "held"), record_field(d, "all", ErrorFigures.from_dict),
                    record_field(d, "corrected", ErrorFigures.from_dict, True),
-                   record_field(d, "orientation_error_arcsec", AngleStats.from_dict, True))
+                   record_field(d, "orientation_error_arcsec", AngleStats.from_dict, True),
+                   vector_field(d, "drift_translation_mm", 3, True))

@@ -21,6 +21,7 @@ from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
 from .targets import _limits_deg, model_pose_fn, run_correction
+from .verify_drift import VerifyDrift
 from .verify_report import VERIFY_FORMAT, VerifyReport
 
 
@@ -76,17 +77,20 @@ class VerifyResult:
 class VerifyPasses:
     """The passes of closed-loop verification, a plan the runner executes: the model-corrected pass, then up to
     ``closed_loop_iterations`` passes re-solved from the previous pass's measurements (seed 001 §4.2). Every pass
-    holds a correction beyond a bound at the planned joints (``held_reasons``). ``results``: (stage, err (N, 3)
-    mm tracker frame, safe (N,), held) per measured pass."""
+    holds a correction beyond a bound at the planned joints (``held_reasons``). With reference nests (``drift``)
+    rounds of nest readings open the first pass, follow every ``every_n_points`` points and close every pass, and
+    each pass's readings are moved into the calibration's tracker frame before anything is computed from them.
+    ``results``: (stage, err (N, 3) mm tracker frame, safe (N,), held) per measured pass."""
 
     def __init__(self, cell: CellModel, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
                  q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray,
-                 estimator=None):
+                 estimator=None, drift: VerifyDrift | None = None):
         cfg, kin = cell.config, cell.kinematics                  # the nominal model commands the joints
         self.cell, self.cfg, self.kin = cell, cfg, kin
         self.T_tool, self.ids, self.p_d, self.q0, self.q = T_tool, ids, p_d, q0, q
         self.R_d, self.T_tb, self.target_tracker = R_d, T_tb, target_tracker
         self.estimator = estimator                   # three SMRs: seed 003's 6D pose from the measured SMR 1
+        self.drift = drift
         self.R_planned = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]     # each point's planned tool orientation
         self.orientation: dict[str, np.ndarray] = {}     # stage -> tool orientation errors (arc seconds)
         self.limit = np.radians(cfg.correction.max_joint_correction_deg)
@@ -97,9 +101,19 @@ class VerifyPasses:
         self.results: list[tuple[str, np.ndarray, np.ndarray, list[str | None]]] = []
 
     def first(self) -> list[PlanPoint]:
-        return self._points()
+        return self._points(start=True)
 
-    def _points(self) -> list[PlanPoint]:
+    def observe(self, point: PlanPoint, record) -> None:
+        """The runner's ``on_point``: a record on disk (nest readings and the points' times, for the drift)."""
+        if self.drift is not None:
+            self.drift.observe(record)
+
+    def _points(self, start: bool = False) -> list[PlanPoint]:
+        """This pass's commands with rounds of nest readings (``VerifyDrift.with_rounds``)."""
+        points = self._commands()
+        return points if self.drift is None else self.drift.with_rounds(points, start)
+
+    def _commands(self) -> list[PlanPoint]:
         """This pass's commands: the current joints, or the planned ones where a bound holds the correction."""
         moved = np.linalg.norm((fk(self.kin, self.q) @ self.T_tool)[:, :3, 3] - self.p_d, axis=1)
         self.held = held_reasons(self.q, self.q0, self.limit, self.lo, self.hi,
@@ -112,6 +126,8 @@ class VerifyPasses:
 
     def next(self, p_meas: np.ndarray) -> list[PlanPoint] | None:
         """Record the pass measured at ``p_meas`` (N, 3) mm tracker frame; the next pass's points, or None."""
+        if self.drift is not None:
+            p_meas = self.drift.pass_frame(p_meas, self.stage)       # the calibration's frame
         err = p_meas - self.target_tracker
         self.results.append((self.stage, err, self.safe, self.held))
         if self.estimator is not None:
@@ -130,14 +146,22 @@ class VerifyPasses:
         return self._points()
 
 
+def _translation(drift: VerifyDrift, stage: str) -> tuple[float, float, float] | None:
+    """The mean drift translation (mm) removed from a pass's readings, None when nothing was fitted for it."""
+    removed = drift.passes.get(stage)
+    return None if removed is None else tuple(removed["translation_mm"])
+
+
 def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: CalibratedModel,
-               test_points: list[PointRecord], out_dir: Path, estimator=None) -> VerifyResult:
+               test_points: list[PointRecord], out_dir: Path, estimator=None,
+               drift: VerifyDrift | None = None) -> VerifyResult:
     """Closed-loop verification on a run's test points. ``execute_passes(plan: VerifyPasses) -> RunOutcome``
     drives the robot through the plan's passes and measures (durably logged by the caller). The tool point is
     the model's SMR (its identified offset). With a three-SMR ``estimator`` (``multi_smr.pose_estimator``) every
     pass also reports the tool orientation error against each point's planned orientation (nominal model at the
     planned joints): measured from the three SMRs of the run before correction, estimated from SMR 1 + the two
-    predicted SMRs (seed 003) after."""
+    predicted SMRs (seed 003) after. With reference nests (``drift``, :mod:`campaign.correct.verify_drift`) every
+    measurement, the run's included, is compared in the calibration's tracker frame."""
     kin = cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm)
     ids = [p.point_id for p in test_points]
@@ -145,7 +169,9 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     q0 = np.radians([p.q_cmd_deg for p in test_points])
     T_tb = model.kinematics.T_tracker_base
     target_tracker = transform_points(T_tb, p_d)
-    before = np.array([p.p_tracker_mm for p in test_points]) - target_tracker
+    p_run = np.array([p.p_tracker_mm for p in test_points], float) if drift is None else \
+        drift.run_frame(test_points, UNCORRECTED)
+    before = p_run - target_tracker
     floor = float(np.sqrt(np.mean(np.trace(cell.covariance(target_tracker), axis1=1, axis2=2))))
     rows = {UNCORRECTED: _figures(before)}
     passes = [VerifyPass(UNCORRECTED, 0, len(ids), {}, rows[UNCORRECTED], None)]
@@ -153,7 +179,7 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
     c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q0, T_tool)
-    plan = VerifyPasses(cell, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker, estimator)
+    plan = VerifyPasses(cell, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker, estimator, drift)
     if estimator is not None:
         poses = measured_flange_poses(estimator.tool.p_flange_mm, test_points)
         if poses is not None:
@@ -170,6 +196,8 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
                 plan.orientation[stage], "estimated (seed 003): SMR 1 measured, SMRs 2-3 predicted, adjusted"))
         corrected.append(err)
         corrected_only.append(err[safe_k])
+    if drift is not None:
+        passes = [replace(p, drift_translation_mm=_translation(drift, p.stage)) for p in passes]
     if corrected:
         pooled = np.concatenate(corrected_only)
         rows[POOLED] = _figures(np.concatenate(corrected))
@@ -182,8 +210,11 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
                                   "measured against the targets through the calibrated registration",
                      "held": "points commanded at their planned joints in a corrected pass because the "
                              "correction would exceed a bound (reason per point count)",
-                     "corrected": "figures over the points whose correction was commanded"},
-        created_utc=datetime.now(timezone.utc).isoformat())
+                     "corrected": "figures over the points whose correction was commanded"}
+        | ({"drift_translation_mm": "the tracker drift removed from the pass's readings (mean translation over its "
+                                    "points, mm, tracker frame) to refer them to the calibration's frame"}
+           if drift is not None and drift.active else {}),
+        created_utc=datetime.now(timezone.utc).isoformat(), drift=None if drift is None else drift.section())
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "verify.json", report.to_dict())
     return VerifyResult(report, out_dir, status, reason)

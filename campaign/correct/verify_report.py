@@ -19,7 +19,8 @@ class VerifyReport:
     ``n`` test points; ``noise_floor_mm`` (RMS of the measurement sigma at the targets); ``n_uncorrected`` points
     held at their planned joints in the last pass (None when nothing was measured corrected); ``stages`` error
     statistics per stage (mm); ``passes`` one summary per pass; ``exit_status``/``reason`` of the measuring run;
-    ``definitions`` of the terms; ``created_utc`` ISO time.
+    ``definitions`` of the terms; ``created_utc`` ISO time; ``drift`` the tracker drift removed with the reference
+    nests (``campaign.correct.verify_drift``; None when the config has none).
     """
 
     format: str
@@ -33,10 +34,11 @@ class VerifyReport:
     reason: str
     definitions: dict
     created_utc: str
+    drift: dict | None = None
 
     def to_dict(self) -> dict:
         """The verify.json object."""
-        return record_dict(self)
+        return record_dict(self, omit_none=("drift",))
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "VerifyReport":
@@ -50,4 +52,4 @@ class VerifyReport:
                    record_map_field(data, "stages", ErrorFigures.from_dict),
                    records_field(data, "passes", VerifyPass.from_dict, old) or (), text_field(data, "exit_status"),
                    text_field(data, "reason"), object_field(data, "definitions", old) or {},
-                   text_field(data, "created_utc"))
+                   text_field(data, "created_utc"), object_field(data, "drift", True))

@@ -163,21 +163,22 @@ def _with_check_poses(points, q_grid, p_grid, grid_ids, cfg_check) -> list[PlanP
     return out
 
 
-def with_nest_rounds(points: list[PlanPoint], nests) -> list[PlanPoint]:
-    """Insert a round of every nest (``NestsConfig``) at the start, after every ``every_n_points`` points and at
-    the end; nest points have set ``nest``, the nest's approximate base-frame position and, as joints, where the
-    robot waits (the previous point's; the first point's for the start round)."""
+def with_nest_rounds(points: list[PlanPoint], nests, rounds: int = 0, start: bool = True) -> list[PlanPoint]:
+    """Insert a round of every nest (``NestsConfig``) at the start (unless not ``start``), after every
+    ``every_n_points`` points and at the end, numbered on from ``rounds`` rounds already read; nest points have set
+    ``nest``, the nest's approximate base-frame position and, as joints, where the robot waits (the previous
+    point's; the first point's for the start round)."""
     if not nests.points or not points:
         return points
     out: list[PlanPoint] = []
-    rounds = 0
 
     def one_round():
         nonlocal rounds
         rounds += 1
         q = out[-1].q_deg if out else points[0].q_deg
         out.extend(PlanPoint(nest_point_id(n.id, rounds), "nest", q, tuple(n.p_base_mm)) for n in nests.points)
-    one_round()
+    if start:
+        one_round()
     for k, pt in enumerate(points):
         out.append(pt)
         if (k + 1) % nests.every_n_points == 0 and k + 1 < len(points):

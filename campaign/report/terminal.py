@@ -218,6 +218,26 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
         if a:
             console.print(f"{p.stage}: tool orientation error {a.rms:.1f} arcsec RMS, max {a.max:.1f} "
                           f"({a.source})", markup=False)
+    render_verify_drift(console, rep)
+
+
+def render_verify_drift(console: Console, rep: VerifyReport) -> None:
+    """The tracker drift verify removed with the reference nests: why, and the mean translation per pass (mm)."""
+    d = rep.drift
+    if not d:
+        return
+    if "nests" not in d:
+        console.print(f"tracker drift: not corrected ({d.get('why', '')})", markup=False)
+        return
+    state = "removed" if d.get("applied") else "not removed"
+    console.print(f"tracker drift from {d['nests']} nests ({d.get('readings_run', 0)} readings in the run, "
+                  f"{d.get('readings_verify', 0)} in verify): {state}, {d.get('why', '')}; every measurement in "
+                  f"the {d.get('frame', 'calibration frame')}", markup=False)
+    for p in rep.passes:
+        if p.drift_translation_mm is not None:
+            t = p.drift_translation_mm
+            console.print(f"{p.stage}: drift removed {t[0]:+.3f} {t[1]:+.3f} {t[2]:+.3f} mm "
+                          f"(|t| {math.hypot(*t):.3f} mm, mean over the pass)", markup=False)
 
 
 def render_iso(console, report: dict) -> None:

@@ -34,13 +34,12 @@ def make_runner(cell: CellModel, devices: Devices, *, first_pass: bool = False, 
                 smr1_only: bool = False) -> Runner:
     """The runner of a session on ``devices``: speed caps, payload, swept-path guard, the reduced-speed first pass
     (``first_pass`` and configured), the logged covariance (the spec model, or the tracker's own + the robot's
-    repeatability), and the beam-break SMR predictor seeded with ``records``; every SMR of the tool and the
-    reference nests, or (``smr1_only``) SMR 1 without nests."""
+    repeatability), and the beam-break SMR predictor seeded with ``records``; the reference nests, and every SMR
+    of the tool or (``smr1_only``) SMR 1 only."""
     cfg = cell.config
-    if not smr1_only:
-        check_nest_aiming(cfg, devices.tracker)
+    check_nest_aiming(cfg, devices.tracker)
     pct = cfg.robot.first_pass_speed_pct
-    tool = {} if smr1_only else {"n_smrs": len(cfg.tool.smrs_mm), "nests": cfg.plan.nests}
+    tool = {"nests": cfg.plan.nests} | ({} if smr1_only else {"n_smrs": len(cfg.tool.smrs_mm)})
     return Runner(devices.robot, devices.tracker, cfg.tracker.measurement, devices.clock,
                   lambda p: cell.covariance(p[None])[0], cfg.tool.payload_kg, **tool,
                   predict_p_tracker_mm=smr_predictor(cell, records), covariance_from_device=cell.device_covariance,

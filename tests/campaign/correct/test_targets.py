@@ -15,7 +15,7 @@ CONFIG = str(ROOT / "configs/irb2600.yaml")
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     """The shipped IRB 2600 plan on a geometric-only truth: correction and closed loop without tracker drift (verify
-    does not re-read the nests, so a drifting tracker would move the floor between its passes)."""
+    on a drifting tracker with nests: test_verify_drift.py)."""
     tmp = tmp_path_factory.mktemp("corr")
     cfg = small_config(tmp, **{"plan.grid.step_mm": 200, "plan.test.count": 100,
                                "plan.check_poses": {"count": 3, "every_n_points": 50}})
