@@ -30,6 +30,20 @@ def _jacobian(kin, q, meta, built, values):
     return p + dp, J, R
 
 
+def _whitened_design(W, J_geo: np.ndarray, R: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """Whitened design (3N, P) = W [J_geo R] / D, written into one array (no concatenated copy: at 10^5 points
+    every (N, 3, P) temporary costs its page faults)."""
+    G = J_geo.shape[2]
+    A = np.empty((len(J_geo), 3, G + R.shape[2]))
+    if W is None:
+        A[:, :, :G], A[:, :, G:] = J_geo, R
+    else:
+        np.matmul(W, J_geo, out=A[:, :, :G])
+        np.matmul(W, R, out=A[:, :, G:])
+    A /= D
+    return A.reshape(len(A) * 3, -1)
+
+
 @dataclass(frozen=True, eq=False)
 class ElasticResult:
     """Jointly identified geometry and effects, with diagnostics. ``residual_tracker_mm`` (N, 3) = measured -
@@ -65,7 +79,7 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     x = np.zeros(K)
     split = np.cumsum([e.k for e in built])[:-1]
     _, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-    A_full = whiten(W, np.concatenate([J[:, :, geo_cols], R], axis=2)).reshape(-1, len(geo_cols) + K)
+    A_full = _whitened_design(W, J[:, :, geo_cols], R, np.ones(len(geo_cols) + K))
     names = tuple(layout.names[c] for c in geo_cols) + eff_names
     ident = analyse_identifiability(A_full, names, list(range(len(names))), options.rank_tol)
     keep = ident.keep.copy()
@@ -78,8 +92,7 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     def residual_and_A(kin, x):
         p, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
         r = whiten(W, p_meas - p).reshape(-1)
-        A = whiten(W, np.concatenate([J[:, :, geo_cols], R[:, :, eff_keep]], axis=2)).reshape(-1, P) / D
-        return r, A
+        return r, _whitened_design(W, J[:, :, geo_cols], R[:, :, eff_keep], D)
 
     def step(state, dx_scaled):
         kin, x = state

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from robocal import gp, kinematics, screen
-from robocal.elastic import BlockedCV, Blocking, cv, pose_blocks
+from robocal.elastic import BlockedCV, Blocking, cv, design_array, pose_blocks
 from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit
@@ -61,7 +61,8 @@ def test_blocked_cv_in_row_blocks_equals_one_block(monkeypatch):
                  Blocking("order", np.arange(N) * 4 // N)]
     one = BlockedCV(A, y, W, blockings)
     monkeypatch.setattr(cv, "CHUNK_ROWS", 7)
-    A2 = A.copy()
+    A2 = design_array(N, P)
+    A2[...] = A
     blocked = BlockedCV(A2, y, W, blockings, copy=False)          # whitened in place, in blocks of 7 rows
     assert np.shares_memory(blocked.Aw, A2)
     np.testing.assert_array_equal(one.Aw, blocked.Aw)
