@@ -22,7 +22,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .kinematics import Kinematics, ParamLayout, chain, identification_jacobian
+from .kinematics import CHAIN_ROWS, Kinematics, ParamLayout, chain, identification_jacobian
 from .frames import skew, transform_points
 
 G_MM_S2 = 9.80665
@@ -79,13 +79,19 @@ def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_
     ``payload_cog_flange_mm`` in the flange frame (None: at the SMR). ``gravity_base``: direction of gravity in
     the base frame (floor mount -z; a wall or ceiling mount another unit vector)."""
     q = np.atleast_2d(q_rad)
-    c = chain(kin, q, full=False)
     N, n = q.shape
+    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
+    masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
+    if N > CHAIN_ROWS:                   # row blocks: the frames and the torques of one block in cache
+        tau = np.empty((N, n))
+        for s in range(0, N, CHAIN_ROWS):
+            b = slice(s, s + CHAIN_ROWS)
+            tau[b] = gravity_torques(kin, q[b], masses[b], pay[b], payload_cog_flange_mm, gravity_base)
+        return tau
+    c = chain(kin, q, full=False)
     o_next = np.concatenate([c.origin[:, 1:], c.T_base_flange[:, None, :3, 3]], axis=1)    # (N, n, 3)
     cog = kin.p_flange_smr_mm if payload_cog_flange_mm is None else np.asarray(payload_cog_flange_mm, float)
     p_pay = transform_points(c.T_base_flange, cog)
-    masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
-    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
     g = np.asarray(gravity_base, float)
     force = G_MM_S2 * g / np.linalg.norm(g)                                      # per kg, N
     # everything hanging on joint j (links j..n-1 at their midpoints, the payload): its mass M_j and first moment

@@ -300,8 +300,9 @@ def _linearise(kin, q, p_meas, W, cols, D):
     parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
     p, Jt = identification_jacobian_t(kin, q)
     r = whiten(W, p_meas - p).reshape(-1)
-    A = (_whiten_t(W, Jt[cols]).reshape(len(cols), -1) / D[:, None]).T
-    return r, A
+    At = _whiten_t(W, Jt[cols])                       # a fresh (P, N, 3) array (the gather copies): scaled in place
+    At /= D[:, None, None]
+    return r, At.reshape(len(cols), -1).T
 
 
 def _apply(kin, layout, cols, dx_scaled, D):
