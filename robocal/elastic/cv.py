@@ -39,10 +39,11 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
     label = np.zeros(n, int)
     for _ in range(iterations):
         label = np.concatenate([_nearest(x[s:s + 20000], centres) for s in range(0, n, 20000)])   # bounded memory
-        for c in range(len(centres)):
-            members = label == c
-            if members.any():
-                centres[c] = x[members].mean(axis=0)
+        order = np.argsort(label, kind="stable")          # each cluster's members contiguous, in row order
+        xs, ids = x[order], np.arange(len(centres))
+        first, last = np.searchsorted(label[order], ids), np.searchsorted(label[order], ids, side="right")
+        for c in np.flatnonzero(last > first):
+            centres[c] = xs[first[c]:last[c]].mean(axis=0)
     deal = rng.permutation(len(centres)) % folds
     return deal[label]
 
