@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..effects import effect_regressor
-from ..elastic import BlockedCV, Blocking, ElasticResult, design_array, EngineResult, calibrate_elastic, order_blocks, pose_blocks
+from ..elastic import (BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, design_array,
+                       order_blocks, pose_blocks)
 from ..elastic import run_engine
 from ..identify import CalibrationOptions, calibrate, whitening
 from ..kinematics import ParamLayout, identification_jacobian, smr_tracker

@@ -22,7 +22,7 @@ from .model import EffectChoice, FittedEffect, elastic_flange, elastic_smr_track
 from .physical import reading
 from .select import EffectSelection, Step, Trial, select_effects
 
-__all__ = ["BlockedCV", "Blocking", "design_array", "EffectChoice", "EffectSelection", "ElasticResult", "EngineOptions",
+__all__ = ["BlockedCV", "Blocking", "EffectChoice", "EffectSelection", "ElasticResult", "EngineOptions",
            "EngineResult", "FittedEffect", "LibraryOptions", "Step", "Trial", "calibrate_elastic", "candidates",
-           "elastic_flange", "elastic_smr_tracker", "kfold", "order_blocks", "parts", "pose_blocks",
+           "design_array", "elastic_flange", "elastic_smr_tracker", "kfold", "order_blocks", "parts", "pose_blocks",
            "reading", "refinements", "run_engine", "select", "select_effects"]

@@ -81,6 +81,8 @@ def test_blocked_cv_in_row_blocks_equals_one_block(monkeypatch):
     A2[...] = A
     blocked = BlockedCV(A2, y, W, blockings, copy=False)          # whitened in place, in blocks of 7 rows
     assert np.shares_memory(blocked.Aw, A2)
+    row_major = BlockedCV(A.copy(), y, W, blockings, copy=False)     # not parameter-major: copied, same numbers
+    np.testing.assert_array_equal(one.Aw, row_major.Aw)
     np.testing.assert_array_equal(one.Aw, blocked.Aw)
     for cols in ([0, 1, 2], [0, 2, 4, 5], list(range(P))):
         for i in range(len(blockings)):
