@@ -23,7 +23,7 @@ JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
 TOOL_PARAMS = ("tool_x", "tool_y", "tool_z")
 JACOBIAN_ROWS = 8192          # poses per block of the identification Jacobian (bounded memory at any N)
-CHAIN_ROWS = 4096             # poses per block of the frames-only chain (cache-sized: 3x faster at 10^5 poses)
+CHAIN_ROWS = 4096             # poses per block of the frames-only chain (cache-sized blocks: faster at 10^5 poses)
 UNITS = {"theta": "rad", "d": "mm", "a": "mm", "alpha": "rad", "beta": "rad",
          "base_t": "mm", "base_r": "rad", "tool": "mm"}
 
