@@ -22,7 +22,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .kinematics import Kinematics, ParamLayout, chain, identification_jacobian
+from .kinematics import CHAIN_ROWS, Kinematics, ParamLayout, chain, identification_jacobian
 from .frames import skew, transform_points
 
 G_MM_S2 = 9.80665
@@ -79,22 +79,28 @@ def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_
     ``payload_cog_flange_mm`` in the flange frame (None: at the SMR). ``gravity_base``: direction of gravity in
     the base frame (floor mount -z; a wall or ceiling mount another unit vector)."""
     q = np.atleast_2d(q_rad)
-    c = chain(kin, q)
     N, n = q.shape
-    o = np.concatenate([c.origin, c.T_base_flange[:, None, :3, 3]], axis=1)      # (N, n+1, 3)
-    centres = 0.5 * (o[:, :-1] + o[:, 1:])                                       # (N, n, 3)
+    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
+    masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
+    if N > CHAIN_ROWS:                   # row blocks: the frames and the torques of one block in cache
+        tau = np.empty((N, n))
+        for s in range(0, N, CHAIN_ROWS):
+            b = slice(s, s + CHAIN_ROWS)
+            tau[b] = gravity_torques(kin, q[b], masses[b], pay[b], payload_cog_flange_mm, gravity_base)
+        return tau
+    c = chain(kin, q, full=False)
+    o_next = np.concatenate([c.origin[:, 1:], c.T_base_flange[:, None, :3, 3]], axis=1)    # (N, n, 3)
     cog = kin.p_flange_smr_mm if payload_cog_flange_mm is None else np.asarray(payload_cog_flange_mm, float)
     p_pay = transform_points(c.T_base_flange, cog)
-    masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
     g = np.asarray(gravity_base, float)
     force = G_MM_S2 * g / np.linalg.norm(g)                                      # per kg, N
-    tau = np.zeros((N, n))
-    for j in range(n):
-        lever = centres[:, j:] - c.origin[:, j:j + 1]                             # links j..n-1 hang on joint j
-        t_links = np.einsum("nmk,nk->nm", np.cross(lever, force), c.axis[:, j]) * masses[:, j:]
-        t_pay = np.einsum("nk,nk->n", np.cross(p_pay - c.origin[:, j], force), c.axis[:, j]) * np.asarray(payload_kg, float)
-        tau[:, j] = (t_links.sum(axis=1) + t_pay) / 1000.0                        # N·mm -> N·m
-    return tau
+    # everything hanging on joint j (links j..n-1 at their midpoints, the payload): its mass M_j and first moment
+    # S_j (kg mm); tau_j = ((S_j - M_j o_j) x F) . axis_j = (S_j - M_j o_j) . (F x axis_j)
+    moment = masses[:, :, None] * (0.5 * (c.origin + o_next))
+    S = np.cumsum(moment[:, ::-1], axis=1)[:, ::-1] + (pay[:, None] * p_pay)[:, None, :]
+    M = np.cumsum(masses[:, ::-1], axis=1)[:, ::-1] + pay[:, None]
+    arm = S - M[:, :, None] * c.origin                                           # (N, n, 3) kg mm
+    return np.einsum("njk,njk->nj", arm, np.cross(force, c.axis)) / 1000.0      # N·mm -> N·m
 
 
 def lever_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0, 0.0, -1.0)
@@ -364,7 +370,7 @@ def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) ->
     given ``[(Effect, params (K,)), ...]``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     dq, scale, dp = effect_state(kin, q, meta, effects)
-    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None])
+    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False)
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     return transform_points(kin.T_tracker_base, p_base) + dp
 

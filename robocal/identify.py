@@ -196,11 +196,21 @@ def whiten(W, x):
     return np.einsum("nij,nj...->ni...", W, x)
 
 
-def _whiten_t(W, Jt):
-    """Per-point whitening of parameter-major Jacobian columns Jt (K, N, 3) -> (K, N, 3)."""
+WHITEN_ROWS = 4096     # points per block of ``_whiten_t``
+
+
+def _whiten_t(W, Jt, cols=None):
+    """Per-point whitening of parameter-major Jacobian columns Jt[cols] (K, N, 3) -> a new (K, N, 3) array
+    (``cols`` None: all), gathered and whitened in row blocks (no gathered copy of the whole Jacobian)."""
+    cols = np.arange(len(Jt)) if cols is None else np.asarray(cols, int)
     if W is None:
-        return Jt
-    return np.matmul(Jt[:, :, None, :], np.swapaxes(W, 1, 2))[:, :, 0, :]
+        return Jt[cols]
+    out = np.empty((len(cols),) + Jt.shape[1:])
+    W_t = np.swapaxes(W, 1, 2)
+    for s in range(0, Jt.shape[1], WHITEN_ROWS):
+        b = slice(s, s + WHITEN_ROWS)
+        out[:, b] = np.matmul(Jt[cols, b][:, :, None, :], W_t[b])[:, :, 0, :]
+    return out
 
 
 def r_factor(A: np.ndarray, chunk: int = 2048) -> np.ndarray:
@@ -300,8 +310,9 @@ def _linearise(kin, q, p_meas, W, cols, D):
     parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
     p, Jt = identification_jacobian_t(kin, q)
     r = whiten(W, p_meas - p).reshape(-1)
-    A = (_whiten_t(W, Jt[cols]).reshape(len(cols), -1) / D[:, None]).T
-    return r, A
+    At = _whiten_t(W, Jt, cols)                       # a fresh (P, N, 3) array: scaled in place
+    At /= D[:, None, None]
+    return r, At.reshape(len(cols), -1).T
 
 
 def _apply(kin, layout, cols, dx_scaled, D):

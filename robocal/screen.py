@@ -125,13 +125,16 @@ def _local_scores(r: np.ndarray, idx: np.ndarray, valid: np.ndarray, min_near: i
 
 def screen(q_rad: np.ndarray, p_work_mm: np.ndarray, r_mm: np.ndarray, lever_mm: np.ndarray, near_mm: float,
            sigma_mm: np.ndarray | None = None, repeat_groups: list[np.ndarray] | None = None,
-           z_max: float = 6.0, z_local: float = Z_LOCAL, min_near: int = MIN_NEAR) -> ScreenResult:
+           z_max: float = 6.0, z_local: float = Z_LOCAL, min_near: int = MIN_NEAR,
+           neighbours: tuple[np.ndarray, np.ndarray] | None = None) -> ScreenResult:
     """Screen calibration points for measurement faults.
 
     q_rad (N, n) joints; p_work_mm (N, 3) positions (any Cartesian frame); r_mm (N, 3) residuals of the current
     model; lever_mm (N, n) joint lever arms (``joint_levers_mm``); near_mm the neighbourhood radius
     (``NEAR_FRACTION`` of the reach); sigma_mm (N,) optional tracker statistic per point; repeat_groups optional
-    row-index groups of the same pose. A point is a local fault when it has ``min_near`` near neighbours and its
+    row-index groups of the same pose; neighbours optional ``near_neighbours(q_rad, p_work_mm, lever_mm,
+    near_mm)`` of these points when already known (the search depends on the poses only, not on the residuals;
+    ``lever_mm`` is then unused). A point is a local fault when it has ``min_near`` near neighbours and its
     robust z exceeds ``z_local``; tracker statistics and repeats use ``z_max`` (6 sigma: about 1e-6 false alarms
     per point under Gaussian noise)."""
     q = np.asarray(q_rad, float)
@@ -143,7 +146,7 @@ def screen(q_rad: np.ndarray, p_work_mm: np.ndarray, r_mm: np.ndarray, lever_mm:
     if n < 2 * min_near:
         nan = np.full(n, np.nan)
         return ScreenResult(keep, (), nan, np.zeros(n, int), np.zeros(n, bool), float("nan"))
-    idx, valid = near_neighbours(q, p, np.asarray(lever_mm, float), near_mm)
+    idx, valid = neighbours if neighbours is not None else near_neighbours(q, p, np.asarray(lever_mm, float), near_mm)
     z = _local_scores(r, idx, valid, min_near)
     n_near = valid.sum(axis=1)
     local = np.nan_to_num(z, nan=0.0) > z_local

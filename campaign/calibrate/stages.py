@@ -26,7 +26,7 @@ from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
+from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
 from robocal.stats import error_stats
 
 from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, CalibrationReport
@@ -120,10 +120,10 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cell: CellModel, kin0) -> GeometricFit:
+def _geometric(ds: Dataset, cell: CellModel, kin0, rescreen: _Screen) -> GeometricFit:
     """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
     measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
-    faults, until the excluded set is stable (at most 3 refits)."""
+    faults, until the excluded set is stable (at most 3 refits); ``rescreen`` the screen of this dataset."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = cell.weights(ds)[0][rows]
@@ -133,7 +133,7 @@ def _geometric(ds: Dataset, cell: CellModel, kin0) -> GeometricFit:
     sc = None
     if cell.config.calibration.outliers == "local":
         for _ in range(4):
-            sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
+            sc = rescreen(rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
             if np.array_equal(new_keep, keep):
                 break
@@ -147,11 +147,23 @@ def _geometric(ds: Dataset, cell: CellModel, kin0) -> GeometricFit:
     return GeometricFit(result, sc, rows)
 
 
-def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResult:
-    """The measurement-fault screen of the calib rows ``rows`` with residuals r_mm (nominal levers and reach)."""
-    q = np.radians(ds.q_deg[rows])
-    return screen(q, ds.p_tracker_mm[rows], r_mm, joint_levers_mm(kin0, q), NEAR_FRACTION * reach_mm(kin0),
-                  None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
+class _Screen:
+    """The measurement-fault screen of calib rows ``rows`` of one dataset with residuals r_mm (nominal levers and
+    reach): ``screen(rows, r_mm)``. The neighbour search of the last row set is kept: it depends on the poses
+    only, and the refits screen the same rows again with new residuals."""
+
+    def __init__(self, ds: Dataset, kin0):
+        self.ds, self.kin0, self.near_mm = ds, kin0, NEAR_FRACTION * reach_mm(kin0)
+        self._last: tuple[bytes, tuple] | None = None
+
+    def __call__(self, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResult:
+        ds, q = self.ds, np.radians(self.ds.q_deg[rows])
+        p = ds.p_tracker_mm[rows]
+        key = np.asarray(rows).tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, near_neighbours(q, p, joint_levers_mm(self.kin0, q), self.near_mm))
+        return screen(q, p, r_mm, None, self.near_mm, None if ds.sigma_mm is None else ds.sigma_mm[rows],
+                      repeat_groups(ds.q_deg[rows]), neighbours=self._last[1])
 
 
 def geometric_fit(ds: Dataset, cell: CellModel) -> CalibrationResult:
@@ -161,7 +173,9 @@ def geometric_fit(ds: Dataset, cell: CellModel) -> CalibrationResult:
     ds, plaus = check_dataset(ds, cell)
     ds = prepared_dataset(ds, cell)
     keep, _ = screen_smrs(ds, cell)
-    return _geometric(ds.subset(keep) if not keep.all() else ds, cell, start_kinematics(cell, plaus)).result
+    ds = ds.subset(keep) if not keep.all() else ds
+    kin0 = start_kinematics(cell, plaus)
+    return _geometric(ds, cell, kin0, _Screen(ds, kin0)).result
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,8 +201,9 @@ def fit_stages(ds: Dataset, cell: CellModel, plaus) -> Fitted:
         ds, order = ds.subset(smr_keep), subset(order, smr_keep)
         _check_dataset(ds, cell.config)
     kin0 = start_kinematics(cell, plaus)                    # registration before plausibility: base + SMR offset
-    geo = _geometric(ds, cell, kin0)
-    stage = elastic_stage(ds, cell, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+    rescreen = _Screen(ds, kin0)
+    geo = _geometric(ds, cell, kin0, rescreen)
+    stage = elastic_stage(ds, cell, geo, order, rescreen)
     return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 

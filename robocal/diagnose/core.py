@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..effects import effect_regressor
-from ..elastic import BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, order_blocks, pose_blocks
+from ..elastic import (BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, design_array,
+                       order_blocks, pose_blocks)
 from ..elastic import run_engine
 from ..identify import CalibrationOptions, calibrate, whitening
 from ..kinematics import ParamLayout, identification_jacobian, smr_tracker
@@ -91,8 +92,14 @@ def _linear_design(kin_geo, cols, q, p, cov, meta, effects, opt):
     blockings = [Blocking("pose blocks", pose_blocks(q, opt.engine.folds, opt.engine.seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], opt.engine.folds)))
-    cv = BlockedCV(np.concatenate([J[:, :, cols]] + R, axis=2), p - p0, whitening(cov, len(q)), blockings,
-                   copy=False)                                  # a fresh array: whitened in place
+    A = design_array(len(q), len(cols) + sum(r.shape[2] for r in R))
+    A[:, :, :len(cols)] = J[:, :, cols]
+    at = len(cols)
+    for r in R:
+        A[:, :, at:at + r.shape[2]] = r
+        at += r.shape[2]
+    cv = BlockedCV(A, p - p0, whitening(cov, len(q)), blockings, copy=False)     # a fresh array: whitened in place
+    del A
     at, eff_cols = len(cols), []
     for fe in effects:
         eff_cols.append(np.arange(at, at + fe.values.size))

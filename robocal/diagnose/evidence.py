@@ -89,10 +89,9 @@ def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict
     on each half and compare the effect's parameters (``cols``) by the visible displacement of their difference,
     as a share of the effect's own visible displacement (a physical effect has one set of parameters)."""
     M, _, P = A_w.shape
-    A = A_w.reshape(3 * M, P)
-    nrm = np.linalg.norm(A, axis=0)
+    nrm = np.sqrt(np.einsum("mip,mip->p", A_w, A_w))
     nrm[nrm == 0] = 1.0
-    As = A / nrm
+    As = np.divide(A_w, nrm, order="C").reshape(3 * M, P)     # one copy, whatever the memory order of A_w
     full = np.linalg.lstsq(As, y_w.reshape(-1), rcond=1e-10)[0]
     Xv = _project_out(As[:, cols], As[:, geo_cols])
     own = float(np.linalg.norm(Xv @ full[cols]))

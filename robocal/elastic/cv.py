@@ -39,10 +39,11 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
     label = np.zeros(n, int)
     for _ in range(iterations):
         label = np.concatenate([_nearest(x[s:s + 20000], centres) for s in range(0, n, 20000)])   # bounded memory
-        for c in range(len(centres)):
-            members = label == c
-            if members.any():
-                centres[c] = x[members].mean(axis=0)
+        order = np.argsort(label, kind="stable")          # each cluster's members contiguous, in row order
+        xs, ids = x[order], np.arange(len(centres))
+        first, last = np.searchsorted(label[order], ids), np.searchsorted(label[order], ids, side="right")
+        for c in np.flatnonzero(last > first):
+            centres[c] = xs[first[c]:last[c]].mean(axis=0)
     deal = rng.permutation(len(centres)) % folds
     return deal[label]
 
@@ -62,6 +63,12 @@ def order_blocks(order: np.ndarray, folds: int, segments_per_fold: int = 4) -> n
     return seg % folds
 
 
+def design_array(n_points: int, n_params: int) -> np.ndarray:
+    """An empty design (N, 3, P), the row-order view of a parameter-major (P, N, 3) array: ``BlockedCV(...,
+    copy=False)`` whitens it in place."""
+    return np.empty((n_params, n_points, 3)).transpose(1, 2, 0)
+
+
 @dataclass(frozen=True)
 class Blocking:
     """One way of holding points out: its name and the fold (N,) of every point."""
@@ -74,20 +81,24 @@ class BlockedCV:
 
     ``A`` (N, 3, P) mm per unit parameter, ``y`` (N, 3) mm, ``W`` (N, 3, 3) whitening (inverse Cholesky factor
     of each point's covariance). Fits are weighted least squares on the training folds; errors are returned in
-    mm per point (squared 3-D norm). Memory: the whitened design once (N x 3 x P), whitened in place when
-    ``copy`` is False (the caller hands ``A`` over), one Gram matrix (P, P) per fold, and per call
-    one block of ``CHUNK_ROWS`` rows at a time."""
+    mm per point (squared 3-D norm). The whitened design is kept parameter-major, (P, N, 3) C-ordered, so the
+    held-out errors of a subset S read only S's columns. Memory: that design once, whitened in place when
+    ``copy`` is False and ``A`` is the (N, 3, P) view of such an array (``design_array``; any other ``A`` is
+    copied), one Gram matrix (P, P) per fold, and per call one block of ``CHUNK_ROWS`` rows at a time."""
 
     def __init__(self, A: np.ndarray, y: np.ndarray, W: np.ndarray, blockings: list[Blocking], copy: bool = True):
         N, _, P = A.shape
-        Aw = np.array(A, float) if copy else np.asarray(A, float)
-        for s in range(0, N, CHUNK_ROWS):      # whitened in row blocks: no second N x 3 x P array
-            Aw[s:s + CHUNK_ROWS] = np.einsum("nij,njk->nik", W[s:s + CHUNK_ROWS], Aw[s:s + CHUNK_ROWS])
+        At = np.asarray(A, float).transpose(2, 0, 1)                    # (P, N, 3)
+        if copy or not At.flags.c_contiguous:
+            At = np.array(At, order="C")
+        for s in range(0, N, CHUNK_ROWS):      # whitened in row blocks: no second P x N x 3 array
+            b = slice(s, s + CHUNK_ROWS)
+            At[:, b] = np.einsum("nij,knj->kni", W[b], At[:, b])
         self.yw = np.einsum("nij,nj->ni", W, y)
-        self.scale = np.sqrt(np.einsum("nik,nik->k", Aw, Aw))
+        self.scale = np.sqrt(np.einsum("knj,knj->k", At, At))
         self.scale[self.scale == 0] = 1.0
-        Aw /= self.scale
-        self._Aw = Aw
+        At /= self.scale[:, None, None]
+        self._At = At
         self.L = np.linalg.inv(W)
         self.blockings = blockings
         self.P = P
@@ -98,16 +109,17 @@ class BlockedCV:
             per = []
             for s, e in zip(np.concatenate([[0], edges]), np.concatenate([edges, [N]])):
                 rows = perm[s:e]
-                Af = Aw[rows].reshape(-1, P)           # one fold's rows at a time
-                per.append((rows, Af.T @ Af, Af.T @ self.yw[rows].reshape(-1)))
+                Af = At[:, rows].reshape(P, -1)           # one fold's rows at a time
+                per.append((rows, Af @ Af.T, Af @ self.yw[rows].reshape(-1)))
                 del Af
             self._gram.append((sum(p[1] for p in per), sum(p[2] for p in per), per))
             self._fold_at.append(np.searchsorted(np.unique(b.fold), b.fold))     # (N,) index of each row's fold
 
     @property
     def Aw(self) -> np.ndarray:
-        """The whitened, unit-norm design (N, 3, P) in row order (read-only, not a copy)."""
-        out = self._Aw.view()
+        """The whitened, unit-norm design (N, 3, P) in row order (a read-only view of the parameter-major array,
+        not a copy)."""
+        out = self._At.transpose(1, 2, 0)
         out.flags.writeable = False
         return out
 
@@ -118,15 +130,16 @@ class BlockedCV:
         out = np.empty((len(self.yw), 3))
         GS, cS = G[np.ix_(cols, cols)], c[cols]
         ridge = RIDGE * np.eye(len(cols))
-        X = np.zeros((self.P, len(per)))                      # every fold's fit, zero outside ``cols``
+        X = np.empty((len(per), len(cols)))                  # every fold's fit of ``cols``
         for f, (rows, Gf, cf) in enumerate(per):
-            X[cols, f] = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
+            X[f] = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
         at = self._fold_at[blocking]
         for s in range(0, len(out), CHUNK_ROWS):    # row blocks: all folds' predictions, each row keeps its own
             b = slice(s, s + CHUNK_ROWS)
-            pred = (self._Aw[b].reshape(-1, self.P) @ X).reshape(-1, 3, len(per))
-            e_w = self.yw[b] - np.take_along_axis(pred, at[b, None, None], axis=2)[:, :, 0]
-            out[b] = np.einsum("nij,nj->ni", self.L[b], e_w)
+            m = len(at[b])
+            pred = (X @ self._At[cols, b].reshape(len(cols), -1)).reshape(len(per), m, 3)
+            e_w = self.yw[b] - pred[at[b], np.arange(m)]
+            out[b] = np.matmul(self.L[b], e_w[:, :, None])[:, :, 0]
         return out
 
     def squared_errors(self, cols) -> dict[str, np.ndarray]:

@@ -30,6 +30,27 @@ def _jacobian(kin, q, meta, built, values):
     return p + dp, J, R
 
 
+DESIGN_ROWS = 4096     # points per block of ``_whitened_design``
+
+
+def _whitened_design(W, J: np.ndarray, geo_cols: np.ndarray, R: np.ndarray, eff_cols: np.ndarray,
+                     D: np.ndarray) -> np.ndarray:
+    """Whitened design (3N, P) = W [J[:, :, geo_cols] R[:, :, eff_cols]] / D, gathered and whitened in row blocks
+    into one array (no gathered or concatenated copies: at 10^5 points every (N, 3, P) temporary costs its page
+    faults)."""
+    G = len(geo_cols)
+    A = np.empty((len(J), 3, G + np.arange(R.shape[2])[eff_cols].size))
+    for s in range(0, len(J), DESIGN_ROWS):
+        b = slice(s, s + DESIGN_ROWS)
+        if W is None:
+            A[b, :, :G], A[b, :, G:] = J[b][:, :, geo_cols], R[b][:, :, eff_cols]
+        else:
+            np.matmul(W[b], J[b][:, :, geo_cols], out=A[b, :, :G])
+            np.matmul(W[b], R[b][:, :, eff_cols], out=A[b, :, G:])
+    A /= D
+    return A.reshape(len(A) * 3, -1)
+
+
 @dataclass(frozen=True, eq=False)
 class ElasticResult:
     """Jointly identified geometry and effects, with diagnostics. ``residual_tracker_mm`` (N, 3) = measured -
@@ -65,7 +86,7 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     x = np.zeros(K)
     split = np.cumsum([e.k for e in built])[:-1]
     _, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-    A_full = whiten(W, np.concatenate([J[:, :, geo_cols], R], axis=2)).reshape(-1, len(geo_cols) + K)
+    A_full = _whitened_design(W, J, geo_cols, R, np.arange(K), np.ones(len(geo_cols) + K))
     names = tuple(layout.names[c] for c in geo_cols) + eff_names
     ident = analyse_identifiability(A_full, names, list(range(len(names))), options.rank_tol)
     keep = ident.keep.copy()
@@ -78,8 +99,7 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     def residual_and_A(kin, x):
         p, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
         r = whiten(W, p_meas - p).reshape(-1)
-        A = whiten(W, np.concatenate([J[:, :, geo_cols], R[:, :, eff_keep]], axis=2)).reshape(-1, P) / D
-        return r, A
+        return r, _whitened_design(W, J, geo_cols, R, eff_keep, D)
 
     def step(state, dx_scaled):
         kin, x = state

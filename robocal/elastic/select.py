@@ -22,7 +22,7 @@ from ..effects import effect_regressor
 from ..identify import whitening
 from ..kinematics import Kinematics, identification_jacobian
 from ..stats import paired_gain
-from .cv import BlockedCV, Blocking, order_blocks, pose_blocks
+from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
 from .library import parts, refinements
 from .model import EffectChoice
 
@@ -115,7 +115,7 @@ class _Design:
         p, J = identification_jacobian(kin, q)
         self.p0 = p
         built = [c.build(kin.n) for c in choices]
-        self.A = np.empty((len(q), 3, len(geo_cols) + sum(eff.k for eff in built)))
+        self.A = design_array(len(q), len(geo_cols) + sum(eff.k for eff in built))
         self.A[:, :, :len(geo_cols)] = J[:, :, geo_cols]
         self.cols: dict[EffectChoice, np.ndarray] = {}
         self.names: dict[EffectChoice, tuple[str, ...]] = {}

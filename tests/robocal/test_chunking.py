@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from robocal import gp, kinematics, screen
-from robocal.elastic import BlockedCV, Blocking, cv, pose_blocks
+from robocal.elastic import BlockedCV, Blocking, cv, design_array, pose_blocks
 from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit
@@ -30,6 +30,19 @@ def test_identification_jacobian_in_row_blocks_equals_one_block(monkeypatch):
     np.testing.assert_array_equal(J1, Jt1.transpose(1, 2, 0))
 
 
+def test_frames_only_chain_in_row_blocks_equals_one_block(monkeypatch):
+    """Per-pose DH overrides (links scaled per pose, as thermal growth does) are sliced with the rows."""
+    q = _poses(40)
+    scale = 1.0 + np.linspace(-1e-4, 1e-4, len(q))[:, None]
+    kw = dict(a=KIN.a_mm * scale, d=KIN.d_mm * scale, full=False)
+    one = kinematics.chain(KIN, q, **kw)
+    monkeypatch.setattr(kinematics, "CHAIN_ROWS", 7)
+    blocked = kinematics.chain(KIN, q, **kw)
+    for a, b in zip(one[:3], blocked[:3]):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(kinematics.fk(KIN, q), kinematics.chain(KIN, q, full=True).T_base_flange)
+
+
 def test_screen_in_row_blocks_equals_one_block(monkeypatch):
     """Clustered poses (neighbours exist) with a few faults: the same neighbours, scores and exclusions."""
     rng = np.random.default_rng(1)
@@ -48,6 +61,9 @@ def test_screen_in_row_blocks_equals_one_block(monkeypatch):
     np.testing.assert_array_equal(one.z_local, blocked.z_local)
     np.testing.assert_array_equal(one.keep, blocked.keep)
     assert [e.index for e in one.excluded] == [e.index for e in blocked.excluded] and one.excluded
+    given = screen.screen(q, p, r, None, near, neighbours=(idx1, valid1))     # the search done once, passed in
+    np.testing.assert_array_equal(one.z_local, given.z_local)
+    assert [e.reason for e in one.excluded] == [e.reason for e in given.excluded]
 
 
 def test_blocked_cv_in_row_blocks_equals_one_block(monkeypatch):
@@ -61,9 +77,12 @@ def test_blocked_cv_in_row_blocks_equals_one_block(monkeypatch):
                  Blocking("order", np.arange(N) * 4 // N)]
     one = BlockedCV(A, y, W, blockings)
     monkeypatch.setattr(cv, "CHUNK_ROWS", 7)
-    A2 = A.copy()
+    A2 = design_array(N, P)
+    A2[...] = A
     blocked = BlockedCV(A2, y, W, blockings, copy=False)          # whitened in place, in blocks of 7 rows
     assert np.shares_memory(blocked.Aw, A2)
+    row_major = BlockedCV(A.copy(), y, W, blockings, copy=False)     # not parameter-major: copied, same numbers
+    np.testing.assert_array_equal(one.Aw, row_major.Aw)
     np.testing.assert_array_equal(one.Aw, blocked.Aw)
     for cols in ([0, 1, 2], [0, 2, 4, 5], list(range(P))):
         for i in range(len(blockings)):

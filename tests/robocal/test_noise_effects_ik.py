@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from robocal import effects
 from robocal.effects import apply_effects, effect_regressor, gravity_torques, library
 from robocal.ik import branch_signature, solve_ik, solve_on_branch
 from robocal.kinematics import fk, smr_base
@@ -69,6 +70,46 @@ def test_gravity_torques_signs():
     tau = gravity_torques(kin, q, [0, 35, 40, 12, 4, 1], np.array([0.0, 0.0]))
     assert abs(tau[0, 0]) < 1e-9                           # J1 axis is vertical
     assert abs(tau[1, 1]) > abs(tau[0, 1])                 # leaning forward loads J2 more
+
+
+def _gravity_torques_reference(kin, q, link_masses_kg, payload_kg, cog_flange_mm, g_base):
+    """Independent reference: per pose, joint and hanging body, the lever (body - joint origin) x weight about the
+    joint axis, from 4x4 frames multiplied one by one (Python loops: small N only)."""
+    out = np.zeros(q.shape)
+    g = np.asarray(g_base, float) / np.linalg.norm(g_base) * 9.80665
+    for k, qk in enumerate(q):
+        T, frames = np.eye(4), []
+        for i in range(kin.n):
+            frames.append(T.copy())
+            th, d, a, al = qk[i] + kin.theta_rad[i], kin.d_mm[i], kin.a_mm[i], kin.alpha_rad[i]
+            Rz = np.array([[np.cos(th), -np.sin(th), 0, 0], [np.sin(th), np.cos(th), 0, 0], [0, 0, 1, d], [0, 0, 0, 1]])
+            Tx = np.array([[1, 0, 0, a], [0, np.cos(al), -np.sin(al), 0], [0, np.sin(al), np.cos(al), 0], [0, 0, 0, 1]])
+            b = kin.beta_rad[i]
+            Ry = np.array([[np.cos(b), 0, np.sin(b), 0], [0, 1, 0, 0], [-np.sin(b), 0, np.cos(b), 0], [0, 0, 0, 1]])
+            T = T @ Rz @ Tx @ Ry
+        origins = [f[:3, 3] for f in frames] + [T[:3, 3]]
+        p_pay = T[:3, :3] @ np.asarray(cog_flange_mm, float) + T[:3, 3]
+        for j in range(kin.n):
+            o_j, z_j = frames[j][:3, 3], frames[j][:3, 2]
+            bodies = [(link_masses_kg[m], 0.5 * (origins[m] + origins[m + 1])) for m in range(j, kin.n)]
+            bodies.append((payload_kg[k], p_pay))
+            out[k, j] = sum(m * np.dot(np.cross(c - o_j, g), z_j) for m, c in bodies) / 1000.0
+    return out
+
+
+@pytest.mark.parametrize("g_base", [(0.0, 0.0, -1.0), (0.3, -1.0, 0.2)])
+def test_gravity_torques_equal_an_independent_reference_in_one_block_and_in_row_blocks(monkeypatch, g_base):
+    """The vectorised torque (cumulative first moments) = lever x weight summed body by body, per pose; and the
+    row-blocked path (``CHAIN_ROWS`` forced to 7) gives the same numbers as one block."""
+    kin = irb2600()
+    rng = np.random.default_rng(11)
+    q = np.radians(rng.uniform(-90, 90, (30, 6)))
+    masses, pay, cog = [0, 35, 40, 12, 4, 1], rng.uniform(0, 5, 30), [10.0, -5.0, 40.0]
+    tau = gravity_torques(kin, q, masses, pay, cog, g_base)
+    np.testing.assert_allclose(tau, _gravity_torques_reference(kin, q, masses, pay, cog, g_base), rtol=1e-10,
+                               atol=1e-9)
+    monkeypatch.setattr(effects, "CHAIN_ROWS", 7)
+    np.testing.assert_array_equal(gravity_torques(kin, q, masses, pay, cog, g_base), tau)
 
 
 def test_ik_reaches_targets_to_sub_micrometre():
