@@ -245,8 +245,11 @@ def test_library_blocked_in_move_hits_the_hard_timeout(emulator):
 def test_silent_controller_before_a_move_is_connection_lost_at_once(robot, emulator):
     emulator.command("FREEZE")
     t0 = time.monotonic()
-    with pytest.raises(ConnectionLost, match="no fresh RTDE data"):
+    # Which check sees the silence first depends on the machine's load: the driver's stale-data check ("no fresh
+    # RTDE data") or ur_rtde's own receive timeout (its control connection closes); either is ConnectionLost.
+    with pytest.raises(ConnectionLost, match="no fresh RTDE data|connection closed|RTDE") as err:
         robot.move_joints([30, -60, 60, -90, -90, 0])
+    assert "worker killed" in str(err.value)
     assert time.monotonic() - t0 < 6.0 and not robot.worker_alive
 
 
