@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 
 from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
-                                 overwrite_argument)
+                                 overwrite_argument, width_argument)
 from campaign.errors import DataError
 
 
@@ -67,6 +67,7 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, metavar="RUN_DIR",
                         help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",

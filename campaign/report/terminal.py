@@ -8,6 +8,7 @@ from rich.table import Table
 
 from campaign.calibrate.calibration_report import CalibrationReport
 from campaign.correct.verify_report import VerifyReport
+from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
 
 STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
@@ -33,7 +34,7 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
             s = report.stages[key]["test"]
             ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
             t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
-        console.print(t)
+        console.print(keep_words(t, console.width))
     layer = report.stages.get("compensated", {}).get("layer")
     if layer:
         console.print(layer_line(layer), markup=False)
@@ -140,11 +141,15 @@ def render_parameters(console: Console, report: CalibrationReport) -> None:
     for row in report.parameters:
         if row["identified"]:
             t.add_row(row["name"], f"{row['delta']:+.4f}", f"{row['std']:.4f}", row["unit"])
-    console.print(t)
+    console.print(keep_words(t, console.width))
     if report.unidentifiable:
-        notes = ", ".join(f"{u['name']} (~{'/'.join(u['redundant_with']) or u['reason']})"
-                          for u in report.unidentifiable)
+        notes = ", ".join(f"{u['name']} ({_why_fixed(u)})" for u in report.unidentifiable)
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
+
+
+def _why_fixed(u: dict) -> str:
+    """Why a parameter stayed at nominal: the parameters it is aliased with, else the reason in words."""
+    return f"aliased with {'/'.join(u['redundant_with'])}" if u["redundant_with"] else u["reason"]
 
 
 def _vias(plan: Plan) -> str:
@@ -163,7 +168,7 @@ def render_stop(console: Console, report: CalibrationReport) -> None:
     t.add_column("predicted RMS", justify="right")
     for n, rms in stop["checks"][-1]["curve"]:
         t.add_row(str(n) + (" (stop)" if n == stop["n_calib_at_stop"] else ""), f"{rms:.4f}")
-    console.print(t)
+    console.print(keep_words(t, console.width))
     console.print(f"stopped after {stop['n_calib_at_stop']} calibration points ({stop['reason']}): predicted "
                   f"held-out RMS {stop['predicted_rms_mm']:.4f} mm, measured {_mm(stop['measured_rms_mm'])} mm "
                   "(final model, test set)", markup=False)
@@ -197,22 +202,23 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
             t.add_column(col)
         for s in plan.skipped:
             t.add_row(s.point_id, s.set, *(f"{v:.0f}" for v in s.p_base_mm), s.reason)
-        console.print(t)
+        console.print(keep_words(t, console.width))
 
 
 def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
     floor = rep.noise_floor_mm
-    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm); "
-                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
-    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm)")
+    for col in ("stage", "corrected", "held", "RMS all", "RMS corr.", "max corr.", "RMS corr. / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
     fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
     for p in rep.passes:
         c = p["corrected"]
         t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
                   fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
-    console.print(t)
+    console.print(keep_words(t, console.width))
+    console.print("corrected (corr.) = points whose correction was commanded; held = commanded at their planned "
+                  "joints", markup=False)
     for p in rep.passes:
         for why, count in p["held"].items():
             console.print(f"{p['stage']}: {count} held: {why}", markup=False)
@@ -235,7 +241,7 @@ def render_iso(console, report: dict) -> None:
         for pc in run["poses"]:
             t.add_row(pc["pose"], f"{pc['ap_mm']:.4f}", f"{pc['apx_mm']:+.4f}", f"{pc['apy_mm']:+.4f}",
                       f"{pc['apz_mm']:+.4f}", f"{pc['rp_mm']:.4f}")
-        console.print(t)
+        console.print(keep_words(t, console.width))
         d = run["distance"]
         console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm, RP max {run['max_rp_mm']:.4f} mm; "
                       f"distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, "
