@@ -303,16 +303,36 @@ def iso_figures(iso: dict) -> list[Figure]:
     run = runs[-1]
     dev = run.get("deviation_um")
     if dev:
-        fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.9), constrained_layout=True,
-                                 squeeze=False)
-        for ax, name in zip(axes[0], names):
-            d = np.asarray(dev[name], float)
-            ax.scatter(d[:, 0], d[:, 1], s=10)
-            ax.set_title(name)
-            ax.set_xlabel("dx (um)")
-            ax.set_aspect("equal", adjustable="datalim")
-            ax.grid(alpha=0.3)
-        axes[0][0].set_ylabel("dy (um)")
-        out.append(Figure("iso9283_scatter", f"ISO 9283: attained positions around each barycentre ({run['targets']})",
-                          "Base-frame x/y deviations of each cycle from the pose's barycentre.", _png(fig)))
+        out.append(_iso_scatter(plt, names, {k: np.asarray(v, float) for k, v in dev.items()}, run["targets"]))
     return out
+
+
+def _iso_scatter(plt, names: list[str], dev_um: dict, targets: str) -> Figure:
+    """Attained positions around each pose's barycentre (µm): 3-D with equal axes and one scale for all poses
+    (x/y only for a report written before z was kept)."""
+    three = all(d.shape[1] == 3 for d in dev_um.values())
+    half = max(float(np.abs(d).max()) for d in dev_um.values()) * 1.05 or 1.0
+    fig = plt.figure(figsize=(3.3 * len(names), 3.7))
+    fig.subplots_adjust(left=0.01 if three else 0.05, right=0.97, bottom=0.1, top=0.93, wspace=0.3)
+    for k, name in enumerate(names):
+        d = dev_um[name]
+        ax = fig.add_subplot(1, len(names), k + 1, **({"projection": "3d"} if three else {}))
+        if three:
+            ax.scatter(d[:, 0], d[:, 1], d[:, 2], s=8)
+            ax.set_zlim(-half, half)
+            ax.set_zlabel("dz (µm)", fontsize=8, labelpad=2)
+            ax.set_box_aspect((1, 1, 1))
+        else:
+            ax.scatter(d[:, 0], d[:, 1], s=10)
+            ax.set_aspect("equal")
+            ax.grid(alpha=0.3)
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_title(name)
+        ax.set_xlabel("dx (µm)", fontsize=8)
+        ax.set_ylabel("dy (µm)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    what = "x/y/z" if three else "x/y"
+    return Figure("iso9283_scatter", f"ISO 9283: attained positions around each barycentre ({targets})",
+                  f"Base-frame {what} deviations of each cycle from the pose's barycentre in µm; equal scales on "
+                  "every axis and every pose.", _png(fig))

@@ -229,23 +229,32 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
                           f"({a['source']})", markup=False)
 
 
-def render_iso(console, report: dict) -> None:
-    """Rich table per target kind: AP, APx/y/z, RP per pose, and AD/RD."""
-    from rich.table import Table
+def rp_verdict(run: dict, spec_mm: float | None) -> str:
+    """The largest measured RP against the datasheet repeatability, in words (pass / fail)."""
+    if run.get("rp_within_spec") is None or not spec_mm:
+        return f"RP max {run['max_rp_mm']:.4f} mm (no datasheet repeatability to compare with)"
+    verdict = "pass" if run["rp_within_spec"] else "fail"
+    return (f"RP max {run['max_rp_mm']:.4f} mm vs datasheet repeatability {spec_mm:.4f} mm "
+            f"(robot.repeatability_mm): {verdict}")
 
+
+def render_iso(console, report: dict) -> None:
+    """Rich table per target kind: AP, APx/y/z, RP per pose (mm); AD/RD; RP against the datasheet."""
     for run in report["runs"]:
         t = Table(title=f"ISO 9283 ({run['targets']} targets, {run['cycles']} cycles, cube edge "
-                        f"{report['cube']['edge_mm']:.0f} mm), mm")
-        for col in ("pose", "AP", "APx", "APy", "APz", "RP"):
+                        f"{report['cube']['edge_mm']:.0f} mm)")
+        for col in ("pose", "AP (mm)", "APx (mm)", "APy (mm)", "APz (mm)", "RP (mm)"):
             t.add_column(col, justify="left" if col == "pose" else "right")
         for pc in run["poses"]:
             t.add_row(pc["pose"], f"{pc['ap_mm']:.4f}", f"{pc['apx_mm']:+.4f}", f"{pc['apy_mm']:+.4f}",
                       f"{pc['apz_mm']:+.4f}", f"{pc['rp_mm']:.4f}")
         console.print(keep_words(t, console.width))
         d = run["distance"]
-        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm, RP max {run['max_rp_mm']:.4f} mm; "
-                      f"distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, "
-                      f"RD +-{d['rd_mm']:.4f} mm", highlight=False)
-    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm", highlight=False)
+        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm; distance {'-'.join(d['poses'])} "
+                      f"{d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, RD +-{d['rd_mm']:.4f} mm; "
+                      + rp_verdict(run, report.get("repeatability_spec_mm")), highlight=False,
+                      style=None if run.get("rp_within_spec") is not False else "yellow")
+    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm (tracker and robot "
+                  "repeatability; the measured RP includes the tracker's noise)", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)
