@@ -105,15 +105,15 @@ def render(console: Console, report: dict) -> None:
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:
     m = result.confusion()
-    t = Table(title="Self-check: true effect (rows) vs diagnosed effect (first accepted)")
-    t.add_column("truth \\ diagnosed", no_wrap=True)
+    t = Table(title="Self-check: true effect (rows) vs diagnosed effect (columns, first accepted)")
+    t.add_column("truth", no_wrap=True)
     for b in LABELS:
         t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
             t.add_row(SHORT[a], *[(Text(str(m[a][b]), style="bold") if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
-    console.print(t)
+    console.print(keep_words(t, console.width))
     s = result.summary()
     e = s["shrinkage_error_mm"]
     console.print(
