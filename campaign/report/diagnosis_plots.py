@@ -82,8 +82,8 @@ def _plot_workspace(plt, maps, report, path):
     """Residual RMS per (radius, height) cell; cells without points are hatched grey and say so. One panel,
     "geometric model = final model", when no effect was accepted."""
     stages = ("geometric", "final") if accepted_effects(report) else ("geometric",)
-    fig, axes = plt.subplots(1, len(stages), figsize=(5.9 * len(stages) - 0.3, 4.8), constrained_layout=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(1, len(stages), figsize=(11.5 if len(stages) > 1 else 7.0, 4.8),
+                             constrained_layout=True, squeeze=False)
     axes = axes[0]
     vmax = max((v for st in stages for row in maps[st]["workspace"]["rms_mm"] for v in row if v is not None),
                default=report["noise_floor_mm"])
@@ -101,7 +101,8 @@ def _plot_workspace(plt, maps, report, path):
         ax.set_xlabel("radius from the J1 axis (mm)")
         ax.set_ylabel("height z (mm)")
     fig.colorbar(im, ax=axes, label="residual RMS (mm)")
-    fig.suptitle(f"Residual RMS over the workspace; {label}; hatched cells: no points", fontsize=11)
+    fig.suptitle(f"Residual RMS over the workspace;{' ' if len(stages) > 1 else chr(10)}{label}; hatched cells: no "
+                 "points", fontsize=11)
     _save_png(fig, path)
     plt.close(fig)
     return path
