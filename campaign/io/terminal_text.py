@@ -51,6 +51,23 @@ class SafeConsole(Console):
         kwargs.update(markup=False, emoji=False)
         return super().render_str(clean(text), **kwargs)
 
+    def print(self, *objects, **kwargs) -> None:
+        """Strings wrap between words at the width, and a word longer than the width (a path) stays whole on its
+        own line, where rich would fold it across lines (not with ``soft_wrap``: one line, any length)."""
+        soft = kwargs.get("soft_wrap")
+        if objects and all(isinstance(o, str) for o in objects) and not (self.soft_wrap if soft is None else soft):
+            objects = (wrap_words(clean(kwargs.pop("sep", " ").join(objects)), self.width),)
+            kwargs.update(overflow="ignore", crop=False)
+        super().print(*objects, **kwargs)
+
+
+def wrap_words(text: str, width: int, indent: str = "", hanging: str = "") -> str:
+    """``text`` wrapped between words at ``width`` columns, each of its lines on its own; a word longer than the
+    width stays whole. ``indent``/``hanging``: prefix of the first / the following lines of each."""
+    return "\n".join(textwrap.fill(line, width, initial_indent=indent, subsequent_indent=hanging,
+                                   break_long_words=False, break_on_hyphens=False) or line
+                     for line in text.split("\n"))
+
 
 PIPED_WIDTH = 100          # columns when no stream is a terminal and COLUMNS is not set
 _width_option: int | None = None
@@ -102,6 +119,8 @@ def keep_words(table: Table, width: int) -> Table:
         widths[max(shrinkable, key=lambda i: widths[i])] -= 1
     for column, w in zip(table.columns, widths):
         column.width = w
+    if isinstance(table.title, str):                # the title on one line when the width allows, not wrapped
+        table.min_width = min(width, len(table.title))    # at a narrow table's width
     return table
 
 
@@ -110,9 +129,8 @@ def print_notes(console: Console, notes: list[str], first: int = 1) -> None:
     indent; note ``i`` is numbered ``first + i``."""
     for i, note in enumerate(notes, first):
         mark = f"[{i}] "
-        console.print(textwrap.fill(clean(note), width=console.width, initial_indent=mark,
-                                    subsequent_indent=" " * len(mark), break_long_words=False,
-                                    break_on_hyphens=False), markup=False)
+        console.print(wrap_words(clean(note), console.width, mark, " " * len(mark)), markup=False, overflow="ignore",
+                      crop=False, soft_wrap=True)
 
 
 class _StderrConsole(SafeConsole):

@@ -115,3 +115,14 @@ def test_a_table_keeps_its_words_and_notes_wrap_with_a_hanging_indent():
     lines = text.splitlines()
     first = next(i for i, line in enumerate(lines) if line.startswith("[1] "))
     assert lines[first + 1].startswith("    ") and lines[first + 1].strip()
+
+
+@pytest.mark.unit
+def test_text_wraps_between_words_and_keeps_a_long_path_whole():
+    console = terminal_text.SafeConsole(width=40, record=True, file=io.StringIO())
+    path = "/tmp/" + "very-long-directory-name/" * 3 + "report.json"
+    console.print(f"wrote {path} and model.json   (three spaces kept)")
+    lines = console.export_text().splitlines()
+    assert lines == ["wrote", path, "and model.json   (three spaces kept)"]
+    errors = terminal_text.stderr_console()
+    assert errors.soft_wrap                                  # an error stays one line, whatever its length

@@ -3,6 +3,7 @@ the JSON, noise-floor source, the dataset preparation shared with reprocess, one
 (optional extra) and the self-check entry point."""
 import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,7 +183,8 @@ def test_self_check_entry_point_prints_the_confusion_matrix_and_writes_json(tmp_
     monkeypatch.setattr(sc, "trial_plan", lambda seeds, *a, **k: [("single", ("backlash",), 61),
                                                                   ("control", (), 62),
                                                                   ("order_gear", ("gear_cyclic",), 63)])
-    out = tmp_path / "self.json"
+    monkeypatch.chdir(tmp_path)                                        # a short path in the output
+    out = Path("self.json")
     monkeypatch.setenv("COLUMNS", "80")
     assert main(["diagnose", "--self-check", "--seeds", "1", "--json", str(out)]) == 0
     shown = capsys.readouterr().out
