@@ -17,7 +17,7 @@ import os
 import re
 import textwrap
 
-from rich.console import Console
+from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
@@ -102,11 +102,11 @@ def stdout_console() -> SafeConsole:
     return SafeConsole(width=console_width())
 
 
-def keep_words(table: Table, width: int) -> Table:
+def keep_words(table: Table, width: int) -> Table | Group:
     """Column widths that fit ``table`` in ``width`` columns without cutting a word: from each column's natural
     width, the widest column that is still wider than its longest word loses a column at a time (rich alone
     would cut ``uncorrec…`` or fold ``axis_coupl|ing``); a table whose words cannot fit stays wider. Returns
-    ``table``."""
+    ``table``, or its title above it when the title is wider than the table."""
     texts = [[(t.plain if isinstance(t, Text) else str(t)) for t in (c.header, *c.cells)] for c in table.columns]
     natural = [max(len(line) for t in ts for line in (t.splitlines() or [""])) for ts in texts]
     shortest = [max([1, *(len(w) for t in ts for w in t.split())]) for ts in texts]
@@ -119,8 +119,9 @@ def keep_words(table: Table, width: int) -> Table:
         widths[max(shrinkable, key=lambda i: widths[i])] -= 1
     for column, w in zip(table.columns, widths):
         column.width = w
-    if isinstance(table.title, str):                # the title on one line when the width allows, not wrapped
-        table.min_width = min(width, len(table.title))    # at a narrow table's width
+    if isinstance(table.title, str) and len(table.title) > sum(widths) + chrome:
+        title, table.title = table.title, None          # wider than the table: above it, wrapped at the width
+        return Group(Text(title, style="table.title", justify="left"), table)
     return table
 
 
