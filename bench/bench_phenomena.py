@@ -31,8 +31,9 @@ sys.path.insert(0, str(ROOT))
 
 from rich.console import Console  # noqa: E402
 
+from campaign.calibrate.calibration_report import CalibrationReport  # noqa: E402
 from campaign.config.schema import CalibrationConfig  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.interchange_csv import read_csv, write_csv  # noqa: E402
 from campaign.workflows import reprocess, run_campaign  # noqa: E402
 
@@ -67,21 +68,21 @@ def without_features(csv_in: Path, csv_out: Path, keep_commanded: bool = False) 
     write_csv(csv_out, ds)
 
 
-def stage_rms(report: dict, stage: str) -> float | None:
-    s = report["stages"].get(stage)
-    return None if s is None else s["test"]["rms_mm"]
+def stage_rms(report: CalibrationReport, stage: str) -> float | None:
+    s = report.stages.get(stage)
+    return None if s is None else s.test.rms_mm
 
 
-def final_stage(report: dict) -> str:
+def final_stage(report: CalibrationReport) -> str:
     """The stage of the model written to model.json (compensated = effects + the chosen layer)."""
     return "compensated"
 
 
-def effects_taken(report: dict) -> str:
-    eff = report.get("effects")
+def effects_taken(report: CalibrationReport) -> str:
+    eff = report.effects
     if not eff:
         return "(no effects in this code)"
-    names = [f.get("name", "?") for f in eff.get("fitted", [])]
+    names = [f.get("name", "?") for f in eff.fitted]
     return ", ".join(names) or "none"
 
 
@@ -96,23 +97,23 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         for seed in args.seeds:
-            cfg_a = load_config(campaign_config(tmp, seed, None))
-            cfg_b = load_config(campaign_config(tmp, seed, plain))
-            run = run_campaign(cfg_a, tmp / f"run-{seed}", console=quiet)
+            cell_a = load_cell(campaign_config(tmp, seed, None))
+            cell_b = load_cell(campaign_config(tmp, seed, plain))
+            run = run_campaign(cell_a, tmp / f"run-{seed}", console=quiet)
             if run.outcome.exit_status != "success":
                 print(f"seed {seed}: run {run.outcome.exit_status}: {run.outcome.reason}")
                 return 1
             csv = run.run_dir / "data.csv"
-            a = reprocess(csv, cfg_a, tmp / f"a-{seed}").report
+            a = reprocess(csv, cell_a, tmp / f"a-{seed}").report
             without_features(csv, tmp / f"plain-{seed}.csv")
-            b = reprocess(tmp / f"plain-{seed}.csv", cfg_b, tmp / f"b-{seed}").report
+            b = reprocess(tmp / f"plain-{seed}.csv", cell_b, tmp / f"b-{seed}").report
             # one feature off at a time: no nests (drift not compensated); read-back joints forced
             without_features(csv, tmp / f"nonest-{seed}.csv", keep_commanded=True)
-            a_nodrift = reprocess(tmp / f"nonest-{seed}.csv", cfg_a, tmp / f"a1-{seed}").report
-            cfg_rb = load_config(campaign_config(tmp, seed, {"joints": "readback"}))
-            a_readback = reprocess(csv, cfg_rb, tmp / f"a2-{seed}").report
-            floor = a["noise_floor_mm"]
-            prep = a.get("preparation", {})
+            a_nodrift = reprocess(tmp / f"nonest-{seed}.csv", cell_a, tmp / f"a1-{seed}").report
+            cell_rb = load_cell(campaign_config(tmp, seed, {"joints": "readback"}))
+            a_readback = reprocess(csv, cell_rb, tmp / f"a2-{seed}").report
+            floor = a.noise_floor_mm
+            prep = a.preparation or {}
             drift = prep.get("drift", {})
             ra, rb = stage_rms(a, final_stage(a)), stage_rms(b, final_stage(b))
             ok_a &= ra <= 1.2 * floor
@@ -120,10 +121,10 @@ def main() -> int:
             t_end_h = float(read_csv(csv).t_s.max()) / 3600.0
             print(f"seed {seed}: simulated run of {t_end_h:.2f} h; true drift at the end "
                   f"{np.linalg.norm(np.array([0.06, -0.04, 0.03]) * t_end_h):.3f} mm (translation part)")
-            rows.append((seed, floor, a["noise_floor_source"], prep.get("joints", {}).get("used"),
+            rows.append((seed, floor, a.noise_floor_source, prep.get("joints", {}).get("used"),
                          drift.get("applied"), drift.get("max_nest_move_mm"), effects_taken(a),
-                         stage_rms(a, "kinematic"), stage_rms(a, "elastic"), ra, a["method"].get("residual"),
-                         stage_rms(b, "kinematic"), rb, b["method"].get("residual"), b.get("noise_floor_mm"),
+                         stage_rms(a, "kinematic"), stage_rms(a, "elastic"), ra, a.method.residual,
+                         stage_rms(b, "kinematic"), rb, b.method.residual, b.noise_floor_mm,
                          stage_rms(a_nodrift, "compensated"), stage_rms(a_readback, "compensated")))
     print("held-out test RMS (mm) and ratio to the noise floor; A = defaults, B = read-back joints, no effects, "
           "no drift")

@@ -27,7 +27,7 @@ import yaml  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.importers import import_target_dif, read_target_dif_file  # noqa: E402
 from campaign.calibrate.plausibility import check_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
@@ -40,7 +40,7 @@ PUBLISHED = (("uncalibrated (thesis)", 2.5664), ("hybrid MDH + ASTGCN (thesis)",
 
 
 def config(tmp: Path, **changes):
-    """configs/ur5.yaml with top-level sections changed (dotted keys), loaded."""
+    """The cell model of configs/ur5.yaml with top-level sections changed (dotted keys)."""
     doc = yaml.safe_load((ROOT / "configs" / "ur5.yaml").read_text())
     for key, value in changes.items():
         node, *path = key.split(".")
@@ -50,7 +50,7 @@ def config(tmp: Path, **changes):
         target[path[-1]] = value
     path = tmp / f"ur5-{len(list(tmp.iterdir()))}.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return load_config(path)
+    return load_cell(path)
 
 
 def gravity_sag(model, q_rad: np.ndarray) -> tuple[float, float]:
@@ -66,14 +66,14 @@ def gravity_sag(model, q_rad: np.ndarray) -> tuple[float, float]:
 def dif_sign(tmp: Path) -> None:
     print("1. sign of dif (calibration poses only)")
     _, target, dif, _ = read_target_dif_file(GRID)
-    cfg = config(tmp, **{"calibration.effects": [{"name": "joint_compliance", "params": {"joints": [2, 3]}}],
-                         "calibration.residual": "none"})
+    cell = config(tmp, **{"calibration.effects": [{"name": "joint_compliance", "params": {"joints": [2, 3]}}],
+                          "calibration.residual": "none"})
     for sign in (1.0, -1.0):
         scaled = (target + sign * dif) * 1e6
         on_grid = np.mean(np.abs(scaled - np.round(scaled)) < 1e-3)
         ds = import_target_dif(GRID, dif_sign=sign)
-        nominal = check_dataset(ds, cfg)[1].nominal_rms_mm
-        model = calibrate_dataset(ds, cfg).model
+        nominal = check_dataset(ds, cell)[1].nominal_rms_mm
+        model = calibrate_dataset(ds, cell).model
         comp = ", ".join(f"{n} {v:+.2e} ({v / s:+.0f} std)" for e in model.effects
                          for n, v, s in zip(e.param_names, e.values, e.std))
         dz, corr = gravity_sag(model, np.radians(ds.q_deg))
@@ -85,22 +85,22 @@ def dif_sign(tmp: Path) -> None:
 def stages(tmp: Path) -> list:
     print("2. default reprocess (configs/ur5.yaml, no calibration section), 20 random held-out poses, mm")
     ds = import_target_dif(GRID, RANDOM)
-    report = calibrate_dataset(ds, config(tmp)).report.to_dict()
+    report = calibrate_dataset(ds, config(tmp)).report
     raw = np.linalg.norm(read_target_dif_file(RANDOM)[2], axis=1).mean()
     print(f"   {'stage':34s} {'mean':>7s} {'RMS':>7s} {'max':>7s}")
     for label, mean in PUBLISHED:
         print(f"   {label:34s} {mean:7.4f}")
     print(f"   {'as delivered (|dif|)':34s} {raw:7.4f}")
-    for name, s in report["stages"].items():
-        t = s["test"]
-        print(f"   {name:34s} {t['mean_mm']:7.4f} {t['rms_mm']:7.4f} {t['max_mm']:7.4f}")
+    for name, s in report.stages.items():
+        t = s.test
+        print(f"   {name:34s} {t.mean_mm:7.4f} {t.rms_mm:7.4f} {t.max_mm:7.4f}")
     eff = ", ".join(f"{e['name']}{e['options'].get('joint', e['options'].get('joints', ''))}"
-                    for e in report["effects"]["fitted"]) or "none"
-    print(f"   noise floor (specs) {report['noise_floor_mm']:.4f}; effects taken: {eff}; residual layer: "
-          f"{report['method']['residual']}; excluded points: {len(report['excluded_points'])}")
-    for note in report["plausibility"]["notes"]:
+                    for e in report.effects.fitted) or "none"
+    print(f"   noise floor (specs) {report.noise_floor_mm:.4f}; effects taken: {eff}; residual layer: "
+          f"{report.method.residual}; excluded points: {len(report.excluded_points)}")
+    for note in report.plausibility.notes:
         print(f"   note: {note}")
-    return report["plausibility"]["tool"]["registered_mm"][0]
+    return report.plausibility.tool.registered_mm[0]
 
 
 def rough_offsets(tmp: Path, right) -> None:
@@ -110,12 +110,12 @@ def rough_offsets(tmp: Path, right) -> None:
     ref = None
     for off in (0.0, -30.0, 30.0, 90.0):
         tool = [right[0], right[1], right[2] + off]
-        rep = calibrate_dataset(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report.to_dict()
-        f, k = rep["stages"]["compensated"]["test"], rep["stages"]["kinematic"]["test"]
+        rep = calibrate_dataset(ds, config(tmp, **{"tool.p_flange_smr_mm": tool})).report
+        f, k = rep.final.test, rep.stages["kinematic"].test
         ref = ref or f
-        said = rep["plausibility"]["tool"]["notes"]
-        print(f"   tool z {tool[2]:6.1f} ({off:+5.0f}): final mean {f['mean_mm']:.4f} RMS {f['rms_mm']:.4f} "
-              f"({100 * (f['rms_mm'] / ref['rms_mm'] - 1):+.2f} %), kinematic mean {k['mean_mm']:.4f}; "
+        said = rep.plausibility.tool.notes()
+        print(f"   tool z {tool[2]:6.1f} ({off:+5.0f}): final mean {f.mean_mm:.4f} RMS {f.rms_mm:.4f} "
+              f"({100 * (f.rms_mm / ref.rms_mm - 1):+.2f} %), kinematic mean {k.mean_mm:.4f}; "
               f"{'says: put ' + said[0].split('put ')[1] if said else 'no offset note'}")
 
 

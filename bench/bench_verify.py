@@ -15,6 +15,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from campaign.cli import main as campaign  # noqa: E402
+from campaign.correct.verify_report import VerifyReport  # noqa: E402
 
 
 def main(passes: int = 8) -> None:
@@ -30,9 +31,9 @@ def main(passes: int = 8) -> None:
               f"{time.perf_counter() - t0:.1f} s wall time")
         assert campaign(["run", str(cfg), "--out", str(run)]) == 0
         assert campaign(["verify", str(run)]) == 0
-        report = json.loads(next(run.glob("verify-*/verify.json")).read_text())
-    floor = report["noise_floor_mm"]
-    ratios = {k: v["rms_mm"] / floor for k, v in report["stages"].items()}
+        report = VerifyReport.from_dict(json.loads(next(run.glob("verify-*/verify.json")).read_text()))
+    floor = report.noise_floor_mm
+    ratios = {k: v.rms_mm / floor for k, v in report.stages.items()}
     print("RMS / noise floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
     loops = [r for k, r in ratios.items() if k.startswith("closed loop")]
     print(f"{len(loops)} closed-loop passes: single-pass ratio {min(loops):.2f} .. {max(loops):.2f}")

@@ -1,69 +1,98 @@
-"""``report.json`` as a typed record: ``CalibrationReport`` (built by ``campaign.calibrate.stages``)."""
+"""``report.json`` as a typed record: ``CalibrationReport`` (built by ``campaign.calibrate.stages``), and the
+calibration stages it reports (:data:`STAGES`, the one owner of their names and labels)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
-from campaign.io.json_fields import RecordError, ReportMapping, get_field, number_field, object_field, text_field
+from campaign.io.json_fields import (RecordError, get_field, json_value, list_field, number_field, object_field,
+                                     record_field, record_map_field, records_field, text_field)
+from robocal.identify import Unidentifiable
 
+from .plausibility import Plausibility
+from .report_sections import (EffectsReport, ExcludedPoint, MethodChoice, MultiSmrReport, ParameterRow,
+                              ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary,
+                              unidentifiable_from_dict)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A calibration stage: its key in ``report.json``'s ``stages``, its table label, its short (figure) name."""
+    name: str
+    label: str
+    short: str
+
+
+NOMINAL, KINEMATIC, ELASTIC, COMPENSATED = "nominal", "kinematic", "elastic", "compensated"
+STAGES = (Stage(NOMINAL, "nominal (uncompensated)", "nominal"),
+          Stage(KINEMATIC, "kinematic calibration", "kinematic"),
+          Stage(ELASTIC, "kinematic + physical effects", "elastic"),
+          Stage(COMPENSATED, "final model (+ residual layer, if any)", "final model"))
+"""Seed 000 Table 3's stages in report order (``elastic`` only when physical effects were taken)."""
 
 IDENTIFICATION_KEYS = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
 @dataclass(frozen=True, eq=False)
-class CalibrationReport(ReportMapping):
+class CalibrationReport:
     """``report.json``: the calibration's figures (see ``campaign.calibrate.stages.calibrate_dataset``).
 
-    ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test rows (mm);
-    ``noise_floor_mm`` with its source ("repeats" or "specs") and both candidates; the identified ``parameters``
-    and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm); the method and effect choices; optional
+    ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test and calib rows
+    (mm, keyed by :data:`STAGES` names); ``noise_floor_mm`` with its source ("repeats" or "specs") and both
+    candidates; the identified ``parameters`` and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm);
+    the method and effect choices; ``preparation`` (the JSON section of ``campaign.calibrate.prepare``); optional
     ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
-    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (HTML figures); the
-    hardware ``identification`` of the run log (robot/tracker identity, driver and software versions) when processed
-    from a log.
+    with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (JSON of
+    ``report_points``, for the HTML figures); the hardware ``identification`` of the run log (robot/tracker
+    identity, driver and software versions) when processed from a log.
     """
 
     format: str
     config: str
     source: str
-    n: dict
-    stages: dict
+    n: RowCounts
+    stages: dict[str, StageResult]
     noise_floor_mm: float
     noise_floor_source: str
     noise_floor_specs_mm: float
     noise_floor_repeats_mm: float | None
-    parameters: list
-    unidentifiable: list
+    parameters: tuple[ParameterRow, ...]
+    unidentifiable: tuple[Unidentifiable, ...]
     condition_number: float
     observability: Any
     sigma0: float
     iterations: int
     converged: bool
-    rejected_points: list
-    excluded_points: list
+    rejected_points: tuple[str, ...]
+    excluded_points: tuple[ExcludedPoint, ...]
     structure_note: str | None
     T_tracker_base: list
-    method: dict
-    effects: dict
-    residual_choice: dict | None
-    plausibility: dict | None
-    residual_cv: dict | None
+    method: MethodChoice | None
+    effects: EffectsReport | None
+    residual_choice: ResidualChoice | None
+    plausibility: Plausibility | None
+    residual_cv: ResidualCV | None
     preparation: dict | None
-    multi_smr: dict | None = None
-    stop: dict | None = None
+    multi_smr: MultiSmrReport | None = None
+    stop: StopSummary | None = None
     cell: Any = None
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
 
+    @property
+    def final(self) -> StageResult | None:
+        """The final model's stage (``compensated``)."""
+        return self.stages.get(COMPENSATED)
+
     def to_dict(self) -> dict:
         """The report.json object (the key order written so far)."""
-        out = {name: getattr(self, name) for name in REPORT_KEYS}
+        out = {name: json_value(getattr(self, name)) for name in REPORT_KEYS}
         if self.multi_smr is not None:
-            out["multi_smr"] = self.multi_smr
+            out["multi_smr"] = self.multi_smr.to_dict()
         if self.stop is not None:
-            out["stop"] = self.stop
+            out["stop"] = self.stop.to_dict()
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
         return out
@@ -74,16 +103,28 @@ class CalibrationReport(ReportMapping):
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "CalibrationReport":
-        """A report.json object; RecordError names a missing field or one of the wrong kind."""
+        """A report.json object; RecordError names a missing field or one of the wrong kind (by its path below the
+        report, ``stages.kinematic.test.rms_mm``). Sections a report of an earlier version lacks read as None."""
         if not isinstance(data, Mapping):
             raise RecordError("report", f"expected an object, got {type(data).__name__}")
-        for check, name in ((text_field, "format"), (text_field, "config"), (text_field, "source"), (object_field, "n"), (object_field, "stages"),
-                            (number_field, "noise_floor_mm"), (get_field, "T_tracker_base")):
-            check(data, name)
-        args = {name: get_field(data, name, optional=True) for name in REPORT_KEYS}
-        return cls(**args, multi_smr=object_field(data, "multi_smr", True), stop=object_field(data, "stop", True),
-                   cell=data.get("cell"), points=data.get("points"),
-                   identification=tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data))
+        opt = lambda name: get_field(data, name, optional=True)  # noqa: E731
+        return cls(
+            text_field(data, "format"), text_field(data, "config"), text_field(data, "source"),
+            record_field(data, "n", RowCounts.from_dict), record_map_field(data, "stages", StageResult.from_dict),
+            number_field(data, "noise_floor_mm"), opt("noise_floor_source"), opt("noise_floor_specs_mm"),
+            opt("noise_floor_repeats_mm"), records_field(data, "parameters", ParameterRow.from_dict, True) or (),
+            records_field(data, "unidentifiable", unidentifiable_from_dict, True) or (), opt("condition_number"),
+            opt("observability"), opt("sigma0"), opt("iterations"), opt("converged"),
+            tuple(list_field(data, "rejected_points", True) or ()),
+            records_field(data, "excluded_points", ExcludedPoint.from_dict, True) or (), opt("structure_note"),
+            get_field(data, "T_tracker_base"), record_field(data, "method", MethodChoice.from_dict, True),
+            record_field(data, "effects", EffectsReport.from_dict, True),
+            record_field(data, "residual_choice", ResidualChoice.from_dict, True),
+            record_field(data, "plausibility", Plausibility.from_dict, True),
+            record_field(data, "residual_cv", ResidualCV.from_dict, True), object_field(data, "preparation", True),
+            record_field(data, "multi_smr", MultiSmrReport.from_dict, True),
+            record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
+            tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]

@@ -21,11 +21,12 @@ from robocal.three_smr_pose import MultiSMRPoseEstimator, SMRTool, fit_points_po
 from robocal.screen import smr_triangle
 from robocal.stats import error_stats
 
-from campaign.config.cell_model import calibration_options, measurement_covariance, tracker_uncertainty
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
 from campaign.run.log_records import PointRecord
+
+from .report_sections import AngleStats, ErrorFigures, ExcludedPoint, MultiSmrReport
 
 MIN_TRAINING_STOPS = 20           # calibration stops with all three SMRs needed to train the SMR 2/3 predictors
 
@@ -35,50 +36,47 @@ def smr_clouds(ds: Dataset) -> list[np.ndarray]:
     return [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
 
 
-def screen_smrs(ds: Dataset, cfg: CampaignConfig) -> tuple[np.ndarray, list[dict]]:
-    """(keep (N,) bool, excluded [{point_id, set, reason}]) of the SMR-triangle screen (all True and [] with one
+def screen_smrs(ds: Dataset, cell: CellModel) -> tuple[np.ndarray, list[ExcludedPoint]]:
+    """(keep (N,) bool, excluded points) of the SMR-triangle screen (all True and [] with one
     SMR; the tracker's uncertainty model weighs each distance); DataError when the SMR distances are not those
     of one rigid tool."""
     clouds = smr_clouds(ds)
     if len(clouds) < 2:
         return np.ones(len(ds), bool), []
-    tri = smr_triangle(np.stack(clouds), np.stack([measurement_covariance(cfg, c) for c in clouds]))
+    tri = smr_triangle(np.stack(clouds), np.stack([cell.covariance(c) for c in clouds]))
     if not tri.rigid:
         raise DataError(ds.source, f"{tri.why} (x..z{len(clouds)} columns from another target, or in another "
                                    "order?)")
-    return tri.keep, [{"point_id": ds.point_id[e.index], "set": ds.set[e.index], "reason": e.reason}
-                      for e in tri.excluded]
+    return tri.keep, [ExcludedPoint(ds.point_id[e.index], ds.set[e.index], e.reason) for e in tri.excluded]
 
 
-def multi_smr_report(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray,
-                     offsets0=None) -> dict:
+def multi_smr_report(ds: Dataset, cell: CellModel, kin0, kept_rows: np.ndarray, test: np.ndarray,
+                     offsets0=None) -> MultiSmrReport:
     """Multi-SMR identification (one robot, one flange offset per SMR, from ``offsets0``: the registered ones, by
     default the configured ones) on the kept calib rows and its test figures per SMR; with three SMRs, the flange
     orientation error on the test set (arc seconds)."""
     clouds = smr_clouds(ds)
-    offsets0 = cfg.tool.smrs_mm if offsets0 is None else offsets0
+    offsets0 = cell.config.tool.smrs_mm if offsets0 is None else offsets0
     if len(offsets0) < len(clouds):
-        return {"n_smr": len(clouds), "skipped": f"the data has {len(clouds)} SMRs but the config's tool names "
-                f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)"}
+        return MultiSmrReport(len(clouds), skipped=f"the data has {len(clouds)} SMRs but the config's tool names "
+                              f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)")
     P = np.stack(clouds)
     q = np.radians(ds.q_deg)
-    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
+    cov = np.stack([cell.covariance(c[kept_rows]) for c in clouds])
     try:
         res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
-                                  calibration_options(cfg))
+                                  cell.options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
-    out = {"n_smr": len(clouds), "p_flange_smr_mm": res.p_flange_smr_mm.tolist(), "sigma0": res.sigma0,
-           "converged": res.converged, "unidentifiable": [u.to_dict() for u in res.unidentifiable],
-           "test": {}}
+    test_figures, orientation = {}, None
     if test.any():
         pred = res.predict_tracker(q[test])
-        out["test"] = {f"smr{s + 1}": error_stats(P[s, test] - pred[s]).to_dict() for s in range(len(clouds))}
+        test_figures = {f"smr{s + 1}": ErrorFigures.of(error_stats(P[s, test] - pred[s])) for s in range(len(clouds))}
         if len(clouds) == 3:
-            a = orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test], P[:, test])
-            out["orientation_error_arcsec"] = {"mean": float(a.mean()), "rms": float(np.sqrt(np.mean(a**2))),
-                                               "max": float(a.max()), "n": int(len(a))}
-    return out
+            orientation = angle_stats(orientation_errors_arcsec(res.kinematics, res.p_flange_smr_mm, q[test],
+                                                                P[:, test]))
+    return MultiSmrReport(len(clouds), None, res.p_flange_smr_mm.tolist(), res.sigma0, res.converged,
+                          tuple(res.unidentifiable), test_figures, orientation)
 
 
 def identified_offsets(model) -> np.ndarray | None:
@@ -87,7 +85,7 @@ def identified_offsets(model) -> np.ndarray | None:
     return np.asarray(offsets, float) if offsets is not None and len(offsets) == 3 else None
 
 
-def pose_estimator(cfg: CampaignConfig, model, records) -> MultiSMRPoseEstimator | None:
+def pose_estimator(cell: CellModel, model, records) -> MultiSMRPoseEstimator | None:
     """Seed 003's 6D pose estimator for a three-SMR run (None otherwise): the model's kinematics, the tool at the
     identified offsets, GPR predictors of SMRs 2 and 3 trained on the run's calibration stops (commanded joints)."""
     offsets = identified_offsets(model)
@@ -96,7 +94,7 @@ def pose_estimator(cfg: CampaignConfig, model, records) -> MultiSMRPoseEstimator
         return None
     q = np.radians([r.q_cmd_deg for r in stops])
     p2, p3 = (np.array([next(s.p_tracker_mm for s in r.smrs if s.k == k) for r in stops]) for k in (2, 3))
-    return MultiSMRPoseEstimator.fit(model.kinematics, SMRTool(offsets), q, p2, p3, tracker_uncertainty(cfg),
+    return MultiSMRPoseEstimator.fit(model.kinematics, SMRTool(offsets), q, p2, p3, cell.tracker,
                                      n_restarts=1)
 
 
@@ -116,7 +114,7 @@ def measured_flange_poses(offsets_mm: np.ndarray, points: list[PointRecord]) -> 
     return fit_points_pose(offsets_mm, P)
 
 
-def angle_stats(a_arcsec: np.ndarray, source: str) -> dict:
+def angle_stats(a_arcsec: np.ndarray, source: str | None = None) -> AngleStats:
     """mean / rms / max / n of orientation errors (arc seconds) and how the poses were obtained."""
-    return {"mean": float(a_arcsec.mean()), "rms": float(np.sqrt(np.mean(a_arcsec**2))), "max": float(a_arcsec.max()),
-            "n": int(len(a_arcsec)), "source": source}
+    return AngleStats(float(a_arcsec.mean()), float(np.sqrt(np.mean(a_arcsec**2))), float(a_arcsec.max()),
+                      int(len(a_arcsec)), source)

@@ -15,7 +15,7 @@ import warnings
 
 import numpy as np
 
-from campaign.config.cell_model import calibration_options, tracker_uncertainty, weights_covariance
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, DataWarning
@@ -25,17 +25,18 @@ from robocal.identify import CalibrationResult, IdentificationError, calibrate, 
 from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
-from robocal.noise import noise_floor_mm
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
 from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.stats import error_stats
 
-from .calibration_report import CalibrationReport
+from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, CalibrationReport
 from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .prepare import prepare
 from .report_points import PointTable, cell_summary, point_table, report_points_value
+from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, LayerSummary, MethodChoice,
+                              ParameterRow, PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult)
 
 
 REPORT_FORMAT = "campaign-report/1"
@@ -70,10 +71,10 @@ def _predict(kin_or_model, q, payload=None, meta=None) -> np.ndarray:
     return smr_tracker(kin_or_model, q)
 
 
-def _stage(kin_or_model, q, p, payload=None, meta=None) -> dict:
+def _stage(kin_or_model, q, p, payload=None, meta=None) -> ErrorFigures:
     if len(q) == 0:
-        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
-    return error_stats(p - _predict(kin_or_model, q, payload, meta)).to_dict()
+        return NO_POINTS
+    return ErrorFigures.of(error_stats(p - _predict(kin_or_model, q, payload, meta)))
 
 
 def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
@@ -83,20 +84,20 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[dict, np.ndarray]:
+def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[PredictiveStd, np.ndarray]:
     """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
     report entry and the values (M,)."""
     if len(q) == 0:
-        return {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0, "per_point_mm": {}}, np.zeros(0)
+        return PredictiveStd(None, None, None, 0, {}), np.zeros(0)
     s = np.linalg.norm(layer.predict_std(q, None, payload), axis=1)
-    return {"max_mm": float(s.max()), "mean_mm": float(s.mean()), "rms_mm": float(np.sqrt(np.mean(s**2))),
-            "n": int(len(s)), "per_point_mm": {pid: float(v) for pid, v in zip(point_ids, s)}}, s
+    return PredictiveStd(float(s.max()), float(s.mean()), float(np.sqrt(np.mean(s**2))), int(len(s)),
+                         {pid: float(v) for pid, v in zip(point_ids, s)}), s
 
 
-def prepared_dataset(ds: Dataset, cfg: CampaignConfig) -> Dataset:
+def prepared_dataset(ds: Dataset, cell: CellModel) -> Dataset:
     """The single place where a dataset is prepared before any fit: joint-set choice (commanded / read-back)
     and tracker-drift compensation from the reference nests (campaign/calibrate/prepare.py)."""
-    return prepare(ds, cfg).dataset
+    return prepare(ds, cell).dataset
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,18 +120,18 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+def _geometric(ds: Dataset, cell: CellModel, kin0) -> GeometricFit:
     """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
     measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
     faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
-    cov = weights_covariance(cfg, ds)[0][rows]
-    options = calibration_options(cfg)
+    cov = cell.weights(ds)[0][rows]
+    options = cell.options
     result = _calibrate(kin0, q, p, cov, options, ds.source)
     keep = np.ones(len(rows), bool)
     sc = None
-    if cfg.calibration.outliers == "local":
+    if cell.config.calibration.outliers == "local":
         for _ in range(4):
             sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
@@ -153,14 +154,14 @@ def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResu
                   None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
 
 
-def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
+def geometric_fit(ds: Dataset, cell: CellModel) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
-    _check_dataset(ds, cfg)
-    ds, plaus = check_dataset(ds, cfg)
-    ds = prepared_dataset(ds, cfg)
-    keep, _ = screen_smrs(ds, cfg)
-    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
+    _check_dataset(ds, cell.config)
+    ds, plaus = check_dataset(ds, cell)
+    ds = prepared_dataset(ds, cell)
+    keep, _ = screen_smrs(ds, cell)
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cell, start_kinematics(cell, plaus)).result
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,27 +176,28 @@ class Fitted:
     stage: ElasticStage
 
 
-def fit_stages(ds: Dataset, cfg: CampaignConfig, plaus) -> Fitted:
+def fit_stages(ds: Dataset, cell: CellModel, plaus) -> Fitted:
     """Preparation, SMR-triangle screen, geometric fit (from the registered start ``kin0`` of the plausibility
     check ``plaus``) and elastic stage of a checked dataset: one sequence for ``reprocess`` and ``diagnose``, so
     both take the same effects with the same values."""
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/calibrate/prepare.py)  # noqa: E702
+    prep = prepare(ds, cell); ds = prep.dataset  # joint set, nest drift (campaign/calibrate/prepare.py)  # noqa: E702
     order = order_meta(ds)                                  # approach and moves from the full measurement order
-    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    smr_keep, smr_excluded = screen_smrs(ds, cell)          # SMR-triangle faults: calib, test and check rows
     if not smr_keep.all():
         ds, order = ds.subset(smr_keep), subset(order, smr_keep)
-        _check_dataset(ds, cfg)
-    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
-    geo = _geometric(ds, cfg, kin0)
-    stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+        _check_dataset(ds, cell.config)
+    kin0 = start_kinematics(cell, plaus)                    # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cell, kin0)
+    stage = elastic_stage(ds, cell, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
     return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
-def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
+def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
+    cfg = cell.config
     _check_dataset(ds, cfg)
-    ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    fitted = fit_stages(ds, cfg, plaus)
+    ds, plaus = check_dataset(ds, cell)                     # issue 12: before anything is fitted or written
+    fitted = fit_stages(ds, cell, plaus)
     prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
     kin0 = fitted.kin0
     result = geo.result
@@ -206,7 +208,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     if not test.any():
         plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
         warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
-    cov_source = weights_covariance(cfg, ds)[1]
+    cov_source = cell.weights(ds)[1]
     meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
     final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
     sub = subset
@@ -217,7 +219,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     c = cfg.calibration
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     eval_rows = test if test.any() else cal
-    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    specs = cell.noise_floor_mm(p[eval_rows])
     floor = repeats if repeats is not None else specs
     lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
                   noise_floor_mm=floor)
@@ -234,103 +236,94 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [("nominal", register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
-                    ("kinematic", result.kinematics)]
+    stage_models = [(NOMINAL, register(registered_kinematics(cell, plaus), q[cal], p[cal])),
+                    (KINEMATIC, result.kinematics)]
     if elastic is not None:
-        stage_models.append(("elastic", model_el))
-    stage_models.append(("compensated", model))
-    stages = {name: {"test": _stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
-                     "calib": _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal))}
+        stage_models.append((ELASTIC, model_el))
+    stage_models.append((COMPENSATED, model))
+    stages = {name: StageResult(_stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
+                                _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal)))
               for name, m in stage_models}
-    pred_std = None                                       # (N,) GPR predictive std of the test rows, else NaN
+    spread, pred_std = None, None                         # (N,) GPR predictive std of the test rows, else NaN
     if isinstance(model.residual, GPRResidual):
         pred_std = np.full(len(ds), np.nan)
-        stages["compensated"]["test_pred_std_mm"], pred_std[test] = _pred_std(
-            model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
-    if choice.layer is not None:
-        stages["compensated"]["layer"] = layer_summary(choice, stages["compensated"])
+        spread, pred_std[test] = _pred_std(model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
     calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = smr_excluded + ([] if final_screen is None else [
-        {"point_id": str(calib_ids[e.index]), "set": "calib", "reason": e.reason} for e in final_screen.excluded])
+    excluded = list(smr_excluded) + ([] if final_screen is None else [
+        ExcludedPoint(str(calib_ids[e.index]), "calib", e.reason) for e in final_screen.excluded])
     in_fit = np.zeros(len(ds), bool)
     in_fit[kept_rows] = True
     rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
-    listed = {e["point_id"] for e in excluded}
-    excluded += [{"point_id": pid, "set": "calib", "reason": f"zero {c.weights} weight of the robust_ridge estimator"}
+    listed = {e.point_id for e in excluded}
+    excluded += [ExcludedPoint(pid, "calib", f"zero {c.weights} weight of the robust_ridge estimator")
                  for pid in rejected_ids if pid not in listed]
-    report = {
-        "format": REPORT_FORMAT, "config": cfg.name, "source": ds.source,
-        "n": {"calib": int(cal.sum()), "test": int(test.sum()), "check": int(check.sum()),
-              "rejected": len(rejected_ids)},
-        "stages": stages,
-        "noise_floor_mm": floor,
-        "noise_floor_source": "repeats" if repeats is not None else "specs",
-        "noise_floor_specs_mm": specs, "noise_floor_repeats_mm": repeats,
-        "parameters": _parameters(result), "unidentifiable": [u.to_dict() for u in result.unidentifiable],
-        "condition_number": result.condition_number, "observability": result.observability,
-        "sigma0": result.sigma0, "iterations": result.iterations, "converged": result.converged,
-        "rejected_points": rejected_ids,
-        "excluded_points": excluded,
-        "structure_note": None if final_screen is None else final_screen.structure_note(),
-        "T_tracker_base": model.kinematics.T_tracker_base.tolist(),
-        "method": {"estimator": c.method, "weights": c.weights if c.method == "robust_ridge" else None,
-                   "outliers": c.outliers, "effects": c.effects if isinstance(c.effects, str) else "list",
-                   "residual": choice.kind, "residual_config": c.residual, "measurement_covariance": cov_source},
-        "effects": _effects_report(selection, elastic),
-        "residual_choice": choice.to_dict(),
-        "plausibility": plaus.to_dict(),
-        "residual_cv": _residual_cv_summary(choice),
-        "preparation": prep.report,
-    }
+    multi = None
     if ds.p2_tracker_mm is not None:
-        report["multi_smr"] = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
-        if "p_flange_smr_mm" in report["multi_smr"]:
-            model = replace(model, meta={**(model.meta or {}),
-                                         "p_flange_smrs_mm": report["multi_smr"]["p_flange_smr_mm"]})
+        multi = multi_smr_report(ds, cell, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
+        if multi.p_flange_smr_mm is not None:
+            model = replace(model, meta={**(model.meta or {}), "p_flange_smrs_mm": multi.p_flange_smr_mm})
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
     used[geo.rows], used[kept_rows] = 0.0, 1.0
-    report["cell"] = cell_summary(cfg)
     table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
                         {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
                          for name, m in stage_models}, used, ds.t_s, pred_std)
-    report["points"] = report_points_value(table)
-    if "file" in report["points"] and pred_std is not None:     # per test point: in points.csv too
-        stages["compensated"]["test_pred_std_mm"]["per_point_mm"] = {"file": report["points"]["file"],
-                                                                     "column": "pred_std_mm"}
-    return Calibrated(CalibrationReport(**report), model, result, table)
+    points = report_points_value(table)
+    stages[COMPENSATED] = _final_stage(stages[COMPENSATED], choice, spread, points)
+    report = CalibrationReport(
+        format=REPORT_FORMAT, config=cfg.name, source=ds.source,
+        n=RowCounts(int(cal.sum()), int(test.sum()), int(check.sum()), len(rejected_ids)),
+        stages=stages, noise_floor_mm=floor, noise_floor_source="repeats" if repeats is not None else "specs",
+        noise_floor_specs_mm=specs, noise_floor_repeats_mm=repeats,
+        parameters=_parameters(result), unidentifiable=tuple(result.unidentifiable),
+        condition_number=result.condition_number, observability=result.observability,
+        sigma0=result.sigma0, iterations=result.iterations, converged=result.converged,
+        rejected_points=tuple(rejected_ids), excluded_points=tuple(excluded),
+        structure_note=None if final_screen is None else final_screen.structure_note(),
+        T_tracker_base=model.kinematics.T_tracker_base.tolist(),
+        method=MethodChoice(c.method, c.weights if c.method == "robust_ridge" else None, c.outliers,
+                            c.effects if isinstance(c.effects, str) else "list", choice.kind, c.residual, cov_source),
+        effects=_effects_report(selection, elastic), residual_choice=ResidualChoice.of(choice), plausibility=plaus,
+        residual_cv=_residual_cv_summary(choice), preparation=prep.report, multi_smr=multi,
+        cell=cell_summary(cfg), points=points)
+    return Calibrated(report, model, result, table)
 
 
-def _effects_report(selection, elastic) -> dict:
-    out = {"selection": None if selection is None else selection.to_dict(), "fitted": [], "unidentifiable": []}
-    if elastic is not None:
-        out["fitted"] = [fe.to_dict() for fe in elastic.effects]
-        out["unidentifiable"] = [u.to_dict() for u in elastic.unidentifiable]
-        out["sigma0"] = elastic.sigma0
-        out["notes"] = [f"{fe.choice.label}.{n}: negative compliance {v:.3g} rad/(N*m) ({-v / s:.1f} std below zero): "
-                        "not physical; check the link masses, payload and joint directions"
-                        for fe in elastic.effects if fe.unit == "rad/(N*m)"
-                        for n, v, s in zip(fe.param_names, fe.values, fe.std) if np.isfinite(s) and v < -3 * s]
-        out["condition_number"] = elastic.condition_number
-    return out
+def _final_stage(stage: StageResult, choice: LayerChoice, spread: PredictiveStd | None, points: dict) -> StageResult:
+    """The final model's stage with the GPR predictive spread (per point: in points.csv when the rows are there)
+    and the fitted residual layer's summary."""
+    if spread is not None and "file" in points:
+        spread = replace(spread, per_point_mm={"file": points["file"], "column": "pred_std_mm"})
+    layer = None if choice.layer is None else LayerSummary(**layer_summary(choice, stage.to_dict()))
+    return replace(stage, test_pred_std_mm=spread, layer=layer)
 
 
-def _residual_cv_summary(choice: LayerChoice) -> dict | None:
+def _effects_report(selection, elastic) -> EffectsReport:
+    if elastic is None:
+        return EffectsReport(None if selection is None else selection.to_dict())
+    notes = tuple(f"{fe.choice.label}.{n}: negative compliance {v:.3g} rad/(N*m) ({-v / s:.1f} std below zero): "
+                  "not physical; check the link masses, payload and joint directions"
+                  for fe in elastic.effects if fe.unit == "rad/(N*m)"
+                  for n, v, s in zip(fe.param_names, fe.values, fe.std) if np.isfinite(s) and v < -3 * s)
+    return EffectsReport(None if selection is None else selection.to_dict(), tuple(fe.to_dict() for fe in elastic.effects),
+                         tuple(elastic.unidentifiable), elastic.sigma0, notes, elastic.condition_number)
+
+
+def _residual_cv_summary(choice: LayerChoice) -> ResidualCV | None:
     """The CV figure of the chosen (else the best) candidate layer against none (earlier report key)."""
     cands = {k: v for k, v in choice.cv.items() if k != "none"}
     if not cands:
         return None
     kind = choice.kind if choice.kind in cands else min(cands, key=lambda k: cands[k]["cv_rms_mm"])
     a, b = choice.cv["none"]["cv_rms_mm"], cands[kind]["cv_rms_mm"]
-    return {"folds": choice.folds, "layer": kind, "rms_without_mm": a, "rms_with_mm": b, "gain": 1.0 - b / a,
-            "t": cands[kind]["t"], "significant": cands[kind]["significant"]}
+    return ResidualCV(choice.folds, kind, a, b, 1.0 - b / a, cands[kind]["t"], cands[kind]["significant"])
 
 
-def _parameters(result: CalibrationResult) -> list[dict]:
+def _parameters(result: CalibrationResult) -> tuple[ParameterRow, ...]:
     """Parameter table with angles converted to degrees for people."""
     rows = []
     for row in result.parameters_table():
         if row["unit"] == "rad":
             row = dict(row, unit="deg", delta=float(np.degrees(row["delta"])),
                        std=None if row["std"] is None else float(np.degrees(row["std"])))
-        rows.append(row)
-    return rows
+        rows.append(ParameterRow(**row))
+    return tuple(rows)

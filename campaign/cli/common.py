@@ -8,8 +8,12 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from rich.console import Console
+
+if TYPE_CHECKING:                      # the calibration modules load when a command needs them
+    from campaign.calibrate.plausibility import Plausibility
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -76,7 +80,7 @@ def width_argument(parser: argparse.ArgumentParser) -> None:
                         help="output width in columns (default: the terminal's width, or COLUMNS; 100 when piped)")
 
 
-def print_plausibility(out: Console, plaus: dict | None) -> None:
+def print_plausibility(out: Console, plaus: Plausibility | None) -> None:
     """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
     from campaign.calibrate.plausibility import plausibility_lines
 

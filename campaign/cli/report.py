@@ -83,13 +83,13 @@ def _torques(text: str) -> tuple[float, ...]:
 
 def _urdf_limits(args: argparse.Namespace, model):
     """The URDF's joint limits from --config (which must describe the model's robot) and --effort-nm."""
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.correct.targets import check_model_fits
     from campaign.report.export import UrdfLimits
 
-    cfg = load_config(args.config)
-    check_model_fits(cfg, model, str(args.model))
-    return UrdfLimits.of_config(cfg, args.effort_nm)
+    cell = load_cell(args.config)
+    check_model_fits(cell, model, str(args.model))
+    return UrdfLimits.of_config(cell.config, args.effort_nm)
 
 
 def _iso_arguments(parser: argparse.ArgumentParser) -> None:
@@ -106,15 +106,15 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",
          _iso_arguments)
 def cmd_iso9283(args: argparse.Namespace) -> int:
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.report.terminal import render_iso
     from campaign.workflows import run_iso9283
     from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     model = load_model(args.model) if args.model else None
     out = _stdout()
-    result, report = run_iso9283(cfg, model, args.out, out, overwrite=args.overwrite)
+    result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite)
     o = result.outcome
     if report is None:
         _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)

@@ -2,14 +2,18 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from campaign.io.json_fields import (RecordError, ReportMapping, check_field, count_field, number_field, object_field,
-                                     text_field)
+from campaign.calibrate.report_sections import ErrorFigures, VerifyPass
+from campaign.io.json_fields import (RecordError, count_field, number_field, object_field, record_dict,
+                                     record_map_field, records_field, text_field)
+
+VERIFY_FORMAT = "campaign-verify/2"
+VERIFY_FORMAT_1 = "campaign-verify/1"          # earlier verify.json: no passes, no definitions
 
 
 @dataclass(frozen=True, eq=False)
-class VerifyReport(ReportMapping):
+class VerifyReport:
     """``verify.json``: closed-loop verification of a run's test points (``campaign.correct.verify.verify_run``).
 
     ``n`` test points; ``noise_floor_mm`` (RMS of the measurement sigma at the targets); ``n_uncorrected`` points
@@ -23,8 +27,8 @@ class VerifyReport(ReportMapping):
     n: int
     noise_floor_mm: float
     n_uncorrected: int | None
-    stages: dict
-    passes: list
+    stages: dict[str, ErrorFigures]
+    passes: tuple[VerifyPass, ...]
     exit_status: str
     reason: str
     definitions: dict
@@ -32,14 +36,18 @@ class VerifyReport(ReportMapping):
 
     def to_dict(self) -> dict:
         """The verify.json object."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return record_dict(self)
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "VerifyReport":
-        """A verify.json object; RecordError names a missing field or one of the wrong kind."""
+        """A verify.json object (also of format ``campaign-verify/1``, without passes and definitions);
+        RecordError names a missing field or one of the wrong kind (by its path, ``passes.0.all.rms_mm``)."""
         if not isinstance(data, Mapping):
             raise RecordError("verify", f"expected an object, got {type(data).__name__}")
-        return cls(text_field(data, "format"), text_field(data, "run"), count_field(data, "n"), number_field(data, "noise_floor_mm"),
-                   count_field(data, "n_uncorrected", True), object_field(data, "stages"), check_field(data, "passes", False, lambda v: isinstance(v, list), "a list"),
-                   text_field(data, "exit_status"), text_field(data, "reason"), object_field(data, "definitions"),
+        old = data.get("format") == VERIFY_FORMAT_1
+        return cls(text_field(data, "format"), text_field(data, "run"), count_field(data, "n"),
+                   number_field(data, "noise_floor_mm"), count_field(data, "n_uncorrected", True),
+                   record_map_field(data, "stages", ErrorFigures.from_dict),
+                   records_field(data, "passes", VerifyPass.from_dict, old) or (), text_field(data, "exit_status"),
+                   text_field(data, "reason"), object_field(data, "definitions", old) or {},
                    text_field(data, "created_utc"))

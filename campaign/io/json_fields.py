@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import fields
 import math
-from typing import Any, Iterator
+from typing import Any
 
 from campaign.errors import DataError
 
@@ -14,6 +15,7 @@ class RecordError(DataError):
 
     def __init__(self, field_name: str, message: str, file: str = "<record>") -> None:
         self.field = field_name
+        self.detail = message
         super().__init__(file, f"field {field_name!r}: {message}")
 
 
@@ -88,20 +90,70 @@ def float_rows(matrix) -> list[list[float]]:
 
 
 # --------------------------------------------------------------------------
-# reports
+# report records: nested sections, JSON out
 
 
-class ReportMapping(Mapping):
-    """Read-only mapping view of a report's ``to_dict()`` (``report["stages"]``, ``report.get(...)``)."""
+def figure_field(data: Mapping, name: str) -> float | None:
+    """A report figure: a number (NaN and infinity kept, bool refused), or None (null or absent)."""
+    return check_field(data, name, True, lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+                       "a number or null")
 
-    def to_dict(self) -> dict:  # pragma: no cover - overridden
-        raise NotImplementedError
 
-    def __getitem__(self, key: str) -> Any:
-        return self.to_dict()[key]
+def list_field(data: Mapping, name: str, optional: bool = False) -> list | None:
+    """A JSON array (kept as it is)."""
+    return check_field(data, name, optional, lambda v: isinstance(v, list), "a list")
 
-    def __iter__(self) -> Iterator[str]:
-        return iter(self.to_dict())
 
-    def __len__(self) -> int:
-        return len(self.to_dict())
+def _object(path: str, v: Any) -> Mapping:
+    if not isinstance(v, Mapping):
+        raise RecordError(path, f"expected an object, got {repr(v)[:80]}")
+    return v
+
+
+def _nested(name: str, parse, value):
+    """``parse(value)``; a RecordError inside names its path below ``name`` (``stages.kinematic.test.rms_mm``)."""
+    try:
+        return parse(value)
+    except RecordError as exc:
+        raise RecordError(f"{name}.{exc.field}", exc.detail) from None
+
+
+def record_field(data: Mapping, name: str, parse, optional: bool = False):
+    """The nested record ``parse(data[name])`` of a JSON object (None for an absent optional one)."""
+    v = object_field(data, name, optional)
+    return None if v is None else _nested(name, parse, v)
+
+
+def records_field(data: Mapping, name: str, parse, optional: bool = False) -> tuple | None:
+    """A JSON array of objects, each ``parse``d (a tuple)."""
+    items = list_field(data, name, optional)
+    if items is None:
+        return None
+    return tuple(_nested(f"{name}.{i}", parse, _object(f"{name}.{i}", v)) for i, v in enumerate(items))
+
+
+def record_map_field(data: Mapping, name: str, parse, optional: bool = False) -> dict | None:
+    """A JSON object whose values are objects, each ``parse``d (a dict, key order kept)."""
+    v = object_field(data, name, optional)
+    if v is None:
+        return None
+    return {k: _nested(f"{name}.{k}", parse, _object(f"{name}.{k}", x)) for k, x in v.items()}
+
+
+def json_value(value: Any) -> Any:
+    """A record field as JSON: records by their ``to_dict()``, tuples as lists, dicts key by key; anything else
+    (numbers, text, JSON lists and objects kept as read) as it is."""
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    if isinstance(value, tuple):
+        return [json_value(v) for v in value]
+    if isinstance(value, dict):
+        return {k: json_value(v) for k, v in value.items()}
+    return value
+
+
+def record_dict(record, omit_none: tuple[str, ...] = ()) -> dict:
+    """A frozen dataclass record as its JSON object: every field in declaration order (:func:`json_value`), the
+    fields named in ``omit_none`` left out when None (keys that only some reports carry)."""
+    return {f.name: json_value(v) for f in fields(record)
+            if not ((v := getattr(record, f.name)) is None and f.name in omit_none)}

@@ -28,24 +28,35 @@ from drivers.redact import redact
 
 from campaign.io.durable import atomic_write
 from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file
-from campaign.calibrate.calibration_report import CalibrationReport
+from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
-from .terminal import STAGE_LABELS
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
 
 
 @dataclass(frozen=True)
 class ReportSources:
-    """The JSON documents one report is made of (file name -> parsed document)."""
+    """What one report is made of: the calibration and verification reports as records, the ISO 9283 and
+    diagnosis documents (JSON), the calibration's per-point rows, and the parsed JSON documents by name
+    (``calibration``, ``verify0``...: what :func:`_num` reads and tags); a record without its document is tagged
+    from its ``to_dict()``."""
     title: str
-    calibration: dict | None = None
+    calibration: CalibrationReport | None = None
     iso9283: dict | None = None
     diagnosis: dict | None = None
-    verify: tuple[dict, ...] = ()
+    verify: tuple[VerifyReport, ...] = ()
     files: dict = field(default_factory=dict)          # doc name -> relative path, for the page's source list
+    documents: dict = field(default_factory=dict)      # doc name -> parsed JSON document
+    points: PointTable | None = None                   # the calibration's per-point rows (inline or points.csv)
+
+    def docs(self) -> dict:
+        """Every document by name (the parsed one, else the record's ``to_dict()``)."""
+        out = {k: v for k, v in (("calibration", self.calibration), ("iso9283", self.iso9283),
+                                 ("diagnosis", self.diagnosis)) if v is not None}
+        out.update({f"verify{i}": v for i, v in enumerate(self.verify)})
+        return {k: self.documents.get(k) or (v.to_dict() if hasattr(v, "to_dict") else v) for k, v in out.items()}
 
 
 def _read(path: Path) -> dict:
@@ -55,13 +66,12 @@ def _read(path: Path) -> dict:
         raise DataError(str(path), f"not a readable JSON report: {exc}") from None
 
 
-def _checked(doc: dict, path: Path, record) -> dict:
-    """``doc`` once ``record.from_dict`` accepts it (a DataError names the file and the field otherwise)."""
+def _checked(doc: dict, path: Path, record):
+    """``record.from_dict(doc)`` (a DataError names the file and the field otherwise)."""
     try:
-        record.from_dict(doc)
+        return record.from_dict(doc)
     except RecordError as exc:
         raise DataError(str(path), exc.message) from None
-    return doc
 
 
 def collect(directory: str | os.PathLike) -> ReportSources:
@@ -70,28 +80,28 @@ def collect(directory: str | os.PathLike) -> ReportSources:
     if not d.is_dir():
         raise DataError(str(d), "not a directory (campaign report takes a run or output directory)")
     found: dict = {}
-    files = {}
+    files, docs, points = {}, {}, None
     if (d / "report.json").exists():
         doc = _read(d / "report.json")
         kind = {CALIBRATION: "calibration", ISO: "iso9283"}.get(doc.get("format"))
         if kind is None:
             raise DataError(str(d / "report.json"), f"unknown report format {doc.get('format')!r}")
-        if kind == "calibration":
-            _checked(doc, d / "report.json", CalibrationReport)
-            if isinstance(doc.get("points"), dict) and "file" in doc["points"]:
-                doc["points"] = PointTable.of(doc["points"], d)        # the per-point rows of a large run
-        found[kind], files[kind] = doc, "report.json"
+        found[kind] = _checked(doc, d / "report.json", CalibrationReport) if kind == "calibration" else doc
+        files[kind], docs[kind] = "report.json", doc
+        if kind == "calibration" and found[kind].points:
+            points = PointTable.of(found[kind].points, d)                # inline, or points.csv of a large run
     if (d / "diagnosis.json").exists():
         found["diagnosis"], files["diagnosis"] = _read(d / "diagnosis.json"), "diagnosis.json"
     verify = []
     for i, p in enumerate(sorted(d.glob("verify-*/verify.json"))):
-        doc = _read(p)
-        verify.append(_checked(doc, p, VerifyReport) if doc.get("format") == "campaign-verify/2" else doc)
+        docs[f"verify{i}"] = doc = _read(p)
+        verify.append(_checked(doc, p, VerifyReport))
         files[f"verify{i}"] = str(p.relative_to(d))
     if not found and not verify:
         raise DataError(str(d), "no report.json, diagnosis.json or verify-*/verify.json to report on")
-    first = next(iter(found.values()), verify[0] if verify else {})
-    return ReportSources(f"{first.get('config', d.name)}: {d.name}", verify=tuple(verify), files=files, **found)
+    first = next((docs.get(k, found[k]) for k in ("calibration", "iso9283", "diagnosis") if k in found), {})
+    return ReportSources(f"{first.get('config', d.name)}: {d.name}", verify=tuple(verify), files=files,
+                         documents=docs, points=points, **found)
 
 
 def _lookup(doc: dict, key: str):
@@ -119,9 +129,9 @@ def build_figures(src: ReportSources) -> dict[str, list]:
 
     figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": []}
     if src.calibration:
-        figs["calibration"] = hf.calibration_figures(src.calibration)
+        figs["calibration"] = hf.calibration_figures(src.calibration, src.points)
     for i, v in enumerate(src.verify):
-        if v.get("stages"):
+        if v.stages:
             figs["verify"].append(hf.verify_figure(v, i))
     if src.diagnosis and src.diagnosis.get("maps"):
         figs["diagnosis"] = diagnosis_figures(src.diagnosis)
@@ -151,12 +161,9 @@ def diagnosis_figures(report: dict) -> list:
 def render_html(src: ReportSources, figures: dict[str, list]) -> str:
     env = Environment(loader=PackageLoader("campaign.report", "templates"), autoescape=select_autoescape(["html", "j2"]),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
-    docs = {k: v for k, v in (("calibration", src.calibration), ("iso9283", src.iso9283),
-                              ("diagnosis", src.diagnosis)) if v is not None}
-    docs.update({f"verify{i}": v for i, v in enumerate(src.verify)})
     b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
     return env.get_template("report.html.j2").render(
-        src=src, figures=figures, b64=b64, num=_num_factory(docs), stage_labels=STAGE_LABELS,
+        src=src, figures=figures, b64=b64, num=_num_factory(src.docs()), stages=STAGES,
         n_figures=sum(len(v) for v in figures.values()))
 
 

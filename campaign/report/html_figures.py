@@ -1,7 +1,9 @@
-"""Figures of the HTML report, drawn only from the JSON documents (report.json, diagnosis, verify, ISO 9283).
+"""Figures of the HTML report, drawn only from the documents (report.json and its per-point rows, verify.json,
+diagnosis, ISO 9283).
 
-Each function takes the document dict and returns a :class:`Figure` (PNG bytes + title + caption), or None when
-the document lacks what it needs. matplotlib with the Agg backend; one figure at a time, closed after use.
+Each function takes the report (a record, or the document dict of diagnosis and ISO 9283) and returns a
+:class:`Figure` (PNG bytes + title + caption), or None when the report lacks what it needs. matplotlib with the Agg
+backend; one figure at a time, closed after use.
 """
 from __future__ import annotations
 
@@ -10,10 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campaign.calibrate.calibration_report import COMPENSATED, KINEMATIC, NOMINAL, STAGES, CalibrationReport
 from campaign.calibrate.report_points import PointTable
+from campaign.correct.verify_report import VerifyReport
 
-STAGES = (("nominal", "nominal"), ("kinematic", "kinematic"), ("compensated", "final model"))
-COLORS = {"nominal": "tab:red", "kinematic": "tab:blue", "compensated": "tab:green"}
+COLORS = {NOMINAL: "tab:red", KINEMATIC: "tab:blue", COMPENSATED: "tab:green"}     # the stages drawn
+DRAWN = tuple((s.name, s.short) for s in STAGES if s.name in COLORS)
+_SHORT = dict(DRAWN)
 SET_STYLE = {"calib": ("o", "tab:blue", "calibration"), "test": ("^", "tab:orange", "test (held out)"),
              "check": ("s", "tab:purple", "check (repeated)"), "nest": ("*", "tab:red", "reference nest")}
 DPI = 80
@@ -52,23 +57,22 @@ def _png(fig) -> bytes:
 def _stages(err: dict) -> tuple:
     """(key, label) of the stages to draw; the final model is drawn once when it equals the kinematic one (no
     effects, no residual layer) instead of two curves on top of each other."""
-    if np.array_equal(err.get("compensated"), err.get("kinematic"), equal_nan=True):
-        return (("nominal", "nominal"), ("kinematic", "kinematic = final model"))
-    return STAGES
+    if np.array_equal(err.get(COMPENSATED), err.get(KINEMATIC), equal_nan=True):
+        return ((NOMINAL, _SHORT[NOMINAL]), (KINEMATIC, f"{_SHORT[KINEMATIC]} = {_SHORT[COMPENSATED]}"))
+    return DRAWN
 
 
-def _points(report: dict):
-    """(sets (N,), p_base (N, 3), q_deg (N, n), {stage: |err| (N,)}) of report.json's points section."""
-    pts = PointTable.of(report.get("points") or None)      # inline, or read from points.csv by html_report
+def _points(pts: PointTable | None):
+    """(sets (N,), p_base (N, 3), q_deg (N, n), {stage: |err| (N,)}) of report.json's per-point rows."""
     if pts is None:
         return None
     err = {k: np.linalg.norm(v, axis=1) for k, v in pts.err_base_mm.items()}
     return np.array(pts.set), pts.p_base_mm, pts.q_deg, err
 
 
-def _test_points(report: dict):
+def _test_points(pts: PointTable | None):
     """(p_base (M, 3), q_deg (M, n), {stage: |err| (M,)}) of the test points, or None without any."""
-    got = _points(report)
+    got = _points(pts)
     if got is None:
         return None
     sets, p, q, err = got
@@ -79,8 +83,8 @@ def _test_points(report: dict):
 
 
 # ============================================================================ calibration run
-def plan_figure(report: dict) -> Figure | None:
-    got = _points(report)
+def plan_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _points(points)
     if got is None:
         return None
     sets, p, _, _ = got
@@ -103,12 +107,12 @@ def plan_figure(report: dict) -> Figure | None:
                   "Measured SMR positions (base frame via the calibrated registration) by set.", _png(fig))
 
 
-def histogram_figure(report: dict) -> Figure | None:
-    got = _test_points(report)
+def histogram_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _test_points(points)
     if got is None:
         return None
     p, q, err = got
-    floor = report["noise_floor_mm"]
+    floor = report.noise_floor_mm
     stages = _stages(err)
     fig, axes = _subplots(1, len(stages), (4 * len(stages), 3.6), left=0.06 * 3 / len(stages), bottom=0.16, top=0.9,
                           wspace=0.28)
@@ -126,8 +130,8 @@ def histogram_figure(report: dict) -> Figure | None:
                   "Each stage on its own scale; the dashed line is the noise floor.", _png(fig))
 
 
-def cdf_figure(report: dict) -> Figure | None:
-    got = _test_points(report)
+def cdf_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _test_points(points)
     if got is None:
         return None
     p, q, err = got
@@ -136,7 +140,7 @@ def cdf_figure(report: dict) -> Figure | None:
     for key, label in _stages(err):
         e = np.sort(err[key][np.isfinite(err[key])])
         ax.step(e, np.arange(1, len(e) + 1) / len(e), where="post", color=COLORS[key], label=label)
-    ax.axvline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
+    ax.axvline(report.noise_floor_mm, color="k", ls="--", lw=1, label="noise floor")
     ax.set_xscale("log")
     ax.set_xlabel("|error| on test points (mm, log scale)")
     ax.set_ylabel("fraction of test points")
@@ -146,8 +150,8 @@ def cdf_figure(report: dict) -> Figure | None:
                   "Fraction of held-out points whose error is below a value.", _png(fig))
 
 
-def reach_height_figure(report: dict) -> Figure | None:
-    got = _test_points(report)
+def reach_height_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _test_points(points)
     if got is None:
         return None
     p, q, err = got
@@ -157,7 +161,7 @@ def reach_height_figure(report: dict) -> Figure | None:
     for ax, x, xl in zip(axes, (reach, p[:, 2]), ("reach: radius from the J1 axis (mm)", "height z (mm)")):
         for key, label in _stages(err):
             ax.plot(x, err[key], ".", ms=4, color=COLORS[key], label=label, alpha=0.8)
-        ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
+        ax.axhline(report.noise_floor_mm, color="k", ls="--", lw=1, label="noise floor")
         ax.set_yscale("log")
         ax.set_xlabel(xl)
         ax.set_ylabel("|error| (mm, log)")
@@ -167,8 +171,8 @@ def reach_height_figure(report: dict) -> Figure | None:
                   _png(fig))
 
 
-def joints_figure(report: dict) -> Figure | None:
-    got = _test_points(report)
+def joints_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _test_points(points)
     if got is None:
         return None
     p, q, err = got
@@ -181,7 +185,7 @@ def joints_figure(report: dict) -> Figure | None:
             continue
         for key, label in _stages(err)[1:]:
             ax.plot(q[:, j], err[key], ".", ms=5, color=COLORS[key], label=label, alpha=0.8)
-        ax.axhline(report["noise_floor_mm"], color="k", ls="--", lw=1, label="noise floor")
+        ax.axhline(report.noise_floor_mm, color="k", ls="--", lw=1, label="noise floor")
         ax.set_ylim(bottom=0)
         ax.set_xlabel(f"J{j + 1} (deg)")
         ax.set_ylabel("|error| (mm)")
@@ -192,15 +196,15 @@ def joints_figure(report: dict) -> Figure | None:
                   _png(fig))
 
 
-def workspace_map_figure(report: dict) -> Figure | None:
-    got = _test_points(report)
+def workspace_map_figure(report: CalibrationReport, points: PointTable | None) -> Figure | None:
+    got = _test_points(points)
     if got is None:
         return None
     p, q, err = got
     fig, axes = _subplots(1, 2, (11.5, 4.6), left=0.07, right=0.97, bottom=0.12, top=0.92, wspace=0.25)
     axes = axes[0]
     reach = np.hypot(p[:, 0], p[:, 1])
-    for ax, key, title in zip(axes, ("nominal", "compensated"), ("before: nominal model", "after: calibrated model")):
+    for ax, key, title in zip(axes, (NOMINAL, COMPENSATED), ("before: nominal model", "after: calibrated model")):
         sc = ax.scatter(reach, p[:, 2], c=err[key], s=40, cmap="viridis", vmin=0)
         fig.colorbar(sc, ax=ax, label="|error| (mm)")
         ax.set_title(title)
@@ -212,58 +216,60 @@ def workspace_map_figure(report: dict) -> Figure | None:
                   _png(fig))
 
 
-def parameters_figure(report: dict) -> Figure | None:
-    rows = [r for r in report.get("parameters", []) if r["identified"] and r["std"]]
+def parameters_figure(report: CalibrationReport, points: PointTable | None = None) -> Figure | None:
+    rows = [r for r in report.parameters if r.identified and r.std]
     if not rows:
         return None
-    z = np.array([abs(r["delta"]) / r["std"] for r in rows])
+    z = np.array([abs(r.delta) / r.std for r in rows])
     fig, axes = _subplots(1, 1, (max(7, 0.32 * len(rows)), 3.8), left=0.09, bottom=0.24, top=0.96)
     ax = axes[0][0]
     ax.bar(range(len(rows)), z, color=["tab:blue" if v >= 3 else "tab:gray" for v in z])
     ax.axhline(3, color="k", ls="--", lw=1, label="3 sigma")
     ax.set_yscale("log")
-    ax.set_xticks(range(len(rows)), [r["name"] for r in rows], rotation=60, ha="right", fontsize=8)
+    ax.set_xticks(range(len(rows)), [r.name for r in rows], rotation=60, ha="right", fontsize=8)
     ax.set_ylabel("|delta| / sigma (log)")
     ax.legend(fontsize=8)
     return Figure("parameters", "Identified parameters: deviation from nominal in standard deviations",
                   "Grey: within 3 sigma of nominal.", _png(fig))
 
 
-def calibration_figures(report: dict) -> list[Figure]:
+def calibration_figures(report: CalibrationReport, points: PointTable | None) -> list[Figure]:
+    """The calibration section's figures from the report and its per-point rows (``PointTable.of`` its ``points``)."""
     figs = (plan_figure, histogram_figure, cdf_figure, reach_height_figure, joints_figure, workspace_map_figure,
             parameters_figure)
-    return [f for f in (g(report) for g in figs) if f is not None]
+    return [f for f in (g(report, points) for g in figs) if f is not None]
 
 
 # ============================================================================ verify
 def _verify_label(name: str, passes: dict) -> str:
     """A pass's tick label: its name and, from verify.json's passes, how many points were corrected and held."""
     p = passes.get(name)
-    return name if p is None else f"{name}\n{p['n_corrected']} corrected, {p['n_held']} held"
+    return name if p is None else f"{name}\n{p.n_corrected} corrected, {p.n_held} held"
 
 
-def verify_figure(verify: dict, index: int) -> Figure:
+def verify_figure(verify: VerifyReport, index: int) -> Figure:
     """RMS per verify pass on a log scale (the corrected passes sit near the floor, the uncorrected one far
     above): all test points, and the corrected points where the pass held some; the noise floor as a line."""
     plt = _plt()
     from matplotlib.ticker import FuncFormatter
 
-    names = list(verify["stages"])
-    passes = {p["stage"]: p for p in verify.get("passes", [])}
-    rms_all = [verify["stages"][k]["rms_mm"] for k in names]
-    rms_corr = [(passes[k]["corrected"] or {}).get("rms_mm") if k in passes and passes[k]["n_held"] else None
+    names = list(verify.stages)
+    passes = {p.stage: p for p in verify.passes}
+    rms_all = [verify.stages[k].rms_mm for k in names]
+    rms_corr = [passes[k].corrected.rms_mm if k in passes and passes[k].n_held and passes[k].corrected else None
                 for k in names]
     fig, ax = plt.subplots(figsize=(max(7, 1.9 * len(names)), 4.4), constrained_layout=True)   # small: a layout
     x = np.arange(len(names))                                                                  # engine is cheap
     split = any(v is not None for v in rms_corr)
     w = 0.38 if split else 0.6
-    bars = ax.bar(x - (w / 2 if split else 0), rms_all, w, color="tab:blue", label="all test points")
-    ax.bar_label(bars, fmt="%.3f", fontsize=7)
+    bars = ax.bar(x - (w / 2 if split else 0), [np.nan if v is None else v for v in rms_all], w, color="tab:blue",
+                  label="all test points")
+    ax.bar_label(bars, labels=["" if v is None else f"{v:.3f}" for v in rms_all], fontsize=7)
     if split:
         corr = ax.bar(x + w / 2, [np.nan if v is None else v for v in rms_corr], w, color="tab:green",
                       label="corrected points only")
         ax.bar_label(corr, labels=["" if v is None else f"{v:.3f}" for v in rms_corr], fontsize=7)
-    floor = verify["noise_floor_mm"]
+    floor = verify.noise_floor_mm
     ax.axhline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor:.3f} mm")
     ax.set_yscale("log")
     shown = [v for v in (*rms_all, *rms_corr, floor) if v]

@@ -6,13 +6,11 @@ import math
 from rich.console import Console
 from rich.table import Table
 
-from campaign.calibrate.calibration_report import CalibrationReport
+from campaign.calibrate.calibration_report import STAGES, CalibrationReport
+from campaign.calibrate.report_sections import LayerSummary
 from campaign.correct.verify_report import VerifyReport
 from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
-
-STAGE_LABELS = (("nominal", "nominal (uncompensated)"), ("kinematic", "kinematic calibration"),
-                ("elastic", "kinematic + physical effects"), ("compensated", "final model (+ residual layer, if any)"))
 
 
 def _mm(v) -> str:
@@ -22,47 +20,46 @@ def _mm(v) -> str:
 def render_stages(console: Console, report: CalibrationReport) -> None:
     """Seed 000 Table 3 rows on the held-out test set, with the noise floor ("none" without test rows)."""
     floor = report.noise_floor_mm
-    if not report.n["test"]:
+    if not report.n.test:
         console.print("Position error on the held-out test set: none (no test rows)", style="yellow")
     else:
-        t = Table(title=f"Position error on the test set (n = {report.n['test']}), mm")
+        t = Table(title=f"Position error on the test set (n = {report.n.test}), mm")
         for col in ("stage", "max", "mean", "RMS", "RMS / floor"):
             t.add_column(col, justify="left" if col == "stage" else "right")
-        for key, label in STAGE_LABELS:
-            if key not in report.stages:
+        for stage in STAGES:
+            if stage.name not in report.stages:
                 continue
-            s = report.stages[key]["test"]
-            ratio = "-" if s["rms_mm"] is None or not floor else f"{s['rms_mm'] / floor:.2f}"
-            t.add_row(label, _mm(s["max_mm"]), _mm(s["mean_mm"]), _mm(s["rms_mm"]), ratio)
+            s = report.stages[stage.name].test
+            ratio = "-" if s.rms_mm is None or not floor else f"{s.rms_mm / floor:.2f}"
+            t.add_row(stage.label, _mm(s.max_mm), _mm(s.mean_mm), _mm(s.rms_mm), ratio)
         console.print(keep_words(t, console.width))
-    layer = report.stages.get("compensated", {}).get("layer")
+    layer = None if report.final is None else report.final.layer
     if layer:
         console.print(layer_line(layer), markup=False)
     render_choices(console, report)
     cv = report.residual_cv
     if cv and report.residual_choice is None:
-        verdict = ("it predicts structure" if cv["gain"] > 0.02 else
+        verdict = ("it predicts structure" if cv.gain > 0.02 else
                    "no structured residual above the noise: the layer mostly interpolates noise")
-        console.print(f"residual layer ({report.method['residual']}): {cv['folds']}-fold CV on the calibration "
-                      f"points, RMS {cv['rms_without_mm']:.4f} -> {cv['rms_with_mm']:.4f} mm "
-                      f"({100 * cv['gain']:+.0f} %): {verdict}")
+        console.print(f"residual layer ({report.method.residual}): {cv.folds}-fold CV on the calibration "
+                      f"points, RMS {cv.rms_without_mm:.4f} -> {cv.rms_with_mm:.4f} mm "
+                      f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
     console.print(f"noise floor {_mm(floor)} mm (from {report.noise_floor_source}; specs "
                   f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
-                  f"sigma0 {report.sigma0:.2f}   rejected points {report.n['rejected']}")
+                  f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
     render_identity(console, report)
 
 
-def layer_line(lay: dict) -> str:
+def layer_line(lay: LayerSummary) -> str:
     """The fitted residual layer's calibration RMS next to its CV-predicted held-out RMS, labelled."""
     gp = ""
-    if "approximation" in lay:
-        how = "exact GP" if lay["approximation"] == "exact" else f"inducing-point GP, {lay['n_inducing']} inputs"
-        gp = (f" ({how} on {lay['n_train']} points, noise {_mm(lay['noise_mm'])} mm, "
-              f"floor {_mm(lay['noise_floor_mm'])} mm)")
-    return (f"residual layer {lay['kind']}{gp}: calibration RMS {_mm(lay['calib_rms_mm'])} mm is a fit to its own "
-            f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay['cv_predicted_rms_mm'])} mm "
-            f"({lay['folds']}-fold), test set {_mm(lay['test_rms_mm'])} mm")
+    if lay.approximation is not None:
+        how = "exact GP" if lay.approximation == "exact" else f"inducing-point GP, {lay.n_inducing} inputs"
+        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {_mm(lay.noise_floor_mm)} mm)"
+    return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
+            f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "
+            f"({lay.folds}-fold), test set {_mm(lay.test_rms_mm)} mm")
 
 
 def render_identity(console: Console, report: CalibrationReport) -> None:
@@ -95,7 +92,8 @@ def render_preparation(console: Console, prep: dict | None) -> None:
 
 def render_choices(console: Console, report: CalibrationReport) -> None:
     """Which effects and which residual layer the data supported (CV figures), and the excluded points."""
-    sel = (report.effects or {}).get("selection")
+    effects = report.effects
+    sel = None if effects is None else effects.selection
     if sel:
         tried = {}
         for t in sel["trials"]:
@@ -105,33 +103,33 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
         console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
                       f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
-    for fe in (report.effects or {}).get("fitted", []):
+    for fe in () if effects is None else effects.fitted:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
                                                                  if "stiffness_Nm_per_rad" in p else "")
                          for n, p in fe["params"].items())
         console.print(f"  {fe['name']}: {vals}")
-    for note in (report.effects or {}).get("notes", []):
+    for note in (effects and effects.notes) or ():
         console.print(f"  note: {note}")
     ch = report.residual_choice
-    if ch and ch.get("candidates"):
+    if ch and ch.candidates:
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
-                         for k, v in ch["candidates"].items())
-        console.print(f"residual layer by {ch['folds']}-fold CV on the calibration points (RMS mm): {figs} -> "
-                      f"{ch['chosen']}")
-    for e in report.excluded_points or []:
-        console.print(f"excluded {e['point_id']}: {e['reason']}")
+                         for k, v in ch.candidates.items())
+        console.print(f"residual layer by {ch.folds}-fold CV on the calibration points (RMS mm): {figs} -> "
+                      f"{ch.chosen}")
+    for e in report.excluded_points:
+        console.print(f"excluded {e.point_id}: {e.reason}")
     if report.structure_note:
         console.print(report.structure_note)
     multi = report.multi_smr
-    if multi and "skipped" not in multi:
-        figs = ", ".join(f"{k} RMS {v['rms_mm']:.4f}" for k, v in multi["test"].items())
-        console.print(f"{multi['n_smr']}-SMR calibration (one offset per SMR), test set: {figs} mm")
-        o = multi.get("orientation_error_arcsec")
+    if multi and multi.skipped is None:
+        figs = ", ".join(f"{k} RMS {v.rms_mm:.4f}" for k, v in multi.test.items())
+        console.print(f"{multi.n_smr}-SMR calibration (one offset per SMR), test set: {figs} mm")
+        o = multi.orientation_error_arcsec
         if o:
-            console.print(f"flange orientation error on the test set: mean {o['mean']:.1f}, RMS {o['rms']:.1f}, "
-                          f"max {o['max']:.1f} arcsec")
+            console.print(f"flange orientation error on the test set: mean {o.mean:.1f}, RMS {o.rms:.1f}, "
+                          f"max {o.max:.1f} arcsec")
     elif multi:
-        console.print(f"multi-SMR calibration skipped: {multi['skipped']}")
+        console.print(f"multi-SMR calibration skipped: {multi.skipped}")
 
 
 def render_parameters(console: Console, report: CalibrationReport) -> None:
@@ -139,17 +137,17 @@ def render_parameters(console: Console, report: CalibrationReport) -> None:
     for col in ("parameter", "delta", "std", "unit"):
         t.add_column(col, justify="left" if col == "parameter" else "right")
     for row in report.parameters:
-        if row["identified"]:
-            t.add_row(row["name"], f"{row['delta']:+.4f}", f"{row['std']:.4f}", row["unit"])
+        if row.identified:
+            t.add_row(row.name, f"{row.delta:+.4f}", f"{row.std:.4f}", row.unit)
     console.print(keep_words(t, console.width))
     if report.unidentifiable:
-        notes = ", ".join(f"{u['name']} ({_why_fixed(u)})" for u in report.unidentifiable)
+        notes = ", ".join(f"{u.name} ({_why_fixed(u)})" for u in report.unidentifiable)
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
 
 
-def _why_fixed(u: dict) -> str:
+def _why_fixed(u) -> str:
     """Why a parameter stayed at nominal: the parameters it is aliased with, else the reason in words."""
-    return f"aliased with {'/'.join(u['redundant_with'])}" if u["redundant_with"] else u["reason"]
+    return f"aliased with {'/'.join(u.redundant_with)}" if u.redundant_with else u.reason
 
 
 def _vias(plan: Plan) -> str:
@@ -166,11 +164,11 @@ def render_stop(console: Console, report: CalibrationReport) -> None:
     t = Table(title="Predicted held-out RMS vs calibration points (last refit), mm")
     t.add_column("calibration points", justify="right")
     t.add_column("predicted RMS", justify="right")
-    for n, rms in stop["checks"][-1]["curve"]:
-        t.add_row(str(n) + (" (stop)" if n == stop["n_calib_at_stop"] else ""), f"{rms:.4f}")
+    for n, rms in stop.last_curve:
+        t.add_row(str(n) + (" (stop)" if n == stop.n_calib_at_stop else ""), f"{rms:.4f}")
     console.print(keep_words(t, console.width))
-    console.print(f"stopped after {stop['n_calib_at_stop']} calibration points ({stop['reason']}): predicted "
-                  f"held-out RMS {stop['predicted_rms_mm']:.4f} mm, measured {_mm(stop['measured_rms_mm'])} mm "
+    console.print(f"stopped after {stop.n_calib_at_stop} calibration points ({stop.reason}): predicted "
+                  f"held-out RMS {stop.predicted_rms_mm:.4f} mm, measured {_mm(stop.measured_rms_mm)} mm "
                   "(final model, test set)", markup=False)
 
 
@@ -211,22 +209,22 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
     t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm)")
     for col in ("stage", "corrected", "held", "RMS all", "RMS corr.", "max corr.", "RMS corr. / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
-    fmt = lambda s, key: "-" if s is None else f"{s[key]:.3f}"  # noqa: E731
+    fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
     for p in rep.passes:
-        c = p["corrected"]
-        t.add_row(p["stage"], str(p["n_corrected"]), str(p["n_held"]), fmt(p["all"], "rms_mm"), fmt(c, "rms_mm"),
-                  fmt(c, "max_mm"), "-" if c is None else f"{c['rms_mm'] / floor:.2f}")
+        c = p.corrected
+        t.add_row(p.stage, str(p.n_corrected), str(p.n_held), fmt(p.all.rms_mm), fmt(c and c.rms_mm),
+                  fmt(c and c.max_mm), "-" if c is None else f"{c.rms_mm / floor:.2f}")
     console.print(keep_words(t, console.width))
     console.print("corrected (corr.) = points whose correction was commanded; held = commanded at their planned "
                   "joints", markup=False)
     for p in rep.passes:
-        for why, count in p["held"].items():
-            console.print(f"{p['stage']}: {count} held: {why}", markup=False)
+        for why, count in p.held.items():
+            console.print(f"{p.stage}: {count} held: {why}", markup=False)
     for p in rep.passes:
-        a = p.get("orientation_error_arcsec")
+        a = p.orientation_error_arcsec
         if a:
-            console.print(f"{p['stage']}: tool orientation error {a['rms']:.1f} arcsec RMS, max {a['max']:.1f} "
-                          f"({a['source']})", markup=False)
+            console.print(f"{p.stage}: tool orientation error {a.rms:.1f} arcsec RMS, max {a.max:.1f} "
+                          f"({a.source})", markup=False)
 
 
 def rp_verdict(run: dict, spec_mm: float | None) -> str:

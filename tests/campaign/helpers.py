@@ -1,9 +1,13 @@
-"""Small configs derived from the shipped ones, for fast campaign tests."""
+"""Small configs derived from the shipped ones, for fast campaign tests; the reports a command wrote, typed."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import yaml
+
+from campaign.calibrate.calibration_report import CalibrationReport
+from campaign.correct.verify_report import VerifyReport
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -26,7 +30,7 @@ def small_config(tmp_path: Path, name: str = "irb2600", **overrides) -> Path:
     return path
 
 
-SMALL_ARM_JOINTS = [  # robocal.diagnose.truth_cell.small_arm_nominal (the published UR5 DH table)
+SMALL_ARM_JOINTS = [  # robocal.simulation.truth_cell.small_arm_nominal (the published UR5 DH table)
     {"alpha_deg": 90, "a_mm": 0, "d_mm": 89.159, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
     {"alpha_deg": 0, "a_mm": -425, "d_mm": 0, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
     {"alpha_deg": 0, "a_mm": -392.25, "d_mm": 0, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
@@ -36,7 +40,7 @@ SMALL_ARM_JOINTS = [  # robocal.diagnose.truth_cell.small_arm_nominal (the publi
 
 
 def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.csv", **overrides) -> tuple[Path, Path]:
-    """A truth campaign (robocal.diagnose.truth_cell) as an interchange CSV (read-back joints, rows in measurement order, time and
+    """A truth campaign (robocal.simulation.truth_cell) as an interchange CSV (read-back joints, rows in measurement order, time and
     payload when logged) and a config of its robot with the nominal SMR offset and no calibration section (only
     the ``calibration.*`` keys given as overrides)."""
     import numpy as np
@@ -61,3 +65,13 @@ def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.c
         doc.setdefault("calibration", {})[key.split(".", 1)[1]] = value
     cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
     return csv, cfg
+
+
+def read_report(directory: Path) -> CalibrationReport:
+    """``report.json`` of a run or output directory, as the typed record (RecordError when a field is wrong)."""
+    return CalibrationReport.from_dict(json.loads((Path(directory) / "report.json").read_text()))
+
+
+def read_verify(path: Path) -> VerifyReport:
+    """A ``verify.json``, as the typed record."""
+    return VerifyReport.from_dict(json.loads(Path(path).read_text()))

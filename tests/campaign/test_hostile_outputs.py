@@ -17,7 +17,7 @@ import yaml
 
 from campaign.run.output_dirs import MARKER
 from campaign.run.log_reader import encode_record
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import SECRET, checksums, run_campaign_process, secret_hits
 
 pytestmark = pytest.mark.system
@@ -136,8 +136,8 @@ def _spreadsheet_safe(w: Path, out: str, err: str) -> None:
 
 def _no_test_rows_reported(w: Path, out: str, err: str) -> None:
     assert "held-out test set: none" in out
-    report = json.loads((w / "out" / "report.json").read_text())
-    assert report["n"]["test"] == 0 and any("no test rows" in n for n in report["plausibility"]["notes"])
+    report = read_report(w / "out")
+    assert report.n.test == 0 and any("no test rows" in n for n in report.plausibility.notes)
     assert "Held-out test set: none" in (w / "out" / "report.html").read_text()
 
 

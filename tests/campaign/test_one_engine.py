@@ -2,7 +2,7 @@
 section: the defaults): the same accepted effects, the same parameter values (1e-9 relative) and the same "after"
 RMS on the test rows as reprocess's elastic stage.
 
-20 simulated campaigns of robocal/diagnose/truth_cell.py (the failure classes of real campaigns and single effects) and the
+20 simulated campaigns of robocal/simulation/truth_cell.py (the failure classes of real campaigns and single effects) and the
 measured campaigns of DATASETS (the public UR5 campaign). Adding a dataset is one line: ``Case(name, make)`` with
 ``make(tmp_path) -> (csv_path, config_path)``.
 """
@@ -15,13 +15,13 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.calibrate.diagnosis import diagnose_dataset
 from campaign.data.importers import import_target_dif
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
 from robocal.diagnose.selfcheck import FORMS, trial_setting
-from robocal.diagnose.truth_cell import TruthProtocol, simulate, small_arm_nominal
+from robocal.simulation.truth_cell import TruthProtocol, simulate, small_arm_nominal
 from tests.campaign.helpers import ROOT, truth_csv
 
 SMALL = dict(n_calib=160, n_test=50, check_poses=6, check_repeats=4)
@@ -64,13 +64,13 @@ DATASETS: list[Case] = [       # measured campaigns, one line each
 @pytest.mark.parametrize("case", CAMPAIGNS + DATASETS, ids=lambda c: c.name)
 def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_path, case):
     csv, cfg_path = case.make(tmp_path)
-    cfg = load_config(cfg_path)
-    rep = calibrate_dataset(read_csv(csv), cfg).report.to_dict()
-    diag = diagnose_dataset(read_csv(csv), cfg).report
-    fitted = rep["effects"]["fitted"]
+    cell = load_cell(cfg_path)
+    rep = calibrate_dataset(read_csv(csv), cell).report
+    diag = diagnose_dataset(read_csv(csv), cell).report
+    fitted = rep.effects.fitted
     accepted = [f for f in diag["findings"] if f["accepted"]]
     print(case.name, [f["evidence"]["label"] for f in accepted], diag["final_test_rms_mm"])
-    assert [f["evidence"]["label"] for f in accepted] == rep["effects"]["selection"]["taken"]
+    assert [f["evidence"]["label"] for f in accepted] == rep.effects.selection["taken"]
     assert [e["name"] for e in diag["effects"]] == [e["name"] for e in fitted]
     for mine, theirs in zip(diag["effects"], fitted):
         assert mine["options"] == theirs["options"]
@@ -79,7 +79,7 @@ def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_p
             if "stiffness_Nm_per_rad" in row:
                 assert mine["params"][name]["stiffness_Nm_per_rad"] == pytest.approx(row["stiffness_Nm_per_rad"],
                                                                                      rel=1e-9)
-    after = rep["stages"]["elastic" if fitted else "kinematic"]["test"]["rms_mm"]
+    after = rep.stages["elastic" if fitted else "kinematic"].test.rms_mm
     assert diag["final_test_rms_mm"] == pytest.approx(after, rel=1e-9)
-    assert diag["baseline_test_rms_mm"] == pytest.approx(rep["stages"]["kinematic"]["test"]["rms_mm"], rel=1e-9)
+    assert diag["baseline_test_rms_mm"] == pytest.approx(rep.stages["kinematic"].test.rms_mm, rel=1e-9)
     assert np.isfinite(diag["unexplained_structure"]["excess_over_floor_mm"])

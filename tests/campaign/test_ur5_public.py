@@ -4,15 +4,15 @@ published hybrid MDH + neural-network result (mean 0.1549 mm). ``-s`` prints eve
 figures (docs/results.md)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
+from campaign.calibrate.report_sections import RowCounts
 from campaign.calibrate.stages import calibrate_dataset
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import cli
 
 pytestmark = pytest.mark.system
@@ -36,28 +36,27 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
     assert code == 0, err
     code, text, err = cli(capsys, "reprocess", data, "--config", ROOT / "configs" / "ur5.yaml", "--out", out)
     assert code == 0, err
-    report = json.loads((out / "report.json").read_text())
-    stages = report["stages"]
+    report = read_report(out)
+    stages = report.stages
     raw = _raw_mean_mm(UR5 / "3D_UR5_uncalibrated_random_cleaned.csv")
     with capsys.disabled():
         print(f"\nUR5 public campaign, 20 random held-out poses (mm); published: uncalibrated mean "
               f"{PUBLISHED_UNCALIBRATED_MM}, hybrid MDH + ASTGCN mean {PUBLISHED_HYBRID_MM}")
         print(f"  {'as delivered (|dif|, no registration)':40s} mean {raw:.4f}")
         for name, s in stages.items():
-            t = s["test"]
-            print(f"  {name:40s} mean {t['mean_mm']:.4f}  RMS {t['rms_mm']:.4f}  max {t['max_mm']:.4f}")
-        effects = [e["name"] + str(e["options"]) for e in report["effects"]["fitted"]]
-        print(f"  noise floor (specs) {report['noise_floor_mm']:.4f}; effects {effects}; "
-              f"layer {report['method']['residual']}")
-    assert report["n"] == {"calib": 1000, "test": 20, "check": 0, "rejected": 0}
+            t = s.test
+            print(f"  {name:40s} mean {t.mean_mm:.4f}  RMS {t.rms_mm:.4f}  max {t.max_mm:.4f}")
+        effects = [e["name"] + str(e["options"]) for e in report.effects.fitted]
+        print(f"  noise floor (specs) {report.noise_floor_mm:.4f}; effects {effects}; layer {report.method.residual}")
+    assert report.n == RowCounts(calib=1000, test=20, check=0, rejected=0)
     assert abs(raw - PUBLISHED_UNCALIBRATED_MM) < 0.01          # the published baseline is the raw |dif| mean
-    final = stages["compensated"]["test"]["mean_mm"]
+    final, kinematic = report.final.test.mean_mm, stages["kinematic"].test.mean_mm
     assert final < OUR_BOUND_MM < PUBLISHED_HYBRID_MM
-    assert stages["kinematic"]["test"]["mean_mm"] < PUBLISHED_HYBRID_MM
-    assert final <= stages["kinematic"]["test"]["mean_mm"]
+    assert kinematic < PUBLISHED_HYBRID_MM
+    assert final <= kinematic
     # the config's SMR offset (30 mm) is rough: registered, reported, and the terminal says what to configure
-    tool = report["plausibility"]["tool"]
-    assert tool["directions_determined"] == 3 and 3.0 < tool["difference_mm"][0] < 6.0
+    tool = report.plausibility.tool
+    assert tool.determined == 3 and 3.0 < tool.difference_mm[0] < 6.0
     assert "put [" in text and "in tool.p_flange_smr_mm" in text
 
 
@@ -68,18 +67,18 @@ def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
     from campaign.calibrate.plausibility import check_dataset
 
     ds = import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv", UR5 / "3D_UR5_uncalibrated_random_cleaned.csv")
-    plaus = check_dataset(ds, load_config(ROOT / "configs" / "ur5.yaml"))[1]
+    plaus = check_dataset(ds, load_cell(ROOT / "configs" / "ur5.yaml"))[1]
     right = [round(v, 1) for v in plaus.tool.registered_mm[0]]
     reports = {}
     for off_mm in (0.0, -30.0, 90.0):
         where = tmp_path / f"off{off_mm:+.0f}"
         where.mkdir()
         cfg = small_config(where, "ur5", **{"tool.p_flange_smr_mm": [right[0], right[1], right[2] + off_mm]})
-        reports[off_mm] = calibrate_dataset(ds, load_config(cfg)).report.to_dict()
-    assert reports[0.0]["plausibility"]["tool"]["notes"] == []
+        reports[off_mm] = calibrate_dataset(ds, load_cell(cfg)).report
+    assert reports[0.0].plausibility.tool.notes() == ()
     for off_mm in (-30.0, 90.0):
-        assert len(reports[off_mm]["plausibility"]["tool"]["notes"]) == 1
-        for stage, s in reports[0.0]["stages"].items():
+        assert len(reports[off_mm].plausibility.tool.notes()) == 1
+        for stage, s in reports[0.0].stages.items():
             for key in ("mean_mm", "rms_mm", "max_mm"):
-                got = reports[off_mm]["stages"][stage]["test"][key]
-                assert got == pytest.approx(s["test"][key], rel=0.01), (off_mm, stage, key)
+                got = getattr(reports[off_mm].stages[stage].test, key)
+                assert got == pytest.approx(getattr(s.test, key), rel=0.01), (off_mm, stage, key)

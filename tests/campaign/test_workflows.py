@@ -4,15 +4,14 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.interchange_csv import read_csv
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
 from robocal.ik import branch_signature
 from robocal.kinematics import smr_base, within_limits
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 
 pytestmark = pytest.mark.system
 
@@ -26,38 +25,37 @@ def full_run(tmp_path_factory):
 
 
 def test_mock_campaign_reaches_the_noise_floor(full_run):
-    report = json.loads((full_run / "report.json").read_text())
-    kin, nom = report["stages"]["kinematic"]["test"], report["stages"]["nominal"]["test"]
-    floor = report["noise_floor_mm"]
-    print(f"test set n={kin['n']}: nominal RMS {nom['rms_mm']:.3f} mm, kinematic RMS {kin['rms_mm']:.4f} mm, "
-          f"noise floor {floor:.4f} mm ({report['noise_floor_source']}), ratio {kin['rms_mm'] / floor:.2f}")
-    assert report["noise_floor_source"] == "repeats"
-    assert kin["rms_mm"] <= 1.2 * floor
-    assert nom["rms_mm"] > 5 * kin["rms_mm"]
-    assert {"nominal", "kinematic", "compensated"} <= set(report["stages"])
-    for stage in report["stages"].values():
-        assert set(stage["test"]) == {"max_mm", "mean_mm", "rms_mm", "n"}
-    assert report["unidentifiable"] and report["parameters"]
+    report = read_report(full_run)
+    kin, nom = report.stages["kinematic"].test, report.stages["nominal"].test
+    floor = report.noise_floor_mm
+    print(f"test set n={kin.n}: nominal RMS {nom.rms_mm:.3f} mm, kinematic RMS {kin.rms_mm:.4f} mm, "
+          f"noise floor {floor:.4f} mm ({report.noise_floor_source}), ratio {kin.rms_mm / floor:.2f}")
+    assert report.noise_floor_source == "repeats"
+    assert kin.rms_mm <= 1.2 * floor
+    assert nom.rms_mm > 5 * kin.rms_mm
+    assert {"nominal", "kinematic", "compensated"} <= set(report.stages)
+    for stage in report.stages.values():
+        assert stage.test.n == kin.n and None not in (stage.test.max_mm, stage.test.mean_mm, stage.test.rms_mm)
+    assert report.unidentifiable and report.parameters
 
 
 def test_reprocess_of_exported_csv_reproduces_the_live_report(full_run, tmp_path):
-    live = json.loads((full_run / "report.json").read_text())
+    live = read_report(full_run)
     for source in (full_run / "data.csv", full_run):
         out = tmp_path / source.name
         assert main(["reprocess", str(source), "--config", str(ROOT / "configs/irb2600.yaml"), "--out", str(out)]) == 0
-        again = json.loads((out / "report.json").read_text())
+        again = read_report(out)
         for stage in ("nominal", "kinematic", "compensated"):
             for key in ("max_mm", "mean_mm", "rms_mm", "n"):
-                assert again["stages"][stage]["test"][key] == pytest.approx(live["stages"][stage]["test"][key],
-                                                                            rel=1e-9, abs=1e-12)
-        assert again["noise_floor_mm"] == pytest.approx(live["noise_floor_mm"], rel=1e-12)
+                assert getattr(again.stages[stage].test, key) == pytest.approx(
+                    getattr(live.stages[stage].test, key), rel=1e-9, abs=1e-12)
+        assert again.noise_floor_mm == pytest.approx(live.noise_floor_mm, rel=1e-12)
 
 
 def test_log_holds_every_planned_point_once(full_run):
     contents = read_log(full_run)
     ids = [p["point_id"] for p in contents.points]
-    cfg = load_config(ROOT / "configs/irb2600.yaml")
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    plan = build_plan(load_cell(ROOT / "configs/irb2600.yaml"))
     assert sorted(ids) == sorted(p.point_id for p in plan.points)
     assert contents.stops[-1]["exit_status"] == "success"
     rec = contents.points[0]
@@ -68,9 +66,9 @@ def test_log_holds_every_planned_point_once(full_run):
 
 
 def test_plan_uses_one_configuration_inside_the_limits():
-    cfg = load_config(ROOT / "configs/irb2600.yaml")
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(ROOT / "configs/irb2600.yaml")
+    kin = cell.kinematics
+    plan = build_plan(cell)
     q = np.radians([p.q_deg for p in plan.points])
     assert within_limits(kin, q).all()
     sig = branch_signature(kin, q)
@@ -154,21 +152,22 @@ def test_sigint_stops_cleanly_with_exit_130(tmp_path):
 def test_cross_validation_tells_structure_from_noise(full_run, tmp_path):
     """Default config: on geometric-only truth no effect and no residual layer is taken (model.json holds none);
     with joint compliance in the truth, forward selection takes it and the elastic stage beats the kinematic one."""
-    geometric = json.loads((full_run / "report.json").read_text())
-    assert geometric["effects"]["selection"]["taken"] == [] and "elastic" not in geometric["stages"]
-    assert geometric["residual_choice"]["chosen"] == "none"
+    geometric = read_report(full_run)
+    assert geometric.effects.selection["taken"] == [] and "elastic" not in geometric.stages
+    assert geometric.residual_choice.chosen == "none"
     assert json.loads((full_run / "model.json").read_text())["residual"] is None
     cfg = small_config(tmp_path, **{"plan.grid.step_mm": 200, "simulation.effects": [
         {"name": "joint_compliance", "scale": 3.0}]})
     run = tmp_path / "r"
     assert main(["run", str(cfg), "--out", str(run)]) == 0
-    report = json.loads((run / "report.json").read_text())
-    rms = {k: v["test"]["rms_mm"] for k, v in report["stages"].items()}
-    print(f"compliance truth: taken {report['effects']['selection']['taken']}, test RMS kinematic "
-          f"{rms['kinematic']:.4f} -> elastic {rms['elastic']:.4f} mm (floor {report['noise_floor_mm']:.4f})")
-    assert report["effects"]["selection"]["taken"][0] == "joint_compliance(J2,3)"
+    report = read_report(run)
+    rms = {k: v.test.rms_mm for k, v in report.stages.items()}
+    taken = report.effects.selection["taken"]
+    print(f"compliance truth: taken {taken}, test RMS kinematic "
+          f"{rms['kinematic']:.4f} -> elastic {rms['elastic']:.4f} mm (floor {report.noise_floor_mm:.4f})")
+    assert taken[0] == "joint_compliance(J2,3)"
     assert rms["elastic"] < 0.6 * rms["kinematic"] and rms["compensated"] <= rms["elastic"] * 1.0001
-    fitted = {p: v["value"] for p, v in report["effects"]["fitted"][0]["params"].items()}
+    fitted = {p: v["value"] for p, v in report.effects.fitted[0]["params"].items()}
     truth = {"c2": 3 * 3.3e-7, "c3": 3 * 6.7e-7}            # typical values of robocal.effects x scale 3
     for name, value in truth.items():
         assert abs(fitted[name] - value) < 0.25 * value

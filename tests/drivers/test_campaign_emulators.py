@@ -4,19 +4,18 @@ RWS 1.0 and 2.0 (the driver over HTTP Digest / Basic to the in-process RWS emula
 ur_rtde library to the RTDE emulator process, and the generic tracker over socket:// to the tracker emulator.
 Where the tracker is mock://, it follows the emulated robot's read-back joints (simulated measurements).
 """
-import json
 
 import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.run.devices import mock_world
 from campaign.run.log_reader import read_log
 from drivers.emulators.rtde_launch import start_emulator
 from drivers.emulators.rws_server import RwsEmulator
 from drivers.emulators.line_tracker_server import TrackerEmulator
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 pytestmark = pytest.mark.system
 
@@ -29,8 +28,8 @@ def _finished(run, min_points=20):
     contents = read_log(run)
     assert contents.stops[-1]["exit_status"] == "success", contents.stops
     assert len(contents.points) >= min_points
-    report = json.loads((run / "report.json").read_text())
-    assert report["stages"]["kinematic"]["test"]["rms_mm"] < report["stages"]["nominal"]["test"]["rms_mm"]
+    report = read_report(run)
+    assert report.stages["kinematic"].test.rms_mm < report.stages["nominal"].test.rms_mm
     return contents, report
 
 
@@ -65,7 +64,7 @@ def test_campaign_against_ur_emulator_with_the_real_library(tmp_path, monkeypatc
 def test_campaign_with_tracker_over_socket(tmp_path):
     """Robot: the RWS emulator moving a simulated robot; tracker: the line-protocol emulator measuring it."""
     cfg_path = small_config(tmp_path, **SMALL)
-    world = mock_world(load_config(cfg_path))
+    world = mock_world(load_cell(cfg_path))
     world.faults = {}
 
     def move(q_deg):
@@ -82,7 +81,7 @@ def test_campaign_with_tracker_over_socket(tmp_path):
         run = tmp_path / "run"
         assert main(["run", str(cfg), "--out", str(run)]) == 0
         contents, report = _finished(run)
-    assert report["stages"]["kinematic"]["test"]["rms_mm"] < 3 * report["noise_floor_mm"]
+    assert report.stages["kinematic"].test.rms_mm < 3 * report.noise_floor_mm
 
 
 def test_motors_off_mid_run_stops_cleanly_and_resume_completes(tmp_path, capsys):
@@ -127,6 +126,6 @@ def test_controller_of_another_model_stops_before_the_first_move(tmp_path, capsy
         assert emu.moves == [] and not run.exists()
         assert main(["run", str(cfg), "--out", str(run), "--force"]) == 0
         contents, report = _finished(run)
-    for doc in (contents.start, report):
+    for doc in (contents.start, dict(report.identification)):
         check = doc["identity_check"]
         assert check["robot"]["result"] == "mismatch" and "IRB 6700-150/3.20" in check["overridden"][0]

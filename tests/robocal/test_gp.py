@@ -18,7 +18,7 @@ from robocal.model import CalibratedModel
 from robocal.payload import DeflectionModel, HeavyPayloadCell, deflected_flange, irb4600, random_configurations
 from robocal.rbf import RBFNetwork
 from robocal.stats import error_stats
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 
@@ -147,28 +147,29 @@ def test_campaign_reprocess_with_gpr_residual(tmp_path, capsys):
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     out = tmp_path / "re"
     assert main(["reprocess", str(run / "data.csv"), "--config", str(cfg), "--out", str(out)]) == 0
-    live, again = (json.loads((d / "report.json").read_text()) for d in (run, out))
-    comp = again["stages"]["compensated"]
-    lay = comp["layer"]
-    assert lay["kind"] == "gpr" and lay["approximation"] == "exact" and 0 < lay["n_train"] <= again["n"]["calib"]
-    assert lay["calib_rms_mm"] == comp["calib"]["rms_mm"] and lay["test_rms_mm"] == comp["test"]["rms_mm"]
-    assert lay["cv_predicted_rms_mm"] == again["residual_choice"]["candidates"]["gpr"]["cv_rms_mm"]
-    assert lay["noise_floor_mm"] == again["noise_floor_mm"] and lay["noise_mm"] >= lay["noise_floor_mm"] * (1 - 1e-9)
+    live, again = read_report(run), read_report(out)
+    comp = again.final
+    lay = comp.layer
+    assert lay.kind == "gpr" and lay.approximation == "exact" and 0 < lay.n_train <= again.n.calib
+    assert lay.calib_rms_mm == comp.calib.rms_mm and lay.test_rms_mm == comp.test.rms_mm
+    assert lay.cv_predicted_rms_mm == again.residual_choice.candidates["gpr"]["cv_rms_mm"]
+    assert lay.noise_floor_mm == again.noise_floor_mm and lay.noise_mm >= lay.noise_floor_mm * (1 - 1e-9)
     shown = capsys.readouterr().out
-    assert f"calibration RMS {lay['calib_rms_mm']:.3f} mm is a fit to its own points, not an accuracy; " \
-           f"CV-predicted held-out RMS {lay['cv_predicted_rms_mm']:.3f} mm" in shown
+    assert f"calibration RMS {lay.calib_rms_mm:.3f} mm is a fit to its own points, not an accuracy; " \
+           f"CV-predicted held-out RMS {lay.cv_predicted_rms_mm:.3f} mm" in shown
     html = (out / "report.html").read_text()
     assert 'id="layer-honesty"' in html and "not an accuracy" in html
     assert f'data-key="stages.compensated.layer.cv_predicted_rms_mm" data-scale="1.0" data-fmt=".4f" ' \
-           f'data-value="{lay["cv_predicted_rms_mm"]!r}"' in html
-    assert again["method"]["residual"] == "gpr"
-    assert comp["test"]["rms_mm"] == pytest.approx(live["stages"]["compensated"]["test"]["rms_mm"], rel=1e-9)
-    std = comp["test_pred_std_mm"]
-    assert std["n"] == comp["test"]["n"] == len(std["per_point_mm"]) > 0
-    print(f"gpr reprocess: kinematic RMS {again['stages']['kinematic']['test']['rms_mm']:.4f} mm, compensated "
-          f"{comp['test']['rms_mm']:.4f} mm, predictive std mean {std['mean_mm']:.4f} mm")
-    assert comp["test"]["rms_mm"] < again["stages"]["kinematic"]["test"]["rms_mm"]
-    assert 0.3 * comp["test"]["rms_mm"] < std["rms_mm"] < 3 * comp["test"]["rms_mm"]
+           f'data-value="{lay.cv_predicted_rms_mm!r}"' in html
+    assert again.method.residual == "gpr"
+    assert comp.test.rms_mm == pytest.approx(live.final.test.rms_mm, rel=1e-9)
+    std = comp.test_pred_std_mm
+    assert std.n == comp.test.n == len(std.per_point_mm) > 0
+    kinematic = again.stages["kinematic"].test.rms_mm
+    print(f"gpr reprocess: kinematic RMS {kinematic:.4f} mm, compensated "
+          f"{comp.test.rms_mm:.4f} mm, predictive std mean {std.mean_mm:.4f} mm")
+    assert comp.test.rms_mm < kinematic
+    assert 0.3 * comp.test.rms_mm < std.rms_mm < 3 * comp.test.rms_mm
     model = json.loads((out / "model.json").read_text())
     assert model["residual"]["kind"] == "gpr"
     assert main(["reprocess", str(run), "--config", str(cfg), "--out", str(tmp_path / "from-log")]) == 0
@@ -178,4 +179,4 @@ def test_campaign_reprocess_with_gpr_residual(tmp_path, capsys):
     assert main(["reprocess", str(tmp_path / "pay.csv"), "--config", str(cfg), "--out", str(tmp_path / "pay")]) == 0
     layer = load_model(tmp_path / "pay" / "model.json").residual
     assert layer.uses_payload and layer.payload_kg == 40.0
-    assert json.loads((tmp_path / "pay" / "report.json").read_text())["stages"]["compensated"]["test_pred_std_mm"]["n"] > 0
+    assert read_report(tmp_path / "pay").final.test_pred_std_mm.n > 0

@@ -2,7 +2,6 @@
 paused by tracker faults and resumed until it is done."""
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -11,7 +10,7 @@ import time
 import pytest
 
 from campaign.run.log_reader import read_log
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 from tests.campaign.hostile import cli
 
 pytestmark = pytest.mark.system
@@ -37,15 +36,15 @@ def _check_run(run_dir):
     plan = (run_dir / "plan.csv").read_text().splitlines()[1:]
     assert n_cal == stops[0]["n_calib"] < sum(",calib," in row for row in plan)
     assert sum(p["set"] == "test" for p in contents.points) == sum(",test," in row for row in plan)
-    report = json.loads((run_dir / "report.json").read_text())
-    stop = report["stop"]
-    assert stop["n_calib_at_stop"] == n_cal
-    assert stop["measured_rms_mm"] == report["stages"]["compensated"]["test"]["rms_mm"]
-    curve = dict(map(tuple, stop["checks"][-1]["curve"]))
-    assert curve[n_cal] == pytest.approx(stop["predicted_rms_mm"])
+    report = read_report(run_dir)
+    stop = report.stop
+    assert stop.n_calib_at_stop == n_cal
+    assert stop.measured_rms_mm == report.final.test.rms_mm
+    curve = dict(map(tuple, stop.last_curve))
+    assert curve[n_cal] == pytest.approx(stop.predicted_rms_mm)
     assert all(a >= b - 1e-12 for a, b in zip(list(curve.values()), list(curve.values())[1:]))   # more points help
-    assert abs(stop["predicted_rms_mm"] / stop["measured_rms_mm"] - 1) < 0.3
-    assert not any("incomplete run" in n for n in report["plausibility"]["notes"])
+    assert abs(stop.predicted_rms_mm / stop.measured_rms_mm - 1) < 0.3
+    assert not any("incomplete run" in n for n in report.plausibility.notes)
     return stop
 
 
@@ -53,7 +52,7 @@ def test_stop_auto_refits_after_blocks_stops_and_measures_the_test_set(tmp_path,
     code, out, err = cli(capsys, "run", _config(tmp_path), "--out", tmp_path / "run")
     assert code == 0, err
     stop = _check_run(tmp_path / "run")
-    assert "Predicted held-out RMS vs calibration points" in out and f"stopped after {stop['n_calib_at_stop']}" in out
+    assert "Predicted held-out RMS vs calibration points" in out and f"stopped after {stop.n_calib_at_stop}" in out
     assert (tmp_path / "run" / "report.html").read_text().count('id="stop-table"') == 1
 
 

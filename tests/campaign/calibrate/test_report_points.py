@@ -1,6 +1,5 @@
 """Per-point rows of report.json (campaign/calibrate/report_points.py): inline up to a size, points.csv beyond, and every
 reader (the HTML report, PointTable.of) gets the same rows either way."""
-import json
 
 import numpy as np
 import pytest
@@ -8,21 +7,22 @@ import pytest
 from campaign.calibrate import report_points as rp
 from campaign.config.simulation import simulated_cell
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.report_points import PointTable
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 
 def simulated_csv(cfg_path, path, n=240, seed=0):
     """A seeded campaign on the config's simulated cell: random joints mid-range, 80 % calib."""
-    cfg = load_config(cfg_path)
+    cell = load_cell(cfg_path)
+    cfg = cell.config
     rng = np.random.default_rng(seed)
     lo = np.array([j.q_min_deg for j in cfg.robot.joints])
     hi = np.array([j.q_max_deg for j in cfg.robot.joints])
     q = rng.uniform(lo + 0.3 * (hi - lo), hi - 0.3 * (hi - lo), (n, len(lo)))
-    p, _ = simulated_cell(cfg).measure(np.radians(q), rng)
+    p, _ = simulated_cell(cell).measure(np.radians(q), rng)
     ids = tuple(f"P{i}" if i % 50 else f"P{i} a'b" for i in range(n))
     sets = tuple(np.where(rng.random(n) < 0.8, "calib", "test"))
     write_csv(path, Dataset(ids, sets, q, p, t_s=np.arange(n) * 2.0))
@@ -36,21 +36,19 @@ def test_points_beyond_the_inline_size_go_to_points_csv_and_read_back_identicall
     assert main(["reprocess", str(csv), "--config", str(cfg), "--out", str(tmp_path / "inline")]) == 0
     monkeypatch.setattr(rp, "POINTS_INLINE_MAX", 100)
     assert main(["reprocess", str(csv), "--config", str(cfg), "--out", str(tmp_path / "side")]) == 0
-    inline = json.loads((tmp_path / "inline" / "report.json").read_text())
-    side = json.loads((tmp_path / "side" / "report.json").read_text())
-    assert "file" not in inline["points"] and not (tmp_path / "inline" / "points.csv").exists()
-    ref = side["points"]
+    inline, side = read_report(tmp_path / "inline"), read_report(tmp_path / "side")
+    assert "file" not in inline.points and not (tmp_path / "inline" / "points.csv").exists()
+    ref = side.points
     assert ref["file"] == "points.csv" and ref["format"] == "campaign-points/1" and ref["n"] == 240
-    a, b = PointTable.of(inline["points"]), PointTable.of(ref, tmp_path / "side")
+    a, b = PointTable.of(inline.points), PointTable.of(ref, tmp_path / "side")
     assert b.point_id == a.point_id and b.set == a.set and b.point_id[50] == "P50 a'b"
     for name in ("q_deg", "p_base_mm", "used", "t_s"):
         np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
     assert list(b.err_base_mm) == list(a.err_base_mm)
     for stage in a.err_base_mm:
         np.testing.assert_allclose(b.err_base_mm[stage], a.err_base_mm[stage], atol=1e-12)
-    std_inline = inline["stages"]["compensated"]["test_pred_std_mm"]["per_point_mm"]
-    assert side["stages"]["compensated"]["test_pred_std_mm"]["per_point_mm"] == {"file": "points.csv",
-                                                                                  "column": "pred_std_mm"}
+    std_inline = inline.final.test_pred_std_mm.per_point_mm
+    assert side.final.test_pred_std_mm.per_point_mm == {"file": "points.csv", "column": "pred_std_mm"}
     test = np.array(b.set) == "test"
     assert len(std_inline) == test.sum() > 0 and a.pred_std_mm is None
     np.testing.assert_allclose(b.pred_std_mm[test], [std_inline[i] for i in np.array(b.point_id)[test]], atol=1e-6)

@@ -2,16 +2,15 @@
 the base, reported with the value to configure, and changes nothing else; another robot's data are still refused."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 from tests.cells import irb2600_poses, irb2600, make_cell, measure, ur10
 
@@ -55,29 +54,30 @@ def ur10_data(tmp_path_factory):
 
 
 def _process(tmp_path, data, tool_z):
-    """report.json of the default processing with the SMR offset (0, 0, tool_z) in the config."""
+    """The report of the default processing with the SMR offset (0, 0, tool_z) in the config."""
     where = tmp_path / f"z{tool_z:g}"
     where.mkdir()
     cfg = small_config(where, "ur10", **{"tool.p_flange_smr_mm": [0.0, 0.0, tool_z]})
-    return calibrate_dataset(read_csv(data), load_config(cfg)).report.to_dict()
+    return calibrate_dataset(read_csv(data), load_cell(cfg)).report
 
 
 @pytest.mark.system
 def test_rough_offsets_register_and_change_nothing_else(ur10_data, tmp_path):
     right = _process(tmp_path, ur10_data, TRUE_SMR[2])
-    assert right["plausibility"]["tool"]["notes"] == []                     # within a few mm: nothing to say
+    assert right.plausibility.tool.notes() == ()                            # within a few mm: nothing to say
     for off in (-84.0, 30.0, 90.0):
         rough = _process(tmp_path, ur10_data, TRUE_SMR[2] + off)
-        tool = rough["plausibility"]["tool"]
-        assert tool["directions_determined"] == 3
-        assert len(tool["notes"]) == 1 and "put [" in tool["notes"][0] and "tool.p_flange_smr_mm" in tool["notes"][0]
-        assert abs(tool["difference_mm"][0] - abs(off)) < 2.0
-        np.testing.assert_allclose(tool["registered_mm"], right["plausibility"]["tool"]["registered_mm"], atol=1e-6)
-        for stage, figures in right["stages"].items():
+        tool = rough.plausibility.tool
+        notes = tool.notes()
+        assert tool.determined == 3
+        assert len(notes) == 1 and "put [" in notes[0] and "tool.p_flange_smr_mm" in notes[0]
+        assert abs(tool.difference_mm[0] - abs(off)) < 2.0
+        np.testing.assert_allclose(tool.registered_mm, right.plausibility.tool.registered_mm, atol=1e-6)
+        for stage, figures in right.stages.items():
             for key in ("rms_mm", "mean_mm", "max_mm"):
-                got = rough["stages"][stage]["test"][key]
-                assert got == pytest.approx(figures["test"][key], rel=0.01), (stage, off)
-        assert not rough["plausibility"]["overridden"]
+                got = getattr(rough.stages[stage].test, key)
+                assert got == pytest.approx(getattr(figures.test, key), rel=0.01), (stage, off)
+        assert not rough.plausibility.overridden
 
 
 @pytest.mark.system
@@ -86,7 +86,7 @@ def test_the_terminal_prints_the_offset_to_configure(ur10_data, tmp_path, capsys
     code, out, err = cli(capsys, "reprocess", ur10_data, "--config", cfg, "--out", tmp_path / "out")
     assert code == 0, err
     line = next(ln for ln in out.splitlines() if "tool.p_flange_smr_mm" in ln)
-    registered = json.loads((tmp_path / "out" / "report.json").read_text())["plausibility"]["tool"]["registered_mm"][0]
+    registered = read_report(tmp_path / "out").plausibility.tool.registered_mm[0]
     assert f"put [{registered[0]:.1f}, {registered[1]:.1f}, {registered[2]:.1f}] in tool.p_flange_smr_mm" in line
     assert (tmp_path / "out" / "model.json").exists()
 

@@ -7,7 +7,7 @@ import yaml
 from campaign.cli import main
 from campaign.config.load import load_config
 from campaign.errors import ConfigError
-from tests.campaign.helpers import ROOT, small_config
+from tests.campaign.helpers import ROOT, read_report, small_config
 
 
 def _with(tmp_path, **calibration):
@@ -53,18 +53,17 @@ def test_forced_effect_list_reaches_model_json(tmp_path):
     run = tmp_path / "r"
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     model = json.loads((run / "model.json").read_text())
-    report = json.loads((run / "report.json").read_text())
+    report = read_report(run)
     assert model["effects"][0]["name"] == "joint_compliance" and set(model["effects"][0]["params"]) == {"c2", "c3"}
-    assert report["effects"]["selection"] is None and "elastic" in report["stages"]
+    assert report.effects.selection is None and "elastic" in report.stages
     assert model["residual"] is None
 
 
 @pytest.mark.unit
 def test_gravity_model_keys_of_the_robot(tmp_path):
-    from campaign.calibrate.effects_stage import gravity_model
+    from campaign.config.load import load_cell
 
-    cfg = load_config(small_config(tmp_path, **{"robot.mass_kg": 272, "robot.gravity_direction_base": [1, 0, 0]}))
-    g = gravity_model(cfg)
+    g = load_cell(small_config(tmp_path, **{"robot.mass_kg": 272, "robot.gravity_direction_base": [1, 0, 0]})).gravity
     assert g.source == "mass class" and g.gravity_base == (1.0, 0.0, 0.0)
     assert sum(g.link_masses_kg) == pytest.approx(0.7 * 272)
     for key, value, words in (("robot.link_masses_kg", [1, 2], "a list of 6 numbers"),

@@ -5,7 +5,7 @@ import pytest
 
 from campaign.cli import main
 from drivers.rapid import check_rapid_syntax, parse_rapid_module
-from tests.campaign.helpers import ROOT
+from tests.campaign.helpers import ROOT, read_verify
 
 pytestmark = pytest.mark.system
 
@@ -46,18 +46,18 @@ def test_correct_cli_bad_targets_file(run_dir, tmp_path, capsys):
 
 def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
     assert main(["verify", str(run_dir)]) == 0
-    report = json.loads(next(run_dir.glob("verify-*/verify.json")).read_text())
-    floor, stages = report["noise_floor_mm"], report["stages"]
-    ratios = {k: v["rms_mm"] / floor for k, v in stages.items()}
+    report = read_verify(next(run_dir.glob("verify-*/verify.json")))
+    floor, stages = report.noise_floor_mm, report.stages
+    ratios = {k: v.rms_mm / floor for k, v in stages.items()}
     print("verify RMS / floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
     assert ratios["uncorrected (planned joints)"] > 10
     assert ratios["model-corrected"] <= 1.2
     assert ratios["after correction (all passes pooled)"] <= 1.2
     assert all(r <= 1.3 for k, r in ratios.items() if k.startswith("closed loop"))
-    for p in report["passes"][1:]:                  # every pass says what it measured
-        assert p["n_corrected"] + p["n_held"] == (report["n"] if p["stage"] != "after correction (all passes pooled)"
-                                                  else p["n_corrected"] + p["n_held"])
-        assert p["n_held"] == sum(p["held"].values()) or p["stage"].startswith("after")
+    for p in report.passes[1:]:                     # every pass says what it measured
+        assert p.n_corrected + p.n_held == (report.n if p.stage != "after correction (all passes pooled)"
+                                            else p.n_corrected + p.n_held)
+        assert p.n_held == sum(p.held.values()) or p.stage.startswith("after")
 
 
 def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path):

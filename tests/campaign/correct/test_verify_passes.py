@@ -1,13 +1,12 @@
 """``verify`` says exactly what it measured (issue 12), on the shipped UR10 and IRB 4600 cells: per pass the
 corrected and held points (with reasons), and the figures over corrected points within 1.3 x the noise floor."""
-import json
 
 import numpy as np
 
 import pytest
 
 from campaign.cli import main
-from tests.campaign.helpers import ROOT
+from tests.campaign.helpers import ROOT, read_verify
 
 
 @pytest.mark.system
@@ -19,15 +18,15 @@ def test_verify_reports_held_points_and_corrected_figures(name, tmp_path, capsys
     assert main(["verify", str(run)]) == 0
     table = capsys.readouterr().out
     assert "held" in table and "corrected" in table
-    report = json.loads(next(run.glob("verify-*/verify.json")).read_text())
-    floor, n = report["noise_floor_mm"], report["n"]
-    for p in report["passes"]:
-        if p["stage"].startswith("after"):
+    report = read_verify(next(run.glob("verify-*/verify.json")))
+    floor, n = report.noise_floor_mm, report.n
+    for p in report.passes:
+        if p.stage.startswith("after"):
             continue
-        assert p["n_corrected"] + p["n_held"] == n
-        assert sum(p["held"].values()) == (p["n_held"] if p["stage"] != "uncorrected (planned joints)" else 0)
-    corrected = {p["stage"]: p["corrected"]["rms_mm"] / floor for p in report["passes"] if p["corrected"]}
-    held = {p["stage"]: p["n_held"] for p in report["passes"]}
+        assert p.n_corrected + p.n_held == n
+        assert sum(p.held.values()) == (p.n_held if p.stage != "uncorrected (planned joints)" else 0)
+    corrected = {p.stage: p.corrected.rms_mm / floor for p in report.passes if p.corrected}
+    held = {p.stage: p.n_held for p in report.passes}
     print(f"{name}: noise floor {floor:.3f} mm; corrected RMS / floor "
           + ", ".join(f"{k} {v:.2f}" for k, v in corrected.items()) + "; held " + ", ".join(f"{k} {v}" for k, v in held.items()))
     assert all(r <= 1.3 for r in corrected.values())

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 
 Rows = list[list[str]]
@@ -215,8 +215,8 @@ def test_force_overrides_and_the_report_says_so(base, tmp_path, capsys):
     code, out, err = cli(capsys, "reprocess", path, "--config", base["config"], "--out", tmp_path / "out", "--force")
     assert code == 0, err
     assert "OVERRIDDEN with --force" in out and "q2 = 1000" in out
-    plaus = json.loads((tmp_path / "out" / "report.json").read_text())["plausibility"]
-    assert plaus["forced"] and len(plaus["rejected_rows"]) == 1 and "q2 = 1000" in plaus["overridden"][0]
+    plaus = read_report(tmp_path / "out").plausibility
+    assert plaus.forced and len(plaus.rejected_rows) == 1 and "q2 = 1000" in plaus.overridden[0]
 
 
 @pytest.mark.system

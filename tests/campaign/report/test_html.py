@@ -7,7 +7,7 @@ import pytest
 
 from campaign.cli import main
 from tests.campaign.browser import Chromium, chromium
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 needs_browser = pytest.mark.skipif(chromium() is None, reason="chromium not installed (.ci/run installs it)")
 
@@ -68,8 +68,8 @@ def test_run_writes_report_html_and_png_figures(mock_run):
     html = (run_dir / "report.html").read_text()
     pngs = sorted(p.name for p in (run_dir / "report_figures").glob("*.png"))
     assert len(pngs) >= 6 and html.count("<figure") == len(pngs)
-    report = json.loads((run_dir / "report.json").read_text())
-    assert len(report["points"]["point_id"]) == sum(report["n"][k] for k in ("calib", "test", "check"))
+    report = read_report(run_dir)
+    assert len(report.points["point_id"]) == report.n.calib + report.n.test + report.n.check
     assert "Table 3" in html and "Identifiability" in html and "Excluded points" in html
 
 

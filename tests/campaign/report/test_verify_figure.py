@@ -4,17 +4,23 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
+from campaign.correct.verify_report import VerifyReport  # noqa: E402
 from campaign.report import html_figures  # noqa: E402
 
 
-def _verify() -> dict:
+def _verify() -> VerifyReport:
     stage = lambda rms, n: {"max_mm": 2 * rms, "mean_mm": rms, "rms_mm": rms, "n": n}  # noqa: E731
     names = ("uncorrected (planned joints)", "model-corrected", "closed loop 1")
     stages = dict(zip(names, (stage(0.78, 27), stage(0.035, 27), stage(0.031, 27))))
-    passes = [{"stage": names[0], "n_corrected": 0, "n_held": 27, "corrected": None},
-              {"stage": names[1], "n_corrected": 24, "n_held": 3, "corrected": stage(0.029, 24)},
-              {"stage": names[2], "n_corrected": 27, "n_held": 0, "corrected": stage(0.031, 27)}]
-    return {"noise_floor_mm": 0.03, "stages": stages, "passes": passes}
+    passes = [{"stage": names[0], "n_corrected": 0, "n_held": 27, "held": {}, "all": stages[names[0]],
+               "corrected": None},
+              {"stage": names[1], "n_corrected": 24, "n_held": 3, "held": {"bound": 3}, "all": stages[names[1]],
+               "corrected": stage(0.029, 24)},
+              {"stage": names[2], "n_corrected": 27, "n_held": 0, "held": {}, "all": stages[names[2]],
+               "corrected": stage(0.031, 27)}]
+    return VerifyReport.from_dict({"format": "campaign-verify/2", "run": "run", "n": 27, "noise_floor_mm": 0.03,
+                                   "n_uncorrected": 0, "stages": stages, "passes": passes, "exit_status": "success",
+                                   "reason": "", "definitions": {}, "created_utc": "2026-11-26T10:00:00Z"})
 
 
 @pytest.mark.unit

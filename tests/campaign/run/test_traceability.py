@@ -1,20 +1,18 @@
 """Traceability and ETA: identification in the start record and report.json, campaign.log, a keep-out run whose
 every executed move stays clear, and an ETA that converges during the run."""
-import json
 
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell, load_config
 from campaign.run.eta import RunEta, estimate_duration_s, point_times_s
 from campaign.workflows import run_campaign
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
 from drivers.mock import MockRobot
 from robocal.sweep import Boxes, flange_points_base, sample_segments
-from tests.campaign.helpers import small_config
+from tests.campaign.helpers import read_report, small_config
 
 SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 6, "plan.check_poses": {"count": 0, "every_n_points": 50},
          "tracker.measurement.samples": 2, "tracker.measurement.settle_s": 0.0, "calibration.residual": "none"}
@@ -27,8 +25,7 @@ def test_mock_run_carries_identification_and_writes_campaign_log(tmp_path):
     run = tmp_path / "run"
     assert main(["run", str(cfg), "--out", str(run)]) == 0
     start = read_log(run).start
-    report = json.loads((run / "report.json").read_text())
-    for doc in (start, report):
+    for doc in (start, dict(read_report(run).identification)):
         assert doc["robot_identity"]["serial"] == "MOCK-R-0001"
         assert set(doc["robot_identity"]) >= {"vendor", "model", "controller_type", "serial", "software_version"}
         assert doc["tracker_identity"]["serial"] == "MOCK-T-0001"
@@ -41,9 +38,9 @@ def test_mock_run_carries_identification_and_writes_campaign_log(tmp_path):
 
 @pytest.mark.system
 def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
-    cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT], "plan.clearance_mm": 30}))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT], "plan.clearance_mm": 30}))
+    kin = cell.kinematics
+    plan = build_plan(cell)
     assert any(p.via_deg for p in plan.points)                 # the box sits across the plan: vias were needed
     robots = []
     real_init = MockRobot.__init__
@@ -52,13 +49,13 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
         real_init(self, *a, **k)
         robots.append(self)
     monkeypatch.setattr(MockRobot, "__init__", spy)
-    result = run_campaign(cfg, tmp_path / "run")
+    result = run_campaign(cell, tmp_path / "run")
     assert result.outcome.exit_status == "success"
     cmds = robots[0].commands
     q_a = np.radians([c.q_from_deg for c in cmds])
     q_b = np.radians([c.q_to_deg for c in cmds])
     q, _ = sample_segments(q_a, q_b, np.full(len(cmds), 300))
-    pts = flange_points_base(kin, q, np.array([[0.0, 0.0, 0.0], cfg.tool.p_flange_smr_mm])).reshape(-1, 3)
+    pts = flange_points_base(kin, q, np.array([[0.0, 0.0, 0.0], cell.config.tool.p_flange_smr_mm])).reshape(-1, 3)
     box = Boxes(np.array([KEEP_OUT["min_mm"]], float), np.array([KEEP_OUT["max_mm"]], float)).grown(30.0)
     inside = np.all((pts > box.lo[0]) & (pts < box.hi[0]), axis=1)
     assert not inside.any(), f"{inside.sum()} samples of executed moves inside the keep-out box"
@@ -66,18 +63,17 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
 
 @pytest.mark.system
 def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
-    cfg = load_config(small_config(tmp_path, **SMALL))
-    (tmp_path / "slow").mkdir()                           # its own file: the run copies cfg's, unchanged
-    slow = load_config(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL))
+    (tmp_path / "slow").mkdir()                           # its own file: the run copies cell's, unchanged
+    slow = load_cell(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
+    plan = build_plan(cell)
     n = len(plan.points)
-    d15, d25 = estimate_duration_s(plan.points, cfg, kin), estimate_duration_s(plan.points, slow, kin)
+    d15, d25 = estimate_duration_s(plan.points, cell), estimate_duration_s(plan.points, slow)
     assert d25 - d15 == pytest.approx(n * 2 * 1.0, rel=1e-9)  # samples x (2.5 - 1.5) s per point
-    result = run_campaign(cfg, tmp_path / "run")
+    result = run_campaign(cell, tmp_path / "run")
     recs = read_log(result.run_dir).records()
     actual = np.array([r.t_end_s - r.t_start_s for r in recs])
-    eta = RunEta(*point_times_s(plan.points, cfg, kin))
+    eta = RunEta(*point_times_s(plan.points, cell))
     prior_error = abs(eta.remaining_s() - actual.sum()) / actual.sum()
     k = n // 4
     for r in recs[:k]:
@@ -101,9 +97,9 @@ def test_identity_changes_name_what_differs():
 @pytest.mark.unit
 def test_a_robot_standing_inside_the_clearance_is_told_to_jog_clear(tmp_path):
     from campaign.plan.motion_safety import PathGuard, UnsafeMotion
-    cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT]}))
-    kin = nominal_kinematics(cfg)
-    guard = PathGuard.from_config(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT]}))
+    cfg, kin = cell.config, cell.kinematics
+    guard = PathGuard.for_cell(cell)
     q_ref = np.asarray(cfg.plan.q_ref_deg, float)
     centre = (np.array(KEEP_OUT["min_mm"]) + np.array(KEEP_OUT["max_mm"])) / 2
     from robocal.ik import solve_ik

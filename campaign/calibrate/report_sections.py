@@ -1,0 +1,358 @@
+"""The typed sections of ``report.json`` and ``verify.json`` (frozen records): each writes the JSON object it
+stands for with ``to_dict()`` (keys and order as in the file) and reads one back with ``from_dict()``
+(:class:`~campaign.io.json_fields.RecordError` names a missing or ill-typed field by its path). Keys that reports of
+earlier versions lack are optional when read.
+
+Sections that another component writes stay the JSON it writes: the effect selection and fitted effects
+(``robocal.elastic``), the layer CV table (``robocal.layers``), the stop checks (run log events).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, object_field, record_dict,
+                                     record_field, record_map_field, records_field, text_field)
+from robocal.identify import Unidentifiable
+from robocal.stats import ErrorStats
+
+if TYPE_CHECKING:                                   # robocal.layers loads the GP stack: not needed to read a report
+    from robocal.layers import LayerChoice
+
+
+@dataclass(frozen=True)
+class ErrorFigures:
+    """Statistics of the 3-D position error of ``n`` points (mm); None (JSON null) over no point."""
+    max_mm: float | None
+    mean_mm: float | None
+    rms_mm: float | None
+    n: int
+
+    @classmethod
+    def of(cls, stats: ErrorStats) -> "ErrorFigures":
+        return cls(stats.max_mm, stats.mean_mm, stats.rms_mm, stats.n)
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ErrorFigures":
+        return cls(figure_field(d, "max_mm"), figure_field(d, "mean_mm"), figure_field(d, "rms_mm"), count_field(d, "n"))
+
+
+NO_POINTS = ErrorFigures(None, None, None, 0)
+
+
+@dataclass(frozen=True)
+class PredictiveStd:
+    """A GPR layer's predictive standard deviation on the test points (3-D, mm); ``per_point_mm`` {point_id: mm},
+    or a reference ``{"file", "column"}`` to points.csv."""
+    max_mm: float | None
+    mean_mm: float | None
+    rms_mm: float | None
+    n: int
+    per_point_mm: dict
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "PredictiveStd":
+        f = ErrorFigures.from_dict(d)
+        return cls(f.max_mm, f.mean_mm, f.rms_mm, f.n, object_field(d, "per_point_mm"))
+
+
+_GP_KEYS = ("approximation", "n_train", "n_inducing", "noise_mm", "noise_floor_mm")
+
+
+@dataclass(frozen=True)
+class LayerSummary:
+    """The fitted residual layer beside its honest figures (``robocal.layers.layer_summary``): calibration RMS (a
+    fit to its own points), CV-predicted held-out RMS, test RMS (mm); for a GPR its approximation, training size,
+    inducing inputs (None: exact), noise and the floor bounding it (mm)."""
+    kind: str
+    calib_rms_mm: float | None
+    cv_predicted_rms_mm: float | None
+    folds: int
+    test_rms_mm: float | None
+    note: str
+    approximation: str | None = None
+    n_train: int | None = None
+    n_inducing: int | None = None
+    noise_mm: float | None = None
+    noise_floor_mm: float | None = None
+
+    def to_dict(self) -> dict:
+        out = record_dict(self)
+        if self.approximation is None:                      # the GP keys come together, for a GPR only
+            for key in _GP_KEYS:
+                del out[key]
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "LayerSummary":
+        gp = {k: get_field(d, k, True) for k in _GP_KEYS} if "approximation" in d else {}
+        return cls(text_field(d, "kind"), figure_field(d, "calib_rms_mm"), figure_field(d, "cv_predicted_rms_mm"),
+                   count_field(d, "folds"), figure_field(d, "test_rms_mm"), text_field(d, "note", True) or "", **gp)
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """One calibration stage evaluated on the ``test`` and ``calib`` rows; the final stage also carries the GPR
+    predictive spread and the residual layer's summary when it has them."""
+    test: ErrorFigures
+    calib: ErrorFigures
+    test_pred_std_mm: PredictiveStd | None = None
+    layer: LayerSummary | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("test_pred_std_mm", "layer"))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "StageResult":
+        return cls(record_field(d, "test", ErrorFigures.from_dict), record_field(d, "calib", ErrorFigures.from_dict),
+                   record_field(d, "test_pred_std_mm", PredictiveStd.from_dict, True),
+                   record_field(d, "layer", LayerSummary.from_dict, True))
+
+
+@dataclass(frozen=True)
+class RowCounts:
+    """Rows of the dataset by set, and the calibration rows the fit left out."""
+    calib: int
+    test: int
+    check: int
+    rejected: int
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "RowCounts":
+        return cls(*(count_field(d, k) for k in ("calib", "test", "check", "rejected")))
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    """An identification candidate: delta from nominal and its std (angles in deg), identified or fixed."""
+    name: str
+    unit: str
+    delta: float
+    std: float | None
+    identified: bool
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ParameterRow":
+        return cls(text_field(d, "name"), text_field(d, "unit"), figure_field(d, "delta"), figure_field(d, "std"),
+                   bool(get_field(d, "identified")))
+
+
+@dataclass(frozen=True)
+class ExcludedPoint:
+    """A point left out of the fit (``set`` calib, or any set for an SMR-triangle fault) and why."""
+    point_id: str
+    set: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ExcludedPoint":
+        return cls(text_field(d, "point_id"), text_field(d, "set", True) or "calib", text_field(d, "reason"))
+
+
+def unidentifiable_from_dict(d: Mapping) -> Unidentifiable:
+    """``robocal.identify.Unidentifiable`` of its JSON object."""
+    return Unidentifiable(text_field(d, "name"), tuple(list_field(d, "redundant_with")), text_field(d, "reason"))
+
+
+@dataclass(frozen=True)
+class MethodChoice:
+    """The estimator and the choices the config made or left to the data."""
+    estimator: str
+    weights: str | None
+    outliers: str | None = None
+    effects: str | None = None
+    residual: str | None = None
+    residual_config: str | None = None
+    measurement_covariance: str | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("outliers", "residual_config", "measurement_covariance"))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "MethodChoice":
+        return cls(text_field(d, "estimator"), *(text_field(d, k, True) for k in (
+            "weights", "outliers", "effects", "residual", "residual_config", "measurement_covariance")))
+
+
+@dataclass(frozen=True)
+class EffectsReport:
+    """The physical effects: the CV selection and the fitted effects as ``robocal.elastic`` writes them, the
+    effect parameters fixed as unidentifiable; with an elastic stage its sigma0, notes and condition number."""
+    selection: dict | None
+    fitted: tuple[dict, ...] = ()
+    unidentifiable: tuple[Unidentifiable, ...] = ()
+    sigma0: float | None = None
+    notes: tuple[str, ...] | None = None
+    condition_number: float | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("sigma0", "notes", "condition_number"))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "EffectsReport":
+        notes = list_field(d, "notes", True)
+        return cls(object_field(d, "selection", True), tuple(list_field(d, "fitted", True) or ()),
+                   records_field(d, "unidentifiable", unidentifiable_from_dict, True) or (),
+                   figure_field(d, "sigma0") if "sigma0" in d else None, None if notes is None else tuple(notes),
+                   figure_field(d, "condition_number") if "condition_number" in d else None)
+
+
+@dataclass(frozen=True)
+class ResidualChoice:
+    """The residual layer chosen by k-fold CV on the calibration points: per candidate its CV RMS (mm) and its
+    test against none (``robocal.layers``)."""
+    chosen: str
+    folds: int
+    test: str
+    candidates: dict
+
+    @classmethod
+    def of(cls, choice: LayerChoice) -> "ResidualChoice":
+        d = choice.to_dict()
+        return cls(d["chosen"], d["folds"], d["test"], d["candidates"])
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ResidualChoice":
+        return cls(text_field(d, "chosen"), count_field(d, "folds"), text_field(d, "test", True) or "",
+                   object_field(d, "candidates"))
+
+
+@dataclass(frozen=True)
+class ResidualCV:
+    """The CV figure of the chosen (else the best) layer against none: held-out RMS without and with it (mm),
+    relative gain, paired t and whether it is significant."""
+    folds: int
+    layer: str
+    rms_without_mm: float
+    rms_with_mm: float
+    gain: float
+    t: float | None = None
+    significant: bool | None = None
+
+    @property
+    def predicts_structure(self) -> bool:
+        """Significant; for reports without the test, a gain above 2 %."""
+        return self.significant if self.significant is not None else self.gain > 0.02
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("t", "significant"))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ResidualCV":
+        return cls(count_field(d, "folds"), text_field(d, "layer"), figure_field(d, "rms_without_mm"),
+                   figure_field(d, "rms_with_mm"), figure_field(d, "gain"),
+                   figure_field(d, "t") if "t" in d else None, get_field(d, "significant", True))
+
+
+@dataclass(frozen=True)
+class StopSummary:
+    """``plan.stop: auto``: the rule, every refit's check (run log events: predicted curve, decision), where it
+    stopped and why, the predicted and the measured held-out RMS (mm, final model on the test set)."""
+    rule: str
+    checks: tuple[dict, ...]
+    n_calib_at_stop: int
+    predicted_rms_mm: float
+    measured_rms_mm: float | None
+    reason: str
+
+    @property
+    def last_curve(self) -> list:
+        """[[calibration points, predicted held-out RMS mm], ...] of the last refit."""
+        return self.checks[-1]["curve"]
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "StopSummary":
+        return cls(text_field(d, "rule"), tuple(list_field(d, "checks")), count_field(d, "n_calib_at_stop"),
+                   figure_field(d, "predicted_rms_mm"), figure_field(d, "measured_rms_mm"), text_field(d, "reason"))
+
+
+@dataclass(frozen=True)
+class AngleStats:
+    """Orientation errors (arc seconds) over ``n`` poses, and how the poses were obtained when it matters."""
+    mean: float
+    rms: float
+    max: float
+    n: int
+    source: str | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("source",))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "AngleStats":
+        return cls(figure_field(d, "mean"), figure_field(d, "rms"), figure_field(d, "max"), count_field(d, "n"),
+                   text_field(d, "source", True))
+
+
+@dataclass(frozen=True)
+class MultiSmrReport:
+    """Multi-SMR identification (one flange offset per SMR, mm), its test figures per SMR (``smr1``...) and, with
+    three SMRs, the flange orientation error on the test set; or why it was ``skipped``."""
+    n_smr: int
+    skipped: str | None = None
+    p_flange_smr_mm: list | None = None
+    sigma0: float | None = None
+    converged: bool | None = None
+    unidentifiable: tuple[Unidentifiable, ...] = ()
+    test: dict[str, ErrorFigures] = field(default_factory=dict)
+    orientation_error_arcsec: AngleStats | None = None
+
+    def to_dict(self) -> dict:
+        if self.skipped is not None:
+            return {"n_smr": self.n_smr, "skipped": self.skipped}
+        return record_dict(self, omit_none=("skipped", "orientation_error_arcsec"))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "MultiSmrReport":
+        n = count_field(d, "n_smr")
+        if "skipped" in d:
+            return cls(n, text_field(d, "skipped"))
+        return cls(n, None, list_field(d, "p_flange_smr_mm"), figure_field(d, "sigma0"), get_field(d, "converged"),
+                   records_field(d, "unidentifiable", unidentifiable_from_dict, True) or (),
+                   record_map_field(d, "test", ErrorFigures.from_dict),
+                   record_field(d, "orientation_error_arcsec", AngleStats.from_dict, True))
+
+
+@dataclass(frozen=True)
+class VerifyPass:
+    """One verification pass: points corrected and held (count per reason), the error over all points and over
+    the corrected ones (mm, None when none was corrected), the tool orientation error with three SMRs."""
+    stage: str
+    n_corrected: int
+    n_held: int
+    held: dict
+    all: ErrorFigures
+    corrected: ErrorFigures | None
+    orientation_error_arcsec: AngleStats | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self, omit_none=("orientation_error_arcsec",))
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "VerifyPass":
+        return cls(text_field(d, "stage"), count_field(d, "n_corrected"), count_field(d, "n_held"),
+                   object_field(d, "held"), record_field(d, "all", ErrorFigures.from_dict),
+                   record_field(d, "corrected", ErrorFigures.from_dict, True),
+                   record_field(d, "orientation_error_arcsec", AngleStats.from_dict, True))
