@@ -74,7 +74,7 @@ def render(console: Console, report: dict) -> None:
         style = "green" if f["accepted"] else ("dim" if f["evidence"].get("diagnosable", True) else "yellow")
         evidence = _short_evidence(f)
         if evidence:
-            notes.append(f"{f['effect']} {joints_text(f['joints'])}: {evidence}")
+            notes.append(" ".join([f["effect"], *([joints_text(f["joints"])] if f["joints"] else [])]) + f": {evidence}")
         t.add_row(f["effect"], joints_text(f["joints"]), "yes" if f["accepted"] else "no",
                   _mm(f["test_rms_before_mm"]), _mm(after), f"{after / floor:.2f}" if after and floor else "-",
                   f"[{len(notes)}]" if evidence else "", style=style)
