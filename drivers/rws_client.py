@@ -445,7 +445,7 @@ class RwsSession:
                 self._sleep(wait)
                 delay *= 2
         raise RwsBusy(f"{self.name}: {method} {path}: HTTP 503 after {self.policy.retries + 1} attempts "
-                      "(controller busy or session pool exhausted; log out other RWS clients or wait ~5 min)")
+                      "(controller busy or session pool exhausted; log out other RWS clients or wait about 5 min)")
 
     def _send_once(self, method: str, path: str, *, params: Mapping[str, str], auth: httpx.Auth | None,
                    timeout: float, content: bytes | None, headers: Mapping[str, str] | None) -> httpx.Response:

@@ -10,6 +10,13 @@ import pytest
 KINDS = {"unit", "system"}
 
 
+@pytest.fixture(autouse=True)
+def _unwrapped_output(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Command output is not wrapped in tests (``COLUMNS=1000``): tests read phrases and lines of it; the layout at
+    a given width (80 columns, ``--width``) is tested in ``tests/campaign/cli/test_columns.py``, which sets its own."""
+    monkeypatch.setenv("COLUMNS", "1000")
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     bad = [item.nodeid for item in items if len({m.name for m in item.iter_markers()} & KINDS) != 1]
     if bad:

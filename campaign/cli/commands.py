@@ -12,7 +12,7 @@ from pathlib import Path
 from rich.console import Console
 
 from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
-                                 overwrite_argument, print_plausibility)
+                                 overwrite_argument, print_plausibility, width_argument)
 from campaign.config.load import load_cell
 from campaign.errors import DataError
 from campaign.calibrate.plausibility import forced
@@ -44,6 +44,7 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="RUN_DIR", type=Path, help="continue an interrupted or paused run")
     _force_argument(parser)
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
@@ -78,6 +79,7 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
     _config_argument(parser)
     parser.add_argument("--csv", metavar="FILE", type=Path, help="also write the plan as CSV")
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
@@ -111,6 +113,7 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
                              "reprocess wrote from the same source); never a run's directory")
     _force_argument(parser)
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
@@ -224,6 +227,7 @@ def _print_rejected(out: Console, n_targets: int, out_dir: Path) -> None:
 def _verify_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="a finished run (with model.json)")
     _force_argument(parser)
+    width_argument(parser)
 
 
 @command("verify", "measure the run's test points after correction (closed loop) and report before/after",

@@ -64,6 +64,22 @@ def overwrite_argument(parser: argparse.ArgumentParser) -> None:
                              "directory of other files or of another dataset's outputs); never into another run")
 
 
+def _columns(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of columns, got {text!r}") from None
+    if not 40 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"expected 40 to 1000 columns, got {text!r}")
+    return value
+
+
+def width_argument(parser: argparse.ArgumentParser) -> None:
+    """``--width N``: the columns of the command's output (default: the terminal's, 100 when piped)."""
+    parser.add_argument("--width", type=_columns, metavar="N",
+                        help="output width in columns (default: the terminal's width, or COLUMNS; 100 when piped)")
+
+
 def print_plausibility(out: Console, plaus: Plausibility | None) -> None:
     """The plausibility lines of a report: unit, nominal RMS vs bound, notes, overridden checks."""
     from campaign.calibrate.plausibility import plausibility_lines

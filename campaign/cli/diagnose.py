@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import EXIT_FAILED, EXIT_OK, _stderr, _stdout, command, overwrite_argument
+from campaign.cli.common import (EXIT_FAILED, EXIT_OK, _stderr, _stdout, command, overwrite_argument,
+                                 width_argument)
 from campaign.errors import DataError
 
 MAX_SEEDS = 1000        # self-check trials grow with the seeds: bound the loop
@@ -42,6 +43,7 @@ def _arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="override failed plausibility checks (the report says they were overridden)")
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("diagnose", "diagnose the sim-to-real gap: where it lies, which effect causes it, how far it shrinks",

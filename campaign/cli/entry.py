@@ -50,7 +50,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     from campaign.cli.boundary import guarded
+    from campaign.io.terminal_text import set_width
 
+    set_width(getattr(args, "width", None))          # --width N of the table commands (None: the terminal's)
     argv_text = list(argv) if argv is not None else sys.argv[1:]
     return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
 

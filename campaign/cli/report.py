@@ -1,7 +1,8 @@
 """``campaign report``, ``campaign export`` and ``campaign iso9283``.
 
     campaign report RUN_DIR [--out report.html]
-    campaign export MODEL.json [--urdf robot.urdf] [--dh-csv dh.csv] [--robodk robodk.txt] [--name NAME]
+    campaign export MODEL.json [--urdf robot.urdf --config CONFIG [--effort-nm N[,N...]]] [--dh-csv dh.csv]
+                   [--robodk robodk.txt] [--name NAME]
     campaign iso9283 CONFIG [--model MODEL.json] [--out RUN_DIR]
 
 Imported by :mod:`campaign.cli`, which registers them.
@@ -12,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
-                                 overwrite_argument)
+                                 overwrite_argument, width_argument)
 from campaign.errors import DataError
 
 
@@ -35,7 +36,13 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def _export_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL.json", type=Path, help="model.json written by run or reprocess")
-    parser.add_argument("--urdf", type=Path, metavar="FILE", help="URDF of the calibrated chain (tool = fixed link)")
+    parser.add_argument("--urdf", type=Path, metavar="FILE",
+                        help="URDF of the calibrated chain (tool = fixed link); needs --config for the joint limits")
+    parser.add_argument("--config", help="campaign YAML of the cell: joint limits and robot.max_joint_speed_deg_s "
+                                         "for the URDF")
+    parser.add_argument("--effort-nm", type=_torques, metavar="N[,N...]",
+                        help="datasheet joint torque limits for the URDF (N*m, one for all joints or one per "
+                             "joint; default: effort omitted)")
     parser.add_argument("--dh-csv", type=Path, metavar="FILE", help="CSV table of the calibrated parameters")
     parser.add_argument("--robodk", type=Path, metavar="FILE", help="DH(M) table as RoboDK users enter it by hand")
     parser.add_argument("--name", default="robot", help="robot name in the URDF (default: robot)")
@@ -54,9 +61,35 @@ def cmd_export(args: argparse.Namespace) -> int:
     for option, path in (("--urdf", args.urdf), ("--dh-csv", args.dh_csv), ("--robodk", args.robodk)):
         if path is not None:
             check_file(path, args.overwrite, option)
-    files = export(load_model(args.model), args.urdf, args.dh_csv, args.robodk, args.name)
+    model = load_model(args.model)
+    limits = _urdf_limits(args, model) if args.urdf and args.config else None     # export: --urdf needs them
+    files = export(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
     _stdout().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
+    if limits is not None and limits.effort_nm is None:
+        _stdout().print("URDF: joint effort limits omitted (no --effort-nm); tools that require them (urdfdom, "
+                        "ROS) need the datasheet torques", markup=False)
     return EXIT_OK
+
+
+def _torques(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N*m values separated by commas, got {text!r}") from None
+    if any(not v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive torques, got {text!r}")
+    return values
+
+
+def _urdf_limits(args: argparse.Namespace, model):
+    """The URDF's joint limits from --config (which must describe the model's robot) and --effort-nm."""
+    from campaign.config.load import load_cell
+    from campaign.correct.targets import check_model_fits
+    from campaign.report.export import UrdfLimits
+
+    cell = load_cell(args.config)
+    check_model_fits(cell, model, str(args.model))
+    return UrdfLimits.of_config(cell.config, args.effort_nm)
 
 
 def _iso_arguments(parser: argparse.ArgumentParser) -> None:
@@ -67,6 +100,7 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, metavar="RUN_DIR",
                         help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
     overwrite_argument(parser)
+    width_argument(parser)
 
 
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",

@@ -14,9 +14,9 @@ PLOTS_MISSING = "matplotlib is not importable: no plots (it is a dependency: rei
 
 # ============================================================================ plots
 def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] | str:
-    """PNG maps of the residual (geometric vs final model) and the shrinkage per accepted effect into ``out_dir``
-    (a checked output directory is taken, i.e. created and marked, only once matplotlib imports). Returns the
-    files written, or a one-line note when matplotlib is not importable."""
+    """PNG maps of the residual (geometric vs final model) and, with at least one accepted effect, the shrinkage
+    per accepted effect into ``out_dir`` (a checked output directory is taken, i.e. created and marked, only once
+    matplotlib imports). Returns the files written, or a one-line note when matplotlib is not importable."""
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -27,8 +27,9 @@ def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] 
     out.mkdir(parents=True, exist_ok=True)
     maps = report["maps"]
     files = [_plot_workspace(plt, maps, report, out / "where_workspace.png"),
-             _plot_joints(plt, maps, report, out / "where_joints.png"),
-             _plot_shrinkage(plt, report, out / "shrinkage.png")]
+             _plot_joints(plt, maps, report, out / "where_joints.png")]
+    if accepted_effects(report):
+        files.append(_plot_shrinkage(plt, report, out / "shrinkage.png"))
     if "time" in maps.get("geometric", {}):
         files.append(_plot_time(plt, maps, report, out / "where_time.png"))
     return files
@@ -64,19 +65,30 @@ def _floor_lines(ax, report, vertical=False):
         line(repeat, color="gray", ls=":", lw=1, label=f"repeat scatter {repeat:.3f} mm (overestimated)")
 
 
-def _same_curves(maps) -> bool:
-    """True when the final model is the geometric one (no effect accepted): one curve, not two on top."""
-    return maps.get("final") == maps.get("geometric")
+def accepted_effects(report: dict) -> list[str]:
+    """The effects the diagnosis accepted (its final model is the geometric one plus these): with none, the maps
+    draw "geometric = final" once instead of two curves that differ by rounding."""
+    return [f["effect"] for f in report["findings"] if f["accepted"]]
+
+
+GEOMETRIC_IS_FINAL = "geometric = final (no effect accepted)"
+
+
+def _final_label(report: dict) -> str:
+    return "final (geometric + " + ", ".join(accepted_effects(report)) + ")"
 
 
 def _plot_workspace(plt, maps, report, path):
-    """Residual RMS per (radius, height) cell; cells without points are hatched grey and say so."""
-    fig, axes = plt.subplots(1, 2, figsize=(11.5, 4.8), constrained_layout=True)
-    vmax = max((v for st in ("geometric", "final") for row in maps[st]["workspace"]["rms_mm"] for v in row
-                if v is not None), default=report["noise_floor_mm"])
+    """Residual RMS per (radius, height) cell; cells without points are hatched grey and say so. One panel,
+    "geometric model = final model", when no effect was accepted."""
+    stages = ("geometric", "final") if accepted_effects(report) else ("geometric",)
+    fig, axes = plt.subplots(1, len(stages), figsize=(11.5 if len(stages) > 1 else 7.0, 4.8),
+                             constrained_layout=True, squeeze=False)
+    axes = axes[0]
+    vmax = max((v for st in stages for row in maps[st]["workspace"]["rms_mm"] for v in row if v is not None),
+               default=report["noise_floor_mm"])
     floor, label, _ = plot_floor(report)
-    same = _same_curves(maps)
-    for ax, st in zip(axes, ("geometric", "final")):
+    for ax, st in zip(axes, stages):
         w = maps[st]["workspace"]
         grid = np.array([[np.nan if v is None else v for v in row] for row in w["rms_mm"]]).T
         ax.set_facecolor("0.9")
@@ -84,13 +96,13 @@ def _plot_workspace(plt, maps, report, path):
                         hatch="//", facecolor="0.9", edgecolor="0.7", lw=0, zorder=0)
         im = ax.pcolormesh(w["radius_edges_mm"], w["z_edges_mm"], np.ma.masked_invalid(grid), vmin=0, vmax=vmax,
                            cmap="viridis", zorder=1)
-        ax.set_title("geometric model" if st == "geometric" else
-                     ("final model = geometric (no effect accepted)" if same else "final model (with the effects)"),
-                     fontsize=10)
+        ax.set_title(("geometric model" if len(stages) > 1 else "geometric model = final model (no effect accepted)")
+                     if st == "geometric" else _final_label(report) + " model", fontsize=10)
         ax.set_xlabel("radius from the J1 axis (mm)")
         ax.set_ylabel("height z (mm)")
     fig.colorbar(im, ax=axes, label="residual RMS (mm)")
-    fig.suptitle(f"Residual RMS over the workspace; {label}; hatched cells: no points", fontsize=11)
+    fig.suptitle(f"Residual RMS over the workspace;{' ' if len(stages) > 1 else chr(10)}{label}; hatched cells: no "
+                 "points", fontsize=11)
     _save_png(fig, path)
     plt.close(fig)
     return path
@@ -105,41 +117,42 @@ def _plot_line(ax, m, label, style):
 
 def _plot_joints(plt, maps, report, path):
     n = len(maps["geometric"]["joints"])
-    same = _same_curves(maps)
+    same = not accepted_effects(report)
     fig, axes = plt.subplots(2, (n + 1) // 2, figsize=(12, 6.4), constrained_layout=True, squeeze=False)
     for j, ax in enumerate(axes.ravel()):
         if j >= n:
             ax.axis("off")
             continue
-        _plot_line(ax, maps["geometric"]["joints"][j], "geometric = final (no effect accepted)" if same else "geometric",
-                   "o-")
+        _plot_line(ax, maps["geometric"]["joints"][j], GEOMETRIC_IS_FINAL if same else "geometric", "o-")
         if not same:
-            _plot_line(ax, maps["final"]["joints"][j], "final", "s-")
+            _plot_line(ax, maps["final"]["joints"][j], _final_label(report), "s-")
         _floor_lines(ax, report)
         ax.set_xlabel(maps["geometric"]["joints"][j]["label"])
         ax.set_ylabel("RMS (mm)")
         ax.set_ylim(bottom=0)
     axes.ravel()[0].legend(fontsize=8)
     gaps = any(v is None for m in maps["geometric"]["joints"] for v in m["rms_mm"])
-    fig.suptitle("Residual RMS over each joint's range" + ("; gaps: bins without points" if gaps else ""))
+    fig.suptitle("Residual RMS over each joint's range" + (f", {GEOMETRIC_IS_FINAL}" if same else "")
+                 + ("; gaps: bins without points" if gaps else ""))
     _save_png(fig, path)
     plt.close(fig)
     return path
 
 
 def _plot_time(plt, maps, report, path):
-    same = _same_curves(maps)
+    same = not accepted_effects(report)
     fig, ax = plt.subplots(figsize=(7.5, 4), constrained_layout=True)
-    _plot_line(ax, maps["geometric"]["time"], "geometric = final (no effect accepted)" if same else "geometric", "o-")
+    _plot_line(ax, maps["geometric"]["time"], GEOMETRIC_IS_FINAL if same else "geometric", "o-")
     if "time" in maps["final"] and not same:
-        _plot_line(ax, maps["final"]["time"], "final", "s-")
+        _plot_line(ax, maps["final"]["time"], _final_label(report), "s-")
     _floor_lines(ax, report)
     ax.set_xlabel("t (min)")
     ax.set_ylabel("RMS (mm)")
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=8)
     gaps = any(v is None for v in maps["geometric"]["time"]["rms_mm"])
-    ax.set_title("Residual RMS over time" + ("; gaps: intervals without points" if gaps else ""))
+    ax.set_title("Residual RMS over time" + (f", {GEOMETRIC_IS_FINAL}" if same else "")
+                 + ("; gaps: intervals without points" if gaps else ""), fontsize=10)
     _save_png(fig, path)
     plt.close(fig)
     return path

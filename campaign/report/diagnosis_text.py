@@ -5,7 +5,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from campaign.io.terminal_text import clean
+from campaign.io.terminal_text import clean, keep_words, print_notes
 from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 
@@ -41,6 +41,18 @@ def _short_evidence(f: dict) -> str:
     return "; ".join(parts)
 
 
+def joints_text(joints) -> str:
+    """``J1-J6`` for a run of three or more consecutive joints, else ``J2, J3`` (wraps between joints)."""
+    runs: list[list[int]] = []
+    for j in sorted(joints):
+        if runs and j == runs[-1][-1] + 1:
+            runs[-1].append(j)
+        else:
+            runs.append([j])
+    parts = [f"J{r[0]}-J{r[-1]}" if len(r) >= 3 else ", ".join(f"J{j}" for j in r) for r in runs]
+    return ", ".join(parts) or "-"
+
+
 def render(console: Console, report: dict) -> None:
     """Rich tables: summary, the preparation (joint set, tracker drift), findings (which effect, how far it
     shrinks), where it lies, what cannot be told, and the unexplained structure (the same figures as the JSON's
@@ -57,28 +69,33 @@ def render(console: Console, report: dict) -> None:
     render_preparation(console, report.get("preparation"))     # read-back lag -> joint set; nest drift
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
     for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),
-                      ("after", "right"), ("after / floor", "right"), ("evidence", "left")):
-        t.add_column(col, justify=just, overflow="fold")
+                      ("after", "right"), ("after / floor", "right"), ("note", "right")):
+        t.add_column(col, justify=just)
+    notes = []
     for f in report["findings"]:
         after = f["test_rms_after_mm"]
         style = "green" if f["accepted"] else ("dim" if f["evidence"].get("diagnosable", True) else "yellow")
-        t.add_row(f["effect"], ",".join(f"J{j}" for j in f["joints"]) or "-", "yes" if f["accepted"] else "no",
+        evidence = _short_evidence(f)
+        if evidence:
+            notes.append(" ".join([f["effect"], *([joints_text(f["joints"])] if f["joints"] else [])]) + f": {evidence}")
+        t.add_row(f["effect"], joints_text(f["joints"]), "yes" if f["accepted"] else "no",
                   _mm(f["test_rms_before_mm"]), _mm(after), f"{after / floor:.2f}" if after and floor else "-",
-                  _short_evidence(f), style=style)
-    console.print(t)
+                  f"[{len(notes)}]" if evidence else "", style=style)
+    console.print(keep_words(t, console.width))
+    print_notes(console, notes)
     if report["where"]:
         w = Table(title="Where it lies (regions significantly above the noise floor)")
         for col, just in (("stage", "left"), ("region", "left"), ("RMS", "right"), ("floor", "right"),
                           ("ratio", "right"), ("n", "right")):
-            w.add_column(col, justify=just, overflow="fold")
+            w.add_column(col, justify=just)
         for r in report["where"]:
             w.add_row(r["stage"], r.get("region", r["description"]), _mm(r["rms_mm"]), _mm(r["floor_mm"]),
                       "-" if r.get("ratio") is None else f"{r['ratio']:.1f}", str(r["n"]))
-        console.print(w)
+        console.print(keep_words(w, console.width))
     else:
         console.print("where: no region of the geometric model's residual is significantly above the noise floor")
     for u in report.get("undiagnosable", []):
-        js = " J" + ",".join(map(str, u["joints"])) if u.get("joints") else ""
+        js = " " + joints_text(u["joints"]) if u.get("joints") else ""
         console.print(Text.assemble(("cannot tell from these data:", "yellow"),
                                     clean(f" {u['effect']}{js}: {u['reason']} (to reveal it: {u['remedy']})")))
     us = report.get("unexplained_structure", {})
@@ -91,15 +108,15 @@ def render(console: Console, report: dict) -> None:
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:
     m = result.confusion()
-    t = Table(title="Self-check: true effect (rows) vs diagnosed effect (first accepted)")
-    t.add_column("truth \\ diagnosed", no_wrap=True)
+    t = Table(title="Self-check: true effect (rows) vs diagnosed effect (columns, first accepted)")
+    t.add_column("truth", no_wrap=True)
     for b in LABELS:
         t.add_column(SHORT[b], justify="right")
     for a in LABELS:
         if sum(m[a].values()):
             t.add_row(SHORT[a], *[(Text(str(m[a][b]), style="bold") if a == b else str(m[a][b])) if m[a][b] else "."
                                   for b in LABELS])
-    console.print(t)
+    console.print(keep_words(t, console.width))
     s = result.summary()
     e = s["shrinkage_error_mm"]
     console.print(

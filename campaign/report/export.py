@@ -11,9 +11,14 @@ project's forward kinematics exactly for standard DH, modified DH and Hayati's b
 
 The tool (the SMR centre, ``p_flange_smr_mm``) is a fixed link ``tool`` on the flange. The registration
 ``T_tracker_base`` and any residual layer (IDW/GPR: not a kinematic chain) are stated in comments.
+
+Joint limits (:class:`UrdfLimits`, from the config): position limits from ``robot.joints[].q_min_deg/q_max_deg``,
+velocity from ``robot.max_joint_speed_deg_s`` (rad/s, every joint), effort from the datasheet torques when given,
+else omitted (never ``0``: ROS tools take a zero limit literally).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -23,8 +28,44 @@ from scipy.spatial.transform import Rotation
 from robocal.kinematics import Kinematics
 from robocal.model import CalibratedModel
 
+from campaign.config.schema import CampaignConfig
+from campaign.errors import DataError
 from campaign.io.csv_cells import render_rows
 from campaign.io.durable import atomic_write
+
+
+@dataclass(frozen=True)
+class UrdfLimits:
+    """Per joint (n,): position limits (rad), velocity limit (rad/s) and effort limit (N*m, None: omitted)."""
+    q_min_rad: tuple[float, ...]
+    q_max_rad: tuple[float, ...]
+    velocity_rad_s: tuple[float, ...]
+    effort_nm: tuple[float, ...] | None = None
+    source: str = "config"
+
+    @classmethod
+    def of_config(cls, cfg: CampaignConfig, effort_nm: tuple[float, ...] | None = None) -> "UrdfLimits":
+        """The config's joint limits and ``robot.max_joint_speed_deg_s`` for every joint; ``effort_nm``: datasheet
+        torques, one value for every joint or one per joint (DataError otherwise)."""
+        joints = cfg.robot.joints
+        n = len(joints)
+        if effort_nm is not None:
+            if len(effort_nm) not in (1, n) or min(effort_nm) <= 0:
+                raise DataError("--effort-nm", f"expected one positive torque (N*m) or {n}, got {len(effort_nm)}")
+            effort_nm = tuple(float(e) for e in effort_nm) * (n if len(effort_nm) == 1 else 1)
+        speed = float(np.radians(cfg.robot.max_joint_speed_deg_s))
+        return cls(tuple(float(np.radians(j.q_min_deg)) for j in joints),
+                   tuple(float(np.radians(j.q_max_deg)) for j in joints), (speed,) * n, effort_nm,
+                   f"config {cfg.name}: robot.joints limits, robot.max_joint_speed_deg_s "
+                   f"{cfg.robot.max_joint_speed_deg_s:g} deg/s")
+
+
+def _limit_xml(limits: UrdfLimits, i: int) -> str:
+    """``<limit>`` of joint ``i`` at full precision; no effort attribute without datasheet torques."""
+    f = lambda v: repr(float(v))  # noqa: E731
+    effort = "" if limits.effort_nm is None else f' effort="{f(limits.effort_nm[i])}"'
+    return (f'<limit lower="{f(limits.q_min_rad[i])}" upper="{f(limits.q_max_rad[i])}"'
+            f' velocity="{f(limits.velocity_rad_s[i])}"{effort}/>')
 
 
 def _rot(axis: str, angle_rad: float) -> np.ndarray:
@@ -60,16 +101,23 @@ def _origin_xml(T_mm: np.ndarray) -> str:
     return f'<origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>'
 
 
-def urdf_text(model: CalibratedModel, name: str = "robot") -> str:
-    """The URDF document (links base_link, link1..linkN, flange, tool) of the model's kinematic layer."""
+def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -> str:
+    """The URDF document (links base_link, link1..linkN, flange, tool) of the model's kinematic layer, with the
+    joint ``limits``."""
     kin = model.kinematics
+    if len(limits.q_min_rad) != kin.n:
+        raise DataError("export", f"the model has {kin.n} joints but the limits {len(limits.q_min_rad)}")
     origins, O_flange = joint_origins(kin)
     T = np.asarray(kin.T_tracker_base)
     notes = [f"calibrated kinematic chain exported by robot-accuracy-campaign ({kin.convention.upper()}"
              f"{' + Hayati beta on joints ' + ','.join(str(i + 1) for i, h in enumerate(kin.hayati) if h) if any(kin.hayati) else ''})",
              "units: metres and radians; joint values are the controller's (the DH theta offsets are in the origins)",
              "tool link = SMR centre p_flange_smr_mm = " + ", ".join(f"{v:.4f}" for v in kin.p_flange_smr_mm) + " mm",
-             "registration T_tracker_base (mm) rows: " + "; ".join(" ".join(f"{v:.6f}" for v in row) for row in T)]
+             "registration T_tracker_base (mm) rows: " + "; ".join(" ".join(f"{v:.6f}" for v in row) for row in T),
+             f"joint limits from {limits.source}; velocity in rad/s, "
+             + ("effort in N*m (datasheet)" if limits.effort_nm is not None else
+                "effort omitted (no datasheet torque given: add effort=\"N*m\" where a tool requires it, e.g. "
+                "urdfdom)")]
     if getattr(model, "effects", ()):
         names = ", ".join(getattr(fe.choice, "label", type(fe).__name__) for fe in model.effects)
         notes.append(f"NOT exported: the physical effects of the model ({names}: joint-angle dependent, not a fixed "
@@ -83,10 +131,9 @@ def urdf_text(model: CalibratedModel, name: str = "robot") -> str:
     links = ["base_link"] + [f"link{i + 1}" for i in range(kin.n)] + ["flange", "tool"]
     lines += [f'  <link name="{ln}"/>' for ln in links]
     for i in range(kin.n):
-        lo, hi = float(kin.q_min_rad[i]), float(kin.q_max_rad[i])
         lines += [f'  <joint name="j{i + 1}" type="revolute">', f'    <parent link="{links[i]}"/>',
                   f'    <child link="{links[i + 1]}"/>', f"    {_origin_xml(origins[i])}", '    <axis xyz="0 0 1"/>',
-                  f'    <limit lower="{lo!r}" upper="{hi!r}" effort="0" velocity="0"/>', "  </joint>"]
+                  f"    {_limit_xml(limits, i)}", "  </joint>"]
     tool = np.eye(4)
     tool[:3, 3] = kin.p_flange_smr_mm
     for jname, parent, child, Tj in (("flange_joint", links[kin.n], "flange", O_flange),
@@ -151,11 +198,13 @@ def robodk_text(model: CalibratedModel) -> str:
 
 
 def export(model: CalibratedModel, urdf: Path | None = None, dh_csv: Path | None = None,
-           robodk: Path | None = None, name: str = "robot") -> list[Path]:
-    """Write the requested files; returns their paths."""
+           robodk: Path | None = None, name: str = "robot", limits: UrdfLimits | None = None) -> list[Path]:
+    """Write the requested files (the URDF needs ``limits``); returns their paths."""
     written = []
     if urdf:
-        atomic_write(Path(urdf), urdf_text(model, name).encode())
+        if limits is None:
+            raise DataError("--urdf", "the URDF's joint limits come from the config: give --config CONFIG")
+        atomic_write(Path(urdf), urdf_text(model, limits, name).encode())
         written.append(Path(urdf))
     if dh_csv:
         written.append(write_dh_csv(model, dh_csv))

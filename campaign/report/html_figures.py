@@ -241,17 +241,49 @@ def calibration_figures(report: CalibrationReport, points: PointTable | None) ->
 
 
 # ============================================================================ verify
+def _verify_label(name: str, passes: dict) -> str:
+    """A pass's tick label: its name and, from verify.json's passes, how many points were corrected and held."""
+    p = passes.get(name)
+    return name if p is None else f"{name}\n{p.n_corrected} corrected, {p.n_held} held"
+
+
 def verify_figure(verify: VerifyReport, index: int) -> Figure:
+    """RMS per verify pass on a log scale (the corrected passes sit near the floor, the uncorrected one far
+    above): all test points, and the corrected points where the pass held some; the noise floor as a line."""
     plt = _plt()
+    from matplotlib.ticker import FuncFormatter
+
     names = list(verify.stages)
-    rms = [verify.stages[k].rms_mm for k in names]
-    fig, ax = plt.subplots(figsize=(max(7, 1.8 * len(names)), 4.2), constrained_layout=True)   # small: a layout
-    ax.bar(range(len(names)), rms, color="tab:blue")                                               # engine is cheap
-    ax.axhline(verify.noise_floor_mm, color="k", ls="--", lw=1, label="noise floor")
-    ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
-    ax.set_ylabel("RMS on the test points (mm)")
+    passes = {p.stage: p for p in verify.passes}
+    rms_all = [verify.stages[k].rms_mm for k in names]
+    rms_corr = [passes[k].corrected.rms_mm if k in passes and passes[k].n_held and passes[k].corrected else None
+                for k in names]
+    fig, ax = plt.subplots(figsize=(max(7, 1.9 * len(names)), 4.4), constrained_layout=True)   # small: a layout
+    x = np.arange(len(names))                                                                  # engine is cheap
+    split = any(v is not None for v in rms_corr)
+    w = 0.38 if split else 0.6
+    bars = ax.bar(x - (w / 2 if split else 0), [np.nan if v is None else v for v in rms_all], w, color="tab:blue",
+                  label="all test points")
+    ax.bar_label(bars, labels=["" if v is None else f"{v:.3f}" for v in rms_all], fontsize=7)
+    if split:
+        corr = ax.bar(x + w / 2, [np.nan if v is None else v for v in rms_corr], w, color="tab:green",
+                      label="corrected points only")
+        ax.bar_label(corr, labels=["" if v is None else f"{v:.3f}" for v in rms_corr], fontsize=7)
+    floor = verify.noise_floor_mm
+    ax.axhline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor:.3f} mm")
+    ax.set_yscale("log")
+    shown = [v for v in (*rms_all, *rms_corr, floor) if v]
+    ax.set_ylim(min(shown) / 3, max(shown) * 2)          # every bar visibly above the axis, the floor inside
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:e}"[0] in "25" else ""))
+    ax.tick_params(axis="y", which="minor", labelsize=7)
+    ax.set_xticks(x, [_verify_label(k, passes) for k in names], fontsize=8)
+    ax.set_ylabel("RMS on the test points (mm, log scale)")
     ax.legend(fontsize=8)
-    return Figure(f"verify_{index}", "Closed-loop verification: RMS per pass", "Measured on the cell.", _png(fig))
+    return Figure(f"verify_{index}", "Closed-loop verification: RMS per pass",
+                  "Measured on the cell; log scale, so the corrected passes are readable against the noise floor. "
+                  "Corrected: points whose correction was commanded; held: commanded at their planned joints.",
+                  _png(fig))
 
 
 # ============================================================================ ISO 9283
@@ -277,16 +309,36 @@ def iso_figures(iso: dict) -> list[Figure]:
     run = runs[-1]
     dev = run.get("deviation_um")
     if dev:
-        fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.9), constrained_layout=True,
-                                 squeeze=False)
-        for ax, name in zip(axes[0], names):
-            d = np.asarray(dev[name], float)
-            ax.scatter(d[:, 0], d[:, 1], s=10)
-            ax.set_title(name)
-            ax.set_xlabel("dx (um)")
-            ax.set_aspect("equal", adjustable="datalim")
-            ax.grid(alpha=0.3)
-        axes[0][0].set_ylabel("dy (um)")
-        out.append(Figure("iso9283_scatter", f"ISO 9283: attained positions around each barycentre ({run['targets']})",
-                          "Base-frame x/y deviations of each cycle from the pose's barycentre.", _png(fig)))
+        out.append(_iso_scatter(plt, names, {k: np.asarray(v, float) for k, v in dev.items()}, run["targets"]))
     return out
+
+
+def _iso_scatter(plt, names: list[str], dev_um: dict, targets: str) -> Figure:
+    """Attained positions around each pose's barycentre (µm): 3-D with equal axes and one scale for all poses
+    (x/y only for a report written before z was kept)."""
+    three = all(d.shape[1] == 3 for d in dev_um.values())
+    half = max(float(np.abs(d).max()) for d in dev_um.values()) * 1.05 or 1.0
+    fig = plt.figure(figsize=(3.3 * len(names), 3.7))
+    fig.subplots_adjust(left=0.01 if three else 0.05, right=0.97, bottom=0.1, top=0.93, wspace=0.3)
+    for k, name in enumerate(names):
+        d = dev_um[name]
+        ax = fig.add_subplot(1, len(names), k + 1, **({"projection": "3d"} if three else {}))
+        if three:
+            ax.scatter(d[:, 0], d[:, 1], d[:, 2], s=8)
+            ax.set_zlim(-half, half)
+            ax.set_zlabel("dz (µm)", fontsize=8, labelpad=2)
+            ax.set_box_aspect((1, 1, 1))
+        else:
+            ax.scatter(d[:, 0], d[:, 1], s=10)
+            ax.set_aspect("equal")
+            ax.grid(alpha=0.3)
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_title(name)
+        ax.set_xlabel("dx (µm)", fontsize=8)
+        ax.set_ylabel("dy (µm)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    what = "x/y/z" if three else "x/y"
+    return Figure("iso9283_scatter", f"ISO 9283: attained positions around each barycentre ({targets})",
+                  f"Base-frame {what} deviations of each cycle from the pose's barycentre in µm; equal scales on "
+                  "every axis and every pose.", _png(fig))

@@ -1,7 +1,7 @@
 """ISO 9283 characteristics of an acceptance run: AP / RP / AD / RD (``robocal.iso9283``) of the logged cycles,
-with nominal and, given a calibrated model, corrected targets, as the run's ``report.json``
-(``campaign-iso9283/1``). The cube and its plan are in :mod:`campaign.plan.iso9283`; the run itself is
-``campaign.workflows.run_iso9283``.
+with nominal and, given a calibrated model, corrected targets, and the largest RP against the datasheet
+repeatability (``robot.repeatability_mm``), pass or fail, as the run's ``report.json`` (``campaign-iso9283/1``).
+The cube and its plan are in :mod:`campaign.plan.iso9283`; the run itself is ``campaign.workflows.run_iso9283``.
 
 Rows are logged as set ``check`` (repeated poses) with ids ``N:P3.c07`` (nominal targets) or ``C:P3.c07``
 (corrected targets).
@@ -32,6 +32,12 @@ FRAME_FIT = ("least-squares rigid fit of the five barycentres to the commanded p
              "the part of the error a rigid frame absorbs; RP, AD and RD are frame-independent")
 
 
+def rp_within_spec(max_rp_mm: float, spec_mm: float | None) -> bool | None:
+    """Pass/fail of the measured RP (the largest of the five poses, mm) against the datasheet repeatability
+    ``robot.repeatability_mm`` (None without one). The measured RP includes the tracker's noise."""
+    return None if not spec_mm else bool(max_rp_mm <= spec_mm)
+
+
 def iso_report(cell: CellModel, records: list[PointRecord], cube: IsoCube, model: CalibratedModel | None) -> dict:
     """AP/RP per pose and AD/RD (P2-P4) of every target kind in the log records (``N:`` and ``C:`` ids)."""
     cfg = cell.config
@@ -54,11 +60,12 @@ def iso_report(cell: CellModel, records: list[PointRecord], cube: IsoCube, model
         n = min(len(by_kind[kind][name]) for name in POSE_NAMES)
         p = np.array([transform_points(T_base_tracker, np.array(by_kind[kind][name][:n])) for name in POSE_NAMES])
         poses, dist = characteristics(p, p_cmd)
-        dev = {name: np.round((p[j] - p[j].mean(axis=0))[:, :2] * 1000.0, 2).tolist()
-               for j, name in enumerate(POSE_NAMES)}
+        dev = {name: np.round((p[j] - p[j].mean(axis=0)) * 1000.0, 2).tolist() for j, name in enumerate(POSE_NAMES)}
+        max_rp = max(pc.rp_mm for pc in poses)
         runs.append({"targets": label, "cycles": n, "poses": [pc.to_dict() for pc in poses],
                      "distance": dist.to_dict(), "max_ap_mm": max(pc.ap_mm for pc in poses),
-                     "max_rp_mm": max(pc.rp_mm for pc in poses), "deviation_um": dev})
+                     "max_rp_mm": max_rp, "rp_within_spec": rp_within_spec(max_rp, cfg.robot.repeatability_mm),
+                     "deviation_um": dev})
     T_tb = inv_T(T_base_tracker)
     floor = cell.noise_floor_mm(transform_points(T_tb, p_cmd))
     return {"format": REPORT_FORMAT, "config": cfg.name, "frame": frame,

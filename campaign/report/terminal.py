@@ -9,6 +9,7 @@ from rich.table import Table
 from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.calibrate.report_sections import LayerSummary
 from campaign.correct.verify_report import VerifyReport
+from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
 
 
@@ -31,7 +32,7 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
             s = report.stages[stage.name].test
             ratio = "-" if s.rms_mm is None or not floor else f"{s.rms_mm / floor:.2f}"
             t.add_row(stage.label, _mm(s.max_mm), _mm(s.mean_mm), _mm(s.rms_mm), ratio)
-        console.print(t)
+        console.print(keep_words(t, console.width))
     layer = None if report.final is None else report.final.layer
     if layer:
         console.print(layer_line(layer), markup=False)
@@ -138,10 +139,15 @@ def render_parameters(console: Console, report: CalibrationReport) -> None:
     for row in report.parameters:
         if row.identified:
             t.add_row(row.name, f"{row.delta:+.4f}", f"{row.std:.4f}", row.unit)
-    console.print(t)
+    console.print(keep_words(t, console.width))
     if report.unidentifiable:
-        notes = ", ".join(f"{u.name} (~{'/'.join(u.redundant_with) or u.reason})" for u in report.unidentifiable)
+        notes = ", ".join(f"{u.name} ({_why_fixed(u)})" for u in report.unidentifiable)
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
+
+
+def _why_fixed(u) -> str:
+    """Why a parameter stayed at nominal: the parameters it is aliased with, else the reason in words."""
+    return f"aliased with {'/'.join(u.redundant_with)}" if u.redundant_with else u.reason
 
 
 def _vias(plan: Plan) -> str:
@@ -160,7 +166,7 @@ def render_stop(console: Console, report: CalibrationReport) -> None:
     t.add_column("predicted RMS", justify="right")
     for n, rms in stop.last_curve:
         t.add_row(str(n) + (" (stop)" if n == stop.n_calib_at_stop else ""), f"{rms:.4f}")
-    console.print(t)
+    console.print(keep_words(t, console.width))
     console.print(f"stopped after {stop.n_calib_at_stop} calibration points ({stop.reason}): predicted "
                   f"held-out RMS {stop.predicted_rms_mm:.4f} mm, measured {_mm(stop.measured_rms_mm)} mm "
                   "(final model, test set)", markup=False)
@@ -194,22 +200,23 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
             t.add_column(col)
         for s in plan.skipped:
             t.add_row(s.point_id, s.set, *(f"{v:.0f}" for v in s.p_base_mm), s.reason)
-        console.print(t)
+        console.print(keep_words(t, console.width))
 
 
 def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
     floor = rep.noise_floor_mm
-    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm); "
-                    "corrected = points whose correction was commanded, held = commanded at their planned joints")
-    for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm)")
+    for col in ("stage", "corrected", "held", "RMS all", "RMS corr.", "max corr.", "RMS corr. / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
     fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
     for p in rep.passes:
         c = p.corrected
         t.add_row(p.stage, str(p.n_corrected), str(p.n_held), fmt(p.all.rms_mm), fmt(c and c.rms_mm),
                   fmt(c and c.max_mm), "-" if c is None else f"{c.rms_mm / floor:.2f}")
-    console.print(t)
+    console.print(keep_words(t, console.width))
+    console.print("corrected (corr.) = points whose correction was commanded; held = commanded at their planned "
+                  "joints", markup=False)
     for p in rep.passes:
         for why, count in p.held.items():
             console.print(f"{p.stage}: {count} held: {why}", markup=False)
@@ -240,23 +247,32 @@ def render_verify_drift(console: Console, rep: VerifyReport) -> None:
                           f"(|t| {math.hypot(*t):.3f} mm, mean over the pass)", markup=False)
 
 
-def render_iso(console, report: dict) -> None:
-    """Rich table per target kind: AP, APx/y/z, RP per pose, and AD/RD."""
-    from rich.table import Table
+def rp_verdict(run: dict, spec_mm: float | None) -> str:
+    """The largest measured RP against the datasheet repeatability, in words (pass / fail)."""
+    if run.get("rp_within_spec") is None or not spec_mm:
+        return f"RP max {run['max_rp_mm']:.4f} mm (no datasheet repeatability to compare with)"
+    verdict = "pass" if run["rp_within_spec"] else "fail"
+    return (f"RP max {run['max_rp_mm']:.4f} mm vs datasheet repeatability {spec_mm:.4f} mm "
+            f"(robot.repeatability_mm): {verdict}")
 
+
+def render_iso(console, report: dict) -> None:
+    """Rich table per target kind: AP, APx/y/z, RP per pose (mm); AD/RD; RP against the datasheet."""
     for run in report["runs"]:
         t = Table(title=f"ISO 9283 ({run['targets']} targets, {run['cycles']} cycles, cube edge "
-                        f"{report['cube']['edge_mm']:.0f} mm), mm")
-        for col in ("pose", "AP", "APx", "APy", "APz", "RP"):
+                        f"{report['cube']['edge_mm']:.0f} mm)")
+        for col in ("pose", "AP (mm)", "APx (mm)", "APy (mm)", "APz (mm)", "RP (mm)"):
             t.add_column(col, justify="left" if col == "pose" else "right")
         for pc in run["poses"]:
             t.add_row(pc["pose"], f"{pc['ap_mm']:.4f}", f"{pc['apx_mm']:+.4f}", f"{pc['apy_mm']:+.4f}",
                       f"{pc['apz_mm']:+.4f}", f"{pc['rp_mm']:.4f}")
-        console.print(t)
+        console.print(keep_words(t, console.width))
         d = run["distance"]
-        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm, RP max {run['max_rp_mm']:.4f} mm; "
-                      f"distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, "
-                      f"RD +-{d['rd_mm']:.4f} mm", highlight=False)
-    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm", highlight=False)
+        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm; distance {'-'.join(d['poses'])} "
+                      f"{d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, RD +-{d['rd_mm']:.4f} mm; "
+                      + rp_verdict(run, report.get("repeatability_spec_mm")), highlight=False,
+                      style=None if run.get("rp_within_spec") is not False else "yellow")
+    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm (tracker and robot "
+                  "repeatability; the measured RP includes the tracker's noise)", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)

@@ -3,6 +3,7 @@ the JSON, noise-floor source, the dataset preparation shared with reprocess, one
 (optional extra) and the self-check entry point."""
 import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,10 +183,14 @@ def test_self_check_entry_point_prints_the_confusion_matrix_and_writes_json(tmp_
     monkeypatch.setattr(sc, "trial_plan", lambda seeds, *a, **k: [("single", ("backlash",), 61),
                                                                   ("control", (), 62),
                                                                   ("order_gear", ("gear_cyclic",), 63)])
-    out = tmp_path / "self.json"
+    monkeypatch.chdir(tmp_path)                                        # a short path in the output
+    out = Path("self.json")
+    monkeypatch.setenv("COLUMNS", "80")
     assert main(["diagnose", "--self-check", "--seeds", "1", "--json", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "truth \\ diagnosed" in text and "correctly attributed" in text and "order_gear: named right 1/1" in text
+    shown = capsys.readouterr().out
+    assert max(map(len, shown.splitlines())) <= 80                     # the confusion matrix fits 80 columns
+    text = " ".join(shown.split())
+    assert "diagnosed effect (columns" in text and "correctly attributed" in text and "order_gear: named right 1/1" in text
     rep = json.loads(out.read_text())
     assert rep["passed"] and rep["confusion"]["backlash"]["backlash"] == 1 and rep["confusion"]["none"]["none"] == 1
     assert main(["diagnose", "--self-check", "--seeds", "0"]) == 2

@@ -6,7 +6,7 @@ import pytest
 
 from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
-from campaign.report.export import export, robodk_text, urdf_text
+from campaign.report.export import UrdfLimits, export, robodk_text, urdf_text
 from robocal.kinematics import Kinematics, fk, smr_base
 from robocal.model import CalibratedModel
 from robocal.simulation.mock_cell import random_geometric_errors
@@ -17,9 +17,13 @@ ROOT = Path(__file__).resolve().parents[3]
 CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
 
 
+def _limits(kin: Kinematics) -> UrdfLimits:
+    return UrdfLimits(tuple(kin.q_min_rad), tuple(kin.q_max_rad), (1.0,) * kin.n)
+
+
 def _max_error_um(kin: Kinematics, tmp_path: Path, n: int = 1000, seed: int = 0) -> float:
     path = tmp_path / "robot.urdf"
-    path.write_text(urdf_text(CalibratedModel(kin)))
+    path.write_text(urdf_text(CalibratedModel(kin), _limits(kin)))
     robot = yourdfpy.URDF.load(str(path), load_meshes=False, build_scene_graph=True)
     rng = np.random.default_rng(seed)
     q = rng.uniform(kin.q_min_rad, kin.q_max_rad, (n, kin.n))
@@ -60,7 +64,7 @@ def test_wrong_origin_would_be_caught(tmp_path):
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     path = tmp_path / "robot.urdf"
     bent = kin.with_(alpha_rad=kin.alpha_rad + np.r_[0, 0, np.radians(0.01), 0, 0, 0])
-    path.write_text(urdf_text(CalibratedModel(bent)))
+    path.write_text(urdf_text(CalibratedModel(bent), _limits(bent)))
     robot = yourdfpy.URDF.load(str(path), load_meshes=False)
     q = np.radians([10, 20, -30, 40, 50, 60])
     robot.update_cfg(dict(zip([f"j{i + 1}" for i in range(6)], q)))
@@ -72,7 +76,8 @@ def test_export_files_and_residual_note(tmp_path):
     from robocal.residual import IDWResidual
     layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
     model = CalibratedModel(simulated_cell(cell).truth, layer)
-    files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt")
+    files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
+                   limits=UrdfLimits.of_config(cell.config))
     assert [f.name for f in files] == ["r.urdf", "dh.csv", "robodk.txt"]
     assert "NOT exported: the non-kinematic residual layer" in (tmp_path / "r.urdf").read_text()
     rows = (tmp_path / "dh.csv").read_text().splitlines()
@@ -100,5 +105,54 @@ def test_physical_effects_are_noted_not_exported(tmp_path):
     from robocal.elastic import EffectChoice
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
-    text = urdf_text(CalibratedModel(kin, None, None, (fake,)))
+    text = urdf_text(CalibratedModel(kin, None, None, (fake,)), _limits(kin))
     assert "NOT exported: the physical effects of the model (joint_compliance" in text
+
+
+def _model_json(tmp_path: Path) -> Path:
+    import json
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(CalibratedModel(simulated_cell(load_cell(ROOT / "configs" / "irb2600.yaml")).truth)
+                               .to_dict()))
+    return path
+
+
+def test_urdf_joint_limits_come_from_the_config(tmp_path, capsys):
+    """campaign export --urdf --config: velocity = robot.max_joint_speed_deg_s in rad/s and the config's position
+    limits, as yourdfpy reads them; effort omitted without --effort-nm, never a zero limit."""
+    from campaign.cli import main
+
+    config = ROOT / "configs" / "irb2600.yaml"
+    cfg = load_cell(config).config
+    model = _model_json(tmp_path)
+    assert main(["export", str(model), "--urdf", str(tmp_path / "r.urdf"), "--config", str(config)]) == 0
+    assert "effort limits omitted" in capsys.readouterr().out
+    text = (tmp_path / "r.urdf").read_text()
+    assert 'velocity="0"' not in text and 'effort="0"' not in text and "effort=" not in text.split("-->")[-1]
+    robot = yourdfpy.URDF.load(str(tmp_path / "r.urdf"), load_meshes=False, build_scene_graph=False)
+    for i, jc in enumerate(cfg.robot.joints):
+        limit = robot.joint_map[f"j{i + 1}"].limit
+        assert limit.velocity == pytest.approx(np.radians(cfg.robot.max_joint_speed_deg_s))
+        assert (limit.lower, limit.upper) == pytest.approx((np.radians(jc.q_min_deg), np.radians(jc.q_max_deg)))
+        assert limit.effort is None
+
+    efforts = "1800,1800,900,200,200,120"
+    assert main(["export", str(model), "--urdf", str(tmp_path / "e.urdf"), "--config", str(config),
+                 "--effort-nm", efforts]) == 0
+    robot = yourdfpy.URDF.load(str(tmp_path / "e.urdf"), load_meshes=False, build_scene_graph=False)
+    assert [robot.joint_map[f"j{i + 1}"].limit.effort for i in range(6)] == [float(e) for e in efforts.split(",")]
+
+
+def test_urdf_without_config_or_with_bad_torques_is_one_line_exit_2(tmp_path, capsys):
+    from campaign.cli import main
+
+    model = _model_json(tmp_path)
+    assert main(["export", str(model), "--urdf", str(tmp_path / "r.urdf")]) == 2
+    assert "give --config CONFIG" in capsys.readouterr().err and not (tmp_path / "r.urdf").exists()
+    config = str(ROOT / "configs" / "irb2600.yaml")
+    assert main(["export", str(model), "--urdf", str(tmp_path / "r.urdf"), "--config", config,
+                 "--effort-nm", "1,2"]) == 2
+    assert "one positive torque (N*m) or 6" in capsys.readouterr().err
+    assert main(["export", str(model), "--urdf", str(tmp_path / "r.urdf"), "--config", config,
+                 "--effort-nm", "0"]) == 2
+    assert main(["export", str(model), "--dh-csv", str(tmp_path / "dh.csv")]) == 0      # no URDF: no config needed
