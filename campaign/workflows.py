@@ -133,6 +133,7 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path | Claim, contents=Non
     claim taken once the model exists); ``contents``: the log it came from (hardware identification)."""
     from campaign.calibrate.stages import calibrate_dataset
     from campaign.calibrate.outputs import write_outputs     # the numerics load when calibrating, not at every start-up
+    from campaign.calibrate.summary import summarize
     processed = calibrate_dataset(dataset, cfg)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
@@ -141,6 +142,8 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path | Claim, contents=Non
         stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+    processed = replace(processed, report=replace(processed.report,
+                                                  summary=summarize(processed.report, cfg.acceptance)))
     if isinstance(out_dir, Claim):
         out_dir = out_dir.take()
     write_outputs(processed, out_dir)

@@ -25,15 +25,15 @@ import yaml
 
 from campaign.config.bounded_yaml import load_limited, read_limited
 from campaign.config.reader import _Reader, _describe, _fmt, _keys
-from campaign.config.schema import (CONVENTIONS, CalibrationConfig, CampaignConfig, CorrectionConfig, JointConfig,
-                                    MAX_JOINTS, MeasurementConfig, OutputConfig, PlanConfig, RobotConfig,
+from campaign.config.schema import (AcceptanceConfig, CONVENTIONS, CalibrationConfig, CampaignConfig,
+                                    CorrectionConfig, JointConfig, MAX_JOINTS, MeasurementConfig, OutputConfig, PlanConfig, RobotConfig,
                                     SimulationConfig, ToolConfig, TrackerConfig, _NAME_RE, FILE_NAME_MAX,
                                     MAX_NAME_CHARS)
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
 from robocal.noise import TrackerUncertainty
 
-from .sections import _calibration, _correction, _output, _plan, _simulation
+from .sections import _acceptance, _calibration, _correction, _output, _plan, _simulation
 
 
 __all__ = ["load_config", "parse_config"]
@@ -140,6 +140,7 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
         output=_output(r.section("output", OutputConfig, required=False)),
         source_path=r.file,
         sha256=sha256,
+        acceptance=_acceptance(r.section("acceptance", AcceptanceConfig, required=False)),
     )
 
 

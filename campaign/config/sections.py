@@ -1,4 +1,4 @@
-"""Readers of the plan, calibration, correction, simulation and output sections of a config file."""
+"""Readers of the plan, calibration, correction, simulation, output and acceptance sections of a config file."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -6,8 +6,8 @@ import math
 
 from campaign.config.plan_section import optimal_keys
 from campaign.config.reader import _ListPath, _Reader, _describe, _fmt
-from campaign.config.schema import (BoxConfig, CALIBRATION_METHODS, CORRECTION_GENERATORS, CalibrationConfig,
-                                    CheckPosesConfig, CorrectionConfig, ERROR_FUNCTIONS, EffectSpec, FaultsConfig,
+from campaign.config.schema import (AcceptanceConfig, BoxConfig, CALIBRATION_METHODS, CORRECTION_GENERATORS,
+                                    CalibrationConfig, CheckPosesConfig, CorrectionConfig, ERROR_FUNCTIONS, EffectSpec, FaultsConfig,
                                     GridConfig, Iso9283Config, JOINT_SETS, JointConfig, NestConfig, NestsConfig,
                                     OUTLIER_SCREENS, OutputConfig, PLAN_ORDERS, PlanConfig, RESIDUAL_MODELS,
                                     RobotConfig, SimulationConfig, TestSetConfig, ToolConfig, TrackerConfig, Vec3,
@@ -262,3 +262,9 @@ def _faults(r: _Reader) -> FaultsConfig:
 
 def _output(r: _Reader) -> OutputConfig:
     return OutputConfig(dir=r.string("dir", "runs"))
+
+
+def _acceptance(r: _Reader) -> AcceptanceConfig:
+    """Each bound optional (absent or null: not checked)."""
+    return AcceptanceConfig(*(None if r.data.get(k) is None else r.number(k, positive=True)
+                              for k in ("max_rms_mm", "max_mm")))

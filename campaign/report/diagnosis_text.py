@@ -8,6 +8,8 @@ from rich.text import Text
 from campaign.io.terminal_text import clean
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 
+from .quantities import floor_mm
+
 
 # ============================================================================ terminal
 def _mm(v) -> str:
@@ -49,8 +51,8 @@ def render(console: Console, report: dict) -> None:
     console.print(Text.assemble(("Sim-to-real gap", "bold"), clean(
         f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
         f"{report['config']})")))
-    console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
-                  f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
+    console.print(f"noise floor {floor_mm(floor)} mm from {report['noise_floor_source']} (specs "
+                  f"{floor_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
     for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),

@@ -33,6 +33,8 @@ from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
+from .quantities import FLOOR_FMT
+
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
 
 
@@ -163,7 +165,7 @@ def render_html(src: ReportSources, figures: dict[str, list]) -> str:
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
     return env.get_template("report.html.j2").render(
-        src=src, figures=figures, b64=b64, num=_num_factory(src.docs()), stages=STAGES,
+        src=src, figures=figures, b64=b64, num=_num_factory(src.docs()), stages=STAGES, floor_fmt=FLOOR_FMT,
         n_figures=sum(len(v) for v in figures.values()))
 
 

@@ -11,6 +11,8 @@ from campaign.calibrate.report_sections import LayerSummary
 from campaign.correct.verify_report import VerifyReport
 from campaign.plan.points import Plan
 
+from .quantities import floor_mm
+
 
 def _mm(v) -> str:
     return "-" if v is None else f"{v:.3f}"
@@ -44,8 +46,8 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                       f"points, RMS {cv.rms_without_mm:.4f} -> {cv.rms_with_mm:.4f} mm "
                       f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
-    console.print(f"noise floor {_mm(floor)} mm (from {report.noise_floor_source}; specs "
-                  f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
+    console.print(f"noise floor {floor_mm(floor)} mm (from {report.noise_floor_source}; specs "
+                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
                   f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
     render_identity(console, report)
 
@@ -55,7 +57,7 @@ def layer_line(lay: LayerSummary) -> str:
     gp = ""
     if lay.approximation is not None:
         how = "exact GP" if lay.approximation == "exact" else f"inducing-point GP, {lay.n_inducing} inputs"
-        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {_mm(lay.noise_floor_mm)} mm)"
+        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {floor_mm(lay.noise_floor_mm)} mm)"
     return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
             f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "
             f"({lay.folds}-fold), test set {_mm(lay.test_rms_mm)} mm")
@@ -177,7 +179,7 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
     held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
     console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
                   f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
-                  f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
+                  f"{floor_mm(fc.floor_mm)} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
     if blocks:
         console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
 
@@ -200,7 +202,7 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
 def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
     floor = rep.noise_floor_mm
-    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm); "
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor_mm(floor)} mm); "
                     "corrected = points whose correction was commanded, held = commanded at their planned joints")
     for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
@@ -237,6 +239,6 @@ def render_iso(console, report: dict) -> None:
         console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm, RP max {run['max_rp_mm']:.4f} mm; "
                       f"distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, "
                       f"RD +-{d['rd_mm']:.4f} mm", highlight=False)
-    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm", highlight=False)
+    console.print(f"frame: {report['frame']}; noise floor {floor_mm(report['noise_floor_mm'])} mm", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)
