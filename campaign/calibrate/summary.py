@@ -17,7 +17,7 @@ from campaign.io.json_fields import (count_field, figure_field, get_field, list_
 
 from .report_sections import ErrorFigures
 
-PASS, FAIL, NO_CRITERION, NO_TEST_SET = "pass", "fail", "no acceptance criterion configured", "no held-out test set"
+PASS, FAIL, NO_CRITERION, NO_TEST_SET = "pass", "fail", "no acceptance criterion", "no held-out test set"
 
 
 @dataclass(frozen=True)

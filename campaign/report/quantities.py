@@ -9,3 +9,16 @@ FLOOR_FMT = ".3f"
 def floor_mm(value: float | None) -> str:
     """The noise floor as printed everywhere, without the unit ("0.028"); "-" for None."""
     return "-" if value is None else format(value, FLOOR_FMT)
+
+
+CONDITION_SCALE = ((100.0, "good"), (10_000.0, "fair"), (float("inf"), "poor"))
+"""The condition number of the column-scaled identification Jacobian, in words: up to 100 every identified
+parameter is well determined; up to 10 000 some combinations are weakly determined (their sigma tells); above,
+some combinations are barely determined by the poses (a larger or better-spread pose set, or fewer parameters)."""
+
+
+def condition_scale(value: float | None) -> str:
+    """"good", "fair" or "poor" on :data:`CONDITION_SCALE` ("-" for None)."""
+    if value is None:
+        return "-"
+    return next(word for bound, word in CONDITION_SCALE if value <= bound)

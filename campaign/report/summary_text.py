@@ -72,8 +72,8 @@ def verdict_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
         failed = text(f" (exceeded: {', '.join(v.failed)})") if v.failed else text("")
         return (text(f"verdict: {v.result.upper()} against acceptance ") + text(", ").join(bounds)
                 + text(" on the held-out test set") + failed)
-    return text(f"verdict: none, {v.result}") + (
-        text(" (acceptance.max_rms_mm, acceptance.max_mm)") if not bounds else text(""))
+    hint = text(" (set acceptance.max_rms_mm, max_mm)") if not bounds else text("")
+    return text(f"verdict: none: {v.result}") + hint
 
 
 def reason_lines(s: Summary, text: Callable[[str], str] = str) -> list[str]:

@@ -11,7 +11,8 @@ from campaign.calibrate.report_sections import LayerSummary
 from campaign.correct.verify_report import VerifyReport
 from campaign.plan.points import Plan
 
-from .quantities import floor_mm
+from .glossary import UNCORRECTED_VS_NOMINAL
+from .quantities import condition_scale, floor_mm
 
 
 def _mm(v) -> str:
@@ -47,7 +48,8 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                       f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
     console.print(f"noise floor {floor_mm(floor)} mm (from {report.noise_floor_source}; specs "
-                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
+                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f} "
+                  f"({condition_scale(report.condition_number)}: good <= 100, fair <= 10000)   "
                   f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
     render_identity(console, report)
 
@@ -212,6 +214,7 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
         t.add_row(p.stage, str(p.n_corrected), str(p.n_held), fmt(p.all.rms_mm), fmt(c and c.rms_mm),
                   fmt(c and c.max_mm), "-" if c is None else f"{c.rms_mm / floor:.2f}")
     console.print(t)
+    console.print(UNCORRECTED_VS_NOMINAL, markup=False)
     for p in rep.passes:
         for why, count in p.held.items():
             console.print(f"{p.stage}: {count} held: {why}", markup=False)
