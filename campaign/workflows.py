@@ -34,6 +34,7 @@ from campaign.run.session import (RunProgress, apply_safety, continue_clock, def
                                   unique_path)
 from campaign.run.traceability import (check_identity, device_identity, identification, identity_changes, run_logging,
                                        software_version)
+from drivers.base import SystemClock
 from robocal.iso9283 import POSE_NAMES
 from robocal.model import CalibratedModel
 
@@ -91,7 +92,7 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
-        eta = RunEta(times[0][left], times[1][left])
+        eta = RunEta(times[0][left], times[1][left], simulated=not isinstance(clock, SystemClock))
         runner.predict_p_tracker_mm = predictor = smr_predictor(cfg, log.contents.records() if log.contents else ())
         runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
         with RunProgress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
