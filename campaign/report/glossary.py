@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from .quantities import CONDITION_SCALE
 
-UNCORRECTED_VS_NOMINAL = (
-    "uncorrected = the test points at their planned joints, measured against the targets through the calibrated "
-    "model's registration; it exceeds the calibration report's nominal stage on the same points because that stage "
-    "fits its own registration to the nominal model, which absorbs the part of the error a rigid frame can take up")
-"""``verify``'s "uncorrected" against the calibration's "nominal", in one line (terminal and HTML)."""
+UNCORRECTED = ("the test points commanded at their planned joints, measured against the targets through the "
+               "calibrated model's registration; larger than the calibration report's nominal stage on the same "
+               "points, because that stage fits its own registration to the nominal model, which absorbs the part of "
+               "the error a rigid frame can take up")
+"""``verify``'s "uncorrected" against the calibration's "nominal", in one sentence (terminal, HTML, glossary)."""
+UNCORRECTED_VS_NOMINAL = f"uncorrected = {UNCORRECTED}"
 
 _good, _fair = (f"{bound:,.0f}" for bound, _ in CONDITION_SCALE[:2])
 
@@ -22,7 +23,7 @@ GLOSSARY = (
      "The controller's nominal kinematic model, with the tracker-to-base registration and the SMR offset fitted to "
      "the calibration points. Its RMS on the calibration set (plausibility line) and on the test set (Table 3) are "
      "two numbers of the same model on different points."),
-    ("uncorrected (verify)", UNCORRECTED_VS_NOMINAL),
+    ("uncorrected (verify)", UNCORRECTED[0].upper() + UNCORRECTED[1:] + "."),
     ("noise floor",
      "The RMS position error a perfect model would still show: tracker noise plus the robot's repeatability, from "
      "repeated poses when the data have them, else from the specifications. Printed with one format everywhere."),
@@ -30,7 +31,8 @@ GLOSSARY = (
      "The held-out RMS as a multiple of the noise floor: about 1 means the model explains everything above the "
      "noise; well above 1, something is unmodelled."),
     ("CV RMS, t", "The RMS of cross-validation held-out errors on the calibration points, and the paired t "
-     "statistic of the per-point squared errors of two models (an effect is taken when t exceeds 3)."),
+     "statistic of the per-point squared errors of two models (the rule that takes an effect is stated in the "
+     "physical-effects section)."),
     ("condition number",
      "Ratio of the largest to the smallest singular value of the column-scaled identification Jacobian: how much "
      f"measurement noise can be amplified in the identified parameters. Up to {_good} good; up to {_fair} fair "
@@ -45,6 +47,6 @@ GLOSSARY = (
     ("residual layer", "A non-parametric correction (IDW or GPR) fitted to what the model leaves; kept only when "
      "cross-validation shows it predicts held-out points."),
     ("SIMULATED", "A mock:// robot or tracker took part: the measurements come from the simulated cell of the "
-     "config's simulation section, and every time is simulated time."),
+     "config's simulation section, and the cell's times (measuring time, ETA) are simulated time."),
 )
 """(term, definition) pairs, in reading order."""
