@@ -8,7 +8,7 @@ import numpy as np
 
 from campaign.run.output_dirs import Claim
 
-from .quantities import floor_mm
+from campaign.io.quantities import floor_mm
 
 
 PLOTS_MISSING = "matplotlib is not installed: no plots (pip install 'robot-accuracy-campaign[plots]')"

@@ -8,7 +8,7 @@ from rich.text import Text
 from campaign.io.terminal_text import clean
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 
-from .quantities import floor_mm
+from campaign.io.quantities import floor_mm
 
 
 # ============================================================================ terminal

@@ -2,7 +2,7 @@
 for readers of the terminal output)."""
 from __future__ import annotations
 
-from .quantities import CONDITION_SCALE
+from campaign.io.quantities import CONDITION_SCALE
 
 UNCORRECTED = ("the test points commanded at their planned joints, measured against the targets through the "
                "calibrated model's registration; larger than the calibration report's nominal stage on the same "

@@ -34,7 +34,7 @@ from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
 from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
-from .quantities import FLOOR_FMT, condition_scale
+from campaign.io.quantities import FLOOR_FMT, condition_scale
 from .summary_text import FORMATS, banner, held_out_line, model_line, origin, reason_lines, verdict_line
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"

@@ -16,7 +16,7 @@ from campaign.calibrate.calibration_report import COMPENSATED, KINEMATIC, NOMINA
 from campaign.calibrate.report_points import PointTable
 from campaign.correct.verify_report import VerifyReport
 
-from .quantities import floor_mm
+from campaign.io.quantities import floor_mm
 
 COLORS = {NOMINAL: "tab:red", KINEMATIC: "tab:blue", COMPENSATED: "tab:green"}     # the stages drawn
 DRAWN = tuple((s.name, s.short) for s in STAGES if s.name in COLORS)

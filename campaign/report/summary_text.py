@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from campaign.calibrate.summary import FAIL, PASS, Summary
 
-from .quantities import FLOOR_FMT
+from campaign.io.quantities import FLOOR_FMT
 
 Num = Callable[[str, str], str]
 JOINT_SETS = {"readback": "read-back", "commanded": "commanded"}

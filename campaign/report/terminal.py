@@ -12,7 +12,7 @@ from campaign.correct.verify_report import VerifyReport
 from campaign.plan.points import Plan
 
 from .glossary import UNCORRECTED_VS_NOMINAL
-from .quantities import condition_scale, floor_mm
+from campaign.io.quantities import condition_scale, floor_mm
 
 
 def _mm(v) -> str:
@@ -104,7 +104,7 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
             if t["taken"]:
                 tried[t["effect"]] = t
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
-        console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
+        console.print(f"physical effects ({len(tried)} tried; CV RMS on the calibration points, mm; geometry alone "
                       f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
     for fe in () if effects is None else effects.fitted:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"

@@ -2,7 +2,7 @@
 import pytest
 
 from campaign.report.glossary import GLOSSARY
-from campaign.report.quantities import condition_scale, floor_mm
+from campaign.io.quantities import condition_scale, floor_mm
 from tests.campaign.helpers import ROOT
 
 
