@@ -5,9 +5,9 @@ from __future__ import annotations
 from campaign.io.quantities import CONDITION_SCALE
 
 UNCORRECTED = ("the test points commanded at their planned joints, measured against the targets through the "
-               "calibrated model's registration; larger than the calibration report's nominal stage on the same "
-               "points, because that stage fits its own registration to the nominal model, which absorbs the part of "
-               "the error a rigid frame can take up")
+               "calibrated model's registration; usually larger than the calibration report's nominal stage on the "
+               "same points, because that stage fits its own registration to the nominal model, which absorbs the "
+               "part of the error a rigid frame can take up")
 """``verify``'s "uncorrected" against the calibration's "nominal", in one sentence (terminal, HTML, glossary)."""
 UNCORRECTED_VS_NOMINAL = f"uncorrected = {UNCORRECTED}"
 

@@ -204,7 +204,7 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
 def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
     floor = rep.noise_floor_mm
-    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor_mm(floor)} mm); "
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor from the specs {floor_mm(floor)} mm); "
                     "corrected = points whose correction was commanded, held = commanded at their planned joints")
     for col in ("stage", "corrected", "held", "RMS all", "RMS corrected", "max corrected", "RMS corrected / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
