@@ -52,7 +52,8 @@ class ChosenEffect:
 @dataclass(frozen=True)
 class ModelSummary:
     """The chosen model: kinematic ``convention`` with Hayati beta joints, parameters identified / fixed at
-    nominal, physical ``effects``, residual layer, joint set (``readback`` | ``commanded``), drift model."""
+    nominal, physical ``effects``, residual layer, joint set (``readback`` | ``commanded``), tracker drift model
+    (in words)."""
     convention: str
     hayati_joints: tuple[int, ...]
     n_identified: int
@@ -176,8 +177,16 @@ def _model(report) -> ModelSummary:
     return ModelSummary(str(cell.get("convention", "dh")), tuple(cell.get("hayati_joints") or ()), identified,
                         len(report.parameters) - identified, _effects(report),
                         report.method.residual if report.method and report.method.residual else "none",
-                        str((prep.get("joints") or {}).get("used", "commanded")),
-                        "compensated" if drift.get("applied") else "none")
+                        str((prep.get("joints") or {}).get("used", "commanded")), _drift(drift))
+
+
+def _drift(drift: Mapping) -> str:
+    """The tracker drift model in words: none, or its polynomial degree in time (translation, or with rotation)."""
+    if not drift.get("applied"):
+        return "none" if drift.get("nests") else "none (no reference nests)"
+    model = drift.get("model") or {}
+    how = "translation and rotation" if model.get("rotation") else "translation"
+    return f"degree {model.get('degree', '?')} in time, {how}, from {drift.get('nests')} nests"
 
 
 def _effects(report) -> tuple[ChosenEffect, ...]:
