@@ -68,8 +68,9 @@ class ModelSummary:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "ModelSummary":
-        return cls(text_field(d, "convention"), tuple(list_field(d, "hayati_joints")), count_field(d, "n_identified"),
-                   count_field(d, "n_fixed"), records_field(d, "effects", ChosenEffect.from_dict),
+        return cls(text_field(d, "convention"), tuple(list_field(d, "hayati_joints")),
+                   count_field(d, "n_identified"), count_field(d, "n_fixed"),
+                   records_field(d, "effects", ChosenEffect.from_dict),
                    text_field(d, "residual"), text_field(d, "joints"), text_field(d, "drift"))
 
 
@@ -164,8 +165,8 @@ def verdict(held: ErrorFigures | None, acceptance) -> Verdict:
         return Verdict(None, None, NO_CRITERION)
     if held is None:
         return Verdict(rms_max, max_max, NO_TEST_SET)
-    failed = tuple(name for name, value, bound in (("max_rms_mm", held.rms_mm, rms_max), ("max_mm", held.max_mm, max_max))
-                   if bound is not None and value > bound)
+    checks = (("max_rms_mm", held.rms_mm, rms_max), ("max_mm", held.max_mm, max_max))
+    failed = tuple(name for name, value, bound in checks if bound is not None and value > bound)
     return Verdict(rms_max, max_max, FAIL if failed else PASS, failed)
 
 
@@ -221,7 +222,9 @@ def _effects_reason(report) -> str:
         return f"{how}: {taken} of {n} candidates taken" if taken else f"{how}: none of {n} candidates helped"
     if setting == "list":
         return "configured (calibration.effects)"
-    return "none configured (calibration.effects)" if setting in (None, "none", "off") else f"calibration.effects: {setting}"
+    if setting in (None, "none", "off"):
+        return "none configured (calibration.effects)"
+    return f"calibration.effects: {setting}"
 
 
 def _residual_reason(report) -> str:

@@ -26,9 +26,9 @@ import yaml
 from campaign.config.bounded_yaml import load_limited, read_limited
 from campaign.config.reader import _Reader, _describe, _fmt, _keys
 from campaign.config.schema import (AcceptanceConfig, CONVENTIONS, CalibrationConfig, CampaignConfig,
-                                    CorrectionConfig, JointConfig, MAX_JOINTS, MeasurementConfig, OutputConfig, PlanConfig, RobotConfig,
-                                    SimulationConfig, ToolConfig, TrackerConfig, _NAME_RE, FILE_NAME_MAX,
-                                    MAX_NAME_CHARS)
+                                    CorrectionConfig, JointConfig, MAX_JOINTS, MeasurementConfig, OutputConfig,
+                                    PlanConfig, RobotConfig, SimulationConfig, ToolConfig, TrackerConfig, _NAME_RE,
+                                    FILE_NAME_MAX, MAX_NAME_CHARS)
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
 from robocal.noise import TrackerUncertainty

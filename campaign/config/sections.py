@@ -7,8 +7,9 @@ import math
 from campaign.config.plan_section import optimal_keys
 from campaign.config.reader import _ListPath, _Reader, _describe, _fmt
 from campaign.config.schema import (AcceptanceConfig, BoxConfig, CALIBRATION_METHODS, CORRECTION_GENERATORS,
-                                    CalibrationConfig, CheckPosesConfig, CorrectionConfig, ERROR_FUNCTIONS, EffectSpec, FaultsConfig,
-                                    GridConfig, Iso9283Config, JOINT_SETS, JointConfig, NestConfig, NestsConfig,
+                                    CalibrationConfig, CheckPosesConfig, CorrectionConfig, ERROR_FUNCTIONS, EffectSpec,
+                                    FaultsConfig, GridConfig, Iso9283Config, JOINT_SETS, JointConfig, NestConfig,
+                                    NestsConfig,
                                     OUTLIER_SCREENS, OutputConfig, PLAN_ORDERS, PlanConfig, RESIDUAL_MODELS,
                                     RobotConfig, SimulationConfig, TestSetConfig, ToolConfig, TrackerConfig, Vec3,
                                     WEIGHT_FUNCTIONS, _NAME_RE, _ORTHONORMAL_TOL)

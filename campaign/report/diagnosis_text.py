@@ -52,7 +52,8 @@ def render(console: Console, report: dict) -> None:
         f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
         f"{report['config']})")))
     console.print(f"noise floor {floor_mm(floor)} mm from {report['noise_floor_source']} (specs "
-                  f"{floor_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
+                  f"{floor_mm(report['noise_floor_specs_mm'])} mm); geometric model "
+                  f"{_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
     for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),

@@ -18,7 +18,8 @@ GLOSSARY = (
      "The calibration points are the ones the model is fitted to; the test points are held out (never used by the "
      "fit) and judge its accuracy. A figure on the calibration set is a fit to its own points, not an accuracy; "
      "every figure is labelled with its set."),
-    ("held-out", "Measured on points the model never saw: the test set, or the left-out fold of a cross-validation."),
+    ("held-out",
+     "Measured on points the model never saw: the test set, or the left-out fold of a cross-validation."),
     ("nominal",
      "The controller's nominal kinematic model, with the tracker-to-base registration and the SMR offset fitted to "
      "the calibration points. Its RMS on the calibration set (plausibility line) and on the test set (Table 3) are "
@@ -36,14 +37,14 @@ GLOSSARY = (
     ("condition number",
      "Ratio of the largest to the smallest singular value of the column-scaled identification Jacobian: how much "
      f"measurement noise can be amplified in the identified parameters. Up to {_good} good; up to {_fair} fair "
-     f"(some combinations weakly determined: see the parameter sigmas); above {_fair} poor: some combinations are barely "
-     "determined by this pose set. The held-out figures remain the test of accuracy."),
+     f"(some combinations weakly determined: see the parameter sigmas); above {_fair} poor: some combinations are "
+     "barely determined by this pose set. The held-out figures remain the test of accuracy."),
     ("aliased with", "A parameter whose effect on the measured points another parameter (or combination) also "
      "produces: it cannot be told apart, so it stays at nominal and the other takes its share."),
     ("Hayati beta", "A rotation about the y axis added to a joint whose axis is parallel to the previous one, "
      "where the D-H parameters are ill-conditioned."),
-    ("physical effects", "Joint compliance, gear cyclic error, backlash, read-back lag, drift...: terms added to the "
-     "geometric model when cross-validation shows they predict held-out points better."),
+    ("physical effects", "Joint compliance, gear cyclic error, backlash, read-back lag, drift...: terms added to "
+     "the geometric model when cross-validation shows they predict held-out points better."),
     ("residual layer", "A non-parametric correction (IDW or GPR) fitted to what the model leaves; kept only when "
      "cross-validation shows it predicts held-out points."),
     ("SIMULATED", "A mock:// robot or tracker took part: the measurements come from the simulated cell of the "
