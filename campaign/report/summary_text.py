@@ -19,9 +19,9 @@ def banner(s: Summary) -> str | None:
     if not s.simulated:
         return None
     who = " and ".join(s.simulated_devices)
-    verb = "were" if len(s.simulated_devices) > 1 else "was"
-    return (f"SIMULATED: the {who} {verb} simulated (mock:// driver); these figures come from a simulated cell, "
-            "not from a measurement")
+    verb, s_ = ("were", "s") if len(s.simulated_devices) > 1 else ("was", "")
+    return (f"SIMULATED: the {who} {verb} simulated (mock:// driver{s_}); these figures come from a simulated "
+            "cell, not from a measurement")
 
 
 def origin(s: Summary) -> str | None:

@@ -133,6 +133,20 @@ def test_summary_first_and_traceability_in_headless_chromium(mock_run, tmp_path)
 
 
 @pytest.mark.system
+def test_report_of_an_earlier_version_says_it_has_no_summary(mock_run, tmp_path):
+    run_dir, _ = mock_run
+    old = tmp_path / "old"
+    old.mkdir()
+    doc = json.loads((run_dir / "report.json").read_text())
+    del doc["summary"]
+    (old / "report.json").write_text(json.dumps(doc))
+    assert main(["report", str(old), "--out", str(tmp_path / "old.html")]) == 0
+    html = (tmp_path / "old.html").read_text()
+    assert 'id="summary-none"' in html and "earlier version" in html and html.index('id="summary"') < html.index(
+        'id="cell"')
+
+
+@pytest.mark.system
 def test_report_html_is_byte_reproducible(mock_run, tmp_path):
     """Written twice from the same JSON documents, the report is the same bytes (no clock, no random order)."""
     run_dir, _ = mock_run
