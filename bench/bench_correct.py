@@ -24,7 +24,7 @@ from robocal.correct import GENERATORS, correct, correct_ensemble, pose_errors, 
 from robocal.effects import joint_compliance  # noqa: E402
 from robocal.ik import solve_on_branch  # noqa: E402
 from robocal.kinematics import fk  # noqa: E402
-from robocal.sim_cell import random_geometric_errors  # noqa: E402
+from robocal.simulation.mock_cell import random_geometric_errors  # noqa: E402
 from tests.cells import irb2600, tool_frame  # noqa: E402
 
 K_SEED001 = np.array([1e-3, 5e-4, 5e-4, 5e-4, 5e-4])

@@ -1,6 +1,6 @@
 """Diagnosis and effect-engine timing, the self-check on truth campaigns, and both commands on one CSV.
 
-1. Time on 1000 points (700 calibration + 300 test poses of a truth campaign, robocal/diagnose/truth_cell.py, carrying
+1. Time on 1000 points (700 calibration + 300 test poses of a truth campaign, robocal/simulation/truth_cell.py, carrying
    compliance, backlash, a read-back lag and a warm-up): ``robocal.diagnose.diagnose`` (target <= 3 s), the
    ``campaign diagnose`` path on the same campaign written as a CSV, and the default ``reprocess`` calibration work
    (``campaign.calibrate.stages.calibrate_dataset``: preparation, geometric fit, effect engine, residual layer, evaluation; no HTML;
@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from robocal.diagnose import diagnose  # noqa: E402
 from robocal.diagnose.selfcheck import format_confusion, run_self_check, truth_input  # noqa: E402
-from robocal.diagnose.truth_cell import TruthProtocol, simulate  # noqa: E402
+from robocal.simulation.truth_cell import TruthProtocol, simulate  # noqa: E402
 
 ROBOT = ("joint_compliance", "backlash", "readback_lag", "thermal_drift")
 
@@ -57,7 +57,7 @@ def bench_time(repeats: int = 3) -> None:
     for s in d.stages:
         print(f"    {s['added']:<40s} test RMS {s['test_rms_mm']:.4f} mm, CV RMS {s['cv_rms_mm']:.4f} mm")
     print(f"  {d.unexplained_structure['text']}")
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.calibrate.diagnosis import diagnose_source
     from campaign.data.interchange_csv import read_csv
     from campaign.calibrate.stages import calibrate_dataset
@@ -65,12 +65,12 @@ def bench_time(repeats: int = 3) -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         csv, cfg_path = truth_csv(Path(tmp), camp)
-        cfg = load_config(cfg_path)
-        rep, wall, cpu = _timed(lambda: diagnose_source(csv, cfg).report, repeats)
+        cell = load_cell(cfg_path)
+        rep, wall, cpu = _timed(lambda: diagnose_source(csv, cell).report, repeats)
         print(f"  campaign diagnose on the CSV (read, prepare, geometric fit, engine, diagnosis): median wall "
               f"{wall:.2f} s, median CPU {cpu:.2f} s (target <= 3 s)")
         ds = read_csv(csv)
-        pr, wall, cpu = _timed(lambda: calibrate_dataset(ds, cfg), repeats)
+        pr, wall, cpu = _timed(lambda: calibrate_dataset(ds, cell), repeats)
         st = pr.report.stages
         print(f"  default reprocess calibration work (process(): prepare, geometric fit, effect engine, residual layer "
               f"{pr.report.residual_choice.chosen}, evaluation; no HTML): median wall {wall:.2f} s, median CPU "
@@ -131,16 +131,16 @@ def bench_lag_backlash(seeds: int = 10) -> None:
 
 def bench_csv(csv: str, config: str) -> None:
     """Reprocess and diagnose on one campaign: accepted effects, values and held-out figures."""
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.calibrate.diagnosis import diagnose_dataset
     from campaign.data.interchange_csv import read_csv
     from campaign.calibrate.stages import calibrate_dataset
 
-    cfg = load_config(config)
+    cell = load_cell(config)
     t0 = time.process_time()
-    rep = calibrate_dataset(read_csv(csv), cfg).report
+    rep = calibrate_dataset(read_csv(csv), cell).report
     t1 = time.process_time()
-    diag = diagnose_dataset(read_csv(csv), cfg).report
+    diag = diagnose_dataset(read_csv(csv), cell).report
     t2 = time.process_time()
     print(f"\n{csv} with {config}:")
     sel = rep.effects.selection

@@ -1,6 +1,6 @@
 """Nest-drift model selection: leave-one-round-out CV by batched normal-equation downdates (robocal.drift) against
 one least-squares fit per held-out round (the implementation before issue 21), on the same simulated nest readings
-(three floor nests read after every pose of a robocal.diagnose.truth_cell campaign with registration drift, ~880 readings, ~290
+(three floor nests read after every pose of a robocal.simulation.truth_cell campaign with registration drift, ~880 readings, ~290
 rounds). Prints the median time of each, the ratio, and the largest difference of their CV figures.
 
     OPENBLAS_NUM_THREADS=1 python3 bench/bench_drift.py
@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from robocal.drift import _design, fit_drift, nest_rounds  # noqa: E402
-from robocal.diagnose.truth_cell import TruthProtocol, simulate  # noqa: E402
+from robocal.simulation.truth_cell import TruthProtocol, simulate  # noqa: E402
 
 
 def per_round_cv(t, nest, p, degree, rotation):

@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from campaign.run import devices  # noqa: E402
 from campaign.cli import main  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.log_dataset import dataset_from_log  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.run.log_reader import read_log  # noqa: E402
@@ -30,19 +30,19 @@ SMALL = {"plan.test.count": 30, "plan.check_poses": {"count": 0, "every_n_points
 
 def one(tmp: Path, seed: int) -> None:
     tmp.mkdir(parents=True, exist_ok=True)
-    world = devices.mock_world(load_config(small_config(tmp, **SMALL, **{"simulation.seed": seed})))
+    world = devices.mock_world(load_cell(small_config(tmp, **SMALL, **{"simulation.seed": seed})))
     world.faults = {}
-    devices.mock_world = lambda cfg: world
+    devices.mock_world = lambda cell: world
     with EmsconEmulator(lambda: world.p_smr_tracker_mm + world.point_error_mm, seed=seed) as emu:
         path = small_config(tmp, **SMALL, **{"simulation.seed": seed, "tracker.url": emu.url,
                                              "tracker.options": {"meas_time_ms": 10}})
         t0 = time.perf_counter()
         assert main(["run", str(path), "--out", str(tmp / f"run{seed}")]) == 0
         wall = time.perf_counter() - t0
-    cfg = load_config(path)
+    cell = load_cell(path)
     ds = dataset_from_log(read_log(tmp / f"run{seed}"))
-    device = calibrate_dataset(ds, cfg).report
-    spec = calibrate_dataset(dataclasses.replace(ds, cov_mm2=None), cfg).report
+    device = calibrate_dataset(ds, cell).report
+    spec = calibrate_dataset(dataclasses.replace(ds, cov_mm2=None), cell).report
     rms = lambda r: r.stages["kinematic"].test.rms_mm  # noqa: E731
     print(f"seed {seed}: {len(ds.point_id)} points; test RMS device weights {rms(device):.4f} mm, spec weights "
           f"{rms(spec):.4f} mm (ratio {rms(device) / rms(spec):.3f}); noise floor {device.noise_floor_mm:.4f} mm; "

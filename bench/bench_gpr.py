@@ -50,7 +50,7 @@ from robocal.three_smr_pose import (MultiSMRPoseEstimator, fit_points_pose, meas
 from robocal.noise import TrackerUncertainty  # noqa: E402
 from robocal.payload import (SEED003_PAYLOADS_KG, HeavyPayloadCell, irb4600,  # noqa: E402
                              random_configurations)
-from robocal.sim_cell import random_geometric_errors  # noqa: E402
+from robocal.simulation.mock_cell import random_geometric_errors  # noqa: E402
 from tests.cells import tool_frame  # noqa: E402
 
 TOOL = seed003_tool()

@@ -11,8 +11,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.config.cell_model import measurement_covariance, nominal_kinematics  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.run.devices import mock_world  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
 from campaign.run.log_writer import RunLog  # noqa: E402
@@ -50,11 +49,11 @@ class InstantTracker:
     def close(self): pass
 
 
-def time_run(cfg, plan, robot, tracker, clock) -> float:
+def time_run(cell, plan, robot, tracker, clock) -> float:
     with tempfile.TemporaryDirectory() as tmp:
+        cfg = cell.config
         log = RunLog.create(Path(tmp) / "run", {"config_sha256": cfg.sha256, "plan_sha256": plan.sha256})
-        runner = Runner(robot, tracker, cfg.tracker.measurement, clock,
-                        lambda p: measurement_covariance(cfg, p[None])[0])
+        runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: cell.covariance(p[None])[0])
         t0 = time.perf_counter()
         outcome = runner.execute(plan.points, log)
         dt = time.perf_counter() - t0
@@ -63,14 +62,14 @@ def time_run(cfg, plan, robot, tracker, clock) -> float:
 
 
 def main(repeats: int = 5) -> None:
-    cfg = load_config(ROOT / "configs/irb2600.yaml")
-    plan = build_plan(cfg, nominal_kinematics(cfg))
-    m = cfg.tracker.measurement
-    stub = [time_run(cfg, plan, InstantRobot(), InstantTracker(), VirtualClock()) for _ in range(repeats)]
+    cell = load_cell(ROOT / "configs/irb2600.yaml")
+    plan = build_plan(cell)
+    m = cell.config.tracker.measurement
+    stub = [time_run(cell, plan, InstantRobot(), InstantTracker(), VirtualClock()) for _ in range(repeats)]
     mocks = []
     for _ in range(repeats):
-        world = mock_world(cfg)
-        mocks.append(time_run(cfg, plan, MockRobot(world), MockTracker(world), world.clock))
+        world = mock_world(cell)
+        mocks.append(time_run(cell, plan, MockRobot(world), MockTracker(world), world.clock))
     print(f"{len(plan.points)} points, {m.samples} samples per point, fsync per record")
     print(f"controller overhead per point (instant stub devices): median {1e3 * np.median(stub):.3f} ms "
           f"(min {1e3 * np.min(stub):.3f}, max {1e3 * np.max(stub):.3f}); target <= 2 ms")

@@ -33,7 +33,7 @@ from rich.console import Console  # noqa: E402
 
 from campaign.calibrate.calibration_report import CalibrationReport  # noqa: E402
 from campaign.config.schema import CalibrationConfig  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.interchange_csv import read_csv, write_csv  # noqa: E402
 from campaign.workflows import reprocess, run_campaign  # noqa: E402
 
@@ -97,21 +97,21 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         for seed in args.seeds:
-            cfg_a = load_config(campaign_config(tmp, seed, None))
-            cfg_b = load_config(campaign_config(tmp, seed, plain))
-            run = run_campaign(cfg_a, tmp / f"run-{seed}", console=quiet)
+            cell_a = load_cell(campaign_config(tmp, seed, None))
+            cell_b = load_cell(campaign_config(tmp, seed, plain))
+            run = run_campaign(cell_a, tmp / f"run-{seed}", console=quiet)
             if run.outcome.exit_status != "success":
                 print(f"seed {seed}: run {run.outcome.exit_status}: {run.outcome.reason}")
                 return 1
             csv = run.run_dir / "data.csv"
-            a = reprocess(csv, cfg_a, tmp / f"a-{seed}").report
+            a = reprocess(csv, cell_a, tmp / f"a-{seed}").report
             without_features(csv, tmp / f"plain-{seed}.csv")
-            b = reprocess(tmp / f"plain-{seed}.csv", cfg_b, tmp / f"b-{seed}").report
+            b = reprocess(tmp / f"plain-{seed}.csv", cell_b, tmp / f"b-{seed}").report
             # one feature off at a time: no nests (drift not compensated); read-back joints forced
             without_features(csv, tmp / f"nonest-{seed}.csv", keep_commanded=True)
-            a_nodrift = reprocess(tmp / f"nonest-{seed}.csv", cfg_a, tmp / f"a1-{seed}").report
-            cfg_rb = load_config(campaign_config(tmp, seed, {"joints": "readback"}))
-            a_readback = reprocess(csv, cfg_rb, tmp / f"a2-{seed}").report
+            a_nodrift = reprocess(tmp / f"nonest-{seed}.csv", cell_a, tmp / f"a1-{seed}").report
+            cell_rb = load_cell(campaign_config(tmp, seed, {"joints": "readback"}))
+            a_readback = reprocess(csv, cell_rb, tmp / f"a2-{seed}").report
             floor = a.noise_floor_mm
             prep = a.preparation or {}
             drift = prep.get("drift", {})

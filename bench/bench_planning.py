@@ -2,7 +2,7 @@
 
 The IRB 2600 cell of configs/irb2600.yaml with gravity compliance of J2/J3 (c2 1e-6, c3 2e-6 rad/(N m)) and a
 cyclic gear error of J2 (first and second harmonic, 0.008 / 0.004 deg); the truth geometry changes with the seed.
-  A. Held-out RMS of the final model (`process`, default calibration settings) for the grid plan, an optimal plan
+  A. Held-out RMS of the final model (`calibrate_dataset`, default calibration settings) for the grid plan, an optimal plan
      of a third of the grid's points (`plan.kind: optimal`), and a seeded random third of the grid; every design
      is judged on the same measured test set (same poses, same noise) of its seed. Then held-out RMS vs number
      of points: coarser grids (step 400 / 300 / 250 mm), optimal plans and random subsets of the grid of the same
@@ -32,9 +32,8 @@ sys.path.insert(0, str(ROOT))
 
 from rich.console import Console  # noqa: E402
 
-from campaign.config.cell_model import nominal_kinematics  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.errors import ConfigError  # noqa: E402
 from campaign.run.eta import estimate_duration_s  # noqa: E402
@@ -65,37 +64,36 @@ def calib_test_q(plan) -> tuple[np.ndarray, np.ndarray]:
     return np.radians([p.q_deg for p in plan.points if p.set == "calib"]), np.radians([p.q_deg for p in tests])
 
 
-def held_out_rms(cfg, cell, q_cal, q_test, p_test, rng) -> float:
+def held_out_rms(model, cell, q_cal, q_test, p_test, rng) -> float:
     """Final-model RMS on the test set (mm) of a calibration on q_cal measured on ``cell``."""
     p_cal, _ = cell.measure(q_cal, rng)
     ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
                  ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
                  np.vstack([p_cal, p_test]), source="bench")
-    return float(calibrate_dataset(ds, cfg).report.final.test.rms_mm)
+    return float(calibrate_dataset(ds, model).report.final.test.rms_mm)
 
 
 GRID_STEPS_MM = (400, 300, 250)       # coarser grids: the grid design at fewer points (the plan's own step is 200)
 
 
 def part_a(tmp: Path, seeds: list[int], out: Console) -> None:
-    cfg_grid = load_config(write_config(tmp, seeds[0]))
-    kin = nominal_kinematics(cfg_grid)
-    grid = build_plan(cfg_grid, kin)
+    cell_grid = load_cell(write_config(tmp, seeds[0]))
+    grid = build_plan(cell_grid)
     q_grid, q_test = calib_test_q(grid)
     n_third = int(round(len(q_grid) / 3))
     designs: dict[tuple[str, int], np.ndarray] = {("grid", len(q_grid)): q_grid}
     for step in GRID_STEPS_MM:
-        q = calib_test_q(build_plan(load_config(write_config(tmp, seeds[0], grid=_grid(step))), kin))[0]
+        q = calib_test_q(build_plan(load_cell(write_config(tmp, seeds[0], grid=_grid(step)))))[0]
         designs[("grid", len(q))] = q
     counts = sorted({n for _, n in designs} | {n_third})
     plans, t_build = {}, {}
     for n in counts:
         if n == len(q_grid):
             continue
-        cfg_opt = load_config(write_config(tmp, seeds[0], kind="optimal", points=n))
+        cell_opt = load_cell(write_config(tmp, seeds[0], kind="optimal", points=n))
         t0 = time.perf_counter()
         try:
-            plans[n] = build_plan(cfg_opt, kin)
+            plans[n] = build_plan(cell_opt)
         except ConfigError as exc:                     # fewer points than the parameters need
             out.print(f"   optimal plan of {n} points refused: {exc}")
             continue
@@ -103,12 +101,12 @@ def part_a(tmp: Path, seeds: list[int], out: Console) -> None:
         q_opt, q_test_opt = calib_test_q(plans[n])
         assert np.allclose(q_test, q_test_opt), "grid and optimal plans must share the test set"
         designs[("optimal", n)] = q_opt
-    cfg_opt = load_config(write_config(tmp, seeds[0], kind="optimal", points=n_third))
+    cell_opt = load_cell(write_config(tmp, seeds[0], kind="optimal", points=n_third))
     cal_only = lambda plan: [p for p in plan.points if p.set == "calib"]  # noqa: E731
-    d_grid = estimate_duration_s(grid.points, cfg_grid, kin)
-    d_opt = estimate_duration_s(plans[n_third].points, cfg_opt, kin)
-    c_grid = estimate_duration_s(cal_only(grid), cfg_grid, kin)
-    c_opt = estimate_duration_s(cal_only(plans[n_third]), cfg_opt, kin)
+    d_grid = estimate_duration_s(grid.points, cell_grid)
+    d_opt = estimate_duration_s(plans[n_third].points, cell_opt)
+    c_grid = estimate_duration_s(cal_only(grid), cell_grid)
+    c_opt = estimate_duration_s(cal_only(plans[n_third]), cell_opt)
     out.print(f"A. grid {len(q_grid)} calibration points, optimal third {n_third} (plan built in "
               f"{t_build[n_third]:.1f} s), test set {len(q_test)} points")
     out.print(f"   duration: whole plan grid {d_grid / 60:.1f} min, optimal third {d_opt / 60:.1f} min "
@@ -117,14 +115,14 @@ def part_a(tmp: Path, seeds: list[int], out: Console) -> None:
     res: dict[tuple[str, int], list[float]] = {}
     floors = []
     for seed in seeds:
-        cfg = load_config(write_config(tmp, seed))
-        cell = simulated_cell(cfg)
+        model = load_cell(write_config(tmp, seed))
+        cell = simulated_cell(model)
         p_test, _ = cell.measure(q_test, np.random.default_rng(10_000 + seed))
         floors.append(float(cell.noise_floor(q_test)))
         for n in counts:
             designs[("random", n)] = q_grid[np.sort(np.random.default_rng(seed).choice(len(q_grid), n, replace=False))]
         for key, q in designs.items():
-            res.setdefault(key, []).append(held_out_rms(cfg, cell, q, q_test, p_test, np.random.default_rng(seed)))
+            res.setdefault(key, []).append(held_out_rms(model, cell, q, q_test, p_test, np.random.default_rng(seed)))
         g, o, r = res[("grid", len(q_grid))][-1], res[("optimal", n_third)][-1], res[("random", n_third)][-1]
         out.print(f"   seed {seed}: held-out RMS grid {g:.4f}  optimal third {o:.4f} ({o / g:.3f} x grid)  "
                   f"random third {r:.4f} ({r / g:.3f} x grid)  noise floor {floors[-1]:.4f} mm")
@@ -146,13 +144,12 @@ def _grid(step_mm: float) -> dict:
 
 
 def part_b(tmp: Path, seeds: list[int], out: Console) -> None:
-    cfg_grid = load_config(write_config(tmp, seeds[0]))
-    n_grid = build_plan(cfg_grid, nominal_kinematics(cfg_grid)).count("calib")
+    n_grid = build_plan(load_cell(write_config(tmp, seeds[0]))).count("calib")
     out.print(f"B. plan.stop: auto, max_points {n_grid} (the grid's count), block_points 20")
     ok = 0
     for seed in seeds:
         path = write_config(tmp, seed, kind="optimal", stop="auto", max_points=n_grid)
-        res = run_campaign(load_config(path), tmp / f"stop-{seed}", console=Console(file=open("/dev/null", "w")))
+        res = run_campaign(load_cell(path), tmp / f"stop-{seed}", console=Console(file=open("/dev/null", "w")))
         stop = res.processed.report.stop
         n, pred, meas = stop.n_calib_at_stop, stop.predicted_rms_mm, stop.measured_rms_mm
         good = n < 0.5 * n_grid and abs(pred / meas - 1) <= 0.15
@@ -163,9 +160,8 @@ def part_b(tmp: Path, seeds: list[int], out: Console) -> None:
 
 
 def part_c(tmp: Path, out: Console) -> None:
-    cfg = load_config(write_config(tmp, 1, kind="optimal", points=100))
-    kin = nominal_kinematics(cfg)
-    pool = candidate_pool(cfg, kin, PathGuard.from_config(cfg, kin))
+    cell = load_cell(write_config(tmp, 1, kind="optimal", points=100))
+    pool = candidate_pool(cell, PathGuard.for_cell(cell))
     pick = np.sort(np.random.default_rng(0).choice(len(pool.q_rad), 3000, replace=False))
     A, spread = pool.criterion.A[pick], pool.criterion.spread[pick]
 

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from rich.console import Console  # noqa: E402
 
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.report.html import build_figures, collect, render_html, write_report  # noqa: E402
 from campaign.data.interchange_csv import read_csv  # noqa: E402
 from campaign.workflows import run_campaign  # noqa: E402
@@ -59,14 +59,14 @@ def main() -> None:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_report_")) if args.keep is None else args.keep
     tmp.mkdir(parents=True, exist_ok=True)
-    cfg = load_config(thousand_point_config(tmp))
-    result = run_campaign(cfg, tmp / "run", console=Console(quiet=True))
+    cell = load_cell(thousand_point_config(tmp))
+    result = run_campaign(cell, tmp / "run", console=Console(quiet=True))
     run_dir = result.run_dir
     n = result.processed.report.n
     rows = len(result.processed.points)
     print(f"run: {n.calib} calib + {n.test} test + {n.check} check = {rows} points")
     ds = read_csv(run_dir / "data.csv")
-    t_cal = median_s(lambda: calibrate_dataset(ds, cfg), args.repeats)
+    t_cal = median_s(lambda: calibrate_dataset(ds, cell), args.repeats)
     src = collect(run_dir)
     t_fig = median_s(lambda: build_figures(src), args.repeats)
     figs = build_figures(src)

@@ -24,17 +24,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.config.cell_model import measurement_covariance  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from robocal.identify import CalibrationOptions, calibrate  # noqa: E402
 from robocal.kinematics import smr_tracker  # noqa: E402
-from tests.campaign.screen_campaigns import CFG, KIN0, sparse_campaign  # noqa: E402
+from tests.campaign.screen_campaigns import CELL, KIN0, sparse_campaign  # noqa: E402
 
 
 def baseline(ds, options):
     q, p = np.radians(ds.q_deg), ds.p_tracker_mm
     cal, test = ds.mask("calib"), ds.mask("test")
-    res = calibrate(KIN0, q[cal], p[cal], measurement_covariance(CFG, p[cal]), options)
+    res = calibrate(KIN0, q[cal], p[cal], CELL.covariance(p[cal]), options)
     e = np.linalg.norm(p[test] - smr_tracker(res.kinematics, q[test]), axis=1)
     return e, np.flatnonzero(cal)[res.point_weights == 0]
 
@@ -46,7 +45,7 @@ def scenario(name, seeds, **kw):
     for s in seeds:
         c = sparse_campaign(s, **kw)
         n_bad += int(c.fault.sum())
-        rep = calibrate_dataset(c.ds, CFG).report
+        rep = calibrate_dataset(c.ds, CELL).report
         t = rep.final.test
         rows["default"].append((t.rms_mm, t.max_mm))
         ids = {e.point_id for e in rep.excluded_points}

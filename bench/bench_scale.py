@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from campaign.config.simulation import simulated_cell  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.data.interchange_csv import write_csv  # noqa: E402
 
@@ -36,8 +36,8 @@ TARGETS = {"reprocess": (90.0, 2048.0), "diagnose": (120.0, 2048.0)}     # s, Mi
 
 def simulated_dataset(n_rows: int, seed: int = 0, config: Path = CONFIG) -> Dataset:
     """A seeded campaign of ``n_rows`` rows measured on the config's simulated cell (see module doc)."""
-    cfg = load_config(config)
-    cell = simulated_cell(cfg)
+    model = load_cell(config)
+    cfg, cell = model.config, simulated_cell(model)
     rng = np.random.default_rng(seed)
     lo = np.array([j.q_min_deg for j in cfg.robot.joints])
     hi = np.array([j.q_max_deg for j in cfg.robot.joints])

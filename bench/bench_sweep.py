@@ -11,8 +11,7 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from campaign.config.cell_model import nominal_kinematics  # noqa: E402
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
 from robocal.sweep import (Boxes, check_segments, clearances_mm, flange_points_base, lever_arms_mm,  # noqa: E402
                            sample_segments)
@@ -47,13 +46,13 @@ def main(repeats: int = 5) -> None:
         (Path(tmp) / "plain.yaml").write_text(yaml.safe_dump(doc))
         doc["plan"]["keep_out"] = [BOX]
         (Path(tmp) / "box.yaml").write_text(yaml.safe_dump(doc))
-        plain, boxed = load_config(Path(tmp) / "plain.yaml"), load_config(Path(tmp) / "box.yaml")
-    kin = nominal_kinematics(plain)
-    plan, t_plain = timed(lambda: build_plan(plain, kin), 3)
-    _, t_box = timed(lambda: build_plan(boxed, kin), 3)
+        plain, boxed = load_cell(Path(tmp) / "plain.yaml"), load_cell(Path(tmp) / "box.yaml")
+    kin = plain.kinematics
+    plan, t_plain = timed(lambda: build_plan(plain), 3)
+    _, t_box = timed(lambda: build_plan(boxed), 3)
     q = np.radians([p.q_deg for p in plan.points])
     q_a, q_b = q[:-1], q[1:]
-    pts = np.array([[0.0, 0.0, 0.0], plain.tool.p_flange_smr_mm])
+    pts = np.array([[0.0, 0.0, 0.0], plain.config.tool.p_flange_smr_mm])
     boxes = Boxes(np.array([BOX["min_mm"]], float), np.array([BOX["max_mm"]], float))
     v, t_ca = timed(lambda: check_segments(kin, q_a, q_b, pts, boxes, None, 25.0), repeats)
     (blocked, n_samples), t_dense = timed(lambda: dense(kin, q_a, q_b, pts, boxes, 25.0), repeats)

@@ -27,7 +27,7 @@ import yaml  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.config.load import load_config  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.importers import import_target_dif, read_target_dif_file  # noqa: E402
 from campaign.calibrate.plausibility import check_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
@@ -40,7 +40,7 @@ PUBLISHED = (("uncalibrated (thesis)", 2.5664), ("hybrid MDH + ASTGCN (thesis)",
 
 
 def config(tmp: Path, **changes):
-    """configs/ur5.yaml with top-level sections changed (dotted keys), loaded."""
+    """The cell model of configs/ur5.yaml with top-level sections changed (dotted keys)."""
     doc = yaml.safe_load((ROOT / "configs" / "ur5.yaml").read_text())
     for key, value in changes.items():
         node, *path = key.split(".")
@@ -50,7 +50,7 @@ def config(tmp: Path, **changes):
         target[path[-1]] = value
     path = tmp / f"ur5-{len(list(tmp.iterdir()))}.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return load_config(path)
+    return load_cell(path)
 
 
 def gravity_sag(model, q_rad: np.ndarray) -> tuple[float, float]:
@@ -66,14 +66,14 @@ def gravity_sag(model, q_rad: np.ndarray) -> tuple[float, float]:
 def dif_sign(tmp: Path) -> None:
     print("1. sign of dif (calibration poses only)")
     _, target, dif, _ = read_target_dif_file(GRID)
-    cfg = config(tmp, **{"calibration.effects": [{"name": "joint_compliance", "params": {"joints": [2, 3]}}],
-                         "calibration.residual": "none"})
+    cell = config(tmp, **{"calibration.effects": [{"name": "joint_compliance", "params": {"joints": [2, 3]}}],
+                          "calibration.residual": "none"})
     for sign in (1.0, -1.0):
         scaled = (target + sign * dif) * 1e6
         on_grid = np.mean(np.abs(scaled - np.round(scaled)) < 1e-3)
         ds = import_target_dif(GRID, dif_sign=sign)
-        nominal = check_dataset(ds, cfg)[1].nominal_rms_mm
-        model = calibrate_dataset(ds, cfg).model
+        nominal = check_dataset(ds, cell)[1].nominal_rms_mm
+        model = calibrate_dataset(ds, cell).model
         comp = ", ".join(f"{n} {v:+.2e} ({v / s:+.0f} std)" for e in model.effects
                          for n, v, s in zip(e.param_names, e.values, e.std))
         dz, corr = gravity_sag(model, np.radians(ds.q_deg))

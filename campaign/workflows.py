@@ -1,4 +1,6 @@
-"""The whole campaign in one place: config -> plan -> drivers -> durable log -> calibration -> report."""
+"""The commands' workflows, built from the rooms: ``run_campaign`` (config -> plan -> devices -> durable log ->
+calibration -> report), ``reprocess`` (a log or CSV -> model + report), ``verify`` (closed-loop passes with
+corrected targets) and ``run_iso9283`` (the ISO 9283 acceptance run). The library API the CLI and the tests call."""
 from __future__ import annotations
 
 from contextlib import ExitStack
@@ -12,10 +14,10 @@ import numpy as np
 from rich.console import Console
 
 from campaign.calibrate.plausibility import is_forced
-from campaign.config.cell_model import device_measurement_covariance, measurement_covariance, nominal_kinematics
-from campaign.config.schema import CampaignConfig
-from campaign.data.interchange_csv import read_csv, write_csv
-from campaign.data.log_dataset import dataset_from_log
+from campaign.config.cell_model import CellModel
+from campaign.config.load import load_cell
+from campaign.data.interchange_csv import write_csv
+from campaign.data.source import load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
 from campaign.plan.iso9283 import IsoCube, iso_cube, iso_plan
@@ -29,8 +31,8 @@ from campaign.run.log_reader import completed_point_ids, read_log
 from campaign.run.log_writer import RunLog
 from campaign.run.output_dirs import RUN, Claim, check_dir, source_key
 from campaign.run.resume_checks import check_resume
-from campaign.run.runner import RunOutcome, Runner, closing_on_error, pending
-from campaign.run.session import (RunProgress, apply_safety, continue_clock, default_run_dir, open_log, smr_predictor,
+from campaign.run.runner import RunOutcome, closing_on_error, pending
+from campaign.run.session import (RunProgress, continue_clock, default_run_dir, make_runner, observe_points, open_log,
                                   unique_path)
 from campaign.run.traceability import (check_identity, device_identity, identification, identity_changes, run_logging,
                                        software_version)
@@ -55,17 +57,18 @@ class RunResult:
     iso9283: dict | None = None             # the ISO 9283 report of a plan.kind: iso9283 run
 
 
-def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path | None = None,
+def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | None = None,
                  console: Console | None = None, plan: Plan | None = None, overwrite: bool = False) -> RunResult:
-    """Measure the plan of ``cfg`` (or the rest of it when resuming), then calibrate and report. ``run_dir`` must
-    be new or empty (any directory but a run's with ``overwrite``: see :mod:`campaign.run.output_dirs`)."""
+    """Measure the plan of the cell's config (or the rest of it when resuming), then calibrate and report.
+    ``run_dir`` must be new or empty (any directory but a run's with ``overwrite``: see
+    :mod:`campaign.run.output_dirs`)."""
+    cfg = cell.config
     console = console or stdout_console()
     if resume is not None:
         check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     else:
         run_dir = check_dir(default_run_dir(cfg) if run_dir is None else run_dir, RUN, overwrite)
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin) if plan is None else plan      # given: campaign iso9283 with corrected cycles
+    plan = build_plan(cell) if plan is None else plan          # given: campaign iso9283 with corrected cycles
     if not plan.points:
         raise ConfigError(cfg.source_path, "plan", f"no reachable point to measure ({len(plan.skipped)} skipped"
                           + (f", e.g. {plan.skipped[0].point_id}: {plan.skipped[0].reason})" if plan.skipped else ")"))
@@ -73,12 +76,10 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
         check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
-        cell = stack.enter_context(open_devices(cfg))
-        robot, tracker, clock = cell.robot, cell.tracker, cell.clock
-        runner = Runner(robot, tracker, cfg.tracker.measurement, clock, lambda p: measurement_covariance(cfg, p[None])[0],
-                        cfg.tool.payload_kg, n_smrs=len(cfg.tool.smrs_mm), nests=cfg.plan.nests)
-        apply_safety(runner, cfg, kin, first_pass=resume is None)
-        times = point_times_s(plan.points, cfg, kin)
+        devices = stack.enter_context(open_devices(cell))
+        robot, tracker, clock = devices.robot, devices.tracker, devices.clock
+        runner = make_runner(cell, devices, first_pass=resume is None)
+        times = point_times_s(plan.points, cell)
         identity = device_identity(robot, tracker)
         identity["identity_check"] = check_identity(cfg, identity, is_forced())   # a mismatch: exit 2, nothing moved
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
@@ -93,15 +94,15 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
         eta = RunEta(times[0][left], times[1][left], simulated=not isinstance(clock, SystemClock))
-        runner.predict_p_tracker_mm = predictor = smr_predictor(cfg, log.contents.records() if log.contents else ())
-        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
+        predictor = runner.predict_p_tracker_mm
+        observe_points(predictor, log.contents.records() if log.contents else ())     # resumed: the points so far
         with RunProgress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
                                                                                           record.p_tracker_mm),
                                                      advance(record))
             if plan.blocks:                             # plan.stop: auto: block by block, refit after each
                 from campaign.calibrate.adaptive_stop import AdaptivePasses
-                passes = AdaptivePasses(cfg, plan, run_dir, log, {p.point_id for p in plan.points} - {
+                passes = AdaptivePasses(cell, plan, run_dir, log, {p.point_id for p in plan.points} - {
                     p.point_id for p in todo}, on_skip=advance.skip)
                 outcome = runner.execute_passes(passes, log)
             else:
@@ -111,31 +112,29 @@ def run_campaign(cfg: CampaignConfig, run_dir: Path | None = None, resume: Path 
     from campaign.report.iso9283 import finish
     from campaign.plan.iso9283 import is_iso_plan
     if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
-        iso = finish(cfg, run_dir)
+        iso = finish(cell, run_dir)
         write_report(run_dir)
         return RunResult(run_dir, outcome, None, iso)
-    contents = read_log(run_dir)
-    dataset = dataset_from_log(contents)
-    write_csv(run_dir / "data.csv", dataset)
-    return RunResult(run_dir, outcome, _calibrate(dataset, cfg, run_dir, contents))
+    source = load_source(run_dir)
+    write_csv(run_dir / "data.csv", source.dataset)
+    return RunResult(run_dir, outcome, _calibrate(source.dataset, cell, run_dir, source.contents))
 
 
-def reprocess(source: Path, cfg: CampaignConfig, out_dir: Path, overwrite: bool = False) -> Calibrated:
+def reprocess(source: Path, cell: CellModel, out_dir: Path, overwrite: bool = False) -> Calibrated:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file into ``out_dir``:
     new, empty, or written by reprocess from the same source (any but a run's with ``overwrite``)."""
     claim = check_dir(out_dir, "reprocess", overwrite, source=source_key(source))
-    contents = read_log(source) if source.is_dir() else None
-    dataset = dataset_from_log(contents) if contents is not None else read_csv(source)
-    return _calibrate(dataset, cfg, claim, contents)
+    data = load_source(source)
+    return _calibrate(data.dataset, cell, claim, data.contents)
 
 
-def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path | Claim, contents=None) -> Calibrated:
+def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -> Calibrated:
     """Calibrate ``dataset``, write model/report files and report.html into ``out_dir`` (a run's directory, or a
     claim taken once the model exists); ``contents``: the log it came from (hardware identification)."""
     from campaign.calibrate.stages import calibrate_dataset
     from campaign.calibrate.outputs import write_outputs     # the numerics load when calibrating, not at every start-up
     from campaign.calibrate.summary import summarize
-    processed = calibrate_dataset(dataset, cfg)
+    processed = calibrate_dataset(dataset, cell)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
         from campaign.calibrate.adaptive_stop import stop_summary
@@ -144,7 +143,7 @@ def _calibrate(dataset, cfg: CampaignConfig, out_dir: Path | Claim, contents=Non
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
     processed = replace(processed, report=replace(processed.report,
-                                                  summary=summarize(processed.report, cfg.acceptance)))
+                                                  summary=summarize(processed.report, cell.config.acceptance)))
     if isinstance(out_dir, Claim):
         out_dir = out_dir.take()
     write_outputs(processed, out_dir)
@@ -156,25 +155,25 @@ def verify(run_dir: Path, console: Console | None = None):
     """Closed-loop verification of a finished run: corrected test points measured on the cell (logged durably
     in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3."""
     from campaign.correct.verify import verify_run
-    from campaign.config.load import load_config
     from campaign.calibrate.multi_smr import pose_estimator
     from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(run_dir / "config.yaml")
+    cell = load_cell(run_dir / "config.yaml")
+    cfg = cell.config
     model = load_model(run_dir / "model.json")
     records = read_log(run_dir).records()
     tests = [p for p in records if p.set == "test"]
     if not tests:
         raise CampaignError(f"{run_dir}: the run has no test points to verify")
-    estimator = pose_estimator(cfg, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
+    estimator = pose_estimator(cell, model, records)       # three SMRs: 6D pose from SMR 1 (seed 003), fitted offline
     report_targets(run_dir)                                 # report.html and its figures are the run's to rewrite
     claim = check_dir(unique_path(run_dir / f"verify-{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}"),
                       "verify")
     out_dir = claim.path
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))
-        cell = stack.enter_context(open_devices(cfg))
-        robot, tracker = cell.robot, cell.tracker
+        devices = stack.enter_context(open_devices(cell))
+        robot, tracker = devices.robot, devices.tracker
         identity = device_identity(robot, tracker)
         identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
@@ -182,44 +181,34 @@ def verify(run_dir: Path, console: Console | None = None):
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
         claim.take()
         logging_.to_file(out_dir)
-        runner = Runner(robot, tracker, cfg.tracker.measurement, cell.clock,
-                        lambda p: measurement_covariance(cfg, p[None])[0], cfg.tool.payload_kg)   # SMR 1 only
-        apply_safety(runner, cfg, nominal_kinematics(cfg), first_pass=False)
-        runner.predict_p_tracker_mm = smr_predictor(cfg, records)
-        runner.covariance_from_device = lambda c: device_measurement_covariance(cfg, c)
-        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cfg, model, tests, out_dir,
+        runner = make_runner(cell, devices, records=records, smr1_only=True)
+        result = verify_run(run_dir, lambda plan: runner.execute_passes(plan, log), cell, model, tests, out_dir,
                             estimator)
     write_report(run_dir)                       # report.html now includes the verify passes
     return result
 
 
-def corrected_joints(cfg: CampaignConfig, model: CalibratedModel, cube: IsoCube) -> np.ndarray:
+def corrected_joints(cell: CellModel, model: CalibratedModel, cube: IsoCube) -> np.ndarray:
     """Corrected joints (5, n) deg for P1..P5 with the calibrated model; every pose must pass the bounds."""
     from campaign.correct.targets import Targets, correct_targets
 
-    R = tool_rotation(cfg.plan.tool_direction)
-    accepted, rejected = correct_targets(cfg, model, Targets(POSE_NAMES, cube.p_base_mm, np.repeat(R[None], 5, 0)))
+    R = tool_rotation(cell.config.plan.tool_direction)
+    accepted, rejected = correct_targets(cell, model, Targets(POSE_NAMES, cube.p_base_mm, np.repeat(R[None], 5, 0)))
     if rejected:
         raise CampaignError(f"ISO 9283 pose {rejected[0].target_id} cannot be corrected: {rejected[0].reason}")
     by_id = {t.target_id: t for t in accepted}
     return np.array([by_id[name].q_corrected_deg for name in POSE_NAMES])
 
 
-def run_iso9283(cfg: CampaignConfig, model: CalibratedModel | None, run_dir=None, console=None,
+def run_iso9283(cell: CellModel, model: CalibratedModel | None, run_dir=None, console=None,
                 overwrite: bool = False):
     """``campaign iso9283``: nominal cycles, then (with a model) corrected cycles, through ``run_campaign`` (same
     safety, log and lifecycle); returns (RunResult, report or None)."""
-    from dataclasses import replace
-
-    from campaign.config.cell_model import nominal_kinematics
-    from campaign.report.html import write_report
-
-    kin = nominal_kinematics(cfg)
-    cube = iso_cube(cfg, kin)
-    plan = iso_plan(cfg, kin, None if model is None else corrected_joints(cfg, model, cube))
-    result = run_campaign(cfg, run_dir, None, console, plan=plan, overwrite=overwrite)
+    cube = iso_cube(cell)
+    plan = iso_plan(cell, None if model is None else corrected_joints(cell, model, cube))
+    result = run_campaign(cell, run_dir, None, console, plan=plan, overwrite=overwrite)
     if result.iso9283 is None:
         return result, None
-    report = finish(cfg, result.run_dir, model)            # again with the model's registration as the frame
+    report = finish(cell, result.run_dir, model)            # again with the model's registration as the frame
     write_report(result.run_dir)
     return replace(result, iso9283=report), report

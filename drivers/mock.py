@@ -26,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from robocal.noise import repeatability_sigma_mm
-from robocal.sim_cell import SimulatedCell, readback_joints_deg, tracker_drift_mm
+from robocal.simulation.mock_cell import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
 from robocal.sweep import move_durations_s, peak_speed_per_unit_s
 
@@ -249,7 +249,8 @@ class MockTracker:
         self.nest: str | None = None
         self.nest_error_mm = np.zeros(3)
 
-    def _follow(self) -> None:
+    def follow(self) -> None:
+        """Place the simulated robot at the followed robot's read-back joints (deg); it moves only if they differ."""
         q = np.asarray(self.robot.read_joints(), float)
         if q.shape != self.world.q_deg.shape or np.max(np.abs(q - self.world.q_deg)) > 1e-9:
             self.world.move(q)
@@ -277,7 +278,7 @@ class MockTracker:
     def measure(self) -> TrackerReading:
         w = self.world
         if self.robot is not None:
-            self._follow()
+            self.follow()
         if w.fault("beam_break_probability"):
             raise BeamBroken(f"{self.url}: beam broken")
         if w.fault("timeout_probability"):

@@ -32,20 +32,6 @@ def _factory(table: Mapping[str, str], url: str, what: str):
         raise DriverError(f"{what} url {url!r}: driver {scheme!r} is not available ({exc})") from exc
 
 
-def open_robot(url: str, options: Mapping[str, Any] | None = None, **context) -> Robot:
-    """Robot driver for ``url`` (not yet connected)."""
-    return _factory(ROBOT_DRIVERS, url, "robot")(url, dict(options or {}), **context)
-
-
-def open_tracker(url: str, options: Mapping[str, Any] | None = None, **context) -> Tracker:
-    """Tracker driver for ``url`` (not yet connected); bad options or url -> ``DriverConfigError``."""
-    factory = _factory(TRACKER_DRIVERS, url, "tracker")
-    try:
-        return factory(url, dict(options or {}), **context)
-    except ValueError as exc:                      # option validation of the line-protocol driver
-        raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
-
-
 @dataclass(frozen=True)
 class CellContext:
     """What the drivers of one cell may need beyond url and options: ``n_joints`` (robot config), ``simulation``
@@ -58,24 +44,31 @@ class CellContext:
     robot: Robot | None = None
 
 
-def _with_cell(factory, cell: CellContext, **used) -> dict:
+def _with_cell(factory, cell: CellContext, used: dict, context: dict) -> dict:
+    used = {**used, **context}
     return {**used, "cell": cell} if getattr(factory, "uses_cell", False) else used
 
 
-def open_cell_robot(cell: CellContext, url: str, options: Mapping[str, Any] | None = None) -> Robot:
-    """The cell's robot driver for ``url`` (not yet connected)."""
+def open_robot(url: str, options: Mapping[str, Any] | None = None, cell: CellContext | None = None,
+               **context) -> Robot:
+    """Robot driver for ``url`` (not yet connected) in ``cell``; ``context``: further factory keywords (a test's
+    ``transport`` or ``environ``)."""
+    cell = cell or CellContext()
     factory = _factory(ROBOT_DRIVERS, url, "robot")
-    return factory(url, dict(options or {}), **_with_cell(factory, cell, n_joints=cell.n_joints))
+    used = {} if cell.n_joints is None else {"n_joints": cell.n_joints}
+    return factory(url, dict(options or {}), **_with_cell(factory, cell, used, context))
 
 
-def open_cell_tracker(cell: CellContext, url: str, options: Mapping[str, Any] | None, robot: Robot) -> Tracker:
-    """The cell's tracker driver for ``url`` next to ``robot`` (not yet connected); readings are stamped with the
-    robot's simulated clock when it has one. Bad options or url -> ``DriverConfigError``."""
+def open_tracker(url: str, options: Mapping[str, Any] | None = None, cell: CellContext | None = None,
+                 robot: Robot | None = None, **context) -> Tracker:
+    """Tracker driver for ``url`` (not yet connected) in ``cell``, next to ``robot`` if given: readings are stamped
+    with the robot's simulated clock when it has one. Bad options or url -> ``DriverConfigError``."""
+    cell = replace(cell or CellContext(), robot=robot)
     factory = _factory(TRACKER_DRIVERS, url, "tracker")
-    context = _with_cell(factory, replace(cell, robot=robot), clock=getattr(robot, "simulated_clock", None))
+    used = {"clock": getattr(robot, "simulated_clock", None)}
     try:
-        return factory(url, dict(options or {}), **context)
-    except ValueError as exc:
+        return factory(url, dict(options or {}), **_with_cell(factory, cell, used, context))
+    except ValueError as exc:                      # option validation of the line-protocol driver
         raise DriverConfigError(f"tracker url {url!r}: {exc}") from None
 
 

@@ -1,4 +1,4 @@
-"""Non-geometric effect models (effects.md §2), each linear in its parameters.
+"""Non-geometric effect models (the catalogue of docs/diagnosis.md §1), each linear in its parameters.
 
 An effect maps joint angles ``q_rad (N, n)`` and per-point metadata to a *basis* with K columns:
 

@@ -27,6 +27,7 @@ from scipy.optimize import minimize
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 JITTER = 1e-10            # added to the diagonal, relative to var(y), for a safe Cholesky
+KERNEL_BLOCK_BYTES = 64 * 2**20   # test-point kernel rows are computed in blocks of at most this size
 NEGLIGIBLE_LOG = -115.0   # kernel entries below exp(-115) ~ 1e-50 of sigma_f^2 are exactly 0 (se_ard)
 
 
@@ -46,6 +47,15 @@ def se_ard(Xa: np.ndarray, Xb: np.ndarray, length: np.ndarray, sigma_f: float) -
     np.exp(d2, out=d2)
     d2 *= sigma_f**2
     return d2
+
+
+def kernel_blocks(n_rows: int, n_cols: int, budget_bytes: int | None = None) -> list[slice]:
+    """Row blocks of an (n_rows, n_cols) kernel matrix of at most ``budget_bytes`` each (default
+    ``KERNEL_BLOCK_BYTES``; one block, the whole matrix, when it fits): predictions at any number of points in
+    bounded memory."""
+    budget = KERNEL_BLOCK_BYTES if budget_bytes is None else budget_bytes
+    step = max(1, budget // (8 * max(n_cols, 1)))
+    return [slice(s, s + step) for s in range(0, max(n_rows, 1), step)]
 
 
 def cholesky_inverse(c: tuple[np.ndarray, bool]) -> np.ndarray:
@@ -279,13 +289,15 @@ class GaussianProcess:
         """Predictive mean (N,) (eq. 7) and optionally variance (N,) (eq. 8; without sigma_n^2 if
         ``include_noise`` is False)."""
         Xs = np.atleast_2d(np.asarray(Xs, float)) - self.x_centre
-        Ks = se_ard(Xs, self.X - self.x_centre, self.length, self.sigma_f)
-        mean = Ks @ self._alpha + self.y_mean
-        if not return_var:
-            return mean
-        v = solve_triangular(self._chol, Ks.T, lower=True, check_finite=False)
-        var = self.sigma_f**2 - np.sum(v**2, axis=0) + (self.sigma_n**2 if include_noise else 0.0)
-        return mean, np.maximum(var, 0.0)
+        Xc = self.X - self.x_centre
+        mean, var = np.empty(len(Xs)), np.empty(len(Xs))
+        for b in kernel_blocks(len(Xs), len(Xc)):                    # (test rows x training points) per block
+            Ks = se_ard(Xs[b], Xc, self.length, self.sigma_f)
+            mean[b] = Ks @ self._alpha + self.y_mean
+            if return_var:
+                v = solve_triangular(self._chol, Ks.T, lower=True, check_finite=False)
+                var[b] = self.sigma_f**2 - np.sum(v**2, axis=0) + (self.sigma_n**2 if include_noise else 0.0)
+        return (mean, np.maximum(var, 0.0)) if return_var else mean
 
     def to_dict(self) -> dict:
         return {"X": self.X.tolist(), "y": self.y.tolist(), "sigma_f": self.sigma_f, "sigma_n": self.sigma_n,
@@ -374,8 +386,11 @@ class MultiOutputGP:
         if len(self.models) == 1 or not all(_same_inputs(g0, g) for g in self.models[1:]):
             return np.stack([g.predict(Xs) for g in self.models], axis=1)
         Xs = np.atleast_2d(np.asarray(Xs, float)) - g0.x_centre
-        K0 = se_ard(Xs, g0.X - g0.x_centre, g0.length, 1.0)
-        return K0 @ np.stack([g.sigma_f**2 * g._alpha for g in self.models], axis=1) + [g.y_mean for g in self.models]
+        Xc, alpha = g0.X - g0.x_centre, np.stack([g.sigma_f**2 * g._alpha for g in self.models], axis=1)
+        out = np.empty((len(Xs), len(self.models)))
+        for b in kernel_blocks(len(Xs), len(Xc)):
+            out[b] = se_ard(Xs[b], Xc, g0.length, 1.0) @ alpha + [g.y_mean for g in self.models]
+        return out
 
     def predict_std(self, Xs: np.ndarray, include_noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mean (N, k), predictive standard deviation (N, k))."""

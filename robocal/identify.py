@@ -183,7 +183,7 @@ def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
     return np.linalg.inv(L)
 
 
-def _whiten(W, x):
+def whiten(W, x):
     """Apply per-point whitening to (N, 3) or (N, 3, P) arrays (batched 3x3 products: matmul, not einsum, which
     is several times slower at 10^5 points)."""
     if W is None:
@@ -247,7 +247,10 @@ def priority_order(layout: ParamLayout) -> list[int]:
 
 
 def observability_indices(A: np.ndarray) -> dict:
-    """Indices O1..O5 (effects.md §3.2) of a column-scaled Jacobian A (m, L)."""
+    """Observability indices of a column-scaled Jacobian A (m, L) with singular values s1 >= ... >= sL: O1 =
+    (s1 s2 ... sL)^(1/L) / sqrt(m) (Borm & Menq 1991), O2 = sL / s1 (Driels & Pathre 1990), O3 = sL (Nahvi,
+    Hollerbach & Hayward 1994), O4 = sL^2 / s1 (Nahvi & Hollerbach 1996), O5 = 1 / sum(1 / s) (Sun & Hollerbach
+    2008)."""
     s = np.linalg.svd(A, compute_uv=False)
     m, L = A.shape
     if L == 0 or s[-1] <= 0:
@@ -296,7 +299,7 @@ def _linearise(kin, q, p_meas, W, cols, D):
     """(r (3N,), A (3N, P)) whitened, A column-scaled by D; A is the transpose of a C-ordered (P, 3N) array (the
     parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
     p, Jt = identification_jacobian_t(kin, q)
-    r = _whiten(W, p_meas - p).reshape(-1)
+    r = whiten(W, p_meas - p).reshape(-1)
     A = (_whiten_t(W, Jt[cols]).reshape(len(cols), -1) / D[:, None]).T
     return r, A
 

@@ -22,6 +22,7 @@ from .frames import exp_se3_left, inv_T, matrix_to_rotvec, transform_points
 JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
 TOOL_PARAMS = ("tool_x", "tool_y", "tool_z")
+JACOBIAN_ROWS = 8192          # poses per block of the identification Jacobian (bounded memory at any N)
 UNITS = {"theta": "rad", "d": "mm", "a": "mm", "alpha": "rad", "beta": "rad",
          "base_t": "mm", "base_r": "rad", "tool": "mm"}
 
@@ -255,15 +256,35 @@ def identification_jacobian(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndar
 
     Returns (p_tracker_mm (N, 3), J (N, 3, P)). Units per column: mm/rad or mm/mm.
     """
-    p_tracker, Jt = identification_jacobian_t(kin, q_rad)
-    return p_tracker, np.ascontiguousarray(Jt.transpose(1, 2, 0))
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+    if len(q) <= JACOBIAN_ROWS:
+        p_tracker, Jt = _jacobian_block(kin, ParamLayout.of(kin), q)
+        return p_tracker, np.ascontiguousarray(Jt.transpose(1, 2, 0))
+    layout = ParamLayout.of(kin)
+    p_tracker, J = np.empty((len(q), 3)), np.empty((len(q), 3, layout.size))
+    for s in range(0, len(q), JACOBIAN_ROWS):              # row blocks: the chain's frames for one block at a time
+        p_tracker[s:s + JACOBIAN_ROWS], Jt = _jacobian_block(kin, layout, q[s:s + JACOBIAN_ROWS])
+        J[s:s + JACOBIAN_ROWS] = Jt.transpose(1, 2, 0)
+    return p_tracker, J
 
 
 def identification_jacobian_t(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``identification_jacobian`` stored by parameter: (p_tracker_mm (N, 3), Jt (P, N, 3)), Jt[c] the (N, 3)
     column c. Every column is written contiguously (the (N, 3, P) layout writes one cache line per value, the
-    cost at 10^5 poses); the fitting loops use this form."""
+    cost at 10^5 poses); the fitting loops use this form. Computed in row blocks of ``JACOBIAN_ROWS`` poses (the
+    chain's intermediate frames of one block at a time: memory bounded at any N, the same numbers)."""
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
     layout = ParamLayout.of(kin)
+    if len(q) <= JACOBIAN_ROWS:
+        return _jacobian_block(kin, layout, q)
+    p_tracker, Jt = np.empty((len(q), 3)), np.empty((layout.size, len(q), 3))
+    for s in range(0, len(q), JACOBIAN_ROWS):
+        p_tracker[s:s + JACOBIAN_ROWS], Jt[:, s:s + JACOBIAN_ROWS] = _jacobian_block(kin, layout, q[s:s + JACOBIAN_ROWS])
+    return p_tracker, Jt
+
+
+def _jacobian_block(kin: Kinematics, layout: ParamLayout, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(p_tracker_mm (N, 3), Jt (P, N, 3)) of one block of poses."""
     c = chain(kin, q_rad)
     N = c.T_base_flange.shape[0]
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)

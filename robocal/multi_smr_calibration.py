@@ -19,7 +19,7 @@ import numpy as np
 from .lm import levenberg_marquardt
 from .frames import fit_rigid, transform_points
 from .identify import (CalibrationOptions, IdentificationError, Unidentifiable, analyse_identifiability, priority_order,
-                       whitening, _whiten)
+                       whiten, whitening)
 from .kinematics import Kinematics, ParamLayout, apply_update, fk, identification_jacobian, smr_base
 from .three_smr_pose import fit_points_pose
 
@@ -93,7 +93,7 @@ def calibrate_multi_smr(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.nd
     base_order = priority_order(layout)                       # base, tool, joints last -> first
     order = list(range(nj, nj + 6)) + list(range(nj + 6, nj + 6 + 3 * S)) + [c for c in base_order if c < nj]
     _, J = _stacked(kin, offsets, q, W)
-    A = _whiten(W, J).reshape(-1, len(names))
+    A = whiten(W, J).reshape(-1, len(names))
     ident = analyse_identifiability(A, names, order, options.rank_tol, options.fixed)
     cols = np.flatnonzero(ident.keep)
     if 3 * S * N <= len(cols):
@@ -102,8 +102,8 @@ def calibrate_multi_smr(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.nd
 
     def lin(kin, offsets):
         p, J = _stacked(kin, offsets, q, W)
-        r = _whiten(W, p_meas - p).reshape(-1)
-        return r, _whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
+        r = whiten(W, p_meas - p).reshape(-1)
+        return r, whiten(W, J[:, :, cols]).reshape(-1, len(cols)) / D
 
     def step(state, dxs):
         kin, offsets = state

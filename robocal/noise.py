@@ -1,4 +1,6 @@
-"""Laser-tracker uncertainty (spherical model of trackers.md §9) and the noise floor.
+"""Laser-tracker uncertainty (the spherical error model: a range and a transverse term, each from the maximum
+permissible error ``a + b * r`` of the tracker's ISO 10360-10 / ASME B89.4.19 specification, in the beam frame) and
+the noise floor.
 
 Standard uncertainties from MPE terms ``a + b * r`` read as expanded with coverage factor k:
 ``u_r = (a_r + b_r * r) / k`` along the beam, ``u_t = (a_t + b_t * r) / k`` transverse.

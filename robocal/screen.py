@@ -33,6 +33,7 @@ NEAR_FRACTION = 0.13          # "near": within 13 % of the robot's reach (IRB 26
 JOINT_FACTOR = 3.0            # joint motion may reach three times that (joint motions partly cancel in position)
 MIN_NEAR = 4                  # near neighbours needed before a residual can be called isolated
 MAX_NEIGHBOURS = 32
+CHUNK_ROWS = 8192              # rows per block of the neighbour arrays (bounded memory at any N)
 Z_LOCAL = 7.0                 # robust z of an isolated residual (structure gives the statistic a tail to ~6)
 
 
@@ -87,9 +88,17 @@ def near_neighbours(q_rad: np.ndarray, p_mm: np.ndarray, lever_mm: np.ndarray, n
     dist, idx = cKDTree(p_mm).query(p_mm, k=k + 1, distance_upper_bound=near_mm)
     valid = np.isfinite(dist) & (idx != np.arange(n)[:, None])       # not the point itself (ties: any column)
     idx = np.where(valid, idx, 0)
-    lever = 0.5 * (lever_mm[:, None, :] + lever_mm[idx])
-    d_joint = np.sqrt(np.sum(((q_rad[:, None, :] - q_rad[idx]) * lever) ** 2, axis=2))
-    return idx, valid & (d_joint <= JOINT_FACTOR * near_mm)
+    for b in _blocks(n):                               # row blocks: no (N, K, n) temporaries
+        nb = idx[b]
+        lever = 0.5 * (lever_mm[b, None, :] + lever_mm[nb])
+        d_joint = np.sqrt(np.sum(((q_rad[b, None, :] - q_rad[nb]) * lever) ** 2, axis=2))
+        valid[b] &= d_joint <= JOINT_FACTOR * near_mm
+    return idx, valid
+
+
+def _blocks(n: int) -> list[slice]:
+    """Row blocks of ``CHUNK_ROWS`` (the per-neighbour arrays (N, K, ...) one block at a time)."""
+    return [slice(s, s + CHUNK_ROWS) for s in range(0, max(n, 1), CHUNK_ROWS)]
 
 
 def _nan_median(x: np.ndarray, axis: int) -> np.ndarray:
@@ -103,13 +112,13 @@ def _local_scores(r: np.ndarray, idx: np.ndarray, valid: np.ndarray, min_near: i
     scaled by the larger of the campaign's and the neighbourhood's median deviation (chi_3 median -> sigma);
     nan where fewer than ``min_near`` neighbours are near."""
     count = valid.sum(axis=1)
-    rn = np.where(valid[..., None], r[idx], np.nan)                  # (N, K, 3)
-    d = np.linalg.norm(r - _nan_median(rn, 1), axis=1)               # nan without neighbours
+    d = np.concatenate([np.linalg.norm(r[b] - _nan_median(np.where(valid[b, :, None], r[idx[b]], np.nan), 1), axis=1)
+                        for b in _blocks(len(r))])                   # nan without neighbours
     ok = count >= min_near
     if not ok.any():
         return np.full(len(r), np.nan)
     s_global = float(np.median(d[ok]))
-    s_local = _nan_median(np.where(valid, d[idx], np.nan), 1)
+    s_local = np.concatenate([_nan_median(np.where(valid[b], d[idx[b]], np.nan), 1) for b in _blocks(len(r))])
     sigma = np.maximum(s_global, np.nan_to_num(s_local, nan=0.0)) / CHI3_MEDIAN
     return np.where(ok, d / np.maximum(sigma, 1e-12), np.nan)
 

@@ -6,7 +6,7 @@ import numpy as np
 from robocal.ik import solve_on_branch
 from robocal.kinematics import Kinematics
 from robocal.noise import repeatability_sigma_mm
-from robocal.sim_cell import SimulatedCell, random_geometric_errors
+from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors
 
 # seed 000 eq. 17, re-orthonormalised (the printed matrix has 6 decimals)
 T_SEED000 = np.array([[-0.548100, 0.836354, -0.009874, 2180.859],

@@ -1,8 +1,8 @@
 """Structure guards over EVERY import statement of the product (module level, inside functions, under
 ``TYPE_CHECKING``): no import cycle, no upward arrow between the top packages (robocal imports nothing of
 campaign or drivers; drivers nothing of campaign), campaign's sub-packages import only the rooms below them, no
-private name imported from another package, no module over the line cap, and the line bridge's import closure
-is the standard library only.
+private name imported from another package, no module over the line cap, the line bridge's import closure is
+the standard library only, and the cell model is built where a command starts (one nominal-model call site).
 
 Known debt is listed with the reason it is still here; every list fails when an entry goes stale, so it cannot
 outlive the debt. ``test_checker_*`` run the same checks on small fake trees so that each check is shown to fail.
@@ -29,23 +29,20 @@ SHARED_LEAVES = {"errors", "io"}
 BRIDGE = "drivers.bridge.line_bridge"
 
 # Known debt (issue 23 removes every entry). Each entry says why it is here.
-OVER_LIMIT: dict[str, str] = {
-    "campaign/config/schema.py": "the config dataclasses in one module (split by section: phase 2b)",
-    "campaign/data/interchange_csv.py": "reader and writer of the interchange CSV (phase 2b)",
-    "drivers/rapid/parser.py": "statements and expressions of the RAPID parser in one class (phase 2b)",
-}
+OVER_LIMIT: dict[str, str] = {}      # file -> why it is still over MAX_LINES
 KNOWN_CYCLES = {}
-KNOWN_UPWARD = {   # (importer, imported): arrows from a lower package to a higher one
-    ("drivers.emulators.emscon_server", "campaign.config.load"): "--cell builds the mock world from a campaign config",
-    ("drivers.emulators.emscon_server", "campaign.run.devices"): "--cell builds the mock world from a campaign config",
+KNOWN_UPWARD: dict[tuple[str, str], str] = {}   # (importer, imported): arrows from a lower package to a higher one
+KNOWN_DOWNWARD: dict[tuple[str, str], str] = {}  # (importer, imported): a campaign room importing a room above it
+KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}   # (importer, defining module, name)
+# The numerics of a config are built once per command and passed down (campaign.config.cell_model.CellModel):
+# call (or import, for a function) -> the only files (a folder ends in /) that may make it.
+CELL_BUILDERS = {
+    "nominal_kinematics": ("campaign/config/cell_model.py",),
+    "CellModel.from_config": ("campaign/config/load.py",),                      # inside load_cell
+    "load_cell": ("campaign/cli/", "campaign/workflows.py", "campaign/config/load.py",
+                  "campaign/run/emscon_cell.py"),                              # the emulator's command entry
 }
-KNOWN_DOWNWARD: dict[tuple[str, str], str] = {  # (importer, imported): a campaign room importing a room above it
-    ("campaign.run.resume_checks", "campaign.data.log_dataset"):
-        "resume builds a dataset to check the log (one log schema, check_records: phase 2b)",
-}
-KNOWN_PRIVATE = {
-    ("robocal.elastic.fit", "robocal.identify", "_whiten"): "whitening shared with the effect engine (phase 2b)",
-}
+KNOWN_CELL_BUILDERS: dict[tuple[str, str], str] = {}   # (file, call): a builder outside CELL_BUILDERS
 
 
 @dataclass(frozen=True)
@@ -209,6 +206,32 @@ def third_party_closure(root: Path, start: str) -> dict[str, set[str]]:
     return out
 
 
+def builder_sites(root: Path, builders=CELL_BUILDERS, packages=PACKAGES) -> set[tuple[str, str, int]]:
+    """(file, builder, line) of every call of a ``builders`` key outside the files it allows: a call whose dotted
+    callee is the key or ends with ``.key``; for a plain function also any import of it (an alias is a call site)."""
+    out = set()
+    for path in modules(root, packages).values():
+        rel = path.relative_to(root).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.ImportFrom) else []
+            if isinstance(node, ast.Call):
+                names = [dotted(node.func)]
+            for key, allowed in builders.items():
+                if any(n == key or n.endswith(f".{key}") for n in names) \
+                        and not any(rel == a or (a.endswith("/") and rel.startswith(a)) for a in allowed):
+                    out.add((rel, key, node.lineno))
+    return out
+
+
+def dotted(func: ast.expr) -> str:
+    """``a.b.c`` of a callee made of names and attributes ("" for anything else: a call's result, a subscript)."""
+    parts = []
+    while isinstance(func, ast.Attribute):
+        parts.append(func.attr)
+        func = func.value
+    return ".".join([func.id, *reversed(parts)]) if isinstance(func, ast.Name) else ""
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # the product
 
@@ -265,6 +288,21 @@ def test_module_size_cap():
     assert set(over) <= set(OVER_LIMIT), f"over {MAX_LINES} lines: {sorted(set(over) - set(OVER_LIMIT))}"
     stale = sorted(f for f in OVER_LIMIT if sizes.get(f, 0) <= MAX_LINES)
     assert not stale, f"no longer over the limit, remove from OVER_LIMIT: {stale}"
+
+
+@pytest.mark.unit
+def test_cell_model_is_built_once_where_a_command_starts():
+    """One call of ``nominal_kinematics`` (in CellModel.from_config); the cell model is built by ``load_cell`` in
+    the CLI and the workflows and passed down, never rebuilt from a config below them."""
+    found = builder_sites(ROOT)
+    new = sorted(f for f in found if f[:2] not in KNOWN_CELL_BUILDERS)
+    assert not new, f"cell model built outside {CELL_BUILDERS} (pass the CellModel down instead): {new}"
+    stale = sorted(set(KNOWN_CELL_BUILDERS) - {f[:2] for f in found})
+    assert not stale, f"gone, remove from KNOWN_CELL_BUILDERS: {stale}"
+    text = (ROOT / "campaign/config/cell_model.py").read_text(encoding="utf-8")
+    calls = [n for n in ast.walk(ast.parse(text)) if isinstance(n, ast.Call)
+             and dotted(n.func).split(".")[-1] == "nominal_kinematics"]
+    assert len(calls) == 1, f"campaign/config/cell_model.py calls nominal_kinematics {len(calls)} times, expected 1"
 
 
 @pytest.mark.unit
@@ -343,3 +381,21 @@ def test_checker_finds_upward_arrows_private_names_and_closures(tmp_path):
         "campaign.io.json_fields:2 imports campaign.config.schema (a room above it)"]
     assert third_party_closure(tmp_path, "drivers.mock") == {"drivers.mock": set(), "robocal.kin": {"numpy"},
                                                              "campaign.run.log": set(), "campaign.errors": set()}
+
+
+@pytest.mark.unit
+def test_checker_finds_a_second_cell_builder(tmp_path):
+    root = _tree(tmp_path, {**CLEAN, "campaign/config/cell_model.py": "def nominal_kinematics(cfg):\n    pass\n"
+                                                                      "k = nominal_kinematics(1)\n",
+                            "campaign/cli/main.py": "from campaign.config.load import load_cell\nc = load_cell(1)\n"})
+    assert not builder_sites(root)
+    _tree(tmp_path, {"campaign/plan/build.py": "from campaign.config import cell_model as cm\n"
+                                               "def f(cfg):\n    return cm.nominal_kinematics(cfg)\n",
+                     "campaign/run/eta.py": "from campaign.config.cell_model import nominal_kinematics as nk\n",
+                     "campaign/data/x.py": "from campaign.config.cell_model import CellModel\n"
+                                           "c = CellModel.from_config(1)\n",
+                     "drivers/mock.py": "import campaign.config.load\ncampaign.config.load.load_cell(2)\n"})
+    assert builder_sites(root) == {("campaign/plan/build.py", "nominal_kinematics", 3),
+                                   ("campaign/run/eta.py", "nominal_kinematics", 1),
+                                   ("campaign/data/x.py", "CellModel.from_config", 2),
+                                   ("drivers/mock.py", "load_cell", 2)}

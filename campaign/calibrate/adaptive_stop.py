@@ -25,8 +25,7 @@ from robocal.effects import effect_regressor
 from robocal.identify import IdentificationError, calibrate
 from robocal.kinematics import ParamLayout, identification_jacobian, smr_tracker
 
-from campaign.config.cell_model import (calibration_options, measurement_covariance, nominal_kinematics,
-                                        weights_covariance)
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.log_dataset import dataset_from_log
 from campaign.io.quantities import floor_mm
@@ -74,7 +73,7 @@ def _rows(kin, q, meta, effects, p_J=None):
     return np.concatenate([J[:, :, cols]] + regs, axis=2)
 
 
-def _plan_meta(cfg: CampaignConfig, q_deg: np.ndarray, t_done: np.ndarray | None) -> dict:
+def _plan_meta(cell: CellModel, q_deg: np.ndarray, t_done: np.ndarray | None) -> dict:
     """Effect metadata of planned poses (N, n) deg in plan order: payload, approach signs of the planned sequence,
     times (measured ones, then extrapolated at the mean rate so far)."""
     n = len(q_deg)
@@ -82,22 +81,21 @@ def _plan_meta(cfg: CampaignConfig, q_deg: np.ndarray, t_done: np.ndarray | None
     if t_done is not None and len(t_done) > 1:
         rate = (t_done[-1] - t_done[0]) / (len(t_done) - 1)
         t = np.concatenate([t_done, t_done[-1] + rate * np.arange(1, n - len(t_done) + 1)])[:n]
-    return {"payload_kg": np.full(n, float(cfg.tool.payload_kg or 0.0)), "approach": approach_signs(q_deg), "t_s": t}
+    return {"payload_kg": np.full(n, cell.payload_kg), "approach": approach_signs(q_deg), "t_s": t}
 
 
-def evaluate(cfg: CampaignConfig, plan: Plan, contents: LogContents, elapsed_s: float) -> StopCheck:
+def evaluate(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: float) -> StopCheck:
     """Refit the calibration points of the log ``contents`` and decide whether the next block is worth it."""
     from .effects_stage import effect_choices, effect_meta   # the calibration numerics load when a block ends
     ds = dataset_from_log(contents)
     cal = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
-    cov = weights_covariance(cfg, ds)[0][cal]
-    kin0 = nominal_kinematics(cfg)
-    geo = calibrate(kin0, q, p, cov, calibration_options(cfg))
+    cov = cell.weights(ds)[0][cal]
+    geo = calibrate(cell.kinematics, q, p, cov, cell.options)
     kin = geo.kinematics
     cols = np.array([ParamLayout.of(kin).index(nm) for nm in geo.identified])
-    meta = effect_meta(ds, cfg, cal)
-    choices, _ = effect_choices(cfg, kin, cols, q, p, cov, meta)
+    meta = effect_meta(ds, cell, cal)
+    choices, _ = effect_choices(cell, kin, cols, q, p, cov, meta)
     effects = (cols, [c.build(kin.n) for c in choices])
     p_J = identification_jacobian(kin, q)
     J = _rows(kin, q, meta, effects, p_J)
@@ -109,15 +107,15 @@ def evaluate(cfg: CampaignConfig, plan: Plan, contents: LogContents, elapsed_s: 
     planned = [pt for pt in plan.points if pt.set == "calib"]
     q_plan_deg = np.array([pt.q_deg for pt in planned])
     q_plan = np.radians(q_plan_deg)
-    J_plan = _rows(kin, q_plan, _plan_meta(cfg, q_plan_deg, meta.get("t_s")), effects)
-    G_plan = whiten_rows(J_plan, measurement_covariance(cfg, smr_tracker(kin, q_plan)))
+    J_plan = _rows(kin, q_plan, _plan_meta(cell, q_plan_deg, meta.get("t_s")), effects)
+    G_plan = whiten_rows(J_plan, cell.covariance(smr_tracker(kin, q_plan)))
     q_test = np.radians([pt.q_deg for pt in plan.points if pt.set == "test"]).reshape(-1, kin.n)
     if not len(q_test):                                    # no test set: judge at the planned poses
         q_test = q_plan
-    J_test = _rows(kin, q_test, _plan_meta(cfg, np.degrees(q_test), None), effects)
+    J_test = _rows(kin, q_test, _plan_meta(cell, np.degrees(q_test), None), effects)
     pred = prediction(G_plan, len(cal), np.array(plan.blocks), Gw, whiten_rows(r[:, :, None], cov)[:, :, 0], J, r,
-                      cov, J_test, measurement_covariance(cfg, smr_tracker(kin, q_test)))
-    return _decide(cfg, plan, len(cal), pred, elapsed_s)
+                      cov, J_test, cell.covariance(smr_tracker(kin, q_test)))
+    return _decide(cell.config, plan, len(cal), pred, elapsed_s)
 
 
 def _decide(cfg: CampaignConfig, plan: Plan, n: int, pred, elapsed_s: float) -> StopCheck:
@@ -152,9 +150,9 @@ class AdaptivePasses:
     time, a refit and a ``stop_check`` event after each block, then the points after the last calibration point
     (test set, final check and nest rounds)."""
 
-    def __init__(self, cfg: CampaignConfig, plan: Plan, run_dir: Path, log, done_ids: set[str],
+    def __init__(self, cell: CellModel, plan: Plan, run_dir: Path, log, done_ids: set[str],
                  on_skip: Callable[[int], None] | None = None) -> None:
-        self.cfg, self.plan, self.run_dir, self.log = cfg, plan, Path(run_dir), log
+        self.cell, self.plan, self.run_dir, self.log = cell, plan, Path(run_dir), log
         self.done = set(done_ids)
         self.on_skip = on_skip
         calib = [i for i, pt in enumerate(plan.points) if pt.set == "calib"]
@@ -203,7 +201,7 @@ class AdaptivePasses:
         # robot time: the sum of the points' own durations (a pause or a resume between sessions does not count)
         elapsed = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in contents.records())
         try:
-            check = evaluate(self.cfg, self.plan, contents, elapsed)
+            check = evaluate(self.cell, self.plan, contents, elapsed)
         except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:   # keep measuring as planned
             self.log.append_event({"type": STOP_EVENT, "n_calib": n, "decision": "continue",
                                    "reason": f"refit failed: {' '.join(str(exc).split())}"})

@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campaign.config.cell_model import (calibration_options, measurement_covariance, nominal_kinematics,
-                                        tracker_uncertainty, weights_covariance)
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.dataset import Dataset
 from campaign.data.source import load_source
@@ -34,10 +33,9 @@ from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, Fitted
 from robocal.elastic import EngineOptions, run_engine
 from robocal.identify import IdentificationError
 from robocal.kinematics import ParamLayout
-from robocal.noise import noise_floor_mm
 from robocal.repeats import noise_floor_from_repeats, repeat_dof
 
-from .effects_stage import gravity_model, subset
+from .effects_stage import subset
 from .plausibility import check_dataset
 from .stages import fit_stages
 
@@ -61,32 +59,33 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
 
 
-def diagnosis_input(ds: Dataset, cfg: CampaignConfig, stage, baseline) -> tuple[DiagnosisInput, FittedStage, dict]:
+def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline) -> tuple[DiagnosisInput, FittedStage, dict]:
     """The robocal input (calib + test rows of the prepared dataset ``ds``, in measurement order), the engine's
     answer of reprocess's elastic stage ``stage`` mapped to those rows, and a dict describing the floor and the
     metadata. ``baseline``: the geometric fit (reprocess's kinematic stage)."""
+    cfg = cell.config
     _check(ds, cfg)
     check = ds.mask("check")
     use = np.flatnonzero(ds.mask("calib") | ds.mask("test"))
     p = ds.p_tracker_mm
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
-    specs = noise_floor_mm(p[use], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    specs = cell.noise_floor_mm(p[use])
     floor, source = (repeats, "repeats") if repeats is not None else (specs, "specs")
     meta = subset(stage.meta, use)
-    inp = DiagnosisInput(nominal_kinematics(cfg), np.radians(ds.q_deg[use]), p[use], measurement_covariance(cfg, p)[use],
+    inp = DiagnosisInput(cell.kinematics, np.radians(ds.q_deg[use]), p[use], cell.covariance(p)[use],
                          ds.mask("calib")[use], ds.mask("test")[use], floor, source,
                          repeat_dof(ds.q_deg[check]) if repeats is not None else None,
                          t_s=meta["t_s"], temp_c=meta["temp_c"], payload_kg=meta["payload_kg"], order=meta["order"],
                          approach=meta["approach"], move_rad=meta["move"], prev_move_rad=meta["prev_move"],
-                         gravity=gravity_model(cfg), baseline=baseline.kinematics,
+                         gravity=cell.gravity, baseline=baseline.kinematics,
                          baseline_identified=tuple(baseline.identified))
     position = np.full(len(ds), -1)
     position[use] = np.arange(len(use))
     engine, elastic, kept = stage.engine, stage.elastic, stage.kept_rows
     if engine is None:                  # effects configured (or none): the diagnosis still asks the engine
         engine = run_engine(baseline.kinematics, _identified(baseline), np.radians(ds.q_deg[kept]), p[kept],
-                            weights_covariance(cfg, ds)[0][kept], subset(stage.meta, kept), gravity_model(cfg),
-                            EngineOptions(folds=cfg.calibration.cv_folds), calibration_options(cfg))
+                            cell.weights(ds)[0][kept], subset(stage.meta, kept), cell.gravity,
+                            EngineOptions(folds=cfg.calibration.cv_folds), cell.options)
         elastic = engine.elastic
     fitted = FittedStage(engine, elastic, position[kept], meta)
     payloads = None if ds.payload_kg is None else sorted({round(float(v), 3) for v in ds.payload_kg[use]})
@@ -106,15 +105,16 @@ def _identified(result) -> np.ndarray:
     return np.array([layout.index(n) for n in result.identified], int)
 
 
-def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions | None = None) -> DiagnosisReport:
+def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | None = None) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract. ``options`` None: the defaults with the
     config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage)."""
+    cfg = cell.config
     _check(ds, cfg)
-    ds, plaus = check_dataset(ds, cfg)                      # issue 12: does this data belong to this robot?
+    ds, plaus = check_dataset(ds, cell)                     # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
-        fitted = fit_stages(ds, cfg, plaus)   # the same preparation, fits and effect engine as reprocess
-        inp, stage, info = diagnosis_input(fitted.dataset, cfg, fitted.stage, fitted.geo.result)
+        fitted = fit_stages(ds, cell, plaus)   # the same preparation, fits and effect engine as reprocess
+        inp, stage, info = diagnosis_input(fitted.dataset, cell, fitted.stage, fitted.geo.result)
         info["plausibility"] = plaus.to_dict()
         info["preparation"] = fitted.prep.report
         d = diagnose(inp, options, stage)
@@ -127,11 +127,11 @@ def diagnose_dataset(ds: Dataset, cfg: CampaignConfig, options: DiagnosisOptions
     return DiagnosisReport(report, d)
 
 
-def diagnose_source(source: str | os.PathLike, cfg: CampaignConfig,
+def diagnose_source(source: str | os.PathLike, cell: CellModel,
                     options: DiagnosisOptions | None = None) -> DiagnosisReport:
     """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
     ``calibration.cv_folds``, as in reprocess)."""
-    return diagnose_dataset(load_source(source), cfg, options)
+    return diagnose_dataset(load_source(source).dataset, cell, options)
 
 
 def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:

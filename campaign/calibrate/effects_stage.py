@@ -12,24 +12,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.approach import approach_signs, moves_from_order
-from robocal.effects import GravityModel
 from robocal.elastic import EffectChoice, EngineOptions, EngineResult, calibrate_elastic, select
 from robocal.kinematics import ParamLayout
 from robocal.model import CalibratedModel
 from robocal.screen import ScreenResult
 
-from campaign.config.cell_model import calibration_options, weights_covariance
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
-
-
-def gravity_model(cfg: CampaignConfig) -> GravityModel:
-    """The one gravity-torque model of the config: link masses (or the arm's mass class), the payload's centre
-    of gravity and the direction of gravity in the base frame."""
-    r = cfg.robot
-    return GravityModel.of_robot(r.n_joints, r.link_masses_kg, r.mass_kg, cfg.tool.payload_cog_flange_mm,
-                                 r.gravity_direction_base)
 
 
 def order_meta(ds: Dataset) -> dict:
@@ -43,29 +33,29 @@ def order_meta(ds: Dataset) -> dict:
             "order": np.arange(n, dtype=float)}
 
 
-def effect_meta(ds: Dataset, cfg: CampaignConfig, rows=None, order: dict | None = None) -> dict:
+def effect_meta(ds: Dataset, cell: CellModel, rows=None, order: dict | None = None) -> dict:
     """Per-row metadata of the physical effects of the rows ``rows`` (default all): payload (kg; the tool's when
     the data has none), time (s) and temperature (deg C), and the ``order_meta`` (given, or from ``ds``)."""
     rows = np.arange(len(ds)) if rows is None else np.asarray(rows)
     n = len(ds)
-    pay = ds.payload_kg if ds.payload_kg is not None else np.full(n, float(cfg.tool.payload_kg or 0.0))
+    pay = ds.payload_kg if ds.payload_kg is not None else np.full(n, cell.payload_kg)
     meta = {"payload_kg": np.asarray(pay, float), "t_s": None if ds.t_s is None else np.asarray(ds.t_s, float),
             "temp_c": None if ds.temp_c is None else np.asarray(ds.temp_c, float),
             **(order_meta(ds) if order is None else order)}
     return subset(meta, rows)
 
 
-def effect_choices(cfg: CampaignConfig, kin, cols, q, p, cov, meta) -> tuple[list[EffectChoice], object]:
+def effect_choices(cell: CellModel, kin, cols, q, p, cov, meta) -> tuple[list[EffectChoice], object]:
     """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
     ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``: the
     configured list, or what the effect engine takes under ``auto``."""
-    spec = cfg.calibration.effects
+    spec = cell.config.calibration.effects
     if spec == "none":
         return [], None
     if spec != "auto":
         return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                            for k, v in s.params.items())) for s in spec], None
-    eng = select(kin, cols, q, p, cov, meta, gravity_model(cfg), EngineOptions(folds=cfg.calibration.cv_folds))
+    eng = select(kin, cols, q, p, cov, meta, cell.gravity, EngineOptions(folds=cell.config.calibration.cv_folds))
     return list(eng.taken), eng
 
 
@@ -89,17 +79,17 @@ class ElasticStage:
     meta: dict
 
 
-def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo, order: dict, rescreen) -> ElasticStage:
+def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> ElasticStage:
     """The effects of the model on top of the geometric fit ``geo`` (``campaign.calibrate.stages.GeometricFit``) of ``ds``,
     ``order`` its ``order_meta``; ``rescreen(rows, residual_mm)`` the measurement-fault screen of calib rows."""
     result = geo.result
     q, p = np.radians(ds.q_deg), ds.p_tracker_mm
-    cov_all = weights_covariance(cfg, ds)[0]
-    meta_all = effect_meta(ds, cfg, order=order)
+    cov_all = cell.weights(ds)[0]
+    meta_all = effect_meta(ds, cell, order=order)
     kept = geo.rows[geo.keep]
-    payload = float(cfg.tool.payload_kg or 0.0)
+    payload = cell.payload_kg
     cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified], int)
-    choices, engine = effect_choices(cfg, result.kinematics, cols, q[kept], p[kept], cov_all[kept],
+    choices, engine = effect_choices(cell, result.kinematics, cols, q[kept], p[kept], cov_all[kept],
                                      subset(meta_all, kept))
     model = CalibratedModel(result.kinematics, None, None, (), payload)
     if not choices:
@@ -108,13 +98,13 @@ def elastic_stage(ds: Dataset, cfg: CampaignConfig, geo, order: dict, rescreen) 
     def fit(rows):
         try:
             return calibrate_elastic(result.kinematics, cols, q[rows], p[rows], cov_all[rows], subset(meta_all, rows),
-                                     choices, calibration_options(cfg))
+                                     choices, cell.options)
         except (np.linalg.LinAlgError, ValueError) as exc:
             raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
     elastic = fit(kept)
     model = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload)
     final_screen = geo.screen
-    if cfg.calibration.outliers == "local":
+    if cell.config.calibration.outliers == "local":
         # screen again against the model with its effects: structure the geometry alone could not fit is no
         # reason to exclude a point (and a fault hidden by that structure shows now)
         rc = geo.rows

@@ -21,8 +21,7 @@ from robocal.three_smr_pose import MultiSMRPoseEstimator, SMRTool, fit_points_po
 from robocal.screen import smr_triangle
 from robocal.stats import error_stats
 
-from campaign.config.cell_model import calibration_options, measurement_covariance, tracker_uncertainty
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
 from campaign.run.log_records import PointRecord
@@ -37,36 +36,36 @@ def smr_clouds(ds: Dataset) -> list[np.ndarray]:
     return [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
 
 
-def screen_smrs(ds: Dataset, cfg: CampaignConfig) -> tuple[np.ndarray, list[ExcludedPoint]]:
+def screen_smrs(ds: Dataset, cell: CellModel) -> tuple[np.ndarray, list[ExcludedPoint]]:
     """(keep (N,) bool, excluded points) of the SMR-triangle screen (all True and [] with one
     SMR; the tracker's uncertainty model weighs each distance); DataError when the SMR distances are not those
     of one rigid tool."""
     clouds = smr_clouds(ds)
     if len(clouds) < 2:
         return np.ones(len(ds), bool), []
-    tri = smr_triangle(np.stack(clouds), np.stack([measurement_covariance(cfg, c) for c in clouds]))
+    tri = smr_triangle(np.stack(clouds), np.stack([cell.covariance(c) for c in clouds]))
     if not tri.rigid:
         raise DataError(ds.source, f"{tri.why} (x..z{len(clouds)} columns from another target, or in another "
                                    "order?)")
     return tri.keep, [ExcludedPoint(ds.point_id[e.index], ds.set[e.index], e.reason) for e in tri.excluded]
 
 
-def multi_smr_report(ds: Dataset, cfg: CampaignConfig, kin0, kept_rows: np.ndarray, test: np.ndarray,
+def multi_smr_report(ds: Dataset, cell: CellModel, kin0, kept_rows: np.ndarray, test: np.ndarray,
                      offsets0=None) -> MultiSmrReport:
     """Multi-SMR identification (one robot, one flange offset per SMR, from ``offsets0``: the registered ones, by
     default the configured ones) on the kept calib rows and its test figures per SMR; with three SMRs, the flange
     orientation error on the test set (arc seconds)."""
     clouds = smr_clouds(ds)
-    offsets0 = cfg.tool.smrs_mm if offsets0 is None else offsets0
+    offsets0 = cell.config.tool.smrs_mm if offsets0 is None else offsets0
     if len(offsets0) < len(clouds):
         return MultiSmrReport(len(clouds), skipped=f"the data has {len(clouds)} SMRs but the config's tool names "
                               f"{len(offsets0)} (tool.p_flange_smr2_mm / p_flange_smr3_mm give the nominal offsets)")
     P = np.stack(clouds)
     q = np.radians(ds.q_deg)
-    cov = np.stack([measurement_covariance(cfg, c[kept_rows]) for c in clouds])
+    cov = np.stack([cell.covariance(c[kept_rows]) for c in clouds])
     try:
         res = calibrate_multi_smr(kin0, q[kept_rows], P[:, kept_rows], np.array(offsets0[:len(clouds)]), cov,
-                                  calibration_options(cfg))
+                                  cell.options)
     except (IdentificationError, np.linalg.LinAlgError) as exc:
         raise DataError(ds.source, f"multi-SMR calibration failed: {exc}") from None
     test_figures, orientation = {}, None
@@ -86,7 +85,7 @@ def identified_offsets(model) -> np.ndarray | None:
     return np.asarray(offsets, float) if offsets is not None and len(offsets) == 3 else None
 
 
-def pose_estimator(cfg: CampaignConfig, model, records) -> MultiSMRPoseEstimator | None:
+def pose_estimator(cell: CellModel, model, records) -> MultiSMRPoseEstimator | None:
     """Seed 003's 6D pose estimator for a three-SMR run (None otherwise): the model's kinematics, the tool at the
     identified offsets, GPR predictors of SMRs 2 and 3 trained on the run's calibration stops (commanded joints)."""
     offsets = identified_offsets(model)
@@ -95,7 +94,7 @@ def pose_estimator(cfg: CampaignConfig, model, records) -> MultiSMRPoseEstimator
         return None
     q = np.radians([r.q_cmd_deg for r in stops])
     p2, p3 = (np.array([next(s.p_tracker_mm for s in r.smrs if s.k == k) for r in stops]) for k in (2, 3))
-    return MultiSMRPoseEstimator.fit(model.kinematics, SMRTool(offsets), q, p2, p3, tracker_uncertainty(cfg),
+    return MultiSMRPoseEstimator.fit(model.kinematics, SMRTool(offsets), q, p2, p3, cell.tracker,
                                      n_restarts=1)
 
 

@@ -27,6 +27,7 @@ from typing import Iterator, Mapping
 
 import numpy as np
 
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError, PlausibilityError
 from campaign.io.json_fields import count_field, figure_field, get_field, list_field, record_field, text_field
 
@@ -157,12 +158,13 @@ def row_locations(ds) -> list[str]:
     return [f"line {ln} ({pid})" for ln, pid in zip(lines, ds.point_id)]
 
 
-def check_dataset(ds, cfg):
+def check_dataset(ds, cell: CellModel):
     """Checks on the data alone (before any fit): magnitudes, joint limits, unit, nominal RMS, completeness.
 
     Unit and nominal RMS are judged on the rows inside the limits; every failed check is named in one line
     (the wrong-robot verdict first). Returns (dataset, Plausibility): the dataset without the rejected rows
     when forced, else unchanged."""
+    cfg = cell.config
     state = Plausibility()
     n = len(cfg.robot.joints)
     if ds.q_deg.shape[1] != n:
@@ -174,8 +176,8 @@ def check_dataset(ds, cfg):
     failures = []
     cal = _calib_rows(inside)
     if cal.sum() >= 3:
-        state, unit_msg = _check_unit(inside, cfg, cal, state)
-        state, nominal_msg = (state, None) if unit_msg else _check_nominal(inside, cfg, cal, state)
+        state, unit_msg = _check_unit(inside, cell, cal, state)
+        state, nominal_msg = (state, None) if unit_msg else _check_nominal(inside, cell, cal, state)
         failures += [m for m in (nominal_msg, unit_msg) if m]
     if limits_msg:
         failures.append(limits_msg)
@@ -258,13 +260,11 @@ def _spread(p: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
 
 
-def _check_unit(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
+def _check_unit(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Guess the xyz unit from the ratio of measured to nominal point spread (registration cannot fix scale)."""
     from robocal.kinematics import smr_base
 
-    from campaign.config.cell_model import nominal_kinematics
-
-    p_nom = smr_base(nominal_kinematics(cfg), np.radians(ds.q_deg[cal]))
+    p_nom = smr_base(cell.kinematics, np.radians(ds.q_deg[cal]))
     s_nom, s_meas = _spread(p_nom), _spread(ds.p_tracker_mm[cal])
     if s_nom < 1e-6:
         return state, None
@@ -281,20 +281,19 @@ def _check_unit(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibi
     return state, what
 
 
-def _register_tool(ds, cfg, cal: np.ndarray) -> ToolCheck | None:
+def _register_tool(ds, cell: CellModel, cal: np.ndarray) -> ToolCheck | None:
     """Base and SMR offsets registered together on the nominal geometry (every SMR the config and the data have,
     on the calibration rows where all of them were read), or None when the rows cannot be registered."""
     from robocal.identify import IdentificationError, register_tool
 
-    from campaign.config.cell_model import nominal_kinematics
-
+    cfg = cell.config
     clouds = [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
     clouds = clouds[:len(cfg.tool.smrs_mm)]
     P = np.stack([c[cal] for c in clouds])
     rows = np.all(np.isfinite(P), axis=(0, 2))
     configured = tuple(tuple(float(v) for v in s) for s in cfg.tool.smrs_mm[:len(clouds)])
     try:
-        reg = register_tool(nominal_kinematics(cfg), np.radians(ds.q_deg[cal][rows]), P[:, rows], configured)
+        reg = register_tool(cell.kinematics, np.radians(ds.q_deg[cal][rows]), P[:, rows], configured)
     except (IdentificationError, np.linalg.LinAlgError, ValueError):
         return None
     if not np.all(np.isfinite(reg.p_flange_smr_mm)):
@@ -302,24 +301,22 @@ def _register_tool(ds, cfg, cal: np.ndarray) -> ToolCheck | None:
     return ToolCheck(configured, tuple(tuple(float(v) for v in r) for r in reg.p_flange_smr_mm), reg.determined)
 
 
-def registered_kinematics(cfg, plaus: Plausibility | None = None):
+def registered_kinematics(cell: CellModel, plaus: Plausibility | None = None):
     """The nominal model with the SMR offset registered by the plausibility check (the configured one when it
     could not be registered): the model of the ``nominal`` stage."""
-    from campaign.config.cell_model import nominal_kinematics
-
-    kin = nominal_kinematics(cfg)
+    kin = cell.kinematics
     if plaus is None or plaus.tool is None:
         return kin
     return kin.with_(p_flange_smr_mm=np.array(plaus.tool.registered_mm[0]))
 
 
-def start_kinematics(cfg, plaus: Plausibility | None = None):
+def start_kinematics(cell: CellModel, plaus: Plausibility | None = None):
     """The model every fit starts from: :func:`registered_kinematics`, with an SMR offset within ON_AXIS_START_MM
     of the flange axis put on the axis. From an on-axis start the calibration admits the wrist parameters that a
     small lateral lever makes only marginally identifiable when its solution identifies them strongly
     (:func:`robocal.identify.calibrate`), so neither the configured lateral values nor a rough config decide which
     parameters are fitted (the fit identifies the lateral offset itself)."""
-    kin = registered_kinematics(cfg, plaus)
+    kin = registered_kinematics(cell, plaus)
     p = kin.p_flange_smr_mm
     return kin.with_(p_flange_smr_mm=[0.0, 0.0, p[2]]) if np.hypot(p[0], p[1]) < ON_AXIS_START_MM else kin
 
@@ -330,16 +327,17 @@ def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
     return tuple(got) + tuple(cfg.tool.smrs_mm[len(got):])
 
 
-def _check_nominal(ds, cfg, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
+def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Nominal RMS after registering the base and the SMR offsets on the calibration rows < 1 % of the reach."""
     from robocal.identify import IdentificationError, register
     from robocal.kinematics import smr_tracker
 
+    cfg = cell.config
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
-    tool = _register_tool(ds, cfg, cal)
+    tool = _register_tool(ds, cell, cal)
     state = replace(state, tool=tool, notes=state.notes + (() if tool is None else tool.notes()))
     try:
-        kin = register(registered_kinematics(cfg, state), q, p)
+        kin = register(registered_kinematics(cell, state), q, p)
     except (IdentificationError, np.linalg.LinAlgError):
         return state, None                  # calibration reports it with its own message
     err = p - smr_tracker(kin, q)

@@ -1,6 +1,6 @@
 """Before calibration: which joint set drives the model, and the tracker drift seen by the reference nests.
 
-``prepare(ds, cfg)`` returns the dataset the calibration works on (robot rows only, one joint set, positions in
+``prepare(ds, cell)`` returns the dataset the calibration works on (robot rows only, one joint set, positions in
 the tracker frame of the start of the run) and a report section saying what was chosen and why. Nothing mixes
 the two joint sets: the chosen one becomes ``q_deg`` and ``qc_deg`` is dropped.
 """
@@ -16,8 +16,7 @@ from robocal.readback import ENCODER_NOISE_DEG, prefer_commanded, readback_stati
 from robocal.screen import nest_misreads
 from robocal.stats import error_stats
 
-from campaign.config.cell_model import measurement_covariance, nominal_kinematics
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
 
@@ -36,25 +35,25 @@ MAX_READBACK_RMS_DEG = 1.0   # read-back lags are hundredths of a degree; more m
 FIT_MARGIN = 0.9    # the read-back set overrides the statistics only when it fits >= 10 % better
 
 
-def _fit_rms(cfg: CampaignConfig, q_deg: np.ndarray, p_mm: np.ndarray) -> float | None:
+def _fit_rms(cell: CellModel, q_deg: np.ndarray, p_mm: np.ndarray) -> float | None:
     """RMS (mm) of a plain geometric LM fit of the calib rows with these joints (same model for both sets)."""
     try:
-        res = calibrate(nominal_kinematics(cfg), np.radians(q_deg), p_mm, measurement_covariance(cfg, p_mm),
+        res = calibrate(cell.kinematics, np.radians(q_deg), p_mm, cell.covariance(p_mm),
                         CalibrationOptions(method="lm", weights="none"))
     except (IdentificationError, np.linalg.LinAlgError, ValueError):
         return None
     return error_stats(res.residual_tracker_mm).rms_mm
 
 
-def _confirm_by_fit(cfg: CampaignConfig | None, ds: Dataset, robot: np.ndarray) -> tuple[bool, str, dict]:
+def _confirm_by_fit(cell: CellModel | None, ds: Dataset, robot: np.ndarray) -> tuple[bool, str, dict]:
     """(keep commanded, why, figures): the statistics said the sets differ; which one do the measurements follow?
     The same geometric model is fitted to the calib rows with each set; the read-back set wins only when its
     RMS is clearly (>= 10 %) lower."""
     cal = ds.mask("calib")
-    if cfg is None or cal.sum() < 10:
+    if cell is None or cal.sum() < 10:
         return True, "", {}
     p = ds.p_tracker_mm[cal]
-    rms_cmd, rms_read = _fit_rms(cfg, ds.qc_deg[cal], p), _fit_rms(cfg, ds.q_deg[cal], p)
+    rms_cmd, rms_read = _fit_rms(cell, ds.qc_deg[cal], p), _fit_rms(cell, ds.q_deg[cal], p)
     figs = {"geometric_fit_rms_commanded_mm": rms_cmd, "geometric_fit_rms_readback_mm": rms_read}
     if rms_cmd is None or rms_read is None:
         return True, "", figs
@@ -64,10 +63,10 @@ def _confirm_by_fit(cfg: CampaignConfig | None, ds: Dataset, robot: np.ndarray) 
     return True, f"; geometric fit RMS {rms_cmd:.4f} mm commanded vs {rms_read:.4f} mm read-back", figs
 
 
-def choose_joints(ds: Dataset, setting: str, cfg: CampaignConfig | None = None) -> tuple[np.ndarray, str, dict]:
+def choose_joints(ds: Dataset, setting: str, cell: CellModel | None = None) -> tuple[np.ndarray, str, dict]:
     """(q_deg (N, n) of the robot rows, set name, report) for ``calibration.joints`` = auto|commanded|readback.
     ``auto``: the read-back statistics decide (robocal.readback.prefer_commanded); when they say the sets differ,
-    a geometric fit with each set confirms it (with ``cfg``; the read-back set wins only if it fits clearly
+    a geometric fit with each set confirms it (with ``cell``; the read-back set wins only if it fits clearly
     better)."""
     robot = ds.mask("nest") == False  # noqa: E712
     if ds.qc_deg is None:
@@ -86,7 +85,7 @@ def choose_joints(ds: Dataset, setting: str, cfg: CampaignConfig | None = None) 
     commanded, why = prefer_commanded(s)
     figs: dict = {}
     if setting == "auto" and commanded:
-        commanded, more, figs = _confirm_by_fit(cfg, ds, robot)
+        commanded, more, figs = _confirm_by_fit(cell, ds, robot)
         why = f"{why}{more}" if commanded else f"{why}, {more}"
     if setting != "auto":
         commanded = setting == "commanded"
@@ -144,9 +143,9 @@ def _more_names(names) -> str:
         if len(names) > 1 else ""
 
 
-def prepare(ds: Dataset, cfg: CampaignConfig) -> Prepared:
-    """Joint set and nest drift of ``ds`` (see module doc) for the calibration of ``cfg``."""
-    q, used, joints_report = choose_joints(ds, cfg.calibration.joints, cfg)
+def prepare(ds: Dataset, cell: CellModel) -> Prepared:
+    """Joint set and nest drift of ``ds`` (see module doc) for the calibration of the cell."""
+    q, used, joints_report = choose_joints(ds, cell.config.calibration.joints, cell)
     model, drift_report = _nest_drift(ds)
     robot = ~ds.mask("nest")
     out = ds.subset(robot) if not robot.all() else ds

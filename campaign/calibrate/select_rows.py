@@ -14,13 +14,12 @@ import numpy as np
 from robocal.design import criterion, d_optimal
 from robocal.identify import IdentificationError, register
 
-from campaign.config.cell_model import nominal_kinematics, weights_covariance
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 
 
-def select_rows(ds: Dataset, cfg: CampaignConfig, n: int) -> np.ndarray:
+def select_rows(ds: Dataset, cell: CellModel, n: int) -> np.ndarray:
     """(N,) bool: the rows of the subset with ``n`` calibration rows chosen by the optimal-plan criterion;
     DataError when the data holds fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %."""
     cal = np.flatnonzero(ds.mask("calib"))
@@ -31,11 +30,11 @@ def select_rows(ds: Dataset, cfg: CampaignConfig, n: int) -> np.ndarray:
         raise DataError(ds.source, "calibration rows without joint values cannot be selected")
     p = ds.p_tracker_mm[cal]
     try:
-        kin = register(nominal_kinematics(cfg), q, p)
+        kin = register(cell.kinematics, q, p)
     except IdentificationError as exc:
         raise DataError(ds.source, f"cannot register the calibration rows: {exc}") from None
-    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else float(cfg.tool.payload_kg or 0.0)
-    crit = criterion(kin, q, weights_covariance(cfg, ds)[0][cal], payload)
+    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
+    crit = criterion(kin, q, cell.weights(ds)[0][cal], payload)
     need = math.ceil(1.1 * crit.identifiable)
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable} parameters these rows "

@@ -15,7 +15,7 @@ import warnings
 
 import numpy as np
 
-from campaign.config.cell_model import calibration_options, tracker_uncertainty, weights_covariance
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, DataWarning
@@ -25,7 +25,6 @@ from robocal.identify import CalibrationResult, IdentificationError, calibrate, 
 from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
 from robocal.model import CalibratedModel
-from robocal.noise import noise_floor_mm
 from robocal.repeats import noise_floor_from_repeats, repeat_groups
 from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, reach_mm, screen
 from robocal.stats import error_stats
@@ -95,10 +94,10 @@ def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[Pr
                          {pid: float(v) for pid, v in zip(point_ids, s)}), s
 
 
-def prepared_dataset(ds: Dataset, cfg: CampaignConfig) -> Dataset:
+def prepared_dataset(ds: Dataset, cell: CellModel) -> Dataset:
     """The single place where a dataset is prepared before any fit: joint-set choice (commanded / read-back)
     and tracker-drift compensation from the reference nests (campaign/calibrate/prepare.py)."""
-    return prepare(ds, cfg).dataset
+    return prepare(ds, cell).dataset
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,18 +120,18 @@ def _calibrate(kin0, q, p, cov, options, source):
         raise DataError(source, f"calibration failed: {exc}") from None
 
 
-def _geometric(ds: Dataset, cfg: CampaignConfig, kin0) -> GeometricFit:
+def _geometric(ds: Dataset, cell: CellModel, kin0) -> GeometricFit:
     """Geometry-only calibration from ``kin0`` (the nominal model with the registered SMR offset) with the
     measurement-fault screen (``calibration.outliers``): fit, screen the residuals locally, refit without the
     faults, until the excluded set is stable (at most 3 refits)."""
     rows = np.flatnonzero(ds.mask("calib"))
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
-    cov = weights_covariance(cfg, ds)[0][rows]
-    options = calibration_options(cfg)
+    cov = cell.weights(ds)[0][rows]
+    options = cell.options
     result = _calibrate(kin0, q, p, cov, options, ds.source)
     keep = np.ones(len(rows), bool)
     sc = None
-    if cfg.calibration.outliers == "local":
+    if cell.config.calibration.outliers == "local":
         for _ in range(4):
             sc = _screen(ds, kin0, rows, p - smr_tracker(result.kinematics, q))
             new_keep = sc.keep
@@ -155,14 +154,14 @@ def _screen(ds: Dataset, kin0, rows: np.ndarray, r_mm: np.ndarray) -> ScreenResu
                   None if ds.sigma_mm is None else ds.sigma_mm[rows], repeat_groups(ds.q_deg[rows]))
 
 
-def geometric_fit(ds: Dataset, cfg: CampaignConfig) -> CalibrationResult:
+def geometric_fit(ds: Dataset, cell: CellModel) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
-    _check_dataset(ds, cfg)
-    ds, plaus = check_dataset(ds, cfg)
-    ds = prepared_dataset(ds, cfg)
-    keep, _ = screen_smrs(ds, cfg)
-    return _geometric(ds.subset(keep) if not keep.all() else ds, cfg, start_kinematics(cfg, plaus)).result
+    _check_dataset(ds, cell.config)
+    ds, plaus = check_dataset(ds, cell)
+    ds = prepared_dataset(ds, cell)
+    keep, _ = screen_smrs(ds, cell)
+    return _geometric(ds.subset(keep) if not keep.all() else ds, cell, start_kinematics(cell, plaus)).result
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,27 +176,28 @@ class Fitted:
     stage: ElasticStage
 
 
-def fit_stages(ds: Dataset, cfg: CampaignConfig, plaus) -> Fitted:
+def fit_stages(ds: Dataset, cell: CellModel, plaus) -> Fitted:
     """Preparation, SMR-triangle screen, geometric fit (from the registered start ``kin0`` of the plausibility
     check ``plaus``) and elastic stage of a checked dataset: one sequence for ``reprocess`` and ``diagnose``, so
     both take the same effects with the same values."""
-    prep = prepare(ds, cfg); ds = prep.dataset  # joint set, nest drift (campaign/calibrate/prepare.py)  # noqa: E702
+    prep = prepare(ds, cell); ds = prep.dataset  # joint set, nest drift (campaign/calibrate/prepare.py)  # noqa: E702
     order = order_meta(ds)                                  # approach and moves from the full measurement order
-    smr_keep, smr_excluded = screen_smrs(ds, cfg)           # SMR-triangle faults: calib, test and check rows
+    smr_keep, smr_excluded = screen_smrs(ds, cell)          # SMR-triangle faults: calib, test and check rows
     if not smr_keep.all():
         ds, order = ds.subset(smr_keep), subset(order, smr_keep)
-        _check_dataset(ds, cfg)
-    kin0 = start_kinematics(cfg, plaus)                     # registration before plausibility: base + SMR offset
-    geo = _geometric(ds, cfg, kin0)
-    stage = elastic_stage(ds, cfg, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
+        _check_dataset(ds, cell.config)
+    kin0 = start_kinematics(cell, plaus)                    # registration before plausibility: base + SMR offset
+    geo = _geometric(ds, cell, kin0)
+    stage = elastic_stage(ds, cell, geo, order, lambda rows, r: _screen(ds, kin0, rows, r))
     return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
-def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
+def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
+    cfg = cell.config
     _check_dataset(ds, cfg)
-    ds, plaus = check_dataset(ds, cfg)                      # issue 12: before anything is fitted or written
-    fitted = fit_stages(ds, cfg, plaus)
+    ds, plaus = check_dataset(ds, cell)                     # issue 12: before anything is fitted or written
+    fitted = fit_stages(ds, cell, plaus)
     prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
     kin0 = fitted.kin0
     result = geo.result
@@ -208,7 +208,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     if not test.any():
         plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
         warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
-    cov_source = weights_covariance(cfg, ds)[1]
+    cov_source = cell.weights(ds)[1]
     meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
     final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
     sub = subset
@@ -219,7 +219,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     c = cfg.calibration
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     eval_rows = test if test.any() else cal
-    specs = noise_floor_mm(p[eval_rows], tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    specs = cell.noise_floor_mm(p[eval_rows])
     floor = repeats if repeats is not None else specs
     lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
                   noise_floor_mm=floor)
@@ -236,7 +236,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
                             model_el.effects, payload_model)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
-    stage_models = [(NOMINAL, register(registered_kinematics(cfg, plaus), q[cal], p[cal])),
+    stage_models = [(NOMINAL, register(registered_kinematics(cell, plaus), q[cal], p[cal])),
                     (KINEMATIC, result.kinematics)]
     if elastic is not None:
         stage_models.append((ELASTIC, model_el))
@@ -259,7 +259,7 @@ def calibrate_dataset(ds: Dataset, cfg: CampaignConfig) -> Calibrated:
                  for pid in rejected_ids if pid not in listed]
     multi = None
     if ds.p2_tracker_mm is not None:
-        multi = multi_smr_report(ds, cfg, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
+        multi = multi_smr_report(ds, cell, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if multi.p_flange_smr_mm is not None:
             model = replace(model, meta={**(model.meta or {}), "p_flange_smrs_mm": multi.p_flange_smr_mm})
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row

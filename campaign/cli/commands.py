@@ -13,7 +13,7 @@ from rich.console import Console
 
 from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
                                  overwrite_argument, print_plausibility)
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.errors import DataError
 from campaign.calibrate.plausibility import forced
 
@@ -25,8 +25,9 @@ def _config_argument(parser: argparse.ArgumentParser) -> None:
 
 @command("validate", "check a campaign config file and print a summary", _config_argument)
 def cmd_validate(args: argparse.Namespace) -> int:
-    """Load and validate CONFIG; print a one-line summary."""
-    cfg = load_config(args.config)
+    """Load and validate CONFIG (the checks of every command, the cell model's included); print a one-line
+    summary."""
+    cfg = load_cell(args.config).config
     _stdout().print(
         f"OK {cfg.source_path}: {cfg.name}: {cfg.robot.model}, {cfg.robot.n_joints} joints, "
         f"robot {cfg.robot.url}, tracker {cfg.tracker.url}",
@@ -50,10 +51,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from campaign.calibrate.outputs import run_files
     from campaign.workflows import run_campaign
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     out = _stdout()
     with forced(args.force):
-        result = run_campaign(cfg, args.out, args.resume, out, overwrite=args.overwrite)
+        result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
@@ -89,7 +90,6 @@ def _plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("plan", "build the measurement plan and print a summary (dry run, nothing moves)", _plan_arguments)
 def cmd_plan(args: argparse.Namespace) -> int:
-    from campaign.config.cell_model import nominal_kinematics
     from campaign.run.eta import estimate_duration_s
     from campaign.plan.build import build_plan
     from campaign.plan.points import write_plan_csv
@@ -97,16 +97,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     from campaign.run.output_dirs import check_file
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if args.csv:
         check_file(args.csv, args.overwrite, "--csv")
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cfg, kin))
-    if cfg.plan.kind != "iso9283" and plan.count("calib"):
+    plan = build_plan(cell)
+    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
+    if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
-        render_forecast(_stdout(), plan_forecast(cfg, kin, plan), plan.blocks)
+        render_forecast(_stdout(), plan_forecast(cell, plan), plan.blocks)
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -127,11 +126,11 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     from campaign.calibrate.outputs import output_files
     from campaign.workflows import reprocess
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
     with forced(args.force):
-        processed = reprocess(args.source, cfg, args.out, args.overwrite)
+        processed = reprocess(args.source, cell, args.out, args.overwrite)
     out = _stdout()
     _print_calibration(out, processed.report)
     out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
@@ -152,7 +151,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     from campaign.data.interchange_csv import read_csv, write_csv
     from campaign.calibrate.select_rows import select_rows
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     if args.points < 1:
         raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
     if args.out.resolve() == args.data.resolve():
@@ -161,7 +160,7 @@ def cmd_select(args: argparse.Namespace) -> int:
 
     check_file(args.out, args.overwrite)
     ds = read_csv(args.data)
-    keep = select_rows(ds, cfg, args.points)
+    keep = select_rows(ds, cell, args.points)
     write_csv(args.out, ds.subset(keep))
     n_cal = int(ds.mask("calib").sum())
     _stdout().print(f"selected {args.points} of {n_cal} calibration rows by the optimal-plan criterion (D-optimal, "
@@ -193,16 +192,16 @@ def cmd_correct(args: argparse.Namespace) -> int:
     from campaign.plan.poses import tool_rotation
     from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
     model = load_model(args.model)
     with forced(args.force):
-        check_model_fits(cfg, model, str(args.model))
-    targets = read_targets_csv(args.targets, tool_rotation(cfg.plan.tool_direction))
-    accepted, rejected = correct_targets(cfg, model, targets, robot_identity=recorded_identity(model, args.model))
+        check_model_fits(cell, model, str(args.model))
+    targets = read_targets_csv(args.targets, tool_rotation(cell.config.plan.tool_direction))
+    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model))
     out = _stdout()
     try:
-        paths = write_corrected(cfg, accepted, rejected, claim.take(), tuple(args.format or ()))
+        paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
         _print_rejected(out, len(targets.ids), args.out)
     res = [t.predicted_residual_mm for t in accepted]

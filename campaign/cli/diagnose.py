@@ -54,16 +54,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.source is None or not args.config:
         raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
     from campaign.cli.common import print_plausibility
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.calibrate.diagnosis import diagnose_source, write_diagnosis_json
     from campaign.report.diagnosis_text import render
     from campaign.report.diagnosis_plots import write_plots
     from campaign.calibrate.plausibility import Plausibility, forced
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     plots = _check_outputs(args)                  # every output path refused or accepted before any work
     with forced(args.force):
-        result = diagnose_source(args.source, cfg)
+        result = diagnose_source(args.source, cell)
     out = _stdout()
     render(out, result.report)
     plaus = result.report.get("plausibility")                 # the diagnosis document carries its JSON
@@ -123,7 +123,7 @@ def _self_check(args: argparse.Namespace) -> int:
 
     out = _stdout()
     total = len(trial_plan(args.seeds))
-    out.print(f"self-check: {total} simulated campaigns from robocal/diagnose/truth_cell.py ({args.seeds} seeds per effect, controls, "
+    out.print(f"self-check: {total} simulated campaigns from robocal/simulation/truth_cell.py ({args.seeds} seeds per effect, controls, "
               "two-effect cases, an effect outside the library)", markup=False)
     with Progress(TextColumn("diagnosing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=out, disable=not out.is_terminal) as bar:

@@ -72,15 +72,15 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
 @command("iso9283", "ISO 9283 pose accuracy and repeatability test (nominal, and corrected with --model)",
          _iso_arguments)
 def cmd_iso9283(args: argparse.Namespace) -> int:
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.report.terminal import render_iso
     from campaign.workflows import run_iso9283
     from campaign.calibrate.outputs import load_model
 
-    cfg = load_config(args.config)
+    cell = load_cell(args.config)
     model = load_model(args.model) if args.model else None
     out = _stdout()
-    result, report = run_iso9283(cfg, model, args.out, out, overwrite=args.overwrite)
+    result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite)
     o = result.outcome
     if report is None:
         _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)

@@ -6,7 +6,8 @@
   (stopping the robot, closing the log, removing a temporary file). Every signal is recorded (:func:`received`).
 * A signal that lands inside a finaliser (a ``__del__``, a weakref callback) has its exception dropped by Python
   ("Exception ignored in ..."). The unraisable hook recognises it, prints nothing and has the signal delivered
-  again 10 ms later, so that it is raised in ordinary code.
+  again 10 ms later, so that it is raised in ordinary code. Once a signal has arrived, any other exception dropped
+  in a finaliser is silenced too: it comes from an object the signal left half-built (seen in a library import).
 * The console script (``main()`` without arguments) installs the handlers before anything is imported or printed
   and never restores them: it ends in :func:`exit_process`, which blocks the signals, turns any signal received
   so far into exit 130 and leaves through ``os._exit`` so that no signal can land in interpreter teardown (where
@@ -59,6 +60,10 @@ def _unraisable(args) -> None:
         timer = threading.Timer(REDELIVER_S, _thread.interrupt_main, (signum,))
         timer.daemon = True
         timer.start()
+        return
+    if _state.installed and _state.received is not None:
+        # After a signal, a finaliser of an object the signal interrupted half-way through building (a library
+        # being imported, say) may fail on its missing attributes: noise, the command ends with exit 130 anyway.
         return
     (_state.previous_hook or sys.__unraisablehook__)(args)
 

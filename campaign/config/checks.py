@@ -1,6 +1,8 @@
-"""Whole-config checks run by ``load_config`` after the per-key schema, so that what ``validate`` accepts ``run``
-accepts: joint count, sizes that allocate or loop, Hayati joints, every driver's url and options (through the
-driver registry, no connection), and the simulated effects' parameters.
+"""Whole-config checks, so that what ``validate`` accepts ``run`` accepts. ``check_config`` (run by ``load_config``
+after the per-key schema): joint count, magnitudes, sizes that allocate or loop, every driver's url and options
+(through the driver registry, no connection) and the simulated effects' parameters. ``check_numerics`` (run by
+``load_cell`` on the built :class:`campaign.config.cell_model.CellModel`): Hayati joints and the simulated
+effects' size at ``plan.q_ref_deg``, which need the nominal model.
 
 Every failure is a :class:`campaign.errors.ConfigError` with the file and the key path.
 """
@@ -11,6 +13,9 @@ import math
 import numpy as np
 
 from campaign.errors import ConfigError
+
+from .cell_model import CellModel
+from .simulation import simulated_effects
 
 SUPPORTED_JOINTS = 6            # plan (wrist singularity), IK branch, ABB confdata and UR write-back are 6R
 MAX_PLAN_POINTS = 20_000        # grid + test + check repeats: a real campaign has a few hundred
@@ -34,9 +39,14 @@ def check_config(cfg) -> None:
     _check_joint_count(cfg, file)
     _check_magnitudes(cfg, file)
     _check_sizes(cfg, file)
-    _check_hayati(cfg, file)
     _check_drivers(cfg, file)
-    _check_effects(cfg)
+    simulated_effects(cfg, cfg.robot.n_joints)          # names, params and values build
+
+
+def check_numerics(cell: CellModel) -> None:
+    """Raise ConfigError for the first problem that needs the nominal model of a checked config."""
+    _check_hayati(cell)
+    _check_effects(cell)
 
 
 def _check_joint_count(cfg, file: str) -> None:
@@ -152,17 +162,15 @@ def _check_magnitudes(cfg, file: str) -> None:
             raise ConfigError(file, key, f"{what} {value:.6g}: expected at most {limit:g} in magnitude")
 
 
-def _check_hayati(cfg, file: str) -> None:
+def _check_hayati(cell: CellModel) -> None:
     """Hayati beta only on a joint whose axis is parallel to the next joint's axis (never the last joint)."""
+    cfg, file = cell.config, cell.config.source_path
     if not cfg.robot.hayati_joints:
         return
     from robocal.kinematics import chain
 
-    from .cell_model import nominal_kinematics
-
     n = cfg.robot.n_joints
-    kin = nominal_kinematics(cfg)
-    axes = chain(kin, np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]).axis[0]    # (n, 3) base frame
+    axes = chain(cell.kinematics, np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]).axis[0]    # (n, 3) base frame
     for k, j in enumerate(cfg.robot.hayati_joints):
         where = f"robot.hayati_joints[{k}]"
         if j >= n:
@@ -188,19 +196,16 @@ def _check_drivers(cfg, file: str) -> None:
             raise ConfigError(file, f"{section}.{where}", message)
 
 
-def _check_effects(cfg) -> None:
-    """Effect names, params and values build (the run would build them the same way)."""
-    from .simulation import simulated_effects
-
+def _check_effects(cell: CellModel) -> None:
+    """Each simulated effect evaluates to a finite shift of the SMR below MAX_EFFECT_MM at ``plan.q_ref_deg`` (the
+    run would build them the same way)."""
+    cfg, kin = cell.config, cell.kinematics
     effects = simulated_effects(cfg, cfg.robot.n_joints)
     if not effects:
         return
     from robocal.effects import apply_effects
     from robocal.kinematics import smr_tracker
 
-    from .cell_model import nominal_kinematics
-
-    kin = nominal_kinematics(cfg)
     q = np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]
     meta = {"t_s": np.array([3600.0]), "temp_c": np.array([25.0]), "payload_kg": np.array([cfg.tool.payload_kg])}
     for i, (eff, params) in enumerate(effects):

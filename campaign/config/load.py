@@ -25,21 +25,32 @@ import yaml
 
 from campaign.config.bounded_yaml import load_limited, read_limited
 from campaign.config.reader import _Reader, _describe, _fmt, _keys
-from campaign.config.schema import (AcceptanceConfig, CONVENTIONS, CalibrationConfig, CampaignConfig,
-                                    CorrectionConfig, JointConfig, MAX_JOINTS, MeasurementConfig, OutputConfig,
-                                    PlanConfig, RobotConfig, SimulationConfig, ToolConfig, TrackerConfig, _NAME_RE,
-                                    FILE_NAME_MAX, MAX_NAME_CHARS)
+from campaign.config.plan_schema import PlanConfig
+from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CampaignConfig, CorrectionConfig,
+                                    JointConfig, MeasurementConfig, OutputConfig, RobotConfig, SimulationConfig,
+                                    ToolConfig, TrackerConfig)
+from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, _NAME_RE
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
 from robocal.noise import TrackerUncertainty
 
+from .cell_model import CellModel
+from .checks import check_config, check_joint_count, check_numerics
 from .sections import _acceptance, _calibration, _correction, _output, _plan, _simulation
 
 
-__all__ = ["load_config", "parse_config"]
+__all__ = ["load_cell", "load_config", "parse_config"]
 
 
 # --------------------------------------------------------------------------- loading
+
+
+def load_cell(path: str | Path) -> CellModel:
+    """The cell model of the campaign file at ``path``: :func:`load_config`, the model built once, and the checks
+    that need it (Hayati joints, simulated effects). What every command starts from; ConfigError as load_config."""
+    cell = CellModel.from_config(load_config(path))
+    check_numerics(cell)
+    return cell
 
 
 def load_config(path: str | Path) -> CampaignConfig:
@@ -73,9 +84,7 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
         raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
     cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
                     sha256=hashlib.sha256(data).hexdigest())
-    from campaign.config.checks import check_config  # cross-key checks: drivers, sizes, Hayati, effects
-
-    check_config(cfg)
+    check_config(cfg)                                   # cross-key checks: sizes, drivers, effects
     return cfg
 
 
@@ -151,9 +160,7 @@ def _robot(r: _Reader) -> RobotConfig:
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
     joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
-    from campaign.config.checks import check_joint_count  # before the plan's checks use the joints
-
-    check_joint_count(len(joints), r.file)
+    check_joint_count(len(joints), r.file)              # before the plan's checks use the joints
     return RobotConfig(
         model=model,
         url=url,

@@ -5,7 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from campaign.config.reader import _describe, _Reader
-from campaign.config.schema import PLAN_KINDS, STOP_RULES, PoolConfig
+from campaign.config.plan_schema import PoolConfig
+from campaign.config.values import PLAN_KINDS, STOP_RULES
 
 
 def optimal_keys(r: _Reader) -> dict[str, Any]:

@@ -17,8 +17,7 @@ from campaign.errors import ConfigError
 from drivers.redact import has_userinfo, redact_url
 from campaign.config.bounded_yaml import load_limited, read_limited
 
-from campaign.config.schema import *  # noqa: F401,F403
-from campaign.config.schema import _NAME_RE, _ORTHONORMAL_TOL, _to_plain  # noqa: F401
+from campaign.config.values import FrozenMap
 
 _REQUIRED: Any = object()
 

@@ -1,79 +1,21 @@
-"""The campaign configuration schema: frozen dataclasses (one per YAML section) and the value tables.
+"""The campaign configuration schema: one frozen dataclass per YAML section (robot, tool, tracker, calibration,
+correction, simulation, output) and the whole file (``CampaignConfig``). The plan section is in
+:mod:`campaign.config.plan_schema`, the choice tables and shared value types in :mod:`campaign.config.values`.
 
-Read by :mod:`campaign.config.load`, which re-exports every name here."""
-
+Read by :mod:`campaign.config.load` and :mod:`campaign.config.sections`."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import math
-import re
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-import yaml
-
-from campaign.errors import ConfigError
-from campaign.config.bounded_yaml import load_limited, read_limited
-
-from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES  # noqa: E402  (the registry owns the url schemes)
-from robocal.effects import MODEL_EFFECTS as MODEL_EFFECT_NAMES  # noqa: E402  (robocal owns the effect names)
-CONVENTIONS = ("dh", "mdh")
-CALIBRATION_METHODS = ("robust_ridge", "lm")
-WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "gpr", "none", "auto")
-OUTLIER_SCREENS = ("local", "none")
-JOINT_SETS = ("auto", "commanded", "readback")
-PLAN_ORDERS = ("serpentine", "random")
-PLAN_KINDS = ("grid", "optimal", "iso9283")
-STOP_RULES = ("off", "auto")
-CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
-ERROR_FUNCTIONS = ("position", "pose")
-from robocal.effects import SIMULATED_EFFECTS as EFFECT_NAMES  # noqa: E402  (one owner: robocal.effects)
 # tracker.uncertainty: robocal owns the class and its numerics; the YAML section requires the four MPE terms
 # (micrometres, micrometres per metre) and takes coverage_k (default 2), see campaign.config.load._uncertainty
-from robocal.noise import TrackerUncertainty  # noqa: E402,F401
-MAX_JOINTS = 12
+from robocal.noise import TrackerUncertainty
 
-_ORTHONORMAL_TOL = 1e-3
-_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*\Z")
-FILE_NAME_MAX = 255                                      # bytes in one path component (ext4, XFS, APFS, NTFS)
-MAX_NAME_CHARS = FILE_NAME_MAX - len("-YYYYmmdd-HHMMSS-NNNN")   # the name + a run directory's timestamp fit
-
-Vec3 = tuple[float, float, float]
-Matrix4 = tuple[tuple[float, float, float, float], ...]
-
-
-# --------------------------------------------------------------------------- data
-
-
-class FrozenMap(Mapping[str, Any]):
-    """Immutable, hashable string-keyed mapping (driver options, effect params).
-
-    Values are JSON-like scalars, tuples and nested ``FrozenMap``s.
-    """
-
-    __slots__ = ("_data",)
-
-    def __init__(self, items: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> None:
-        self._data = dict(items)
-
-    def __getitem__(self, key: str) -> Any:
-        return self._data[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._data)
-
-    def __len__(self) -> int:
-        return len(self._data)
-
-    def __hash__(self) -> int:
-        return hash(frozenset(self._data.items()))
-
-    def __repr__(self) -> str:
-        return f"FrozenMap({self._data!r})"
+from campaign.config.plan_schema import PlanConfig
+from campaign.config.values import Matrix4, Vec3
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,7 +38,7 @@ class JointConfig:
 class RobotConfig:
     """The robot arm and how to reach its controller.
 
-    ``url`` scheme selects the driver (one of ``ROBOT_SCHEMES``). ``model`` (required, e.g. "ABB IRB
+    ``url`` scheme selects the driver (one of ``drivers.registry.ROBOT_SCHEMES``). ``model`` (required, e.g. "ABB IRB
     2600-12/1.65") is compared with the model the controller reports at connect (a different model stops the run
     before the first move; vendor formatting is tolerated).
     ``hayati_joints``: 1-based joints whose axis is parallel to the next one
@@ -184,7 +126,7 @@ class MeasurementConfig:
 class TrackerConfig:
     """The laser tracker.
 
-    ``url`` scheme selects the driver (one of ``TRACKER_SCHEMES``).
+    ``url`` scheme selects the driver (one of ``drivers.registry.TRACKER_SCHEMES``).
     ``model`` defaults to ``""`` (then not compared with the model the tracker reports at connect; a different
     model stops the run before the first move); ``position_in_base_mm`` (rough tracker
     position in the robot base frame, for aiming) defaults to ``None``;
@@ -207,144 +149,6 @@ class TrackerConfig:
 
 
 @dataclass(frozen=True, slots=True)
-class GridConfig:
-    """Calibration grid: a box ``center_mm +- size_mm / 2`` in the robot base frame, sampled every ``step_mm``."""
-
-    center_mm: Vec3
-    size_mm: Vec3
-    step_mm: float
-
-
-@dataclass(frozen=True, slots=True)
-class TestSetConfig:
-    """Random validation points inside the grid box.
-
-    Defaults: ``count`` 50 (int >= 0; 0 = no test set), ``seed`` 0 (int >= 0).
-    """
-
-    __test__ = False  # not a pytest test class despite the name
-
-    count: int
-    seed: int
-
-
-@dataclass(frozen=True, slots=True)
-class CheckPosesConfig:
-    """Poses re-measured during the run (repeatability and drift).
-
-    Defaults: ``count`` 0 (int >= 0), ``every_n_points`` 50 (int >= 1).
-    """
-
-    count: int
-    every_n_points: int
-
-
-@dataclass(frozen=True, slots=True)
-class NestConfig:
-    """One fixed reference nest: ``id`` (text), its approximate position ``p_base_mm`` in the robot base frame and,
-    optionally, ``p_tracker_mm`` in the tracker frame (where a tracker without ``select_nest`` first aims)."""
-
-    id: str
-    p_base_mm: Vec3
-    p_tracker_mm: Vec3 | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class NestsConfig:
-    """Fixed floor nests re-measured through the run (tracker-registration drift).
-
-    ``points`` (default none) the nests; each is measured at the start, after every ``every_n_points``
-    robot points (int >= 1, default 50) and at the end; the tracker aims at the nest, the robot does not
-    move. The run pauses when a nest reads more than ``max_move_mm`` (default 0.2 mm) from its first
-    reading (tracker or nest disturbed).
-    """
-
-    points: tuple[NestConfig, ...] = ()
-    every_n_points: int = 50
-    max_move_mm: float = 0.2
-
-
-@dataclass(frozen=True, slots=True)
-class Iso9283Config:
-    """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
-    P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
-
-    Defaults: ``cycles`` 30 (int >= 2), ``edge_mm`` 0 = the largest cube inside the grid box.
-    """
-
-    cycles: int = 30
-    edge_mm: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class PoolConfig:
-    """Candidate poses of an optimal plan (``plan.kind: optimal``): positions every ``step_mm`` in the grid box
-    (default half the grid step), ``tool_direction`` and ``tilts`` (default 6) directions tilted by ``tilt_deg``
-    (default 20; tilts need ``tracker.position_in_base_mm``) around it, each on ``q_ref_deg``'s IK branch and,
-    with ``wrist_flip`` (default true), on the flipped-wrist branch."""
-
-    step_mm: float | None = None
-    tilt_deg: float = 20.0
-    tilts: int = 6
-    wrist_flip: bool = True
-
-
-@dataclass(frozen=True, slots=True)
-class PlanConfig:
-    """What to measure.
-
-    ``tool_direction``: fixed flange z-axis in the base frame (non-zero, not
-    normalised). ``q_ref_deg``: reference joint configuration (one value per
-    joint, inside the limits) selecting the IK branch. ``test`` and
-    ``check_poses`` are optional. ``nests`` (optional) reference nests;
-    ``order`` ``serpentine`` (default: grid order, each test point next to its
-    nearest grid point) or ``random`` (calib and test points shuffled with
-    ``order_seed``, default 0).
-    ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
-    (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
-    ``kind``: ``grid`` (default), ``optimal`` (``points`` calibration poses chosen from a candidate ``pool``
-    by a D-optimal criterion, measured in a short tour) or ``iso9283``. ``stop: auto`` (optimal plans; default
-    ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS
-    would improve by less than ``stop_gain_pct`` % of the noise floor (default 2) with the next block, or at
-    ``max_points`` (default ``points``) or ``max_minutes`` (default none); then the test set is measured.
-    """
-
-    grid: GridConfig
-    test: TestSetConfig
-    tool_direction: Vec3
-    q_ref_deg: tuple[float, ...]
-    check_poses: CheckPosesConfig
-    nests: NestsConfig = NestsConfig()
-    order: str = "serpentine"
-    order_seed: int = 0
-    keep_out: tuple["BoxConfig", ...] = ()
-    envelope: "BoxConfig | None" = None
-    clearance_mm: float = 25.0
-    kind: str = "grid"                          # grid | optimal (calibration campaign) | iso9283 (acceptance test)
-    iso9283: Iso9283Config = Iso9283Config()
-    points: int | None = None                   # optimal: calibration points
-    pool: PoolConfig = PoolConfig()
-    stop: str = "off"                           # off | auto
-    max_points: int | None = None
-    max_minutes: float | None = None
-    block_points: int = 20
-    stop_gain_pct: float = 2.0
-
-
-@dataclass(frozen=True, slots=True)
-class BoxConfig:
-    """An axis-aligned box in the robot base frame (mm): ``min_mm`` < ``max_mm`` per axis; ``name`` for messages.
-
-    ``plan.keep_out`` boxes must never be entered, ``plan.envelope`` never left, by the flange origin or any
-    SMR centre (with ``plan.clearance_mm``, default 25) anywhere along the joint-interpolated path.
-    """
-
-    name: str
-    min_mm: Vec3
-    max_mm: Vec3
-
-
-@dataclass(frozen=True, slots=True)
 class CalibrationConfig:
     """Identification settings (the whole section is optional).
 
@@ -356,11 +160,11 @@ class CalibrationConfig:
     ``outliers``: ``local`` excludes a point only as a measurement fault (residual isolated against its
     neighbours in joint space and in the workspace, tracker statistics, repeats); ``none`` keeps all.
     ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
-    ``none``, or a list of effect specs (``name`` in ``MODEL_EFFECT_NAMES``, optional ``params`` with the
+    ``none``, or a list of effect specs (``name`` in ``robocal.effects.MODEL_EFFECTS``, optional ``params`` with the
     factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
     ``residual`` ``auto`` chooses none / idw / gpr by k-fold CV and keeps a layer only on a significant gain.
 
-    ``residual`` (one of ``RESIDUAL_MODELS``) is the layer fitted on top of
+    ``residual`` (one of ``values.RESIDUAL_MODELS``) is the layer fitted on top of
     the kinematic model: ``idw`` inverse distance weighting over positions
     (seed 000), ``gpr`` Gaussian-process regression over joint angles, one
     model per base-frame axis (seed 003; the payload becomes an extra input
@@ -368,7 +172,7 @@ class CalibrationConfig:
     predictive standard deviation of every test point), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
 
-    ``joints`` (one of ``JOINT_SETS``, default auto) which joint values drive
+    ``joints`` (one of ``values.JOINT_SETS``, default auto) which joint values drive
     the model when the data holds both commanded (``qc1..qcn``) and read-back
     (``q1..qn``) joints: ``auto`` takes the commanded ones when read-back minus
     command is significantly above the encoder noise or correlates with the
@@ -426,7 +230,7 @@ class FaultsConfig:
 class EffectSpec:
     """One non-geometric error effect of the simulated robot.
 
-    ``name`` in ``EFFECT_NAMES``; ``scale`` >= 0 (default 1); ``params``
+    ``name`` in ``robocal.effects.SIMULATED_EFFECTS``; ``scale`` >= 0 (default 1); ``params``
     (default empty) are effect-specific. In YAML an effect is either a mapping
     ``{name: ..., scale: ..., params: {...}}`` or just its name.
     """

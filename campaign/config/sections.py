@@ -6,13 +6,14 @@ import math
 
 from campaign.config.plan_section import optimal_keys
 from campaign.config.reader import _ListPath, _Reader, _describe, _fmt
-from campaign.config.schema import (AcceptanceConfig, BoxConfig, CALIBRATION_METHODS, CORRECTION_GENERATORS,
-                                    CalibrationConfig, CheckPosesConfig, CorrectionConfig, ERROR_FUNCTIONS, EffectSpec,
-                                    FaultsConfig, GridConfig, Iso9283Config, JOINT_SETS, JointConfig, NestConfig,
-                                    NestsConfig,
-                                    OUTLIER_SCREENS, OutputConfig, PLAN_ORDERS, PlanConfig, RESIDUAL_MODELS,
-                                    RobotConfig, SimulationConfig, TestSetConfig, ToolConfig, TrackerConfig, Vec3,
-                                    WEIGHT_FUNCTIONS, _NAME_RE, _ORTHONORMAL_TOL)
+from campaign.config.plan_schema import (BoxConfig, CheckPosesConfig, GridConfig, Iso9283Config, NestConfig,
+                                         NestsConfig, PlanConfig, TestSetConfig)
+from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CorrectionConfig, EffectSpec, FaultsConfig,
+                                    JointConfig, OutputConfig, RobotConfig, SimulationConfig, ToolConfig,
+                                    TrackerConfig)
+from campaign.config.values import (CALIBRATION_METHODS, CORRECTION_GENERATORS, ERROR_FUNCTIONS, JOINT_SETS,
+                                    OUTLIER_SCREENS, PLAN_ORDERS, RESIDUAL_MODELS, Vec3, WEIGHT_FUNCTIONS, _NAME_RE,
+                                    _ORTHONORMAL_TOL)
 from campaign.errors import ConfigError
 from robocal.effects import SIMULATED_EFFECTS, MODEL_EFFECTS
 

@@ -6,9 +6,9 @@ import numpy as np
 
 from campaign.errors import ConfigError
 from robocal.effects import by_name
-from robocal.sim_cell import SimulatedCell, random_geometric_errors
+from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors
 
-from .cell_model import nominal_kinematics, tracker_uncertainty
+from .cell_model import CellModel
 from .schema import CampaignConfig
 
 
@@ -39,12 +39,10 @@ def simulated_effects(cfg: CampaignConfig, n_joints: int) -> tuple:
     return tuple(out)
 
 
-def simulated_cell(cfg: CampaignConfig) -> SimulatedCell:
+def simulated_cell(cell: CellModel) -> SimulatedCell:
     """The 'real' robot behind mock:// drivers: nominal + seeded geometric errors + configured effects."""
-    sim = cfg.simulation
-    nominal = nominal_kinematics(cfg)
+    sim, nominal = cell.config.simulation, cell.kinematics
     rng = np.random.default_rng(sim.seed)
     truth = random_geometric_errors(nominal, rng, sim.geometric_error_scale).with_(
         T_tracker_base=np.array(sim.T_tracker_base, float), p_flange_smr_mm=sim.p_flange_smr_mm)
-    return SimulatedCell(truth, simulated_effects(cfg, nominal.n), tracker_uncertainty(cfg),
-                         cfg.robot.repeatability_mm)
+    return SimulatedCell(truth, simulated_effects(cell.config, nominal.n), cell.tracker, cell.repeatability_mm)

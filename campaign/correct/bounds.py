@@ -7,6 +7,8 @@ from dataclasses import dataclass
 from numbers import Integral
 from typing import Any, Iterable, Mapping, Sequence
 
+# The writer tag in the header comment of every written file: kept as first published with the /1 formats (files on
+# controllers carry it); it names the writer, not a module path.
 GENERATOR = "campaign.writeback"
 RAPID_FORMAT = "rapid-cal-targets/1"
 URSCRIPT_FORMAT = "urscript-cal-targets/1"

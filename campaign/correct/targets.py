@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 
-from campaign.config.cell_model import nominal_kinematics
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
@@ -103,8 +103,10 @@ def model_pose_fn(model: CalibratedModel, T_flange_tool: np.ndarray):
     return ap
 
 
-def run_correction(cfg: CampaignConfig, ap, T_target: np.ndarray, q_start: np.ndarray, T_tool: np.ndarray) -> Correction:
-    c, kin = cfg.correction, nominal_kinematics(cfg)
+def run_correction(cell: CellModel, ap, T_target: np.ndarray, q_start: np.ndarray, T_tool: np.ndarray) -> Correction:
+    """Pseudo-targets of the nominal model that bring the calibrated pose ``ap`` to ``T_target`` (settings of the
+    ``correction`` section; ``ensemble``: the smallest converged correction of the generators)."""
+    c, kin = cell.config.correction, cell.kinematics
     kw = dict(error=c.error, threshold=c.threshold_mm, max_iter=c.max_iterations)
     if c.generator == "ensemble":
         return smallest_converged(ensemble_generators(c.error), q_start, c.threshold_mm,
@@ -182,14 +184,14 @@ def recorded_identity(model: CalibratedModel, model_path: str | Path | None = No
     return found if isinstance(found, dict) else None
 
 
-def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Targets,
+def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                     T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
                     allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
     """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
     The tool point (default ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot
     (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
     absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
-    kin = nominal_kinematics(cfg)
+    cfg, kin = cell.config, cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
     R_flange = targets.R_base @ T_tool[:3, :3].T
     q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, np.radians(cfg.plan.q_ref_deg),
@@ -201,7 +203,7 @@ def correct_targets(cfg: CampaignConfig, model: CalibratedModel, targets: Target
     if len(idx):
         T_d = np.zeros((len(idx), 4, 4))
         T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = targets.R_base[idx], targets.p_base_mm[idx], 1.0
-        c = run_correction(cfg, model_pose_fn(model, T_tool), T_d, q_nom[idx], T_tool)
+        c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q_nom[idx], T_tool)
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
         std = predictive_std_mm(model, c.q_rad)
@@ -231,8 +233,10 @@ def _limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 
-def check_model_fits(cfg: CampaignConfig, model: CalibratedModel, source: str) -> None:
-    """The model must describe the config's robot: same joint count and convention (DataError otherwise)."""
+def check_model_fits(cell: CellModel, model: CalibratedModel, source: str) -> None:
+    """The model must describe the config's robot: same joint count and convention (DataError otherwise), and
+    identified deltas from the nominal model within physical bounds."""
+    cfg = cell.config
     kin, n = model.kinematics, len(cfg.robot.joints)
     if kin.n != n:
         raise DataError(source, f"the model has {kin.n} joints but the config's robot has {n}: not a model of this robot")
@@ -241,4 +245,4 @@ def check_model_fits(cfg: CampaignConfig, model: CalibratedModel, source: str) -
                                 "not a model of this robot")
     from campaign.calibrate.plausibility import Plausibility, check_deltas
 
-    check_deltas(nominal_kinematics(cfg), kin, source, Plausibility())   # a model of another robot: exit 2
+    check_deltas(cell.kinematics, kin, source, Plausibility())   # a model of another robot: exit 2

@@ -10,8 +10,7 @@ import numpy as np
 
 from campaign.calibrate.multi_smr import angle_stats, measured_flange_poses, tool_orientation_errors_arcsec
 from campaign.calibrate.report_sections import ErrorFigures, VerifyPass
-from campaign.config.cell_model import measurement_covariance, nominal_kinematics
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.io.durable import write_json
 from campaign.plan.points import PlanPoint
 from campaign.run.log_records import PointRecord
@@ -80,10 +79,12 @@ class VerifyPasses:
     holds a correction beyond a bound at the planned joints (``held_reasons``). ``results``: (stage, err (N, 3)
     mm tracker frame, safe (N,), held) per measured pass."""
 
-    def __init__(self, cfg: CampaignConfig, kin, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
+    def __init__(self, cell: CellModel, T_tool: np.ndarray, ids: list[str], p_d: np.ndarray,
                  q0: np.ndarray, q: np.ndarray, R_d: np.ndarray, T_tb: np.ndarray, target_tracker: np.ndarray,
                  estimator=None):
-        self.cfg, self.kin, self.T_tool, self.ids, self.p_d, self.q0, self.q = cfg, kin, T_tool, ids, p_d, q0, q
+        cfg, kin = cell.config, cell.kinematics                  # the nominal model commands the joints
+        self.cell, self.cfg, self.kin = cell, cfg, kin
+        self.T_tool, self.ids, self.p_d, self.q0, self.q = T_tool, ids, p_d, q0, q
         self.R_d, self.T_tb, self.target_tracker = R_d, T_tb, target_tracker
         self.estimator = estimator                   # three SMRs: seed 003's 6D pose from the measured SMR 1
         self.R_planned = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]     # each point's planned tool orientation
@@ -119,7 +120,7 @@ class VerifyPasses:
                                                                           self.T_tool[:3, :3])
         if self.k == self.cfg.correction.closed_loop_iterations:
             return None
-        sigma = np.sqrt(np.trace(measurement_covariance(self.cfg, p_meas), axis1=1, axis2=2))
+        sigma = np.sqrt(np.trace(self.cell.covariance(p_meas), axis1=1, axis2=2))
         significant = np.linalg.norm(err, axis=1) > self.cfg.correction.significance * sigma
         R_flange = np.broadcast_to(self.R_d[0] @ self.T_tool[:3, :3].T, (len(self.ids), 3, 3))
         self.q, self.p_pseudo = closed_loop_step(self.kin, self.T_tool, self.q, self.p_pseudo,
@@ -129,7 +130,7 @@ class VerifyPasses:
         return self._points()
 
 
-def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: CalibratedModel,
+def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: CalibratedModel,
                test_points: list[PointRecord], out_dir: Path, estimator=None) -> VerifyResult:
     """Closed-loop verification on a run's test points. ``execute_passes(plan: VerifyPasses) -> RunOutcome``
     drives the robot through the plan's passes and measures (durably logged by the caller). The tool point is
@@ -137,7 +138,7 @@ def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: Calibr
     pass also reports the tool orientation error against each point's planned orientation (nominal model at the
     planned joints): measured from the three SMRs of the run before correction, estimated from SMR 1 + the two
     predicted SMRs (seed 003) after."""
-    kin = nominal_kinematics(cfg)
+    kin = cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm)
     ids = [p.point_id for p in test_points]
     p_d = np.array([p.p_target_base_mm for p in test_points], float)
@@ -145,14 +146,14 @@ def verify_run(run_dir: Path, execute_passes, cfg: CampaignConfig, model: Calibr
     T_tb = model.kinematics.T_tracker_base
     target_tracker = transform_points(T_tb, p_d)
     before = np.array([p.p_tracker_mm for p in test_points]) - target_tracker
-    floor = float(np.sqrt(np.mean(np.trace(measurement_covariance(cfg, target_tracker), axis1=1, axis2=2))))
+    floor = float(np.sqrt(np.mean(np.trace(cell.covariance(target_tracker), axis1=1, axis2=2))))
     rows = {UNCORRECTED: _figures(before)}
     passes = [VerifyPass(UNCORRECTED, 0, len(ids), {}, rows[UNCORRECTED], None)]
     R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
-    c = run_correction(cfg, model_pose_fn(model, T_tool), T_d, q0, T_tool)
-    plan = VerifyPasses(cfg, kin, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker, estimator)
+    c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q0, T_tool)
+    plan = VerifyPasses(cell, T_tool, ids, p_d, q0, c.q_rad, R_d, T_tb, target_tracker, estimator)
     if estimator is not None:
         poses = measured_flange_poses(estimator.tool.p_flange_mm, test_points)
         if poses is not None:

@@ -6,9 +6,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from campaign.run.log_records import SETS
 from robocal.approach import approach_signs
 
-SETS = ("calib", "test", "check", "nest")
 _SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
 _ENV = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
 

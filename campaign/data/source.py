@@ -1,21 +1,34 @@
-"""``load_source(path)``: a run directory (its durable log) or an interchange CSV as a ``Dataset``."""
+"""``load_source(path)``: a run directory (its durable log) or an interchange CSV as a ``Dataset``, the one place
+where "source -> dataset" is decided (``campaign run`` at its end, ``reprocess``, ``diagnose``)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 import os
 from pathlib import Path
 
 from campaign.errors import DataError
+from campaign.run.log_reader import LogContents, read_log
 
 from .dataset import Dataset
 from .interchange_csv import read_csv
 from .log_dataset import dataset_from_log
 
 
-def load_source(source: str | os.PathLike) -> Dataset:
-    """A run directory (its log.jsonl) or an interchange CSV; DataError when it is neither."""
-    from campaign.run.log_reader import read_log
+@dataclass(frozen=True, eq=False)
+class Source:
+    """The measured data of a source and, for a run directory, the log it came from (hardware identification,
+    ``plan.stop`` decisions; None for a CSV)."""
+    dataset: Dataset
+    contents: LogContents | None = None
 
+
+def load_source(source: str | os.PathLike) -> Source:
+    """A run directory (its log.jsonl, converted by :func:`dataset_from_log`) or an interchange CSV; DataError
+    when the path does not exist, a FileNotFoundError naming log.jsonl for a directory without a log."""
     path = Path(source)
     if not path.exists():
         raise DataError(str(path), "no such file or run directory")
-    return dataset_from_log(read_log(path)) if path.is_dir() else read_csv(path)
+    if not path.is_dir():
+        return Source(read_csv(path))
+    contents = read_log(path)
+    return Source(dataset_from_log(contents), contents)

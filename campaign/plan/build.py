@@ -4,22 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from campaign.config.schema import CampaignConfig
-from robocal.kinematics import Kinematics
+from campaign.config.cell_model import CellModel
 
 from .motion_safety import PathGuard
 from .points import Plan, PlanPoint
 from .poses import finish_plan, grid_points, interleave_tests, solve_targets, test_targets, tool_rotation
 
 
-def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
-    """Plan of a campaign config for the nominal model ``kin``."""
+def build_plan(cell: CellModel) -> Plan:
+    """Plan of a campaign config for its nominal model."""
+    cfg, kin = cell.config, cell.kinematics
     if cfg.plan.kind == "iso9283":                      # ISO 9283 acceptance test: the standard's cube and cycles
         from .iso9283 import iso_plan
-        return iso_plan(cfg, kin)
+        return iso_plan(cell)
     if cfg.plan.kind == "optimal":                      # D-optimal poses from a candidate pool
         from .optimal import optimal_plan
-        return optimal_plan(cfg, kin)
+        return optimal_plan(cell)
     g, pl = cfg.plan.grid, cfg.plan
     R = tool_rotation(pl.tool_direction)
     p_grid, idx = grid_points(g.center_mm, g.size_mm, g.step_mm)
@@ -28,7 +28,7 @@ def build_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
     p_all = np.vstack([p_grid, p_test])
     sets = ["calib"] * len(p_grid) + ["test"] * len(p_test)
     ids = grid_ids + test_ids
-    guard = PathGuard.from_config(cfg, kin)
+    guard = PathGuard.for_cell(cell)
     q_all, ok, skipped = solve_targets(cfg, kin, p_all, ids, sets, R, guard)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])

@@ -1,16 +1,17 @@
-"""The ISO 9283 acceptance-test plan: the largest reachable cube inside the plan's box, its poses P1..P5 and their
-cycles P1 -> P5 -> P4 -> P3 -> P2 (ids ``N:Pk.cNN`` nominal, ``C:Pk.cNN`` corrected)."""
+"""The ISO 9283 acceptance-test plan (``plan.kind: iso9283``): the largest cube inside the plan's box (or
+``plan.iso9283.edge_mm``), shrunk in 5 % steps until P1..P5 are reachable on the plan's robot configuration with the
+fixed SMR orientation, and ``cycles`` cycles P1 -> P5 -> P4 -> P3 -> P2, so each pose is always approached from the
+same neighbour (ids ``N:Pk.cNN`` nominal, ``C:Pk.cNN`` corrected)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import CampaignError, ConfigError
 from robocal.ik import solve_on_branch
 from robocal.iso9283 import CYCLE_ORDER, POSE_NAMES, cube_poses, largest_cube
-from robocal.kinematics import Kinematics
 
 from .points import Plan, PlanPoint
 from .poses import tool_rotation
@@ -30,10 +31,12 @@ class IsoCube:
     note: str
 
 
-def iso_cube(cfg: CampaignConfig, kin: Kinematics) -> IsoCube:
-    """The largest cube inside the plan's box whose P1..P5 are reachable on the plan's configuration."""
+def iso_cube(cell: CellModel) -> IsoCube:
+    """The largest cube inside the plan's box whose P1..P5 are reachable on the plan's configuration (nominal
+    model)."""
     from .motion_safety import PathGuard
 
+    cfg, kin = cell.config, cell.kinematics
     g, pl = cfg.plan.grid, cfg.plan
     lo = np.asarray(g.center_mm, float) - np.asarray(g.size_mm, float) / 2
     hi = np.asarray(g.center_mm, float) + np.asarray(g.size_mm, float) / 2
@@ -46,7 +49,7 @@ def iso_cube(cfg: CampaignConfig, kin: Kinematics) -> IsoCube:
     if pl.iso9283.edge_mm > 0:
         edge = min(edge, pl.iso9283.edge_mm)
     R = tool_rotation(pl.tool_direction)
-    guard = PathGuard.from_config(cfg, kin)
+    guard = PathGuard.for_cell(cell)
     start = edge
     for _ in range(60):
         p = cube_poses(center, edge)
@@ -68,7 +71,7 @@ def cycle_points(q_by_pose_deg: np.ndarray, p_base_mm: np.ndarray, cycles: int, 
                       tuple(p_base_mm[j])) for c in range(cycles) for j in CYCLE_ORDER]
 
 
-def iso_plan(cfg: CampaignConfig, kin: Kinematics, corrected_q_deg: np.ndarray | None = None) -> Plan:
+def iso_plan(cell: CellModel, corrected_q_deg: np.ndarray | None = None) -> Plan:
     """The ISO 9283 plan: nominal-target cycles, then (given corrected joints (5, n) deg) corrected ones."""
     import hashlib
     import json
@@ -76,11 +79,12 @@ def iso_plan(cfg: CampaignConfig, kin: Kinematics, corrected_q_deg: np.ndarray |
     from .motion_safety import PathGuard
     from .motion_safety import with_vias
 
-    cube = iso_cube(cfg, kin)
+    cfg = cell.config
+    cube = iso_cube(cell)
     points = cycle_points(cube.q_deg, cube.p_base_mm, cfg.plan.iso9283.cycles, "N")
     if corrected_q_deg is not None:
         points += cycle_points(corrected_q_deg, cube.p_base_mm, cfg.plan.iso9283.cycles, "C")
-    guard = PathGuard.from_config(cfg, kin)
+    guard = PathGuard.for_cell(cell)
     if guard is not None:                                 # swept path: via poses, never a changed cycle order
         ids = [p.point_id for p in points]
         points = with_vias(cfg, guard, points)

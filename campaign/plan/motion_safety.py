@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import CampaignError, ConfigError
 from drivers.base import MotionLimits, Payload
@@ -55,8 +56,9 @@ class PathGuard:
     q_home_deg: np.ndarray                  # the plan's reference configuration (first via candidate)
 
     @classmethod
-    def from_config(cls, cfg: CampaignConfig, kin: Kinematics) -> "PathGuard | None":
-        """None when the config has neither keep-out boxes nor an envelope."""
+    def for_cell(cls, cell: CellModel) -> "PathGuard | None":
+        """The guard of the cell's nominal model; None when its config has neither keep-out boxes nor an envelope."""
+        cfg, kin = cell.config, cell.kinematics
         pl = cfg.plan
         if not pl.keep_out and pl.envelope is None:
             return None

@@ -22,7 +22,7 @@ from robocal.ik import wrist_angle_rad
 from robocal.kinematics import Kinematics
 from robocal.pool import candidate_poses, incidence_rad, smr_base_and_axis, tilted_rotations
 
-from campaign.config.cell_model import measurement_covariance
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import ConfigError
 from .motion_safety import PathGuard
@@ -40,29 +40,30 @@ class Pool:
     criterion: Criterion
 
 
-def tracker_kinematics(cfg: CampaignConfig, kin: Kinematics) -> Kinematics:
-    """``kin`` with the tracker frame parallel to the base frame at ``tracker.position_in_base_mm`` (the base
+def tracker_kinematics(cell: CellModel) -> Kinematics:
+    """The nominal model with the tracker frame parallel to the base frame at ``tracker.position_in_base_mm`` (the base
     origin when unknown): the frame the measurement covariance of a planned pose is computed in."""
     T = np.eye(4)
-    T[:3, 3] = -np.asarray(cfg.tracker.position_in_base_mm or (0.0, 0.0, 0.0), float)
-    return kin.with_(T_tracker_base=T)
+    T[:3, 3] = -np.asarray(cell.config.tracker.position_in_base_mm or (0.0, 0.0, 0.0), float)
+    return cell.kinematics.with_(T_tracker_base=T)
 
 
-def pose_covariance(cfg: CampaignConfig, kin_t: Kinematics, q_rad: np.ndarray) -> np.ndarray:
+def pose_covariance(cell: CellModel, kin_t: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """(N, 3, 3) mm^2: the calibration weights of planned poses (tracker model at the predicted SMR position)."""
     p_base, _ = smr_base_and_axis(kin_t, q_rad)
-    return measurement_covariance(cfg, p_base + kin_t.T_tracker_base[:3, 3])
+    return cell.covariance(p_base + kin_t.T_tracker_base[:3, 3])
 
 
-def candidate_pool(cfg: CampaignConfig, kin: Kinematics, guard: PathGuard | None) -> Pool:
+def candidate_pool(cell: CellModel, guard: PathGuard | None) -> Pool:
     """The candidate poses of an optimal plan with their criterion; ConfigError when none is left."""
+    cfg, kin = cell.config, cell.kinematics
     pl, tr = cfg.plan, cfg.tracker
     step = pl.pool.step_mm or pl.grid.step_mm / 2
     cells, idx = grid_points(pl.grid.center_mm, pl.grid.size_mm, step)
     R0 = tool_rotation(pl.tool_direction)
     tilts = pl.pool.tilts if tr.position_in_base_mm is not None and pl.pool.tilt_deg > 0 else 0
     rotations = tilted_rotations(R0, math.radians(pl.pool.tilt_deg), tilts)
-    q, cell, ori, branch = candidate_poses(kin, cells, rotations, np.radians(pl.q_ref_deg), pl.pool.wrist_flip)
+    q, at, ori, branch = candidate_poses(kin, cells, rotations, np.radians(pl.q_ref_deg), pl.pool.wrist_flip)
     n_solved = len(q)
     keep = np.degrees(wrist_angle_rad(kin, q)) >= WRIST_MARGIN_DEG
     if tr.position_in_base_mm is not None:
@@ -83,11 +84,11 @@ def candidate_pool(cfg: CampaignConfig, kin: Kinematics, guard: PathGuard | None
         raise ConfigError(cfg.source_path, "plan.grid", f"no candidate pose of the optimal plan is usable "
                           f"({len(cells)} positions, {n_solved} IK solutions, {n_visible} off the wrist singularity "
                           "and visible to the tracker)")
-    q, cell, ori, branch = q[keep], cell[keep], ori[keep], branch[keep]
-    ids = tuple(f"O{i:02d}-{j:02d}-{k:02d}-{o}{'w' if b else ''}" for (i, j, k), o, b in zip(idx[cell], ori, branch))
-    kin_t = tracker_kinematics(cfg, kin)
-    crit = criterion(kin_t, q, pose_covariance(cfg, kin_t, q), cfg.tool.payload_kg)
-    return Pool(q, cells[cell], ids, crit)
+    q, at, ori, branch = q[keep], at[keep], ori[keep], branch[keep]
+    ids = tuple(f"O{i:02d}-{j:02d}-{k:02d}-{o}{'w' if b else ''}" for (i, j, k), o, b in zip(idx[at], ori, branch))
+    kin_t = tracker_kinematics(cell)
+    crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cfg.tool.payload_kg)
+    return Pool(q, cells[at], ids, crit)
 
 
 def planned_count(cfg: CampaignConfig) -> tuple[int, str]:
@@ -116,31 +117,33 @@ def block_ends(cfg: CampaignConfig, n: int, identifiable: int) -> tuple[int, ...
     return tuple(range(first, n, cfg.plan.block_points)) + (n,)
 
 
-def _test_set(cfg: CampaignConfig, kin: Kinematics, R0: np.ndarray, guard: PathGuard | None):
+def _test_set(cell: CellModel, R0: np.ndarray, guard: PathGuard | None):
     """The grid plan's test set exactly: its targets solved in one batch with the grid vertices (the IK re-seeds
     a failed target from its nearest solved neighbour). (p (T, 3) mm, ids, q (T, n) rad, plannable indices,
     skipped)."""
+    cfg = cell.config
     g = cfg.plan.grid
     p_grid, _ = grid_points(g.center_mm, g.size_mm, g.step_mm)
     p_test, test_ids = test_targets(cfg)
     ids = [""] * len(p_grid) + test_ids
-    q, ok, skipped = solve_targets(cfg, kin, np.vstack([p_grid, p_test]), ids,
+    q, ok, skipped = solve_targets(cfg, cell.kinematics, np.vstack([p_grid, p_test]), ids,
                                    ["calib"] * len(p_grid) + ["test"] * len(p_test), R0, guard)
     k = len(p_grid)
     return p_test, test_ids, q[k:], np.flatnonzero(ok[k:]), [s for s in skipped if s.set == "test"]
 
 
-def optimal_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
-    """The optimal plan of ``cfg`` for the nominal model ``kin`` (ConfigError on bad counts, nothing moves)."""
+def optimal_plan(cell: CellModel) -> Plan:
+    """The optimal plan of the cell's config for its nominal model (ConfigError on bad counts, nothing moves)."""
+    cfg = cell.config
     pl = cfg.plan
-    guard = PathGuard.from_config(cfg, kin)
-    pool = candidate_pool(cfg, kin, guard)
+    guard = PathGuard.for_cell(cell)
+    pool = candidate_pool(cell, guard)
     n, key = planned_count(cfg)
     check_count(cfg, n, key, len(pool.q_rad), pool.criterion.identifiable)
     chosen = d_optimal(pool.criterion.A, n, pool.criterion.spread).chosen
     q_ref = np.radians(pl.q_ref_deg)
     R0 = tool_rotation(pl.tool_direction)
-    p_test, test_ids, q_test, test_ok, skipped = _test_set(cfg, kin, R0, guard)
+    p_test, test_ids, q_test, test_ok, skipped = _test_set(cell, R0, guard)
     blocks = block_ends(cfg, n, pool.criterion.identifiable) if pl.stop == "auto" else (n,)
     order, start = [], q_ref
     for lo, hi in zip((0,) + blocks[:-1], blocks):        # each block a short tour from where the last ended
@@ -161,13 +164,13 @@ def optimal_plan(cfg: CampaignConfig, kin: Kinematics) -> Plan:
                        skipped, blocks if pl.stop == "auto" else ())
 
 
-def plan_forecast(cfg: CampaignConfig, kin: Kinematics, plan: Plan) -> Forecast:
+def plan_forecast(cell: CellModel, plan: Plan) -> Forecast:
     """What a plan's calibration points should achieve before any is measured (``robocal.design.forecast``):
     parameter std, the calibrated model's own RMS error at the test poses (AP(theta)) and the noise floor there."""
-    kin_t = tracker_kinematics(cfg, kin)
+    kin_t = tracker_kinematics(cell)
     q_cal = np.radians([p.q_deg for p in plan.points if p.set == "calib"])
-    q_test = np.radians([p.q_deg for p in plan.points if p.set == "test"]).reshape(-1, kin.n)
+    q_test = np.radians([p.q_deg for p in plan.points if p.set == "test"]).reshape(-1, kin_t.n)
     if not len(q_test):
         q_test = q_cal
-    return forecast(kin_t, q_cal, pose_covariance(cfg, kin_t, q_cal), q_test, pose_covariance(cfg, kin_t, q_test),
-                    cfg.tool.payload_kg)
+    return forecast(kin_t, q_cal, pose_covariance(cell, kin_t, q_cal), q_test, pose_covariance(cell, kin_t, q_test),
+                    cell.config.tool.payload_kg)

@@ -1,10 +1,10 @@
-"""ISO 9283 acceptance test on the cell: the standard cube, its cycles through the runner and the durable log,
-and AP / RP / AD / RD (``robocal.iso9283``) with nominal and, given a calibrated model, corrected targets.
+"""ISO 9283 characteristics of an acceptance run: AP / RP / AD / RD (``robocal.iso9283``) of the logged cycles,
+with nominal and, given a calibrated model, corrected targets, as the run's ``report.json``
+(``campaign-iso9283/1``). The cube and its plan are in :mod:`campaign.plan.iso9283`; the run itself is
+``campaign.workflows.run_iso9283``.
 
-Plan (``plan.kind: iso9283``): the largest cube inside the grid box (or ``plan.iso9283.edge_mm``), shrunk in 5 %
-steps until P1..P5 are reachable on the plan's robot configuration with the fixed SMR orientation; ``cycles``
-cycles P1 -> P5 -> P4 -> P3 -> P2, so each pose is always approached from the same neighbour. Rows are logged
-as set ``check`` (repeated poses) with ids ``N:P3.c07`` (nominal targets) or ``C:P3.c07`` (corrected targets).
+Rows are logged as set ``check`` (repeated poses) with ids ``N:P3.c07`` (nominal targets) or ``C:P3.c07``
+(corrected targets).
 
 Frame: the attained positions are measured in the tracker frame. With a calibrated model its registration
 ``T_tracker_base`` maps them into the robot base frame (the certificate). Without one, the base frame is the
@@ -15,15 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from campaign.config.cell_model import tracker_uncertainty
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.plan.iso9283 import IsoCube, iso_cube
 from campaign.run.log_records import PointRecord
 from robocal.frames import fit_rigid, inv_T, transform_points
 from robocal.iso9283 import POSE_NAMES, characteristics
 from robocal.model import CalibratedModel
-from robocal.noise import noise_floor_mm
 
 
 REPORT_FORMAT = "campaign-iso9283/1"
@@ -34,8 +32,9 @@ FRAME_FIT = ("least-squares rigid fit of the five barycentres to the commanded p
              "the part of the error a rigid frame absorbs; RP, AD and RD are frame-independent")
 
 
-def iso_report(cfg: CampaignConfig, records: list[PointRecord], cube: IsoCube, model: CalibratedModel | None) -> dict:
+def iso_report(cell: CellModel, records: list[PointRecord], cube: IsoCube, model: CalibratedModel | None) -> dict:
     """AP/RP per pose and AD/RD (P2-P4) of every target kind in the log records (``N:`` and ``C:`` ids)."""
+    cfg = cell.config
     by_kind: dict[str, dict[str, list]] = {}
     for rec in records:
         kind, rest = rec.point_id.split(":", 1)
@@ -61,7 +60,7 @@ def iso_report(cfg: CampaignConfig, records: list[PointRecord], cube: IsoCube, m
                      "distance": dist.to_dict(), "max_ap_mm": max(pc.ap_mm for pc in poses),
                      "max_rp_mm": max(pc.rp_mm for pc in poses), "deviation_um": dev})
     T_tb = inv_T(T_base_tracker)
-    floor = noise_floor_mm(transform_points(T_tb, p_cmd), tracker_uncertainty(cfg), cfg.robot.repeatability_mm)
+    floor = cell.noise_floor_mm(transform_points(T_tb, p_cmd))
     return {"format": REPORT_FORMAT, "config": cfg.name, "frame": frame,
             "cube": {"center_mm": cube.center_mm.tolist(), "edge_mm": cube.edge_mm, "note": cube.note,
                      "poses_base_mm": p_cmd.tolist()},
@@ -69,15 +68,14 @@ def iso_report(cfg: CampaignConfig, records: list[PointRecord], cube: IsoCube, m
             "noise_floor_mm": floor, "repeatability_spec_mm": cfg.robot.repeatability_mm, "runs": runs}
 
 
-def finish(cfg: CampaignConfig, run_dir, model: CalibratedModel | None = None) -> dict:
+def finish(cell: CellModel, run_dir, model: CalibratedModel | None = None) -> dict:
     """After the cycles are measured: the ISO report from the run's log, written as report.json (+ HTML)."""
     from pathlib import Path
 
-    from campaign.config.cell_model import nominal_kinematics
     from campaign.io.durable import write_json
     from campaign.run.log_reader import read_log
 
     records = [p for p in read_log(Path(run_dir)).records() if ":" in p.point_id]
-    report = iso_report(cfg, records, iso_cube(cfg, nominal_kinematics(cfg)), model)
+    report = iso_report(cell, records, iso_cube(cell), model)
     write_json(Path(run_dir) / "report.json", report)
     return report

@@ -1,4 +1,4 @@
-"""The cell's devices: ``open_cell(cfg)`` opens and connects robot and tracker and closes them on exit.
+"""The cell's devices: ``open_devices(cell)`` opens and connects robot and tracker and closes them on exit.
 
 Which drivers run is the registry's business (by URL); the simulated world behind ``mock://`` drivers is built
 by the mock drivers themselves from the config's simulation section (``mock_world``), only when one is used."""
@@ -12,10 +12,11 @@ import numpy as np
 
 from drivers.base import Clock, Robot, SystemClock, Tracker
 from drivers.mock import MockWorld
-from drivers.registry import CellContext, open_cell_robot, open_cell_tracker
+from drivers.registry import CellContext, open_robot, open_tracker
 
-from campaign.config.simulation import simulated_cell
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
+from campaign.config.simulation import simulated_cell
 
 
 @dataclass(frozen=True)
@@ -27,14 +28,15 @@ class Devices:
 
 
 @contextmanager
-def open_devices(cfg: CampaignConfig) -> Iterator[Devices]:
+def open_devices(cell: CellModel) -> Iterator[Devices]:
     """Open and connect the config's robot and tracker; both are closed on exit whatever happens."""
+    cfg = cell.config
     with ExitStack() as stack:
-        context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cfg))
-        robot = open_cell_robot(context, cfg.robot.url, cfg.robot.options)
+        context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cell))
+        robot = open_robot(cfg.robot.url, cfg.robot.options, context)
         stack.callback(robot.close)
         options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set
-        tracker = open_cell_tracker(context, cfg.tracker.url, options, robot)
+        tracker = open_tracker(cfg.tracker.url, options, context, robot)
         stack.callback(tracker.close)
         robot.connect()
         tracker.connect()
@@ -42,15 +44,16 @@ def open_devices(cfg: CampaignConfig) -> Iterator[Devices]:
         yield Devices(robot, tracker, clock)
 
 
-def mock_world(cfg: CampaignConfig) -> MockWorld:
+def mock_world(cell: CellModel) -> MockWorld:
     """The simulated cell behind mock:// drivers: the config's simulation section (truth, faults, phenomena)."""
+    cfg = cell.config
     s = cfg.simulation
     faults = {"beam_break_probability": s.faults.beam_break_probability,
               "timeout_probability": s.faults.timeout_probability,
               "garbage_probability": s.faults.garbage_probability}
     offset = np.asarray(s.p_flange_smr_mm) - np.asarray(cfg.tool.p_flange_smr_mm)    # true vs nominal SMR 1
     extra = [tuple(np.asarray(p) + offset) for p in cfg.tool.smrs_mm[1:]]
-    return MockWorld(simulated_cell(cfg), s.seed, motion_time_s=s.motion_time_s,
+    return MockWorld(simulated_cell(cell), s.seed, motion_time_s=s.motion_time_s,
                      joint_speed_deg_s=cfg.robot.max_joint_speed_deg_s, payload_kg=cfg.tool.payload_kg,
                      faults=faults, q0_deg=cfg.plan.q_ref_deg, extra_smrs_flange_mm=extra, **mock_phenomena(cfg))
 

@@ -11,25 +11,25 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.kinematics import Kinematics
 from robocal.sweep import move_durations_s
 
-from campaign.config.schema import CampaignConfig
+from campaign.config.cell_model import CellModel
 from campaign.plan.points import PlanPoint
 from .log_records import NestRecord, PointRecord
 
 
-def point_durations_s(points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics,
+def point_durations_s(points: Sequence[PlanPoint], cell: CellModel,
                       q_start_deg: Sequence[float] | None = None) -> np.ndarray:
     """(N,) predicted seconds per point, in plan order, starting from ``q_start_deg`` (default ``plan.q_ref_deg``)."""
-    move, fixed = point_times_s(points, cfg, kin, q_start_deg)
+    move, fixed = point_times_s(points, cell, q_start_deg)
     return move + fixed
 
 
-def point_times_s(points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics,
+def point_times_s(points: Sequence[PlanPoint], cell: CellModel,
                   q_start_deg: Sequence[float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted (move + settle, readings) seconds per point (N,) each: moves at the capped speeds, the settle
-    time, and samples x reading_time_s per SMR."""
+    """Predicted (move + settle, readings) seconds per point (N,) each: moves of the nominal model at the capped
+    speeds, the settle time, and samples x reading_time_s per SMR."""
+    cfg = cell.config
     m = cfg.tracker.measurement
     if not points:
         return np.zeros(0), np.zeros(0)
@@ -43,16 +43,17 @@ def point_times_s(points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinemat
             prev = np.asarray(q, float)
     r = cfg.robot
     p_pts = np.vstack([np.zeros(3), np.asarray(cfg.tool.smrs_mm, float)])
-    t_move = move_durations_s(kin, np.radians(q_from), np.radians(q_to), p_pts,
+    t_move = move_durations_s(cell.kinematics, np.radians(q_from), np.radians(q_to), p_pts,
                               np.radians(r.max_joint_speed_deg_s) * r.max_joint_speed_pct / 100.0,
                               r.max_tcp_speed_mm_s)
     move = np.bincount(owner, weights=t_move, minlength=len(points)) + m.settle_s
     return move, np.full(len(points), m.samples * m.reading_time_s * len(cfg.tool.smrs_mm))
 
 
-def estimate_duration_s(points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics) -> float:
+def estimate_duration_s(points: Sequence[PlanPoint], cell: CellModel) -> float:
     """Predicted campaign duration (s), including the reduced-speed first pass when configured."""
-    move, fixed = point_times_s(points, cfg, kin)
+    cfg = cell.config
+    move, fixed = point_times_s(points, cell)
     total = float(move.sum() + fixed.sum())
     pct = cfg.robot.first_pass_speed_pct
     if pct and points:
@@ -74,8 +75,8 @@ class RunEta:
         self.sums = np.zeros(4)              # measured move, predicted move, measured reading, predicted reading
 
     @classmethod
-    def for_plan(cls, points: Sequence[PlanPoint], cfg: CampaignConfig, kin: Kinematics) -> "RunEta":
-        return cls(*point_times_s(points, cfg, kin))
+    def for_plan(cls, points: Sequence[PlanPoint], cell: CellModel) -> "RunEta":
+        return cls(*point_times_s(points, cell))
 
     def observe(self, record: PointRecord | NestRecord) -> None:
         """A measured point record (``t_start_s`` before its move, ``t_measure_s`` settled, ``t_end_s`` after the

@@ -90,16 +90,18 @@ class LogContents:
     path: str = ""
     point_lines: list[int] = field(default_factory=list)
 
-    def records(self, n_joints: int | None = None) -> list[PointRecord | NestRecord]:
+    def records(self, n_joints: int | None = None, foreign: bool = False) -> list[PointRecord | NestRecord]:
         """The point records as typed records (``n_joints`` joint values each, when known); a bad one raises
-        :class:`RunLogError` naming its line and field."""
+        :class:`RunLogError` naming its line and field. ``foreign``: read as points of any log (foreign shapes
+        migrated, only the fields a dataset needs required: :func:`campaign.run.log_records.point_from_dict`);
+        else as this software writes them."""
         out = []
         for k, data in enumerate(self.points):
             try:
-                out.append(point_from_dict(data, n_joints))
+                out.append(point_from_dict(data, n_joints, foreign))
             except RecordError as exc:
                 line = self.point_lines[k] if k < len(self.point_lines) else None
-                raise RunLogError(self.path, f"point record {data.get('point_id')!r}: {exc.message}",
+                raise RunLogError(self.path or "<run log>", f"point record {data.get('point_id')!r}: {exc.message}",
                                   line=line) from None
         return out
 
@@ -244,5 +246,6 @@ def read_log(path: str | os.PathLike) -> LogContents:
 
 
 def completed_point_ids(contents: LogContents) -> set[str]:
-    """``point_id`` of every ``point`` record in the log (plan and check)."""
-    return {str(d["point_id"]) for d in contents.points if "point_id" in d}
+    """``point_id`` of every ``point`` record in the log (plan, check and nest points), read as typed records of
+    any log (``records(foreign=True)``; a bad record raises :class:`RunLogError`)."""
+    return {rec.point_id for rec in contents.records(foreign=True)}

@@ -4,7 +4,8 @@ The CRC proves a record was written whole, not that its content makes sense. Res
 record (which plan points are done, and later the whole log becomes the dataset), so each one is first read as
 a typed record (:mod:`campaign.run.log_records`: every field present, of its type, finite, of its size) and then checked
 against the plan and the config: point id in the plan and not repeated, set and commanded joints equal to the
-plan's, read-back joints near the limits, xyz of a plausible size.
+plan's, read-back joints near the limits, xyz of a plausible size; then the records together (one joint count, an
+optional field in all records or none), as the dataset at the end of the run needs them.
 The first bad record is a :class:`campaign.run.log_reader.RunLogError` naming its line: exit 2, nothing moves.
 """
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 from campaign.io.csv_cells import restore
 from campaign.errors import DataError
-from .log_records import NestRecord, PointRecord
+from .log_records import NestRecord, PointRecord, check_records
 from .log_reader import LOG_NAME, RunLogError, read_log
 
 Q_CMD_TOL_DEG = 1e-5            # the log stores the plan's joints (rounded to 1e-6 deg)
@@ -105,9 +106,8 @@ def check_unchanged(run_dir: str | Path, start: dict, cfg, plan=None) -> None:
 def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
     """Every point record of RUN_DIR's log is checked against the plan (``plan``, or RUN_DIR/plan.csv when
     None, so that a bad log is refused before the plan is even built) and ``cfg`` before anything moves; then
-    the whole log must convert to a dataset (as it will at the end of the run)."""
-    from campaign.data.log_dataset import dataset_from_log
-
+    the records together (:func:`campaign.run.log_records.check_records`: what the dataset at the end of the
+    run needs)."""
     path = Path(run_dir) / LOG_NAME
     if not path.is_file():
         raise RunLogError(str(path), "no run log here: not a run directory (nothing to resume)")
@@ -129,5 +129,8 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
             line = lines[k] if k < len(lines) else None
             raise RunLogError(str(path), f"{problem}: the log cannot be resumed (nothing was moved)", line=line)
         seen.add(rec.point_id)
-    if contents.points:
-        dataset_from_log(contents)
+    try:
+        check_records(records, str(path), lines)
+    except DataError as exc:
+        raise RunLogError(exc.file, f"{exc.message}: the log cannot be resumed (nothing was moved)",
+                          line=exc.line) from None

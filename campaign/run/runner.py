@@ -31,10 +31,11 @@ from robocal.approach import next_approach
 from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
                           Unstable, average_samples)
 
-from campaign.config.schema import MeasurementConfig, NestsConfig
+from campaign.config.plan_schema import NestsConfig
+from campaign.config.schema import MeasurementConfig
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import PlanPoint
-from .log_records import PointRecord, SmrReading
+from .log_records import NestRecord, PointRecord, SmrReading
 from .runner_nests import NestReadings, PointFailed
 from .log_writer import RunLog
 from .log_reader import RunLogError
@@ -54,14 +55,21 @@ class RunOutcome:
 
 
 class Runner(NestReadings):
-    """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty."""
+    """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty;
+    ``on_point(point, record)`` is called after each record is on disk (a :class:`PointRecord`, or a
+    :class:`NestRecord` for a nest point). ``limits`` (caps sent to the driver before the first move),
+    ``payload``, ``guard`` (swept-path checks and routes) and ``first_pass_limits`` (a reduced-speed traverse of
+    the plan before measuring): None = none."""
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
-                 on_point: Callable[[PlanPoint, dict], None] | None = None, n_smrs: int = 1,
+                 on_point: Callable[[PlanPoint, PointRecord | NestRecord], None] | None = None,
+                 n_smrs: int = 1,
                  predict_p_tracker_mm: Callable[[np.ndarray], np.ndarray] | None = None,
                  covariance_from_device: Callable[[np.ndarray], np.ndarray] | None = None,
-                 nests: NestsConfig | None = None) -> None:
+                 nests: NestsConfig | None = None, *, limits: MotionLimits | None = None,
+                 payload: Payload | None = None, guard: PathGuard | None = None,
+                 first_pass_limits: MotionLimits | None = None) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
         if n_smrs > 1 and not callable(getattr(tracker, "select_smr", None)):
@@ -77,10 +85,7 @@ class Runner(NestReadings):
         self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
-        self.limits: MotionLimits | None = None           # caps sent to the driver before the first move
-        self.payload: Payload | None = None
-        self.guard: PathGuard | None = None
-        self.first_pass_limits: MotionLimits | None = None  # reduced-speed traverse of the plan before measuring
+        self.limits, self.payload, self.guard, self.first_pass_limits = limits, payload, guard, first_pass_limits
         self.q_at: np.ndarray | None = None               # last commanded pose (deg)
         self._poses: np.ndarray | None = None
         self._stopped = False

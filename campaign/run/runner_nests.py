@@ -12,7 +12,7 @@ import numpy as np
 
 from drivers.base import DriverError, TrackerError
 
-from campaign.config.schema import NestsConfig
+from campaign.config.plan_schema import NestsConfig
 from campaign.plan.points import PlanPoint
 from .log_records import NestRecord
 from .log_writer import RunLog

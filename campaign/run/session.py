@@ -1,5 +1,6 @@
-"""One measuring session on the cell: the run directory and its log (new, or resumed after the checks), the runner's
-safety set-up and SMR predictor, and the progress bar with the ETA."""
+"""One measuring session on the cell: the run directory and its log (new, or resumed after the checks), the runner
+(set up once: caps, payload, swept-path guard, measurement covariance, SMR predictor), and the progress bar with
+the ETA."""
 from __future__ import annotations
 
 from datetime import datetime, timezone
@@ -9,7 +10,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-from campaign.config.cell_model import nominal_kinematics
+from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import ConfigError
 from campaign.io.durable import atomic_write
@@ -17,6 +18,7 @@ from campaign.plan.motion_safety import PathGuard, motion_limits, payload
 from campaign.plan.points import Plan, plan_csv_text
 from drivers.base import SystemClock
 
+from .devices import Devices
 from .eta import RunEta
 from .log_reader import read_log
 from .log_records import PointRecord
@@ -28,21 +30,35 @@ from .traceability import software_version
 from .tracker_quality import SmrPredictor
 
 
-def apply_safety(runner: Runner, cfg: CampaignConfig, kin, first_pass: bool) -> None:
-    """Speed caps, payload, swept-path guard and the optional reduced-speed first pass of a runner."""
-    runner.limits, runner.payload, runner.guard = motion_limits(cfg), payload(cfg), PathGuard.from_config(cfg, kin)
-    if first_pass and cfg.robot.first_pass_speed_pct is not None:
-        runner.first_pass_limits = motion_limits(cfg, cfg.robot.first_pass_speed_pct)
+def make_runner(cell: CellModel, devices: Devices, *, first_pass: bool = False, records=(),
+                smr1_only: bool = False) -> Runner:
+    """The runner of a session on ``devices``: speed caps, payload, swept-path guard, the reduced-speed first pass
+    (``first_pass`` and configured), the logged covariance (the spec model, or the tracker's own + the robot's
+    repeatability), and the beam-break SMR predictor seeded with ``records``; every SMR of the tool and the
+    reference nests, or (``smr1_only``) SMR 1 without nests."""
+    cfg = cell.config
+    pct = cfg.robot.first_pass_speed_pct
+    tool = {} if smr1_only else {"n_smrs": len(cfg.tool.smrs_mm), "nests": cfg.plan.nests}
+    return Runner(devices.robot, devices.tracker, cfg.tracker.measurement, devices.clock,
+                  lambda p: cell.covariance(p[None])[0], cfg.tool.payload_kg, **tool,
+                  predict_p_tracker_mm=smr_predictor(cell, records), covariance_from_device=cell.device_covariance,
+                  limits=motion_limits(cfg), payload=payload(cfg), guard=PathGuard.for_cell(cell),
+                  first_pass_limits=motion_limits(cfg, pct) if first_pass and pct is not None else None)
 
 
-def smr_predictor(cfg: CampaignConfig, records) -> SmrPredictor:
+def smr_predictor(cell: CellModel, records=()) -> SmrPredictor:
     """Where to aim the tracker after a beam break: nominal model + registration from the point ``records`` measured
     so far (a resumed or verified run's), else the config's rough tracker position."""
-    predictor = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
-    for record in records:
-        if isinstance(record, PointRecord):                 # nest readings are not at the robot's SMR
-            predictor.observe(record.q_read_deg, record.p_tracker_mm)
+    predictor = SmrPredictor(cell.kinematics, cell.config.tracker.position_in_base_mm)
+    observe_points(predictor, records)
     return predictor
+
+
+def observe_points(predictor: SmrPredictor, records) -> None:
+    """Feed the robot's point ``records`` to ``predictor`` (nest readings are not at the robot's SMR)."""
+    for record in records:
+        if isinstance(record, PointRecord):
+            predictor.observe(record.q_read_deg, record.p_tracker_mm)
 
 
 def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | Claim | None, resume: Path | None,
@@ -96,7 +112,7 @@ def continue_clock(clock, contents) -> None:
     keep increasing across sessions (a real cell's clock is the wall clock and needs nothing)."""
     if isinstance(clock, SystemClock) or contents is None:
         return
-    times = [p.get("t_end_s") for p in contents.points] + [e.get("t_s") for e in contents.events]
+    times = [r.t_end_s for r in contents.records()] + [e.get("t_s") for e in contents.events]
     last = max((t for t in times if isinstance(t, (int, float))), default=0.0)
     if last > clock.now():
         clock.sleep(last - clock.now())

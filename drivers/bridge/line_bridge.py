@@ -2,9 +2,11 @@
 pluggable back end, so a tracker without a public wire protocol (FARO, API, Leica LMF, SpatialAnalyzer) can be
 driven by ``tracker+socket://HOST:PORT`` with ``options: {}`` plus ``goto``/``find`` if the back end can aim.
 
-Standard library only, nothing to pip install: copy the repository's ``drivers/`` folder next to the vendor SDK
-(usually on the Windows PC that runs it) and run the module as below; ``tests/test_structure.py`` keeps its import
-closure free of third-party packages.
+Standard library only, nothing to pip install, but not a single file: it uses the TCP plumbing, fault deck and
+reply encoding of ``drivers/emulators/``. Copy the repository's whole ``drivers/`` folder next to the vendor SDK
+(usually on the Windows PC that runs it) and run the module from the folder that holds ``drivers/`` as below
+(``python drivers/bridge/line_bridge.py`` does not find the package). ``tests/test_structure.py`` keeps the import
+closure free of third-party packages; ``tests/drivers/test_line_bridge.py`` runs such a copy with ``python -S``.
 
 Back ends implement ``Backend``: ``open()``, ``measure() -> Measurement`` (xyz mm in the tracker frame, optional
 1-sigma std devs in mm, optional environment), ``environment()``, ``close()``, and optionally ``goto(x, y, z)`` and
@@ -16,8 +18,8 @@ Back ends implement ``Backend``: ``open()``, ``measure() -> Measurement`` (xyz m
 * ``FaroSdkBackend``, ``SpatialAnalyzerBackend``: UNTESTED SKELETONS showing where the vendor calls go. They were
   written without access to either SDK and have never run against a device; they raise until completed.
 
-Run: ``python -m drivers.bridge.line_bridge --backend replay --csv session.csv --port 7000`` (``--port 0 --print-port`` prints the
-bound port). One client at a time; binds 127.0.0.1 unless ``--host`` is given.
+Run: ``python -m drivers.bridge.line_bridge --backend replay --csv session.csv --port 7000`` (``--port 0
+--print-port`` prints the bound port). One client at a time; binds 127.0.0.1 unless ``--host`` is given.
 """
 from __future__ import annotations
 

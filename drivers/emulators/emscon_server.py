@@ -25,9 +25,10 @@ FindReflector never succeeds), ``late`` (the result packet is sent ``late_s`` la
 instead of the reply), ``disconnect`` (the server closes the connection), ``not_initialised`` (the tracker loses its
 initialisation: ES_RS_TrackerNotInitialized until Initialize), ``warm_up`` (one ES_RS_SensorNotWarmedUp reply).
 
-Run standalone: ``python -m drivers.emulators.emscon_server --port PORT [--cell CONFIG [--robot-url URL]]`` (port 0:
-any free port, printed on the first stdout line with ``--print-port``); it serves until killed, interrupted or its
-stdin is closed (``--ignore-stdin`` to disable that).
+Run standalone: ``python -m drivers.emulators.emscon_server --port PORT`` (port 0: any free port, printed on the
+first stdout line with ``--print-port``); it serves until killed, interrupted or its stdin is closed
+(``--ignore-stdin`` to disable that). It measures a fixed point; a caller passes ``serve(args, position_source)``
+its own SMR position (``python -m campaign.run.emscon_cell CONFIG`` measures a campaign config's simulated cell).
 """
 from __future__ import annotations
 
@@ -363,13 +364,12 @@ class EmsconEmulator(TcpServer):
 
 # ------------------------------------------------------------------------------------------------- command line
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m drivers.emulators.emscon_server",
-                                description="Leica emScon laser-tracker emulator on 127.0.0.1.")
+def parser(prog: str = "python -m drivers.emulators.emscon_server",
+           description: str = "Leica emScon laser-tracker emulator on 127.0.0.1.") -> argparse.ArgumentParser:
+    """The emulator's command-line options (a caller may add its own before ``serve``)."""
+    p = argparse.ArgumentParser(prog=prog, description=description)
     p.add_argument("--port", type=int, default=P.DEFAULT_PORT, help="TCP port (0: any free port; default 700)")
     p.add_argument("--print-port", action="store_true", help="print the bound port as the first stdout line")
-    p.add_argument("--cell", help="campaign config: measure its simulated cell (mock world) instead of a fixed point")
-    p.add_argument("--robot-url", help="with --cell: follow this robot's read-back joints (a driver URL)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--initialised", action="store_true", help="start initialised (default: Initialize needed)")
     p.add_argument("--meas-time-scale", type=float, default=0.0,
@@ -390,45 +390,21 @@ def _fault_probabilities(text: str) -> dict[str, float]:
     return out
 
 
-def cell_position_source(config_path: str, robot_url: str | None = None) -> tuple[PositionSource, Callable[[], None]]:
-    """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
-    function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
-    released by the close function), else it stays at the plan's q_ref."""
-    from campaign.config.load import load_config
-    from campaign.run.devices import mock_world
-    from drivers.mock import MockTracker
-    from drivers.registry import open_robot
-
-    cfg = load_config(config_path)
-    world = mock_world(cfg)
-    world.faults = {}
-    robot = None
-    if robot_url:
-        robot = open_robot(robot_url, cfg.robot.options, n_joints=len(cfg.robot.joints))
-        robot.connect()
-    follower = MockTracker(world, "mock://tracker", robot)
-
-    def position() -> tuple[float, float, float]:
-        if follower.robot is not None:
-            follower._follow()
-        return tuple(float(v) for v in world.p_smr_tracker_mm + world.point_error_mm)
-    return position, (robot.close if robot is not None else (lambda: None))
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    source, release = cell_position_source(args.cell, args.robot_url) if args.cell else (None, lambda: None)
-    with EmsconEmulator(source, port=args.port, seed=args.seed, initialised=args.initialised,
+def serve(args: argparse.Namespace, position_source: PositionSource | None = None) -> int:
+    """Serve with the options of ``parser()`` until shutdown (see the module docstring); ``position_source``: the
+    SMR the emulator measures (mm, tracker frame; a caller's simulated cell), else a fixed point."""
+    with EmsconEmulator(position_source, port=args.port, seed=args.seed, initialised=args.initialised,
                         meas_time_scale=args.meas_time_scale, late_s=args.late_s,
                         fault_probabilities=_fault_probabilities(args.faults)) as emulator:
         if args.print_port:
             print(emulator.port, flush=True)
         print(f"emScon emulator on {HOST}:{emulator.port}", file=sys.stderr, flush=True)
-        try:
-            wait_for_shutdown(watch_stdin=not args.ignore_stdin)
-        finally:
-            release()
+        wait_for_shutdown(watch_stdin=not args.ignore_stdin)
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return serve(parser().parse_args(argv))
 
 
 if __name__ == "__main__":

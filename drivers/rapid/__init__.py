@@ -1,7 +1,9 @@
 """RAPID (ABB) in one place: literals and layout (``literals``), the module checker and reader (``parser`` on
-``lexer``), and the packaged ``CalServer.mod`` (:func:`calserver_text`).
+``statements``, ``expressions`` and ``lexer``), RAPID values (``values``), and the packaged ``CalServer.mod``
+(:func:`calserver_text`).
 
-Used by the target writer (``campaign.writeback``), the ABB driver (``drivers.abb_rws``) and the RWS emulator.
+Used by the target writer (``campaign.correct.rapid_module``), the ABB driver (``drivers.abb_rws``) and the RWS
+emulator.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """RAPID literals and layout: identifiers, strings, numbers, aggregates wrapped to the line limit.
 
-Pure text functions shared by the target writer (``campaign.writeback``) and the ABB driver.
+Pure text functions shared by the target writer (``campaign.correct.rapid_module``) and the ABB driver.
 """
 
 from __future__ import annotations

@@ -91,7 +91,8 @@ def _linear_design(kin_geo, cols, q, p, cov, meta, effects, opt):
     blockings = [Blocking("pose blocks", pose_blocks(q, opt.engine.folds, opt.engine.seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], opt.engine.folds)))
-    cv = BlockedCV(np.concatenate([J[:, :, cols]] + R, axis=2), p - p0, whitening(cov, len(q)), blockings)
+    cv = BlockedCV(np.concatenate([J[:, :, cols]] + R, axis=2), p - p0, whitening(cov, len(q)), blockings,
+                   copy=False)                                  # a fresh array: whitened in place
     at, eff_cols = len(cols), []
     for fe in effects:
         eff_cols.append(np.arange(at, at + fe.values.size))

@@ -1,5 +1,5 @@
 """Withheld-effect self-check of the diagnosis: simulate campaigns where effects are present but absent from the
-starting model (``robocal.diagnose.truth_cell``, written from the physics without the engine), diagnose them, count what was
+starting model (``robocal.simulation.truth_cell``, written from the physics without the engine), diagnose them, count what was
 found.
 
 Kinds of trial (``trial_plan``): one library effect (``single``), none (``control``), two effects (``combo``), an
@@ -23,7 +23,7 @@ from . import DiagnosisInput, DiagnosisOptions, diagnose
 from robocal.effects import EFFECT_NAMES
 from robocal.noise import TrackerUncertainty, noise_floor_mm
 from robocal.repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
-from .truth_cell import LIBRARY_TRUTHS, TruthCampaign, TruthProtocol, simulate, small_arm_nominal
+from robocal.simulation.truth_cell import LIBRARY_TRUTHS, TruthCampaign, TruthProtocol, simulate, small_arm_nominal
 
 LABELS = ("none",) + EFFECT_NAMES
 SMALL_ARM = dict(sampling="box", misalignment_deg=0.05, kg_per_mm=0.02, payloads_kg=(0.0,), timestamps=False,

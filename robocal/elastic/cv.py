@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 RIDGE = 1e-9          # on unit-norm columns: directions the data cannot tell apart get no weight
+CHUNK_ROWS = 8192     # rows per block of the in-place whitening
 
 
 def kfold(n: int, folds: int, seed: int = 0) -> np.ndarray:
@@ -73,38 +74,41 @@ class BlockedCV:
 
     ``A`` (N, 3, P) mm per unit parameter, ``y`` (N, 3) mm, ``W`` (N, 3, 3) whitening (inverse Cholesky factor
     of each point's covariance). Fits are weighted least squares on the training folds; errors are returned in
-    mm per point (squared 3-D norm)."""
+    mm per point (squared 3-D norm). Memory: the whitened design once (N x 3 x P), whitened in place when
+    ``copy`` is False (the caller hands ``A`` over), one Gram matrix (P, P) per fold, and per call
+    one block of ``CHUNK_ROWS`` rows at a time."""
 
-    def __init__(self, A: np.ndarray, y: np.ndarray, W: np.ndarray, blockings: list[Blocking]):
+    def __init__(self, A: np.ndarray, y: np.ndarray, W: np.ndarray, blockings: list[Blocking], copy: bool = True):
         N, _, P = A.shape
-        Aw = np.einsum("nij,njk->nik", W, A)
+        Aw = np.array(A, float) if copy else np.asarray(A, float)
+        for s in range(0, N, CHUNK_ROWS):      # whitened in row blocks: no second N x 3 x P array
+            Aw[s:s + CHUNK_ROWS] = np.einsum("nij,njk->nik", W[s:s + CHUNK_ROWS], Aw[s:s + CHUNK_ROWS])
         self.yw = np.einsum("nij,nj->ni", W, y)
         self.scale = np.sqrt(np.einsum("nik,nik->k", Aw, Aw))
         self.scale[self.scale == 0] = 1.0
         Aw /= self.scale
+        self._Aw = Aw
         self.L = np.linalg.inv(W)
         self.blockings = blockings
         self.P = P
-        self._gram, self._sorted = [], []
-        for b in blockings:                    # rows sorted by fold: every fold's rows are a view of one copy
+        self._gram, self._fold_at = [], []
+        for b in blockings:
             perm = np.argsort(b.fold, kind="stable")
-            Ab = Aw[perm]
             edges = np.flatnonzero(np.diff(b.fold[perm])) + 1
             per = []
             for s, e in zip(np.concatenate([[0], edges]), np.concatenate([edges, [N]])):
                 rows = perm[s:e]
-                Af = Ab[s:e].reshape(-1, P)
-                per.append((rows, Af.T @ Af, Af.T @ self.yw[rows].reshape(-1), Af))
+                Af = Aw[rows].reshape(-1, P)           # one fold's rows at a time
+                per.append((rows, Af.T @ Af, Af.T @ self.yw[rows].reshape(-1)))
+                del Af
             self._gram.append((sum(p[1] for p in per), sum(p[2] for p in per), per))
-            self._sorted.append((perm, Ab))
-        del Aw
+            self._fold_at.append(np.searchsorted(np.unique(b.fold), b.fold))     # (N,) index of each row's fold
 
     @property
     def Aw(self) -> np.ndarray:
-        """The whitened, unit-norm design (N, 3, P) in row order (a copy)."""
-        perm, Ab = self._sorted[0]
-        out = np.empty_like(Ab)
-        out[perm] = Ab
+        """The whitened, unit-norm design (N, 3, P) in row order (read-only, not a copy)."""
+        out = self._Aw.view()
+        out.flags.writeable = False
         return out
 
     def errors(self, cols, blocking: int = 0) -> np.ndarray:
@@ -114,10 +118,15 @@ class BlockedCV:
         out = np.empty((len(self.yw), 3))
         GS, cS = G[np.ix_(cols, cols)], c[cols]
         ridge = RIDGE * np.eye(len(cols))
-        for rows, Gf, cf, Af in per:
-            x = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
-            e_w = self.yw[rows] - (Af[:, cols] @ x).reshape(-1, 3)
-            out[rows] = np.einsum("nij,nj->ni", self.L[rows], e_w)
+        X = np.zeros((self.P, len(per)))                      # every fold's fit, zero outside ``cols``
+        for f, (rows, Gf, cf) in enumerate(per):
+            X[cols, f] = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
+        at = self._fold_at[blocking]
+        for s in range(0, len(out), CHUNK_ROWS):    # row blocks: all folds' predictions, each row keeps its own
+            b = slice(s, s + CHUNK_ROWS)
+            pred = (self._Aw[b].reshape(-1, self.P) @ X).reshape(-1, 3, len(per))
+            e_w = self.yw[b] - np.take_along_axis(pred, at[b, None, None], axis=2)[:, :, 0]
+            out[b] = np.einsum("nij,nj->ni", self.L[b], e_w)
         return out
 
     def squared_errors(self, cols) -> dict[str, np.ndarray]:

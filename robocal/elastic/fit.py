@@ -10,7 +10,7 @@ from typing import Mapping
 import numpy as np
 
 from ..effects import combine, effect_regressor
-from ..identify import CalibrationOptions, Unidentifiable, analyse_identifiability, whitening, _whiten
+from ..identify import CalibrationOptions, Unidentifiable, analyse_identifiability, whiten, whitening
 from ..kinematics import Kinematics, ParamLayout, apply_update, identification_jacobian
 from ..lm import levenberg_marquardt
 from .model import FittedEffect, elastic_smr_tracker
@@ -65,7 +65,7 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     x = np.zeros(K)
     split = np.cumsum([e.k for e in built])[:-1]
     _, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-    A_full = _whiten(W, np.concatenate([J[:, :, geo_cols], R], axis=2)).reshape(-1, len(geo_cols) + K)
+    A_full = whiten(W, np.concatenate([J[:, :, geo_cols], R], axis=2)).reshape(-1, len(geo_cols) + K)
     names = tuple(layout.names[c] for c in geo_cols) + eff_names
     ident = analyse_identifiability(A_full, names, list(range(len(names))), options.rank_tol)
     keep = ident.keep.copy()
@@ -77,8 +77,8 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
 
     def residual_and_A(kin, x):
         p, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-        r = _whiten(W, p_meas - p).reshape(-1)
-        A = _whiten(W, np.concatenate([J[:, :, geo_cols], R[:, :, eff_keep]], axis=2)).reshape(-1, P) / D
+        r = whiten(W, p_meas - p).reshape(-1)
+        A = whiten(W, np.concatenate([J[:, :, geo_cols], R[:, :, eff_keep]], axis=2)).reshape(-1, P) / D
         return r, A
 
     def step(state, dx_scaled):

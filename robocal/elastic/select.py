@@ -108,19 +108,21 @@ class EffectSelection:
 
 
 class _Design:
-    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement)."""
+    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement),
+    written into one (N, 3, P) array ``A`` (no list of blocks to concatenate)."""
 
     def __init__(self, kin, geo_cols, q, meta, choices):
         p, J = identification_jacobian(kin, q)
         self.p0 = p
-        self.blocks = [J[:, :, geo_cols]]
+        built = [c.build(kin.n) for c in choices]
+        self.A = np.empty((len(q), 3, len(geo_cols) + sum(eff.k for eff in built)))
+        self.A[:, :, :len(geo_cols)] = J[:, :, geo_cols]
         self.cols: dict[EffectChoice, np.ndarray] = {}
         self.names: dict[EffectChoice, tuple[str, ...]] = {}
         at = len(geo_cols)
         self.geo = np.arange(at)
-        for c in choices:
-            eff = c.build(kin.n)
-            self.blocks.append(effect_regressor(kin, q, meta, eff, jacobian=(p, J)))
+        for c, eff in zip(choices, built):
+            self.A[:, :, at:at + eff.k] = effect_regressor(kin, q, meta, eff, jacobian=(p, J))
             self.cols[c] = np.arange(at, at + eff.k)
             self.names[c] = eff.param_names
             at += eff.k
@@ -155,8 +157,8 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     blockings = [Blocking("pose blocks", pose_blocks(q, folds, seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], folds)))
-    cv = BlockedCV(np.concatenate(design.blocks, axis=2), r0, whitening(cov_mm2, len(q)), blockings)
-    design.blocks = None
+    cv = BlockedCV(design.A, r0, whitening(cov_mm2, len(q)), blockings, copy=False)     # whitened in place
+    design.A = None
     model: list[tuple[EffectChoice, np.ndarray, EffectChoice]] = []   # taken (choice, its columns, as offered)
 
     def errors(entries, extra_cols=()):

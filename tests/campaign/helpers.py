@@ -30,7 +30,7 @@ def small_config(tmp_path: Path, name: str = "irb2600", **overrides) -> Path:
     return path
 
 
-SMALL_ARM_JOINTS = [  # robocal.diagnose.truth_cell.small_arm_nominal (the published UR5 DH table)
+SMALL_ARM_JOINTS = [  # robocal.simulation.truth_cell.small_arm_nominal (the published UR5 DH table)
     {"alpha_deg": 90, "a_mm": 0, "d_mm": 89.159, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
     {"alpha_deg": 0, "a_mm": -425, "d_mm": 0, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
     {"alpha_deg": 0, "a_mm": -392.25, "d_mm": 0, "theta_deg": 0, "q_min_deg": -360, "q_max_deg": 360},
@@ -40,7 +40,7 @@ SMALL_ARM_JOINTS = [  # robocal.diagnose.truth_cell.small_arm_nominal (the publi
 
 
 def truth_csv(tmp_path: Path, camp, small_arm: bool = False, name: str = "data.csv", **overrides) -> tuple[Path, Path]:
-    """A truth campaign (robocal.diagnose.truth_cell) as an interchange CSV (read-back joints, rows in measurement order, time and
+    """A truth campaign (robocal.simulation.truth_cell) as an interchange CSV (read-back joints, rows in measurement order, time and
     payload when logged) and a config of its robot with the nominal SMR offset and no calibration section (only
     the ``calibration.*`` keys given as overrides)."""
     import numpy as np

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from campaign.config.cell_model import measurement_covariance, nominal_kinematics
+from campaign.config.cell_model import CellModel
 from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_config
 from campaign.data.dataset import Dataset
@@ -16,12 +16,13 @@ from campaign.plan.build import build_plan
 from robocal.effects import joint_compliance
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import smr_base, smr_tracker
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 from tests.campaign.helpers import ROOT
 
 BASE = load_config(ROOT / "configs/irb2600.yaml")
 CFG = replace(BASE, plan=replace(BASE.plan, test=replace(BASE.plan.test, count=40)))
-KIN0 = nominal_kinematics(CFG)
+CELL = CellModel.from_config(CFG)
+KIN0 = CELL.kinematics
 COMPLIANCE = np.array([3.3e-7, 6.7e-7])           # typical J2/J3 compliance, rad/(N*m)
 
 
@@ -40,7 +41,7 @@ _PLAN = None
 def _grid() -> tuple[np.ndarray, list[str]]:
     global _PLAN
     if _PLAN is None:
-        _PLAN = build_plan(CFG, KIN0)
+        _PLAN = build_plan(CELL)
     pts = [p for p in _PLAN.points if p.set in ("calib", "test")]
     return np.radians([p.q_deg for p in pts]), [p.set for p in pts]
 
@@ -52,7 +53,7 @@ def sparse_campaign(seed: int, fault_fraction: float = 0.0, compliance_scale: fl
     sag outside the effect library (``sag_mm_at_1m`` x (horizontal reach / 1 m)^2, down); ``fault_fraction`` of
     the grid's calib rows get a 1-3 mm error in a random direction."""
     rng = np.random.default_rng(seed)
-    base = simulated_cell(CFG)
+    base = simulated_cell(CELL)
     truth = random_geometric_errors(KIN0, rng).with_(T_tracker_base=base.truth.T_tracker_base,
                                                       p_flange_smr_mm=base.truth.p_flange_smr_mm)
     effects = ((joint_compliance((2, 3)), compliance_scale * COMPLIANCE),) if compliance_scale else ()
@@ -87,5 +88,5 @@ def plain_lm_test_errors(ds: Dataset) -> np.ndarray:
     q = np.radians(ds.q_deg)
     cal, test = ds.mask("calib"), ds.mask("test")
     p = ds.p_tracker_mm
-    res = calibrate(KIN0, q[cal], p[cal], measurement_covariance(CFG, p[cal]), CalibrationOptions(method="lm"))
+    res = calibrate(KIN0, q[cal], p[cal], CELL.covariance(p[cal]), CalibrationOptions(method="lm"))
     return np.linalg.norm(p[test] - smr_tracker(res.kinematics, q[test]), axis=1)

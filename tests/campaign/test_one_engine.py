@@ -2,7 +2,7 @@
 section: the defaults): the same accepted effects, the same parameter values (1e-9 relative) and the same "after"
 RMS on the test rows as reprocess's elastic stage.
 
-20 simulated campaigns of robocal/diagnose/truth_cell.py (the failure classes of real campaigns and single effects) and the
+20 simulated campaigns of robocal/simulation/truth_cell.py (the failure classes of real campaigns and single effects) and the
 measured campaigns of DATASETS (the public UR5 campaign). Adding a dataset is one line: ``Case(name, make)`` with
 ``make(tmp_path) -> (csv_path, config_path)``.
 """
@@ -15,13 +15,13 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.calibrate.diagnosis import diagnose_dataset
 from campaign.data.importers import import_target_dif
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
 from robocal.diagnose.selfcheck import FORMS, trial_setting
-from robocal.diagnose.truth_cell import TruthProtocol, simulate, small_arm_nominal
+from robocal.simulation.truth_cell import TruthProtocol, simulate, small_arm_nominal
 from tests.campaign.helpers import ROOT, truth_csv
 
 SMALL = dict(n_calib=160, n_test=50, check_poses=6, check_repeats=4)
@@ -64,9 +64,9 @@ DATASETS: list[Case] = [       # measured campaigns, one line each
 @pytest.mark.parametrize("case", CAMPAIGNS + DATASETS, ids=lambda c: c.name)
 def test_diagnose_and_reprocess_take_the_same_effects_with_the_same_values(tmp_path, case):
     csv, cfg_path = case.make(tmp_path)
-    cfg = load_config(cfg_path)
-    rep = calibrate_dataset(read_csv(csv), cfg).report
-    diag = diagnose_dataset(read_csv(csv), cfg).report
+    cell = load_cell(cfg_path)
+    rep = calibrate_dataset(read_csv(csv), cell).report
+    diag = diagnose_dataset(read_csv(csv), cell).report
     fitted = rep.effects.fitted
     accepted = [f for f in diag["findings"] if f["accepted"]]
     print(case.name, [f["evidence"]["label"] for f in accepted], diag["final_test_rms_mm"])

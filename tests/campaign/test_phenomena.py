@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.data.log_dataset import dataset_from_log
@@ -55,9 +55,8 @@ def test_run_exports_both_joint_sets_and_nest_rows(lag_run):
 @pytest.mark.system
 def test_auto_picks_commanded_joints_and_compensates_the_nest_drift(lag_run):
     cfg_path, run = lag_run
-    cfg = load_config(cfg_path)
     ds = read_csv(run / "data.csv")
-    prep = prepare(ds, cfg)
+    prep = prepare(ds, load_cell(cfg_path))
     assert prep.joints == "commanded" and "last move" in prep.report["joints"]["why"]
     robot = ~ds.mask("nest")
     np.testing.assert_array_equal(prep.dataset.q_deg, ds.qc_deg[robot])
@@ -74,7 +73,7 @@ def test_auto_picks_commanded_joints_and_compensates_the_nest_drift(lag_run):
     assert rms(applied - true) < 0.35 * rms(true)
     # forcing read-back joints is obeyed and said
     (run.parent / "f").mkdir(exist_ok=True)
-    forced = prepare(ds, load_config(phenomena_config(run.parent / "f", **{"calibration.joints": "readback"})))
+    forced = prepare(ds, load_cell(phenomena_config(run.parent / "f", **{"calibration.joints": "readback"})))
     assert forced.joints == "readback" and "calibration.joints: readback" in forced.report["joints"]["why"]
     np.testing.assert_array_equal(forced.dataset.q_deg, ds.q_deg[robot])
 
@@ -87,7 +86,7 @@ def test_auto_keeps_readback_joints_when_the_robot_stood_there(lag_run):
     cfg_path, run = lag_run
     ds = read_csv(run / "data.csv")
     swapped = replace(ds, q_deg=ds.qc_deg, qc_deg=ds.q_deg)
-    prep = prepare(swapped, load_config(cfg_path))
+    prep = prepare(swapped, load_cell(cfg_path))
     rep = prep.report["joints"]
     assert prep.joints == "readback" and "follow the read-back joints" in rep["why"]
     assert rep["geometric_fit_rms_readback_mm"] < 0.9 * rep["geometric_fit_rms_commanded_mm"]
@@ -192,12 +191,10 @@ def test_bad_phenomena_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, ca
 
 @pytest.mark.system
 def test_plan_nest_rounds_and_random_order(tmp_path):
-    from campaign.config.cell_model import nominal_kinematics
     from campaign.plan.build import build_plan
 
-    cfg = load_config(phenomena_config(tmp_path))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(phenomena_config(tmp_path))
+    plan = build_plan(cell)
     sets = [p.set for p in plan.points]
     assert sets[:3] == ["nest"] * 3 and sets[-3:] == ["nest"] * 3
     robot_between = [len(list(g)) for k, g in __import__("itertools").groupby(sets, key=lambda s: s == "nest") if not k]
@@ -207,8 +204,8 @@ def test_plan_nest_rounds_and_random_order(tmp_path):
     assert plan.points[0].q_deg == plan.points[3].q_deg
     grid = np.array([p.p_base_mm for p in plan.points if p.set == "calib"])
     step = np.median(np.linalg.norm(np.diff(grid, axis=0), axis=1))
-    assert step > 2 * cfg.plan.grid.step_mm                     # serpentine order would step to a neighbour
-    again = build_plan(load_config(phenomena_config(tmp_path)), kin)
+    assert step > 2 * cell.config.plan.grid.step_mm             # serpentine order would step to a neighbour
+    again = build_plan(load_cell(phenomena_config(tmp_path)))
     assert again.sha256 == plan.sha256                          # seeded
 
 
@@ -254,22 +251,22 @@ def test_nests_with_a_position_only_tracker(tmp_path):
     from drivers.base import DriverError
     from campaign.run.devices import mock_world
     from campaign.plan.build import build_plan
-    from campaign.config.cell_model import nominal_kinematics
     from campaign.run.log_writer import RunLog
     from campaign.run.runner import Runner
     from drivers.mock import MockRobot, MockTracker
 
-    cfg = load_config(phenomena_config(tmp_path))
-    world = mock_world(cfg)
+    cell = load_cell(phenomena_config(tmp_path))
+    cfg = cell.config
+    world = mock_world(cell)
     tracker = _AimByPosition(MockTracker(world))
     args = (MockRobot(world), tracker, cfg.tracker.measurement, world.clock, lambda p: np.eye(3) * 1e-4)
     with pytest.raises(DriverError, match="p_tracker_mm for nest N1"):
         Runner(*args, nests=cfg.plan.nests)
     T = world.cell.truth.T_tracker_base
     guessed = [dict(n, p_tracker_mm=(T[:3, :3] @ n["p_base_mm"] + T[:3, 3] + 1.0).tolist()) for n in NESTS]
-    cfg = load_config(phenomena_config(tmp_path, **{"plan.nests": {"every_n_points": 15, "points": guessed}}))
-    runner = Runner(*args, nests=cfg.plan.nests)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    cell = load_cell(phenomena_config(tmp_path, **{"plan.nests": {"every_n_points": 15, "points": guessed}}))
+    runner = Runner(*args, nests=cell.config.plan.nests)
+    plan = build_plan(cell)
     log = RunLog.create(tmp_path / "run", {"config_sha256": "x"})
     assert runner.execute(plan.points[:40], log).exit_status == "success"
     nests = [r for r in read_log(tmp_path / "run").points if r["set"] == "nest"]

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.calibrate.report_sections import RowCounts
 from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import read_report, small_config
@@ -67,14 +67,14 @@ def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
     from campaign.calibrate.plausibility import check_dataset
 
     ds = import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv", UR5 / "3D_UR5_uncalibrated_random_cleaned.csv")
-    plaus = check_dataset(ds, load_config(ROOT / "configs" / "ur5.yaml"))[1]
+    plaus = check_dataset(ds, load_cell(ROOT / "configs" / "ur5.yaml"))[1]
     right = [round(v, 1) for v in plaus.tool.registered_mm[0]]
     reports = {}
     for off_mm in (0.0, -30.0, 90.0):
         where = tmp_path / f"off{off_mm:+.0f}"
         where.mkdir()
         cfg = small_config(where, "ur5", **{"tool.p_flange_smr_mm": [right[0], right[1], right[2] + off_mm]})
-        reports[off_mm] = calibrate_dataset(ds, load_config(cfg)).report
+        reports[off_mm] = calibrate_dataset(ds, load_cell(cfg)).report
     assert reports[0.0].plausibility.tool.notes() == ()
     for off_mm in (-30.0, 90.0):
         assert len(reports[off_mm].plausibility.tool.notes()) == 1

@@ -4,9 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.interchange_csv import read_csv
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
@@ -56,8 +55,7 @@ def test_reprocess_of_exported_csv_reproduces_the_live_report(full_run, tmp_path
 def test_log_holds_every_planned_point_once(full_run):
     contents = read_log(full_run)
     ids = [p["point_id"] for p in contents.points]
-    cfg = load_config(ROOT / "configs/irb2600.yaml")
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    plan = build_plan(load_cell(ROOT / "configs/irb2600.yaml"))
     assert sorted(ids) == sorted(p.point_id for p in plan.points)
     assert contents.stops[-1]["exit_status"] == "success"
     rec = contents.points[0]
@@ -68,9 +66,9 @@ def test_log_holds_every_planned_point_once(full_run):
 
 
 def test_plan_uses_one_configuration_inside_the_limits():
-    cfg = load_config(ROOT / "configs/irb2600.yaml")
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(ROOT / "configs/irb2600.yaml")
+    kin = cell.kinematics
+    plan = build_plan(cell)
     q = np.radians([p.q_deg for p in plan.points])
     assert within_limits(kin, q).all()
     sig = branch_signature(kin, q)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.run.devices import mock_world
 from campaign.run.log_reader import read_log
 from drivers.emulators.rtde_launch import start_emulator
@@ -64,7 +64,7 @@ def test_campaign_against_ur_emulator_with_the_real_library(tmp_path, monkeypatc
 def test_campaign_with_tracker_over_socket(tmp_path):
     """Robot: the RWS emulator moving a simulated robot; tracker: the line-protocol emulator measuring it."""
     cfg_path = small_config(tmp_path, **SMALL)
-    world = mock_world(load_config(cfg_path))
+    world = mock_world(load_cell(cfg_path))
     world.faults = {}
 
     def move(q_deg):

@@ -300,23 +300,6 @@ def test_cesapi_client_initialises_configures_measures_and_decodes():
 
 # ------------------------------------------------------------------------------------------------- command line
 
-@pytest.mark.system
-def test_command_line_with_a_cell_measures_the_simulated_smr(tmp_path):
-    from campaign.config.load import load_config
-    from campaign.run.devices import mock_world
-    from tests.campaign.helpers import small_config
-
-    cfg_path = small_config(tmp_path)
-    world = mock_world(load_config(cfg_path))
-    expected = world.p_smr_tracker_mm + world.point_error_mm
-    with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), wait_s=30) as (proc, port):
-        with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=2.0)) as tracker:
-            r = tracker.measure()
-        assert r.xyz_mm == pytest.approx(expected.tolist(), abs=0.05)
-        proc.stdin.close()
-        assert proc.wait(10) == 0
-
-
 @pytest.mark.unit
 @pytest.mark.parametrize("url, options, text", [
     ("emscon://127.0.0.1:1", {"meas_time_ms": "long"}, "emscon option 'meas_time_ms'"),
@@ -329,31 +312,3 @@ def test_bad_tracker_options_are_input_errors_at_the_cli(tmp_path, capsys, url, 
     assert main(["run", str(cfg), "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and text in err and not (tmp_path / "run").exists()
-
-
-@pytest.mark.system
-def test_command_line_with_a_cell_follows_a_robot(tmp_path):
-    """--cell + --robot-url: the emulator reads the robot's joints (here the RWS emulator) and measures the simulated
-    SMR there."""
-    import numpy as np
-
-    from campaign.config.simulation import simulated_cell
-    from campaign.config.load import load_config
-    from drivers.emulators.rws_server import RwsEmulator
-    from robocal.kinematics import smr_tracker
-    from tests.campaign.helpers import small_config
-
-    with RwsEmulator(1) as rws:
-        cfg_path = small_config(tmp_path, **{"robot.url": rws.url,
-                                             "robot.options": {"credentials": {"use_default": True}}})
-        truth = simulated_cell(load_config(cfg_path)).truth
-        with served_port("drivers.emulators.emscon_server", "--cell", str(cfg_path), "--robot-url", rws.url,
-                         wait_s=30) as (proc, port):
-            with open_tracker(f"emscon://127.0.0.1:{port}", dict(FAST, timeout_s=5.0)) as tracker:
-                for q in ([10.0, 20.0, 10.0, 0.0, 30.0, 0.0], [-30.0, 5.0, -20.0, 40.0, -45.0, 90.0]):
-                    rws.joints = list(q)
-                    expected = smr_tracker(truth, np.radians(q)[None])[0]
-                    assert np.linalg.norm(np.subtract(tracker.measure().xyz_mm, expected)) < 0.3
-            proc.stdin.close()
-            assert proc.wait(10) == 0
-            assert rws.counts["logouts"] >= 1                        # the robot session was released

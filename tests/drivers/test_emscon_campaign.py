@@ -14,9 +14,8 @@ import numpy as np
 import pytest
 
 from campaign.run import devices
-from campaign.config.cell_model import device_measurement_covariance, measurement_covariance, nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.log_dataset import dataset_from_log
 from campaign.plan.build import build_plan
 from campaign.run.log_writer import RunLog
@@ -33,8 +32,8 @@ SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 8, "plan.check_poses": {"c
 FAST = {"timeout_s": 0.3, "meas_time_ms": 10}
 
 
-def _world(cfg):
-    world = devices.mock_world(cfg)
+def _world(cell):
+    world = devices.mock_world(cell)
     world.faults = {}
     return world
 
@@ -47,8 +46,8 @@ def _smr(world):
 def test_campaign_run_with_emscon_matches_the_mock_tracker(tmp_path, monkeypatch):
     cfg_mock = small_config(tmp_path, **SMALL)
     assert main(["run", str(cfg_mock), "--out", str(tmp_path / "mock")]) == 0
-    world = _world(load_config(cfg_mock))
-    monkeypatch.setattr(devices, "mock_world", lambda cfg: world)
+    world = _world(load_cell(cfg_mock))
+    monkeypatch.setattr(devices, "mock_world", lambda cell: world)
     with EmsconEmulator(_smr(world), seed=5) as emu:
         cfg = small_config(tmp_path, **SMALL, **{"tracker.url": emu.url, "tracker.options": {"meas_time_ms": 10}})
         assert main(["run", str(cfg), "--out", str(tmp_path / "emscon")]) == 0
@@ -95,24 +94,24 @@ class FaultAt:
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
-    """The small config and the first 7 points of its plan (built once: planning solves IK)."""
-    cfg = load_config(small_config(tmp_path_factory.mktemp("cell"), **SMALL))
-    return cfg, build_plan(cfg, nominal_kinematics(cfg)).points[:7]
+    """The small config's cell model and the first 7 points of its plan (built once: planning solves IK)."""
+    model = load_cell(small_config(tmp_path_factory.mktemp("cell"), **SMALL))
+    return model, build_plan(model).points[:7]
 
 
 def _run(tmp_path, cell, faults, *, at=4, retries=3, predictor=True, late_s=1.0):
-    cfg, points = cell
-    world = _world(cfg)
+    model, points = cell
+    cfg = model.config
+    world = _world(model)
     measurement = dataclasses.replace(cfg.tracker.measurement, retries=retries)
     with EmsconEmulator(_smr(world), seed=2, late_s=late_s) as emu:
         robot = FaultAt(MockRobot(world), emu, at, faults)
         tracker = open_tracker(emu.url, FAST)
         tracker.connect()
         log = RunLog.create(tmp_path / "run", {"config_sha256": "test", "plan_sha256": "test"})
-        predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm) if predictor else None
-        runner = Runner(robot, tracker, measurement, world.clock, lambda p: measurement_covariance(cfg, p[None])[0],
-                        predict_p_tracker_mm=predict,
-                        covariance_from_device=lambda c: device_measurement_covariance(cfg, c))
+        predict = SmrPredictor(model.kinematics, cfg.tracker.position_in_base_mm) if predictor else None
+        runner = Runner(robot, tracker, measurement, world.clock, lambda p: model.covariance(p[None])[0],
+                        predict_p_tracker_mm=predict, covariance_from_device=model.device_covariance)
         if predict is not None:
             runner.on_point = lambda point, record: predict.observe(record.q_read_deg, record.p_tracker_mm)
         t0 = time.monotonic()

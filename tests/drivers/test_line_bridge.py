@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import random
+import shutil
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from drivers.bridge.line_bridge import (BackendError, FaroSdkBackend, LineBridge
 from drivers.emulators.line_tracker_server import DEFAULT_POINT_MM
 from drivers.line_tracker import open_tracker
 from tests.drivers import test_line_tracker as contract
-from tests.drivers.helpers import served_port
+from tests.drivers.helpers import REPO, served_port
 from tests.drivers.test_line_tracker import (no_leftover_threads, test_connection_refused_is_connection_lost,
                                              test_emulator_disconnect_is_connection_lost_and_reconnect_works,
                                              test_emulator_dropped_reply_is_retried,
@@ -156,14 +157,26 @@ def test_command_line_replays_a_csv(tmp_path):
         assert proc.wait(5) == 0
 
 
+def test_a_copied_drivers_folder_runs_without_site_packages(tmp_path):
+    """The documented deployment: only the ``drivers/`` folder, copied to a PC, run with the standard library
+    alone (``-S``: no site-packages, so neither numpy nor this installed project; ``-E``: no PYTHONPATH)."""
+    shutil.copytree(REPO / "drivers", tmp_path / "drivers", ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "session.csv").write_text("x,y,z\n1200.0,-300.0,150.0\n")
+    with served_port("drivers.bridge.line_bridge", "--csv", "session.csv", python_flags=("-S", "-E"),
+                     cwd=tmp_path) as (proc, port):
+        with open_tracker(f"tracker+socket://127.0.0.1:{port}", {"timeout_s": 1.0, "environment": None}) as tracker:
+            assert tracker.measure().xyz_mm == (1200.0, -300.0, 150.0)
+        proc.stdin.close()
+        assert proc.wait(5) == 0
+
+
 def test_measurement_record():
     assert Measurement((1.0, 2.0, 3.0)).std_mm is None
 
 
 def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path):
     """Same reacquisition as emScon where the protocol allows: beam break -> GOTO predicted position -> FIND."""
-    from campaign.config.cell_model import measurement_covariance, nominal_kinematics
-    from campaign.config.load import load_config
+    from campaign.config.load import load_cell
     from campaign.run.devices import mock_world
     from campaign.plan.build import build_plan
     from campaign.run.log_writer import RunLog
@@ -173,23 +186,24 @@ def test_runner_reacquires_through_the_line_protocol_after_a_beam_break(tmp_path
     from drivers.mock import MockRobot
     from tests.campaign.helpers import small_config
 
-    cfg = load_config(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
-    world = mock_world(cfg)
+    cell = load_cell(small_config(tmp_path, **{"plan.grid.step_mm": 600, "tracker.measurement.samples": 1}))
+    cfg = cell.config
+    world = mock_world(cell)
     world.faults = {}
 
     class CellBackend(ReplayBackend):
         def measure(self):
             return Measurement(tuple(world.p_smr_tracker_mm + world.point_error_mm))
 
-    points = build_plan(cfg, nominal_kinematics(cfg)).points[:5]
+    points = build_plan(cell).points[:5]
     backend = CellBackend([{"x": "0", "y": "0", "z": "0"}])
     with LineBridge(backend) as bridge:
         tracker = open_tracker(bridge.url, {"timeout_s": 0.5, "environment": None,
                                             "goto": "GOTO {seq} {x:.3f} {y:.3f} {z:.3f}", "find": "FIND {seq}"})
         tracker.connect()
-        predict = SmrPredictor(nominal_kinematics(cfg), cfg.tracker.position_in_base_mm)
+        predict = SmrPredictor(cell.kinematics, cfg.tracker.position_in_base_mm)
         runner = Runner(MockRobot(world), tracker, cfg.tracker.measurement, world.clock,
-                        lambda p: measurement_covariance(cfg, p[None])[0], predict_p_tracker_mm=predict)
+                        lambda p: cell.covariance(p[None])[0], predict_p_tracker_mm=predict)
         runner.on_point = lambda point, record: (predict.observe(record.q_read_deg, record.p_tracker_mm),
                                                  bridge.inject("beam_break") if point is points[2] else None)
         outcome = runner.execute(points, RunLog.create(tmp_path / "run", {"config_sha256": "t", "plan_sha256": "t"}))

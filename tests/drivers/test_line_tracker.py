@@ -1,6 +1,6 @@
 """Tests of the generic line-protocol tracker driver (drivers/line_tracker.py) and its TCP emulator.
 
-Codec tests are in test_tracker_codec.py. Driver tests run over pyserial's ``loop://`` (the command echoes back,
+Codec tests are in test_line_codec.py. Driver tests run over pyserial's ``loop://`` (the command echoes back,
 so a command that *is* a reply exercises framing without a device), a pty (native serial path) and the emulator on
 127.0.0.1. Every timeout is small (0.2 s) and every RNG is seeded.
 """

@@ -6,7 +6,7 @@ from robocal.correct import (GENERATORS, correct, correct_ensemble, matrix_to_qu
 from robocal.effects import joint_compliance
 from robocal.frames import make_T, rotvec_to_matrix
 from robocal.kinematics import fk
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 from tests.cells import irb2600
 
 

@@ -10,7 +10,7 @@ import pytest
 from robocal.diagnose import diagnose, structure_test, where_analysis
 from robocal.diagnose.evidence import follows_order
 from robocal.diagnose.selfcheck import truth_input
-from robocal.diagnose.truth_cell import TruthProtocol, simulate
+from robocal.simulation.truth_cell import TruthProtocol, simulate
 
 SMALL = TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4)
 CONTRACT = ["noise_floor_mm", "noise_floor_source", "baseline_test_rms_mm", "final_test_rms_mm", "unexplained",

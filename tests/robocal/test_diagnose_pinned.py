@@ -1,4 +1,4 @@
-"""Regression pin of the diagnosis on one seeded truth campaign (robocal/diagnose/truth_cell.py: backlash and a warm-up, random
+"""Regression pin of the diagnosis on one seeded truth campaign (robocal/simulation/truth_cell.py: backlash and a warm-up, random
 measurement order, timestamps): the accepted effects, their values, the step-by-step figures and the leftover.
 Re-pinned when the one effect engine replaced the diagnosis's own selection (issue 20): a change of behaviour
 shows here. Plus: options reach the engine."""
@@ -9,7 +9,7 @@ import pytest
 from robocal.diagnose import DiagnosisOptions, diagnose
 from robocal.elastic import EngineOptions
 from robocal.diagnose.selfcheck import truth_input
-from robocal.diagnose.truth_cell import TruthProtocol, simulate
+from robocal.simulation.truth_cell import TruthProtocol, simulate
 
 REL = 1e-6          # pinned to well below any physical meaning; loose enough for another BLAS build
 

@@ -1,8 +1,7 @@
-"""Diagnosis on campaigns from the independent truth generator (robocal/diagnose/truth_cell.py, written from the physics, not from
+"""Diagnosis on campaigns from the independent truth generator (robocal/simulation/truth_cell.py, written from the physics, not from
 the engine): the failure classes of real campaigns (compliance + misalignment + gear on a small arm, compliance
 sampled sparsely at the extremes, a drift that follows J1 through the measurement order, a read-back lag with
 compliance), read-back lag vs backlash, and a reduced self-check (the full one: bench/bench_diagnose.py)."""
-import ast
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +9,10 @@ import pytest
 
 from robocal.diagnose import diagnose
 from robocal.diagnose.selfcheck import FORMS, run_self_check, run_trial, truth_input
-from robocal.diagnose.truth_cell import TruthProtocol, gravity_torque_nm, random_mass_model, simulate
+from robocal.simulation.truth_cell import TruthProtocol, gravity_torque_nm, random_mass_model, simulate
+from tests.test_structure import ROOT, import_edges, modules
+
+ENGINE = ("robocal.diagnose", "robocal.effects", "robocal.elastic")   # what the truth must never load
 
 SMALL = TruthProtocol(n_calib=160, n_test=60, check_poses=6, check_repeats=4, timestamps=False)
 
@@ -19,11 +21,41 @@ def accepted(d):
     return {f.effect: f for f in d.findings if f.accepted}
 
 
+def import_closure(root: Path, start: str) -> set[str]:
+    """Project modules that importing ``start`` may run: every import statement (functions included) followed,
+    and the ``__init__`` of every package on the way (Python runs it before the module)."""
+    mods = modules(root)
+    todo, seen = [start], set()
+    while todo:
+        name = todo.pop()
+        if name in seen or name not in mods:
+            continue
+        seen.add(name)
+        parts = name.split(".")
+        todo += [".".join(parts[:k]) for k in range(1, len(parts))]
+        todo += [e.target for e in import_edges(name, mods[name], mods)]
+    return seen
+
+
 @pytest.mark.unit
 def test_truth_generator_is_independent_of_the_engine():
-    tree = ast.parse((Path(__file__).resolve().parents[2] / "robocal" / "diagnose" / "truth_cell.py").read_text())
-    imported = {"." * n.level + (n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not [m for m in imported if m.startswith((".", "robocal.diagnose", "robocal.effects", "robocal.elastic"))], imported
+    closure = import_closure(ROOT, "robocal.simulation.truth_cell")
+    assert "robocal.kinematics" in closure and not [m for m in closure if m.startswith(ENGINE)], sorted(closure)
+
+
+@pytest.mark.unit
+def test_the_independence_check_sees_the_engine_through_a_package_init(tmp_path):
+    files = {"robocal/__init__.py": "", "robocal/kinematics.py": "", "robocal/diagnose/core.py": "",
+             "robocal/diagnose/__init__.py": "from .core import diagnose\n",
+             "robocal/diagnose/truth_cell.py": "from robocal.kinematics import chain\n",
+             "robocal/simulation/__init__.py": "", "robocal/simulation/mock_cell.py": "",
+             "robocal/simulation/truth_cell.py": "def f():\n    from . import mock_cell\n"}
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    assert "robocal.diagnose.core" in import_closure(tmp_path, "robocal.diagnose.truth_cell")
+    assert import_closure(tmp_path, "robocal.simulation.truth_cell") == {
+        "robocal", "robocal.simulation", "robocal.simulation.truth_cell", "robocal.simulation.mock_cell"}
 
 
 @pytest.mark.unit

@@ -1,5 +1,5 @@
 """The one effect engine (robocal.elastic): blocked cross-validation, candidates and what cannot be told, forward
-selection on independent truth campaigns (robocal/diagnose/truth_cell.py), the joint fit, the physical reading, the model."""
+selection on independent truth campaigns (robocal/simulation/truth_cell.py), the joint fit, the physical reading, the model."""
 import json
 
 import numpy as np
@@ -12,7 +12,7 @@ from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.model import CalibratedModel
 from robocal.diagnose.selfcheck import truth_input
-from robocal.diagnose.truth_cell import TruthProtocol, simulate
+from robocal.simulation.truth_cell import TruthProtocol, simulate
 from tests.cells import T_SEED000, irb2600
 
 SMALL = TruthProtocol(n_calib=200, n_test=60, check_poses=6, check_repeats=4)

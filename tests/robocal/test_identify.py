@@ -58,7 +58,7 @@ def test_identifiability_finds_the_classical_redundancies():
     p, cov = measure(cell, q, rng)
     result = calibrate(kin, q, p, cov)
     dropped = {u.name: u for u in result.unidentifiable}
-    assert len(result.identified) == 27                       # 4R + 2P + 3 (effects.md §3.1)
+    assert len(result.identified) == 27                       # 4R + 2P + 3, position only (Everett, Driels & Mooring 1987)
     assert {"theta1", "d1", "d2", "theta6", "d6", "a6", "alpha6"} <= set(dropped)
     assert "base_tz" in dropped["d1"].redundant_with and "d3" in dropped["d2"].redundant_with
     # every candidate is accounted for: identified or reported (no silent loss of parameters)

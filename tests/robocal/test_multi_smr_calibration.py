@@ -6,7 +6,7 @@ from robocal.frames import make_T
 from robocal.kinematics import Kinematics
 from robocal.multi_smr_calibration import calibrate_multi_smr, orientation_errors_arcsec, predict_multi
 from robocal.noise import TrackerUncertainty
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 from tests.cells import T_SEED000, irb2600
 
 OFFSETS_NOMINAL = np.array([[80.0, 0.0, 60.0], [-40.0, 70.0, 60.0], [-40.0, -70.0, 60.0]])

@@ -6,7 +6,7 @@ from robocal.kinematics import Kinematics
 from robocal.multi_smr_calibration import predict_multi
 from robocal.noise import TrackerUncertainty
 from robocal.screen import joint_levers_mm, nest_misreads, reach_mm, screen, smr_triangle
-from robocal.diagnose.truth_cell import irb2600_nominal
+from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit
 KIN = irb2600_nominal()

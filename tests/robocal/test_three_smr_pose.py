@@ -9,7 +9,7 @@ from robocal.three_smr_pose import (MultiSMRPoseEstimator, adjust_points, condit
                                     weight_matrix_inverse)
 from robocal.noise import TrackerUncertainty, cartesian_to_spherical, spherical_to_cartesian
 from robocal.payload import HeavyPayloadCell, irb4600, random_configurations
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 
 pytestmark = pytest.mark.unit
 

@@ -8,7 +8,8 @@ import pytest
 
 from campaign.config.simulation import simulated_cell
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.cell_model import CellModel
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.stages import calibrate_dataset
@@ -16,13 +17,14 @@ from robocal.multi_smr_calibration import predict_multi
 from tests.campaign.helpers import ROOT, read_verify, small_config
 from tests.campaign.config.test_multi_smr_section import SMR1, SMR2, SMR3
 
-CFG = load_config(ROOT / "configs/irb2600.yaml")
+CELL = load_cell(ROOT / "configs/irb2600.yaml")
+CFG = CELL.config
 OFFSETS = np.array([[0.36, 0.28, 39.43], [90.0, 0.0, 50.0], [0.0, 90.0, 50.0]])
 
 
 def three_smr_dataset(seed=7, n_cal=120, n_test=40):
     rng = np.random.default_rng(seed)
-    truth = simulated_cell(CFG).truth
+    truth = simulated_cell(CELL).truth
     q = rng.uniform(np.radians([-60, -40, -60, -120, -100, -180]), np.radians([60, 70, 40, 120, 100, 180]),
                     (n_cal + n_test, 6))
     P = predict_multi(truth, OFFSETS, q) + rng.normal(0, 0.01, (3, len(q), 3))
@@ -40,7 +42,7 @@ def test_corrupted_smr_readings_are_set_aside_on_calib_and_test_rows():
     _, q, P, sets = three_smr_dataset()
     P[1, [3, 130]] += [1.5, 0.0, 0.0]                     # SMR 2 misread on a calib and a test row
     P[2, 50] += [0.0, -2.0, 0.5]                          # SMR 3 on a calib row
-    rep = calibrate_dataset(dataset(q, P, sets), cfg).report
+    rep = calibrate_dataset(dataset(q, P, sets), CellModel.from_config(cfg)).report
     listed = {e.point_id: e for e in rep.excluded_points}
     print({k: v.reason for k, v in listed.items()})
     assert set(listed) == {"P3", "P50", "P130"} and listed["P130"].set == "test"
@@ -88,7 +90,7 @@ def test_verify_with_three_smrs_reports_the_tool_orientation(tmp_path, capsys):
     from campaign.run.log_reader import read_log
     from robocal.frames import matrix_to_rotvec
     records = read_log(run).records()
-    est = pose_estimator(load_config(cfg), load_model(run / "model.json"), records)
+    est = pose_estimator(load_cell(cfg), load_model(run / "model.json"), records)
     tests = [r for r in records if r.set == "test"]
     T_meas = measured_flange_poses(est.tool.p_flange_mm, tests)
     T_est = est.estimate(np.radians([r.q_cmd_deg for r in tests]), np.array([r.p_tracker_mm for r in tests]))

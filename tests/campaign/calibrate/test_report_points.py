@@ -7,7 +7,7 @@ import pytest
 from campaign.calibrate import report_points as rp
 from campaign.config.simulation import simulated_cell
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.report_points import PointTable
@@ -16,12 +16,13 @@ from tests.campaign.helpers import read_report, small_config
 
 def simulated_csv(cfg_path, path, n=240, seed=0):
     """A seeded campaign on the config's simulated cell: random joints mid-range, 80 % calib."""
-    cfg = load_config(cfg_path)
+    cell = load_cell(cfg_path)
+    cfg = cell.config
     rng = np.random.default_rng(seed)
     lo = np.array([j.q_min_deg for j in cfg.robot.joints])
     hi = np.array([j.q_max_deg for j in cfg.robot.joints])
     q = rng.uniform(lo + 0.3 * (hi - lo), hi - 0.3 * (hi - lo), (n, len(lo)))
-    p, _ = simulated_cell(cfg).measure(np.radians(q), rng)
+    p, _ = simulated_cell(cell).measure(np.radians(q), rng)
     ids = tuple(f"P{i}" if i % 50 else f"P{i} a'b" for i in range(n))
     sets = tuple(np.where(rng.random(n) < 0.8, "calib", "test"))
     write_csv(path, Dataset(ids, sets, q, p, t_s=np.arange(n) * 2.0))

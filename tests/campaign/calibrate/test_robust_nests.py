@@ -6,21 +6,23 @@ import numpy as np
 import pytest
 
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.cell_model import CellModel
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.prepare import prepare
 from campaign.calibrate.stages import calibrate_dataset
 from campaign.run.log_reader import read_log
-from robocal.diagnose.truth_cell import TruthProtocol, simulate, warmup
+from robocal.simulation.truth_cell import TruthProtocol, simulate, warmup
 from tests.campaign.helpers import ROOT, read_report, small_config
 from tests.campaign.test_phenomena import phenomena_config
 
-CFG = load_config(ROOT / "configs/irb2600.yaml")
+CELL = load_cell(ROOT / "configs/irb2600.yaml")
+CFG = CELL.config
 
 
 def truth_dataset(camp) -> Dataset:
-    """A simulated campaign (robocal.diagnose.truth_cell) as the interchange dataset: robot rows with the commanded joints, each
+    """A simulated campaign (robocal.simulation.truth_cell) as the interchange dataset: robot rows with the commanded joints, each
     followed by the nest readings taken after it (set ``nest``, no joints)."""
     after: dict[int, list[int]] = {}
     for k, r in enumerate(camp.nest_after_row):
@@ -45,7 +47,7 @@ def truth_dataset(camp) -> Dataset:
 
 
 def true_drift_mm(camp, ds: Dataset) -> np.ndarray:
-    """The simulated stand drift (N, 3) mm at the robot rows of ``ds`` (robocal.diagnose.truth_cell's registration_drift)."""
+    """The simulated stand drift (N, 3) mm at the robot rows of ``ds`` (robocal.simulation.truth_cell's registration_drift)."""
     v = camp.truths[0].values
     robot = ~ds.mask("nest")
     t = ds.t_s[robot]
@@ -75,22 +77,22 @@ def test_misread_nests_are_set_aside_and_the_drift_and_result_stay():
     calibration = replace(CFG.calibration, effects="none", residual="none")
     for seed in (0, 1):
         camp = simulate(["registration_drift"], seed, pr)
-        cfg = replace(CFG, calibration=calibration,
-                      tool=replace(CFG.tool, p_flange_smr_mm=tuple(map(float, camp.nominal.p_flange_smr_mm))))
+        cell = CellModel.from_config(replace(CFG, calibration=calibration, tool=replace(
+            CFG.tool, p_flange_smr_mm=tuple(map(float, camp.nominal.p_flange_smr_mm)))))
         clean = truth_dataset(camp)
         bad_ds, bad = with_misreads(clean, 0.005, np.random.default_rng(seed))
         true = true_drift_mm(camp, clean)
         robot = ~clean.mask("nest")
         rms = {}
         for name, ds in (("clean", clean), ("misread", bad_ds)):
-            prep = prepare(ds, cfg)
+            prep = prepare(ds, cell)
             drift = prep.report["drift"]
             excluded = {e["point_id"] for e in drift["excluded"]}
             assert excluded == ({clean.point_id[i] for i in bad} if name == "misread" else set())
             assert all("misread" in e["reason"] for e in drift["excluded"])
             err = (ds.p_tracker_mm[robot] - prep.dataset.p_tracker_mm) - true
             err_um = 1000 * np.sqrt(np.mean(np.sum(err**2, axis=1)))
-            rms[name] = calibrate_dataset(ds, cfg).report.final.test.rms_mm
+            rms[name] = calibrate_dataset(ds, cell).report.final.test.rms_mm
             print(f"seed {seed} {name}: {len(excluded)} nest readings excluded of {len(bad)} misread, drift "
                   f"{drift['model']['degree']}{'+rotation' if drift['model']['rotation'] else ''} (CV RMS "
                   f"{drift['cv_rms_mm']:.4f} mm), drift error {err_um:.1f} um RMS (drift itself "
@@ -106,7 +108,7 @@ def test_a_nest_read_once_is_bad_input(tmp_path, capsys):
     rng = np.random.default_rng(3)
     n = 14
     q = np.vstack([rng.uniform(-40, 40, (n, 6)), np.full((3, 6), np.nan)])
-    p_robot, _ = simulated_cell(CFG).measure(np.radians(q[:n]), rng)
+    p_robot, _ = simulated_cell(CELL).measure(np.radians(q[:n]), rng)
     p = np.vstack([p_robot, [[1000, 0, 0], [1000, 0, 0.01], [0, 900, 0]]])
     ds = Dataset(tuple(f"P{i}" for i in range(n)) + ("N1@001", "N1@002", "N2@001"), ("calib",) * n + ("nest",) * 3,
                  q, p, t_s=np.arange(n + 3) * 5.0, nest_id=("",) * n + ("N1", "N1", "N2"))

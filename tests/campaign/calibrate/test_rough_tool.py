@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.stages import calibrate_dataset
@@ -58,7 +58,7 @@ def _process(tmp_path, data, tool_z):
     where = tmp_path / f"z{tool_z:g}"
     where.mkdir()
     cfg = small_config(where, "ur10", **{"tool.p_flange_smr_mm": [0.0, 0.0, tool_z]})
-    return calibrate_dataset(read_csv(data), load_config(cfg)).report
+    return calibrate_dataset(read_csv(data), load_cell(cfg)).report
 
 
 @pytest.mark.system

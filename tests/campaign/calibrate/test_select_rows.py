@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics, weights_covariance
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
 from robocal.design import criterion
@@ -33,10 +32,10 @@ def _campaign_csv(path):
     return path
 
 
-def _logdet(ds, cfg):
+def _logdet(ds, cell):
     cal = ds.mask("calib")
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
-    c = criterion(register(nominal_kinematics(cfg), q, p), q, weights_covariance(cfg, ds)[0][cal])
+    c = criterion(register(cell.kinematics, q, p), q, cell.weights(ds)[0][cal])
     flat = c.A.reshape(-1, c.A.shape[2])
     return np.linalg.slogdet(np.eye(flat.shape[1]) + flat.T @ flat)[1]
 
@@ -53,14 +52,14 @@ def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path,
     rows = np.array(pos)
     np.testing.assert_array_equal(sub.q_deg, full.q_deg[rows])
     np.testing.assert_array_equal(sub.p_tracker_mm, full.p_tracker_mm[rows])
-    cfg = load_config(CONFIG)
+    cell = load_cell(CONFIG)
     cal = np.flatnonzero(full.mask("calib"))
     rand = []
     for seed in range(5):
         keep = ~full.mask("calib")
         keep[np.random.default_rng(seed).choice(cal, 80, replace=False)] = True
-        rand.append(_logdet(full.subset(keep), cfg))
-    assert _logdet(sub, cfg) > max(rand)
+        rand.append(_logdet(full.subset(keep), cell))
+    assert _logdet(sub, cell) > max(rand)
 
 
 def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_path, capsys):

@@ -10,7 +10,7 @@ import pytest
 from campaign.cli import main
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
-from robocal.diagnose.truth_cell import TruthProtocol, simulate
+from robocal.simulation.truth_cell import TruthProtocol, simulate
 from tests.campaign.helpers import small_config, truth_csv
 
 EFFECTS = {"joint_compliance", "gear_cyclic", "backlash", "readback_lag", "thermal_drift", "axis_coupling",

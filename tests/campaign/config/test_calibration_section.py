@@ -61,10 +61,9 @@ def test_forced_effect_list_reaches_model_json(tmp_path):
 
 @pytest.mark.unit
 def test_gravity_model_keys_of_the_robot(tmp_path):
-    from campaign.calibrate.effects_stage import gravity_model
+    from campaign.config.load import load_cell
 
-    cfg = load_config(small_config(tmp_path, **{"robot.mass_kg": 272, "robot.gravity_direction_base": [1, 0, 0]}))
-    g = gravity_model(cfg)
+    g = load_cell(small_config(tmp_path, **{"robot.mass_kg": 272, "robot.gravity_direction_base": [1, 0, 0]})).gravity
     assert g.source == "mass class" and g.gravity_base == (1.0, 0.0, 0.0)
     assert sum(g.link_masses_kg) == pytest.approx(0.7 * 272)
     for key, value, words in (("robot.link_masses_kg", [1, 2], "a list of 6 numbers"),

@@ -19,7 +19,8 @@ import yaml
 
 from campaign import cli
 from campaign.cli import main
-from campaign.config.schema import EffectSpec, FrozenMap
+from campaign.config.schema import EffectSpec
+from campaign.config.values import FrozenMap
 from campaign.config.load import load_config, parse_config
 from campaign.errors import CampaignError, ConfigError, DataError
 from drivers.base import ConnectionLost

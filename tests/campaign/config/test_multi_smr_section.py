@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 import yaml
 
-from campaign.config.cell_model import measurement_covariance, nominal_kinematics
 from campaign.config.simulation import simulated_cell
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell, load_config
 from campaign.errors import ConfigError
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.data.log_dataset import dataset_from_log
@@ -114,13 +113,14 @@ def multi_smr_run(tmp_path: Path, n_smrs: int = 3):
     """Five plan points of a small IRB 4600 cell with a three-SMR tool, measured by the mock drivers."""
     path = small_config(tmp_path, "irb4600", **{"tool.p_flange_smr_mm": SMR1, "tool.p_flange_smr2_mm": SMR2,
                                                  "tool.p_flange_smr3_mm": SMR3, "simulation.p_flange_smr_mm": SMR1})
-    cfg = load_config(path)
-    world = MockWorld(simulated_cell(cfg), cfg.simulation.seed, q0_deg=cfg.plan.q_ref_deg,
+    cell = load_cell(path)
+    cfg = cell.config
+    world = MockWorld(simulated_cell(cell), cfg.simulation.seed, q0_deg=cfg.plan.q_ref_deg,
                       extra_smrs_flange_mm=cfg.tool.smrs_mm[1:])
-    points = build_plan(cfg, nominal_kinematics(cfg)).points[:5]
+    points = build_plan(cell).points[:5]
     log = RunLog.create(tmp_path / "run", {"config_sha256": cfg.sha256, "plan_sha256": "x"})
     runner = Runner(MockRobot(world), MockTracker(world), cfg.tracker.measurement, world.clock,
-                    lambda p: measurement_covariance(cfg, p[None])[0], n_smrs=n_smrs)
+                    lambda p: cell.covariance(p[None])[0], n_smrs=n_smrs)
     truth = []
     runner.on_point = lambda point, record: truth.append(
         [c.true_smr_tracker(np.radians(world.q_deg)[None])[0] for c in (world.cell, *world.extra_cells)])
@@ -161,8 +161,8 @@ def test_trackers_without_smr_selection_are_refused_up_front(tmp_path: Path) -> 
 
     with pytest.raises(DriverError, match="stub://tracker: the tool has 3 SMRs"):
         Runner(None, OneTarget(), None, None, lambda p: np.eye(3), n_smrs=3)
-    cfg = load_config(small_config(tmp_path, "irb4600"))
-    tracker = MockTracker(MockWorld(simulated_cell(cfg), 0, extra_smrs_flange_mm=[SMR2]))
+    cell = load_cell(small_config(tmp_path, "irb4600"))
+    tracker = MockTracker(MockWorld(simulated_cell(cell), 0, extra_smrs_flange_mm=[SMR2]))
     tracker.select_smr(2)
     with pytest.raises(TargetNotFound, match="no SMR 3 on the tool"):
         tracker.select_smr(3)

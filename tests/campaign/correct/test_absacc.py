@@ -4,9 +4,8 @@ import json
 
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.correct.targets import AbsAccRobot, absacc_guard, recorded_identity
 from campaign.errors import DataError
 from campaign.run.log_writer import RunLog
@@ -30,10 +29,10 @@ def test_guard_refuses_or_warns_only_for_absacc():
 
 @pytest.mark.unit
 def test_identity_from_model_meta_or_the_run_log(tmp_path):
-    cfg = load_config(CONFIG)
-    model = CalibratedModel(nominal_kinematics(cfg), None, {"robot_identity": ABSACC})
+    kin = load_cell(CONFIG).kinematics
+    model = CalibratedModel(kin, None, {"robot_identity": ABSACC})
     assert recorded_identity(model) == ABSACC
-    plain = CalibratedModel(nominal_kinematics(cfg), None, {})
+    plain = CalibratedModel(kin, None, {})
     run = tmp_path / "run"
     RunLog.create(run, {"config_sha256": "x", "plan_sha256": "y", "robot_identity": ABSACC}).close()
     assert recorded_identity(plain, run / "model.json") == ABSACC            # the run's start record
@@ -42,8 +41,7 @@ def test_identity_from_model_meta_or_the_run_log(tmp_path):
 
 @pytest.mark.system
 def test_correct_cli_refuses_an_absacc_model(tmp_path, capsys):
-    cfg = load_config(CONFIG)
-    model = CalibratedModel(nominal_kinematics(cfg), None, {"robot_identity": ABSACC})
+    model = CalibratedModel(load_cell(CONFIG).kinematics, None, {"robot_identity": ABSACC})
     path = tmp_path / "model.json"
     path.write_text(json.dumps(model.to_dict()))
     targets = tmp_path / "targets.csv"

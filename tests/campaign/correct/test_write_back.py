@@ -1,4 +1,4 @@
-"""Write-back formats and safety bounds (campaign.writeback)."""
+"""Write-back formats and safety bounds (campaign.correct)."""
 from __future__ import annotations
 
 import csv

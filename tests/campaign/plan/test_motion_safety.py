@@ -3,8 +3,7 @@ refused; keep-out boxes and the envelope hold along the swept path of random pla
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.errors import ConfigError
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion, motion_limits, payload, plan_route
 from campaign.run.devices import mock_world
@@ -12,29 +11,28 @@ from campaign.plan.build import build_plan
 from campaign.run.log_writer import RunLog
 from campaign.run.log_reader import read_log
 from campaign.run.runner import Runner
-from campaign.config.cell_model import measurement_covariance
 from drivers.base import MotionError, MotionLimits
 from drivers.mock import MockRobot, MockTracker
 from robocal.sweep import Boxes, check_segments, flange_points_base, sample_segments
 from tests.campaign.helpers import small_config
 
 
-def _cfg(tmp_path, **over):
+def _cell(tmp_path, **over):
     base = {"plan.grid.step_mm": 600, "plan.test.count": 6, "plan.check_poses": {"count": 0, "every_n_points": 50},
             "tracker.measurement.samples": 1, "tracker.measurement.settle_s": 0.0}
-    return load_config(small_config(tmp_path, **{**base, **over}))
+    return load_cell(small_config(tmp_path, **{**base, **over}))
 
 
-def _mock_run(tmp_path, cfg, robot_hook=None):
-    world = mock_world(cfg)
+def _mock_run(tmp_path, cell, robot_hook=None):
+    cfg = cell.config
+    world = mock_world(cell)
     robot, tracker = MockRobot(world), MockTracker(world)
     if robot_hook:
         robot_hook(robot)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    plan = build_plan(cell)
     log = RunLog.create(tmp_path / "run", {"config_sha256": "x", "plan_sha256": plan.sha256})
-    runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock,
-                    lambda p: measurement_covariance(cfg, p[None])[0])
-    runner.limits, runner.payload = motion_limits(cfg), payload(cfg)
+    runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock, lambda p: cell.covariance(p[None])[0],
+                    limits=motion_limits(cfg), payload=payload(cfg))
     stops = []
     real_stop = robot.stop
     robot.stop = lambda: (stops.append(1), real_stop())
@@ -43,8 +41,8 @@ def _mock_run(tmp_path, cfg, robot_hook=None):
 
 @pytest.mark.unit
 def test_no_command_above_the_caps_reaches_the_mock_controller(tmp_path):
-    cfg = _cfg(tmp_path, **{"robot.max_tcp_speed_mm_s": 120, "robot.max_joint_speed_pct": 40})
-    outcome, robot, stops, plan = _mock_run(tmp_path, cfg)
+    cell = _cell(tmp_path, **{"robot.max_tcp_speed_mm_s": 120, "robot.max_joint_speed_pct": 40})
+    outcome, robot, stops, plan = _mock_run(tmp_path, cell)
     assert outcome.exit_status == "success" and stops == [1]
     peak = np.array([c.peak_tcp_mm_s for c in robot.commands])
     pct = np.array([c.joint_speed_pct for c in robot.commands])
@@ -56,12 +54,12 @@ def test_no_command_above_the_caps_reaches_the_mock_controller(tmp_path):
 
 @pytest.mark.unit
 def test_a_too_fast_command_is_refused_and_the_run_stops(tmp_path):
-    cfg = _cfg(tmp_path)
+    cell = _cell(tmp_path)
 
     def too_fast(robot):
         real = robot.move_duration_s
         robot.move_duration_s = lambda a, b: 0.5 * real(a, b)      # a driver bug: twice the allowed speed
-    outcome, robot, stops, _ = _mock_run(tmp_path, cfg, too_fast)
+    outcome, robot, stops, _ = _mock_run(tmp_path, cell, too_fast)
     assert outcome.exit_status == "fail" and "refused a move" in outcome.reason and stops == [1]
     assert robot.commands == []                                    # nothing above the cap was executed
     assert read_log(tmp_path / "run").stops[-1]["exit_status"] == "fail"
@@ -69,7 +67,7 @@ def test_a_too_fast_command_is_refused_and_the_run_stops(tmp_path):
 
 @pytest.mark.unit
 def test_mock_refuses_invalid_limits_and_reports_identity(tmp_path):
-    world = mock_world(_cfg(tmp_path))
+    world = mock_world(_cell(tmp_path))
     robot = MockRobot(world)
     with pytest.raises(MotionError):
         robot.set_motion_limits(MotionLimits(250.0, 150.0))
@@ -79,21 +77,22 @@ def test_mock_refuses_invalid_limits_and_reports_identity(tmp_path):
 @pytest.mark.unit
 def test_a_cap_above_the_datasheet_maximum_is_refused(tmp_path):
     with pytest.raises(ConfigError, match=r"robot\.max_tcp_speed_mm_s.*datasheet maximum"):
-        _cfg(tmp_path, **{"robot.max_tcp_speed_mm_s": 7500})
+        _cell(tmp_path, **{"robot.max_tcp_speed_mm_s": 7500})
     with pytest.raises(ConfigError, match=r"robot\.max_joint_speed_pct"):
-        _cfg(tmp_path, **{"robot.max_joint_speed_pct": 120})
-    assert _cfg(tmp_path, **{"robot.max_tcp_speed_mm_s": 7000}).robot.max_tcp_speed_mm_s == 7000
+        _cell(tmp_path, **{"robot.max_joint_speed_pct": 120})
+    assert _cell(tmp_path, **{"robot.max_tcp_speed_mm_s": 7000}).config.robot.max_tcp_speed_mm_s == 7000
 
 
 @pytest.mark.unit
 def test_first_pass_traverses_the_plan_at_reduced_caps_before_measuring(tmp_path):
-    cfg = _cfg(tmp_path, **{"robot.first_pass_speed_pct": 25})
-    world = mock_world(cfg)
+    cell = _cell(tmp_path, **{"robot.first_pass_speed_pct": 25})
+    cfg = cell.config
+    world = mock_world(cell)
     robot, tracker = MockRobot(world), MockTracker(world)
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    plan = build_plan(cell)
     log = RunLog.create(tmp_path / "run", {"config_sha256": "x", "plan_sha256": plan.sha256})
-    runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock, lambda p: np.eye(3) * 1e-4)
-    runner.limits, runner.first_pass_limits = motion_limits(cfg), motion_limits(cfg, 25)
+    runner = Runner(robot, tracker, cfg.tracker.measurement, world.clock, lambda p: np.eye(3) * 1e-4,
+                    limits=motion_limits(cfg), first_pass_limits=motion_limits(cfg, 25))
     assert runner.execute(plan.points, log).exit_status == "success"
     n = len(plan.points)
     first, measured = robot.commands[:n], robot.commands[n:]
@@ -108,7 +107,7 @@ def test_first_pass_traverses_the_plan_at_reduced_caps_before_measuring(tmp_path
 
 @pytest.mark.unit
 def test_a_segment_with_safe_ends_through_a_box_is_blocked(tmp_path):
-    kin = nominal_kinematics(_cfg(tmp_path))
+    kin = _cell(tmp_path).kinematics
     q_a, q_b = np.radians([[-40, 10, 10, 0, 45, 0]]), np.radians([[40, 10, 10, 0, 45, 0]])
     pts = np.array([[0.0, 0.0, 0.0]])
     mid = flange_points_base(kin, (q_a + q_b) / 2, pts)[0, 0]
@@ -145,10 +144,10 @@ def test_property_no_planned_swept_path_enters_keep_out_or_leaves_the_envelope(t
     the pair; on every routed plan a
     4x finer independent sampling of the whole joint path finds no point of the flange or SMR within the
     clearance of a keep-out box or outside the envelope."""
-    cfg = _cfg(tmp_path)
-    kin = nominal_kinematics(cfg)
+    cell = _cell(tmp_path)
+    kin = cell.kinematics
     rng = np.random.default_rng(2026)
-    p_pts = np.array([[0.0, 0.0, 0.0], cfg.tool.p_flange_smr_mm])
+    p_pts = np.array([[0.0, 0.0, 0.0], cell.config.tool.p_flange_smr_mm])
     clearance = 20.0
     routed = refused = with_vias = blocked_direct = reordered = by_envelope = 0
     violations = 0
@@ -238,4 +237,4 @@ def test_a_move_no_via_clears_is_avoided_by_visiting_a_later_point_first():
 ])
 def test_safety_keys_are_validated_with_the_key_path(tmp_path, key, value, where):
     with pytest.raises(ConfigError, match=where):
-        _cfg(tmp_path, **{key: value})
+        _cell(tmp_path, **{key: value})

@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
-from campaign.config.load import load_config
+from campaign.config.load import load_cell, load_config
 from campaign.plan.build import build_plan
 from robocal.design import move_cost
 from tests.campaign.helpers import small_config
@@ -26,10 +25,8 @@ def _config(tmp_path, **over):
 
 
 def test_optimal_plan_chooses_points_from_the_pool_and_keeps_the_grid_test_set(tmp_path):
-    cfg = load_config(_config(tmp_path))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
-    grid = build_plan(load_config(_grid_config(tmp_path)), kin)
+    plan = build_plan(load_cell(_config(tmp_path)))
+    grid = build_plan(load_cell(_grid_config(tmp_path)))
     calib = [p for p in plan.points if p.set == "calib"]
     assert len(calib) == 60 and len({p.point_id for p in calib}) == 60
     tests = lambda pl: sorted((p.point_id, p.q_deg) for p in pl.points if p.set == "test")  # noqa: E731
@@ -45,8 +42,8 @@ def test_optimal_plan_chooses_points_from_the_pool_and_keeps_the_grid_test_set(t
 
 
 def test_stop_auto_plan_has_blocks_and_the_test_set_last(tmp_path):
-    cfg = load_config(_config(tmp_path, **{"plan.stop": "auto", "plan.points": 80, "plan.block_points": 10}))
-    plan = build_plan(cfg, nominal_kinematics(cfg))
+    plan = build_plan(load_cell(_config(tmp_path, **{"plan.stop": "auto", "plan.points": 80,
+                                                     "plan.block_points": 10})))
     sets = [p.set for p in plan.points if p.set in ("calib", "test")]
     assert sets == ["calib"] * 80 + ["test"] * sets.count("test")
     assert plan.blocks[-1] == 80 and list(plan.blocks) == sorted(plan.blocks) and len(plan.blocks) >= 3

@@ -4,13 +4,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.config.simulation import simulated_cell
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.report.export import export, robodk_text, urdf_text
 from robocal.kinematics import Kinematics, fk, smr_base
 from robocal.model import CalibratedModel
-from robocal.sim_cell import random_geometric_errors
+from robocal.simulation.mock_cell import random_geometric_errors
 
 yourdfpy = pytest.importorskip("yourdfpy")
 pytestmark = pytest.mark.unit
@@ -40,15 +39,14 @@ def _max_error_um(kin: Kinematics, tmp_path: Path, n: int = 1000, seed: int = 0)
 
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_urdf_of_each_shipped_cell_matches_fk(config, tmp_path):
-    err = _max_error_um(nominal_kinematics(load_config(config)), tmp_path)
+    err = _max_error_um(load_cell(config).kinematics, tmp_path)
     print(f"{config.stem}: URDF vs FK max {err:.2e} um on 1000 poses")
     assert err <= 1.0
 
 
 @pytest.mark.parametrize("convention", ["dh", "mdh"])
 def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
-    cfg = load_config(ROOT / "configs" / "irb2600.yaml")
-    truth = simulated_cell(cfg).truth                      # DH + errors + Hayati beta on J2
+    truth = simulated_cell(load_cell(ROOT / "configs" / "irb2600.yaml")).truth    # DH + errors + Hayati beta on J2
     if convention == "mdh":
         truth = random_geometric_errors(truth.with_(convention="mdh"), np.random.default_rng(4), 3.0)
     assert np.any(truth.beta_rad != 0)
@@ -59,7 +57,7 @@ def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
 
 def test_wrong_origin_would_be_caught(tmp_path):
     """The comparison is sensitive: a 0.01 deg change of one alpha moves the tool by far more than 1 um."""
-    kin = nominal_kinematics(load_config(ROOT / "configs" / "irb2600.yaml"))
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     path = tmp_path / "robot.urdf"
     bent = kin.with_(alpha_rad=kin.alpha_rad + np.r_[0, 0, np.radians(0.01), 0, 0, 0])
     path.write_text(urdf_text(CalibratedModel(bent)))
@@ -70,10 +68,10 @@ def test_wrong_origin_would_be_caught(tmp_path):
 
 
 def test_export_files_and_residual_note(tmp_path):
-    cfg = load_config(ROOT / "configs" / "irb2600.yaml")
+    cell = load_cell(ROOT / "configs" / "irb2600.yaml")
     from robocal.residual import IDWResidual
     layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
-    model = CalibratedModel(simulated_cell(cfg).truth, layer)
+    model = CalibratedModel(simulated_cell(cell).truth, layer)
     files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt")
     assert [f.name for f in files] == ["r.urdf", "dh.csv", "robodk.txt"]
     assert "NOT exported: the non-kinematic residual layer" in (tmp_path / "r.urdf").read_text()
@@ -84,7 +82,7 @@ def test_export_files_and_residual_note(tmp_path):
 
 def test_robodk_dhm_conversion_is_exact():
     """Standard DH without beta -> DHM rows; rebuilding the chain from the DHM rows gives the same FK."""
-    kin = nominal_kinematics(load_config(ROOT / "configs" / "irb2600.yaml"))
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     text = robodk_text(CalibratedModel(kin))
     rows = [ln.split() for ln in text.splitlines() if ln and ln[0] == " " and ln.split()[0].isdigit()]
     table = np.array([[float(v) for v in r[1:5]] for r in rows])
@@ -100,8 +98,7 @@ def test_robodk_dhm_conversion_is_exact():
 
 def test_physical_effects_are_noted_not_exported(tmp_path):
     from robocal.elastic import EffectChoice
-    cfg = load_config(ROOT / "configs" / "irb2600.yaml")
-    kin = nominal_kinematics(cfg)
+    kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
     text = urdf_text(CalibratedModel(kin, None, None, (fake,)))
     assert "NOT exported: the physical effects of the model (joint_compliance" in text

@@ -5,9 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.plan.iso9283 import iso_cube
 from campaign.plan.build import build_plan
 from robocal.iso9283 import CYCLE_ORDER
@@ -17,14 +16,13 @@ pytestmark = pytest.mark.system
 
 
 def test_plan_is_the_standard_cycle(tmp_path):
-    cfg = load_config(small_config(tmp_path, **{"plan.kind": "iso9283", "plan.iso9283": {"cycles": 4}}))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **{"plan.kind": "iso9283", "plan.iso9283": {"cycles": 4}}))
+    plan = build_plan(cell)
     assert len(plan.points) == 4 * 5 and {p.set for p in plan.points} == {"check"}
     assert [p.point_id for p in plan.points[:6]] == ["N:P1.c01", "N:P5.c01", "N:P4.c01", "N:P3.c01", "N:P2.c01",
                                                      "N:P1.c02"]
-    cube = iso_cube(cfg, kin)
-    assert cube.edge_mm == min(cfg.plan.grid.size_mm)        # the largest cube inside the box is reachable here
+    cube = iso_cube(cell)
+    assert cube.edge_mm == min(cell.config.plan.grid.size_mm)    # the largest cube inside the box is reachable here
     assert np.allclose([plan.points[k].p_base_mm for k in range(5)], cube.p_base_mm[list(CYCLE_ORDER)])
 
 
@@ -84,9 +82,8 @@ def test_iso_bad_model_is_a_one_line_error(tmp_path, capsys):
 
 def test_cube_stays_inside_the_envelope(tmp_path):
     env = {"name": "cell", "min_mm": [600, -500, 500], "max_mm": [1400, 500, 1500]}
-    cfg = load_config(small_config(tmp_path, **{"plan.kind": "iso9283", "plan.envelope": env,
-                                                "plan.clearance_mm": 25.0}))
-    cube = iso_cube(cfg, nominal_kinematics(cfg))
+    cube = iso_cube(load_cell(small_config(tmp_path, **{"plan.kind": "iso9283", "plan.envelope": env,
+                                                         "plan.clearance_mm": 25.0})))
     # grid box (500..1300, -800..800, 400..1600) inside envelope - 25 mm: x 625..1300 -> edge 675 at most
     assert cube.edge_mm <= 675.0 + 1e-9
     assert np.allclose(cube.center_mm, [962.5, 0.0, 1000.0])

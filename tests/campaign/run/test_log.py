@@ -341,3 +341,13 @@ def test_sigkill_at_random_moments(tmp_path):
     final = read_log(run)
     assert not final.torn_tail and final.points[-1]["point_id"] == "final"
     assert len({p["point_id"] for p in final.points}) == len(final.points)
+
+
+@pytest.mark.unit
+def test_the_log_writer_and_reader_import_no_numerics():
+    """The durable log and its records import the standard library only (no numpy): a process that only writes
+    the log starts fast, and the record shape stays independent of the plan and the numerics."""
+    code = ("import sys, campaign.run.log_writer, campaign.run.log_reader, campaign.run.log_records; "
+            "print(sorted(m for m in ('numpy', 'campaign.plan', 'campaign.data', 'robocal') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout

@@ -6,9 +6,8 @@ from datetime import datetime
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.cli import main
-from campaign.config.load import load_config
+from campaign.config.load import load_cell, load_config
 from campaign.run.eta import RunEta, estimate_duration_s, point_times_s
 from campaign.workflows import run_campaign
 from campaign.plan.build import build_plan
@@ -64,9 +63,9 @@ def test_eta_on_a_mock_cell_is_labelled_simulated_time():
 
 @pytest.mark.system
 def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
-    cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT], "plan.clearance_mm": 30}))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT], "plan.clearance_mm": 30}))
+    kin = cell.kinematics
+    plan = build_plan(cell)
     assert any(p.via_deg for p in plan.points)                 # the box sits across the plan: vias were needed
     robots = []
     real_init = MockRobot.__init__
@@ -75,13 +74,13 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
         real_init(self, *a, **k)
         robots.append(self)
     monkeypatch.setattr(MockRobot, "__init__", spy)
-    result = run_campaign(cfg, tmp_path / "run")
+    result = run_campaign(cell, tmp_path / "run")
     assert result.outcome.exit_status == "success"
     cmds = robots[0].commands
     q_a = np.radians([c.q_from_deg for c in cmds])
     q_b = np.radians([c.q_to_deg for c in cmds])
     q, _ = sample_segments(q_a, q_b, np.full(len(cmds), 300))
-    pts = flange_points_base(kin, q, np.array([[0.0, 0.0, 0.0], cfg.tool.p_flange_smr_mm])).reshape(-1, 3)
+    pts = flange_points_base(kin, q, np.array([[0.0, 0.0, 0.0], cell.config.tool.p_flange_smr_mm])).reshape(-1, 3)
     box = Boxes(np.array([KEEP_OUT["min_mm"]], float), np.array([KEEP_OUT["max_mm"]], float)).grown(30.0)
     inside = np.all((pts > box.lo[0]) & (pts < box.hi[0]), axis=1)
     assert not inside.any(), f"{inside.sum()} samples of executed moves inside the keep-out box"
@@ -89,18 +88,17 @@ def test_keep_out_run_every_executed_move_stays_clear(tmp_path, monkeypatch):
 
 @pytest.mark.system
 def test_eta_uses_the_reading_time_and_converges_during_a_run(tmp_path):
-    cfg = load_config(small_config(tmp_path, **SMALL))
-    (tmp_path / "slow").mkdir()                           # its own file: the run copies cfg's, unchanged
-    slow = load_config(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
-    kin = nominal_kinematics(cfg)
-    plan = build_plan(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL))
+    (tmp_path / "slow").mkdir()                           # its own file: the run copies cell's, unchanged
+    slow = load_cell(small_config(tmp_path / "slow", **SMALL, **{"tracker.measurement.reading_time_s": 2.5}))
+    plan = build_plan(cell)
     n = len(plan.points)
-    d15, d25 = estimate_duration_s(plan.points, cfg, kin), estimate_duration_s(plan.points, slow, kin)
+    d15, d25 = estimate_duration_s(plan.points, cell), estimate_duration_s(plan.points, slow)
     assert d25 - d15 == pytest.approx(n * 2 * 1.0, rel=1e-9)  # samples x (2.5 - 1.5) s per point
-    result = run_campaign(cfg, tmp_path / "run")
+    result = run_campaign(cell, tmp_path / "run")
     recs = read_log(result.run_dir).records()
     actual = np.array([r.t_end_s - r.t_start_s for r in recs])
-    eta = RunEta(*point_times_s(plan.points, cfg, kin))
+    eta = RunEta(*point_times_s(plan.points, cell))
     prior_error = abs(eta.remaining_s() - actual.sum()) / actual.sum()
     k = n // 4
     for r in recs[:k]:
@@ -124,9 +122,9 @@ def test_identity_changes_name_what_differs():
 @pytest.mark.unit
 def test_a_robot_standing_inside_the_clearance_is_told_to_jog_clear(tmp_path):
     from campaign.plan.motion_safety import PathGuard, UnsafeMotion
-    cfg = load_config(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT]}))
-    kin = nominal_kinematics(cfg)
-    guard = PathGuard.from_config(cfg, kin)
+    cell = load_cell(small_config(tmp_path, **SMALL, **{"plan.keep_out": [KEEP_OUT]}))
+    cfg, kin = cell.config, cell.kinematics
+    guard = PathGuard.for_cell(cell)
     q_ref = np.asarray(cfg.plan.q_ref_deg, float)
     centre = (np.array(KEEP_OUT["min_mm"]) + np.array(KEEP_OUT["max_mm"])) / 2
     from robocal.ik import solve_ik

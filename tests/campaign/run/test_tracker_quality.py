@@ -2,9 +2,8 @@
 import numpy as np
 import pytest
 
-from campaign.config.cell_model import nominal_kinematics
 from campaign.config.simulation import simulated_cell
-from campaign.config.load import load_config
+from campaign.config.load import load_cell
 from campaign.run.tracker_quality import SmrPredictor, check_device_stability, device_covariance
 from drivers.base import TrackerReading, Unstable
 from robocal.kinematics import smr_tracker
@@ -39,9 +38,10 @@ def test_device_std_beyond_the_stability_limit_is_unstable():
 def test_prediction_after_registration_is_within_a_few_mm(tmp_path, name):
     """Rotated tracker frame (the configs' simulated T_tracker_base), true geometry with errors: after 3 measured
     points the nominal model + registration predicts the SMR to a few mm (what FindReflector needs)."""
-    cfg = load_config(small_config(tmp_path, name))
-    truth = simulated_cell(cfg).truth
-    kin = nominal_kinematics(cfg)
+    cell = load_cell(small_config(tmp_path, name))
+    cfg = cell.config
+    truth = simulated_cell(cell).truth
+    kin = cell.kinematics
     rng = np.random.default_rng(4)
     lo, hi = np.degrees(kin.q_min_rad), np.degrees(kin.q_max_rad)
     q_deg = rng.uniform(0.6 * lo, 0.6 * hi, size=(12, kin.n))
@@ -60,16 +60,15 @@ def test_prediction_after_registration_is_within_a_few_mm(tmp_path, name):
 
 @pytest.mark.unit
 def test_device_covariance_reaches_the_dataset_only_when_every_point_has_it():
-    from types import SimpleNamespace
-
     from campaign.data.log_dataset import dataset_from_log
+    from campaign.run.log_reader import LogContents
 
     def record(i, source):
         cov = (np.eye(3) * (1e-4 if source == "device" else 4e-4)).tolist()
         return {"point_id": f"P{i}", "set": "calib", "q_read_deg": [0.0] * 6, "p_tracker_mm": [float(i), 0.0, 0.0],
                 "cov_mm2": cov, "cov_source": source, "t_end_s": float(i)}
-    device = dataset_from_log(SimpleNamespace(points=[record(i, "device") for i in range(4)], path="log"))
+    device = dataset_from_log(LogContents(start={}, points=[record(i, "device") for i in range(4)], path="log"))
     assert device.cov_mm2.shape == (4, 3, 3) and device.cov_mm2[0, 0, 0] == 1e-4
-    mixed = dataset_from_log(SimpleNamespace(points=[record(0, "spec")] + [record(i, "device") for i in range(1, 4)],
-                                             path="log"))
+    mixed = dataset_from_log(LogContents(start={}, points=[record(0, "spec")] +
+                                             [record(i, "device") for i in range(1, 4)], path="log"))
     assert mixed.cov_mm2 is None                        # a resumed run with another tracker: the spec model for all

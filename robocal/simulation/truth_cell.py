@@ -1,8 +1,10 @@
 """Independent truth generator for testing the diagnosis: a simulated robot cell written from the physics.
 
-Nothing here uses the diagnosis candidates or their regressors (``robocal.diagnose``) or the effect bases of
-``robocal.effects``: every effect is modelled as what happens in the machine, then the laser tracker measures
-the SMR. Only the forward kinematics (``robocal.kinematics.chain``) and the tracker noise model are shared.
+Nothing here uses the diagnosis (``robocal.diagnose``), the effect engine (``robocal.elastic``) or the effect
+bases of ``robocal.effects``, not even through a package ``__init__`` (``tests/robocal/test_diagnose_truth.py``
+checks what importing this module loads): every effect is modelled as what happens in the machine, then the laser
+tracker measures the SMR. Only the forward kinematics (``robocal.kinematics.chain``), the frames and the tracker
+noise model are shared.
 
 Physics (lengths mm, angles rad, torques N*m, time s):
 
@@ -67,8 +69,7 @@ class TruthEffect:
 @dataclass(frozen=True)
 class CampaignShape:
     """The size and timing of a simulated campaign: calibration/test points, duration (s), payload blocks (kg, s),
-    check poses and their repeats, robot repeatability (ISO 9283 RP, mm). Shared by ``TruthProtocol`` and
-    ``robocal.selfcheck.Protocol``."""
+    check poses and their repeats, robot repeatability (ISO 9283 RP, mm); the base of ``TruthProtocol``."""
     n_calib: int = 300
     n_test: int = 100
     duration_s: float = 7200.0

@@ -1,0 +1,276 @@
+"""Which selection criterion ``campaign select`` should use, judged by held-out prediction on forms it was not tuned on.
+
+Protocol (fixed before the comparison was run; one smoke row of UR10 seen, nothing changed after):
+  * Forms: the public real UR5 campaign (1000 grid rows, 100 chosen, its 20 random held-out poses) and four
+    simulated cells (``simulated_cell``, seeds 1 2 3 each), every one with other effects: IRB 2600 with J2/J3
+    gravity compliance + a J2 gear error; IRB 4600 with a J3 gear error + wrist coupling; UR10 geometry only;
+    UR5 with a J1 gear error. The measured data set of a simulated cell is its grid plan's calibration points,
+    measured once; the held-out set its plan's test points, measured separately. n = max(M / 3, 1.2 x the
+    identifiable parameters) rows are chosen of the M.
+  * Every subset is calibrated by the DEFAULT ``process`` of the cell's config; the score of a subset is its
+    held-out RMS over the RMS of all M rows (same measurements); per form the mean over its seeds; the overall
+    score of a criterion the mean over the five forms (the real campaign counts as one form).
+  * The criterion with the lowest overall score wins; the current one (d_spread) is kept unless another beats it
+    by more than 1 %. Seeded random subsets (median of 5 per data set) are the reference a criterion must beat.
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select.py [--seeds 1 2 3] [--criteria ...]
+        [--forms ur5-real ...] [--metric rms_mm|mean_mm]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from campaign.config.load import load_cell  # noqa: E402
+from campaign.config.simulation import simulated_cell  # noqa: E402
+from campaign.data.dataset import Dataset  # noqa: E402
+from campaign.plan.build import build_plan  # noqa: E402
+from robocal.design import _Design, criterion, criterion_effects, d_optimal, design_columns  # noqa: E402
+from robocal.identify import register  # noqa: E402
+from robocal.kinematics import ParamLayout  # noqa: E402
+
+
+GEAR = [1.4e-4, 1.4e-4, 7.0e-5, 7.0e-5]
+FORMS = {
+    "irb2600 compl+gear2": ("irb2600.yaml", [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},
+                                             {"name": "gear_cyclic", "params": {"joint": 2, "values": GEAR}}]),
+    "irb4600 gear3+coupling": ("irb4600.yaml", [{"name": "gear_cyclic", "params": {"joint": 3, "values": GEAR}},
+                                                {"name": "axis_coupling", "params": {"values": [3e-4, 2e-4, 2e-4]}}]),
+    "ur10 geometry": ("ur10.yaml", []),
+    "ur5-sim gear1": ("ur5.yaml", [{"name": "gear_cyclic", "params": {"joint": 1, "values": GEAR}}]),
+}
+UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
+N_RANDOM = 5
+
+
+CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter")
+
+
+class _IDesign(_Design):
+    """``_Design`` that also keeps trace(H M^-1) and, per candidate, T_i = A_i M^-1 H M^-1 A_i^T (3, 3, M): the
+    prediction variance over the pool (H (L, L) the pool's mean prior-scaled J^T J) removed by adding each."""
+
+    def __init__(self, A: np.ndarray, H: np.ndarray) -> None:
+        self.H = H
+        super().__init__(A)
+
+    def _forms(self, W: np.ndarray) -> np.ndarray:
+        B = (W @ self.flatT).reshape(W.shape[0], -1, 3)
+        return np.einsum("lmi,mjl->ijm", B, self.A)
+
+    def refresh(self) -> None:
+        super().refresh()
+        self.T = self._forms(self.Minv @ self.H @ self.Minv)
+        self.trace = float(np.sum(self.Minv * self.H))
+
+    def _update(self, k: int, sign: float) -> None:
+        U = self.Minv @ self.A[k].T
+        C = np.linalg.inv(np.eye(3) + sign * self.S[:, :, k])
+        Xt = np.ascontiguousarray((U.T @ self.flatT).reshape(3, -1, 3).transpose(2, 0, 1))
+        Yt = np.einsum("ijm,jk->ikm", Xt, C)
+        W = self.Minv @ (self.H @ U)
+        Zt = np.ascontiguousarray((W.T @ self.flatT).reshape(3, -1, 3).transpose(2, 0, 1))
+        Q = U.T @ self.H @ U
+        t1 = np.einsum("ikm,jkm->ijm", Yt, Zt)
+        self.T += np.einsum("ikm,kl,jlm->ijm", Yt, Q, Yt) - sign * (t1 + t1.transpose(1, 0, 2))
+        self.trace -= sign * float(np.sum(C * Q))
+        super()._update(k, sign)
+
+    def i_gains(self) -> np.ndarray:
+        """trace(H M^-1) removed by adding each candidate (M,): trace((I + S_i)^-1 T_i)."""
+        inv = np.linalg.inv(np.eye(3)[None] + self.S.transpose(2, 0, 1))
+        return np.einsum("mij,jim->m", inv, self.T)
+
+
+class _Coverage:
+    """The residual layer's share of the prediction error: a zero-mean GP per axis, prior variance ``prior_mm2``,
+    squared-exponential kernel of length ``length_mm`` on coordinates X (M, d) mm (joint angle x lever), noise
+    (M,) mm^2; keeps every candidate's posterior variance and g_k = sum over the integration rows R of
+    cov(x_r, x_k)^2 under rank-one updates."""
+
+    def __init__(self, X: np.ndarray, noise_mm2: np.ndarray, R: np.ndarray, length_mm: float, prior_mm2: float):
+        self.X, self.noise, self.R = X, np.asarray(noise_mm2, float), np.asarray(R, int)
+        self.length, self.prior = float(length_mm), float(prior_mm2)
+        self.K_RM = self._kernel(X[self.R])
+        self.g = np.einsum("rm,rm->m", self.K_RM, self.K_RM)
+        self.var = np.full(len(X), self.prior)
+        self.U = np.zeros((0, len(X)))
+
+    def _kernel(self, Xa: np.ndarray) -> np.ndarray:
+        d2 = np.sum(Xa**2, 1)[:, None] + np.sum(self.X**2, 1)[None, :] - 2.0 * Xa @ self.X.T
+        return self.prior * np.exp(-np.maximum(d2, 0.0) / (2.0 * self.length**2))
+
+    def gains(self) -> np.ndarray:
+        """(M,) mean over R of the posterior variance (3 axes, mm^2) removed by observing each candidate."""
+        return 3.0 * np.maximum(self.g, 0.0) / (self.var + self.noise) / len(self.R)
+
+    def add(self, k: int) -> None:
+        c = self._kernel(self.X[k: k + 1])[0] - self.U[:, k] @ self.U
+        u = c / np.sqrt(c[k] + self.noise[k])
+        uR = u[self.R]
+        v = uR @ self.K_RM - (self.U[:, self.R] @ uR) @ self.U
+        self.g += -2.0 * u * v + u**2 * float(uR @ uR)
+        self.var -= u**2
+        self.U = np.vstack([self.U, u])
+
+
+def _farthest_first(X: np.ndarray, n: int) -> np.ndarray:
+    """n rows of X (M, d) chosen farthest-first from the row nearest the centroid, and the fill distance reached."""
+    d = np.linalg.norm(X - X[np.argmin(np.linalg.norm(X - X.mean(0), axis=1))], axis=1)
+    out = [int(np.argmin(d))]
+    for _ in range(n - 1):
+        out.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(X - X[out[-1]], axis=1))
+    return np.array(out), float(d.max())
+
+
+def choose(ctx, n: int, name: str) -> np.ndarray:
+    """Candidate indices (n,) by criterion ``name``: d_spread (``campaign select``), d (pure Bayesian D), i (pool
+    prediction variance), di (D and I as log-ratios), d_cover / i_cover (plus a GP coverage term), kcenter."""
+    crit, H, X, noise = ctx
+    if name == "d_spread":
+        return d_optimal(crit.A, n, crit.spread).chosen
+    if name == "d":
+        return d_optimal(crit.A, n).chosen
+    if name == "kcenter":
+        return _farthest_first(X, n)[0]
+    M, L = crit.A.shape[0], crit.A.shape[2]
+    d = _IDesign(crit.A, H)
+    cov = None
+    if name.endswith("cover"):
+        R = np.arange(M) if M <= 1000 else np.sort(np.random.default_rng(0).choice(M, 1000, replace=False))
+        cov = _Coverage(X, noise, R, _farthest_first(X, n)[1], float(np.mean(noise)))
+    taken = np.zeros(M, bool)
+    for _ in range(n):
+        if name == "i":
+            g = d.i_gains()
+        elif name == "i_cover":
+            g = d.i_gains() + cov.gains()
+        elif name == "di":
+            g = d.gains() / L - np.log(np.maximum(1.0 - d.i_gains() / d.trace, 1e-300))
+        else:                                            # d_cover
+            g = d.gains() + 3.0 * np.log1p(cov.var / cov.noise)
+        k = int(np.argmax(np.where(taken, -np.inf, g)))
+        d.add(k)
+        taken[k] = True
+        if cov is not None:
+            cov.add(k)
+    return np.array(d.chosen, int)
+
+
+METRIC = ["rms_mm"]             # the protocol's score; --metric mean_mm: the same comparison on the mean error
+
+
+def held_out(ds: Dataset, cell) -> float:
+    """Held-out statistic (``METRIC``, mm) of the default calibration of ``ds``."""
+    return float(getattr(calibrate_dataset(ds, cell).report.final.test, METRIC[0]))
+
+
+def crit_of(ds: Dataset, cell):
+    """The criterion ``campaign select`` builds on the calibration rows (registered nominal model), the pool's
+    H (L, L), the coverage coordinates (M, n) mm and the per-row noise (M,) mm^2."""
+    cal = np.flatnonzero(ds.mask("calib"))
+    q = np.radians(ds.q_deg[cal])
+    kin = register(cell.kinematics, q, ds.p_tracker_mm[cal])
+    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else float(cell.payload_kg or 0.0)
+    cov = cell.weights(ds)[0][cal]
+    crit = criterion(kin, q, cov, payload)
+    J, _, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), payload)}, criterion_effects(kin, q, payload))
+    B = J * prior
+    theta = [c for c, _, k in ParamLayout.of(kin).joint_cols if k == 0]
+    lever = np.sqrt(np.mean(np.sum(J[:, :, theta] ** 2, axis=1), axis=0))       # mm/rad per joint
+    return crit, np.einsum("nip,niq->pq", B, B) / len(q), q * lever, np.trace(cov, axis1=1, axis2=2) / 3.0
+
+
+def sim_dataset(tmp: Path, name: str, seed: int):
+    cfg_name, effects = FORMS[name]
+    d = yaml.safe_load((ROOT / "configs" / cfg_name).read_text())
+    d.setdefault("simulation", {}).update(seed=seed, effects=effects)
+    path = tmp / f"{cfg_name}-{seed}.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    cell = load_cell(path)
+    plan = build_plan(cell)
+    cal = [p for p in plan.points if p.set == "calib"]
+    test = sorted((p for p in plan.points if p.set == "test"), key=lambda p: p.point_id)
+    sim = simulated_cell(cell)
+    q_cal, q_test = np.radians([p.q_deg for p in cal]), np.radians([p.q_deg for p in test])
+    p_cal, _ = sim.measure(q_cal, np.random.default_rng(seed))
+    p_test, _ = sim.measure(q_test, np.random.default_rng(10_000 + seed))
+    ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
+                 ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
+                 np.vstack([p_cal, p_test]), source="bench")
+    return ds, cell
+
+
+def ur5_dataset(tmp: Path):
+    from campaign.data.importers import import_target_dif
+    return (import_target_dif(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv",
+                              UR5 / "3D_UR5_uncalibrated_random_cleaned.csv"), load_cell(ROOT / "configs/ur5.yaml"))
+
+
+def evaluate(ds: Dataset, cell, n: int | None, criteria) -> dict[str, float]:
+    """Held-out RMS ratio to all rows per criterion, plus 'random' (median of N_RANDOM) and 'all' (mm)."""
+    cal = np.flatnonzero(ds.mask("calib"))
+    ctx = crit_of(ds, cell)
+    if n is None:
+        n = max(round(len(cal) / 3), math.ceil(1.2 * ctx[0].identifiable))
+    everything = held_out(ds, cell)
+    out = {"all_mm": everything, "n": n, "M": len(cal)}
+
+    def subset(idx):
+        keep = ~ds.mask("calib")
+        keep[cal[np.asarray(idx, int)]] = True
+        return held_out(ds.subset(keep), cell) / everything
+    for c in criteria:
+        out[c] = subset(choose(ctx, n, c))
+    out["random"] = float(np.median([subset(np.random.default_rng(s).choice(len(cal), n, replace=False))
+                                     for s in range(N_RANDOM)]))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--criteria", nargs="+", default=list(CRITERIA))
+    ap.add_argument("--forms", nargs="+", default=["ur5-real", *FORMS])
+    ap.add_argument("--metric", choices=("rms_mm", "mean_mm"), default="rms_mm",
+                    help="held-out statistic compared (the protocol: rms_mm)")
+    args = ap.parse_args()
+    METRIC[0] = args.metric
+    cols = [*args.criteria, "random"]
+    table: dict[str, list[dict]] = {}
+    print(f"held-out {args.metric} of the chosen subset / that of all rows (default process), per data set")
+    print(f"{'form':26s}{'seed':>5s}{'n/M':>10s}{'all mm':>8s}" + "".join(f"{c:>10s}" for c in cols), flush=True)
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        for form in args.forms:
+            runs = [(0, *ur5_dataset(tmp), 100)] if form == "ur5-real" else \
+                [(s, *sim_dataset(tmp, form, s), None) for s in args.seeds]
+            for seed, ds, cell, n in runs:
+                r = evaluate(ds, cell, n, args.criteria)
+                table.setdefault(form, []).append(r)
+                print(f"{form:26s}{seed:5d}{r['n']:>5d}/{r['M']:<4d}{r['all_mm']:8.4f}"
+                      + "".join(f"{r[c]:10.3f}" for c in cols), flush=True)
+    print("\nmean ratio per form (over seeds), and over forms")
+    means = {f: {c: float(np.mean([r[c] for r in rs])) for c in cols} for f, rs in table.items()}
+    for f, m in means.items():
+        print(f"{f:26s}{'':23s}" + "".join(f"{m[c]:10.3f}" for c in cols))
+    overall = {c: float(np.mean([m[c] for m in means.values()])) for c in cols}
+    print(f"{'MEAN OVER FORMS':26s}{'':23s}" + "".join(f"{overall[c]:10.3f}" for c in cols))
+    best = min(args.criteria, key=overall.get)
+    keep = "d_spread" in overall and overall["d_spread"] <= 1.01 * overall[best]
+    print(f"best: {best} ({overall[best]:.3f}); chosen by the protocol: {'d_spread' if keep else best}")
+
+
+if __name__ == "__main__":
+    main()
