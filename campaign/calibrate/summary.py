@@ -232,6 +232,6 @@ def _residual_reason(report) -> str:
     if m is not None and m.residual_config not in (None, "auto"):
         return f"configured (calibration.residual: {m.residual_config})"
     if ch is not None and ch.candidates:
-        return (f"{ch.folds}-fold cross-validation on the calibration points chose {ch.chosen} among "
-                f"{', '.join(ch.candidates)}")
+        return (f"chosen by {ch.folds}-fold cross-validation on the calibration points among "
+                f"{', '.join(ch.candidates)} (a layer is kept only when it beats none significantly)")
     return "no candidate layer"

@@ -63,7 +63,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if result.iso9283 is not None:                     # plan.kind: iso9283
         from campaign.report.terminal import render_iso
         render_iso(out, result.iso9283)
-        out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
+        out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html, report_figures/ (PNG)",
+                  markup=False)
         return EXIT_OK
     _print_calibration(out, result.processed.report)
     out.print(f"run directory {result.run_dir}: " + ", ".join(run_files(result.processed.report)), markup=False)
