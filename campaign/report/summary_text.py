@@ -37,7 +37,7 @@ def model_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
     if m.hayati_joints:
         conv += text(", Hayati beta on ") + text(", ").join(
             text("J") + num(f"model.hayati_joints.{i}", "count") for i in range(len(m.hayati_joints)))
-    params = (num("model.n_identified", "count") + text(" parameters identified (")
+    params = (num("model.n_identified", "count") + text(" kinematic parameters identified (")
               + num("model.n_fixed", "count") + text(" fixed at nominal)"))
     if m.effects:
         effects = text("effects ") + text("; ").join(
