@@ -36,6 +36,7 @@ from campaign.run.session import (RunProgress, continue_clock, default_run_dir, 
                                   unique_path)
 from campaign.run.traceability import (check_identity, device_identity, identification, identity_changes, run_logging,
                                        software_version)
+from drivers.base import SystemClock
 from robocal.iso9283 import POSE_NAMES
 from robocal.model import CalibratedModel
 
@@ -92,7 +93,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
-        eta = RunEta(times[0][left], times[1][left])
+        eta = RunEta(times[0][left], times[1][left], simulated=not isinstance(clock, SystemClock))
         predictor = runner.predict_p_tracker_mm
         observe_points(predictor, log.contents.records() if log.contents else ())     # resumed: the points so far
         with RunProgress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
@@ -132,6 +133,7 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
     claim taken once the model exists); ``contents``: the log it came from (hardware identification)."""
     from campaign.calibrate.stages import calibrate_dataset
     from campaign.calibrate.outputs import write_outputs     # the numerics load when calibrating, not at every start-up
+    from campaign.calibrate.summary import summarize
     processed = calibrate_dataset(dataset, cell)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
@@ -140,6 +142,8 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
         stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+    processed = replace(processed, report=replace(processed.report,
+                                                  summary=summarize(processed.report, cell.config.acceptance)))
     if isinstance(out_dir, Claim):
         out_dir = out_dir.take()
     write_outputs(processed, out_dir)

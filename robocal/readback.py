@@ -76,5 +76,6 @@ def prefer_commanded(s: ReadbackStats, encoder_noise_deg: float = ENCODER_NOISE_
         j = int(big[np.argmax(s.rms_deg[big])])
         return True, (f"read-back - command RMS {s.rms_deg[j]:.4f} deg on J{j + 1} is more than 3 x the encoder "
                       f"noise ({encoder_noise_deg:g} deg)")
-    return False, (f"read-back equals command within the encoder noise (max RMS {float(s.rms_deg.max()):.2e} deg, "
-                   f"no correlation with the last move)")
+    return False, (f"read-back equals command within the encoder noise (read-back - command RMS at most "
+                   f"{float(s.rms_deg.max()):.4f} deg on every joint, encoder noise {encoder_noise_deg:g} deg; "
+                   "no correlation with the last move)")

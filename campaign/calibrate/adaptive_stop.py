@@ -28,6 +28,7 @@ from robocal.kinematics import ParamLayout, identification_jacobian, smr_tracker
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.log_dataset import dataset_from_log
+from campaign.io.quantities import floor_mm
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_reader import LogContents, read_log
 
@@ -208,8 +209,8 @@ class AdaptivePasses:
             return False
         self.log.append_event(check.to_event())
         self.checked.add(n)
-        logger.info("stop check after %d calibration points: predicted held-out RMS %.4f mm (floor %.4f mm); %s: %s",
-                    n, check.predicted_rms_mm, check.floor_mm, check.decision, check.reason)
+        logger.info("stop check after %d calibration points: predicted held-out RMS %.4f mm (floor %s mm); %s: %s",
+                    n, check.predicted_rms_mm, floor_mm(check.floor_mm), check.decision, check.reason)
         self.stopped = check.decision == "stop"
         return self.stopped
 

@@ -11,6 +11,7 @@ from campaign.io.json_fields import (RecordError, get_field, json_value, list_fi
 from robocal.identify import Unidentifiable
 
 from .plausibility import Plausibility
+from .summary import Summary
 from .report_sections import (EffectsReport, ExcludedPoint, MethodChoice, MultiSmrReport, ParameterRow,
                               ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary,
                               unidentifiable_from_dict)
@@ -31,7 +32,9 @@ STAGES = (Stage(NOMINAL, "nominal (uncompensated)", "nominal"),
           Stage(COMPENSATED, "final model (+ residual layer, if any)", "final model"))
 """Seed 000 Table 3's stages in report order (``elastic`` only when physical effects were taken)."""
 
-IDENTIFICATION_KEYS = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check")
+IDENTIFICATION_KEYS = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check",
+                       "config_sha256", "plan_sha256", "started_utc", "finished_utc", "measuring_s",
+                       "simulated_devices")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
@@ -46,7 +49,9 @@ class CalibrationReport:
     ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
     with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (JSON of
     ``report_points``, for the HTML figures); the hardware ``identification`` of the run log (robot/tracker
-    identity, driver and software versions) when processed from a log.
+    identity, driver and software versions, config and plan hashes, start and end, simulated devices) when
+    processed from a log; the ``summary`` (verdict, one-line model: ``campaign.calibrate.summary``) of a report
+    a command wrote.
     """
 
     format: str
@@ -80,6 +85,7 @@ class CalibrationReport:
     cell: Any = None
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
+    summary: Summary | None = None
 
     @property
     def final(self) -> StageResult | None:
@@ -95,6 +101,8 @@ class CalibrationReport:
             out["stop"] = self.stop.to_dict()
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
+        if self.summary is not None:
+            out["summary"] = self.summary.to_dict()
         return out
 
     def with_identification(self, ident: Mapping) -> "CalibrationReport":
@@ -124,7 +132,8 @@ class CalibrationReport:
             record_field(data, "residual_cv", ResidualCV.from_dict, True), object_field(data, "preparation", True),
             record_field(data, "multi_smr", MultiSmrReport.from_dict, True),
             record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
-            tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data))
+            tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
+            record_field(data, "summary", Summary.from_dict, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]

@@ -25,6 +25,22 @@ def write_outputs(processed: Calibrated, out_dir: str | Path) -> Path:
     return out / "report.json"
 
 
+RUN_FILES = ("log.jsonl", "data.csv (interchange)")
+"""What a run writes before the calibration's outputs (the config copy, plan.csv and campaign.log aside)."""
+
+
+def output_files(report) -> list[str]:
+    """The files a calibration writes into its directory (report.html and its figures by ``write_report``)."""
+    ref = report.points
+    side = [ref["file"]] if isinstance(ref, dict) and "file" in ref else []
+    return ["report.json", "model.json", *side, "report.html", "report_figures/ (PNG)"]
+
+
+def run_files(report) -> list[str]:
+    """The files of a finished calibration run, the log first."""
+    return [*RUN_FILES, *output_files(report)]
+
+
 def load_model(path: str | Path) -> CalibratedModel:
     """Read a model.json written by write_outputs."""
     try:

@@ -384,7 +384,7 @@ def plausibility_lines(plaus: Plausibility | None) -> list[tuple[str, str]]:
     scale = plaus.scale
     unit = f"xyz unit: {plaus.unit}" + (f" (scale {scale:.3f} of the nominal model)" if scale else "")
     if plaus.nominal_rms_mm is not None:
-        unit += (f"; nominal RMS after registration {plaus.nominal_rms_mm:.3f} mm "
+        unit += (f"; nominal RMS after registration {plaus.nominal_rms_mm:.3f} mm on the calibration points "
                  f"(plausible below {plaus.bound_mm:.0f} mm)")
     return ([(unit, "")] + [(note, "yellow") for note in plaus.notes]
             + [(f"OVERRIDDEN with --force: {what}", "bold red") for what in plaus.overridden])

@@ -49,8 +49,8 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("run", "measure the plan on the cell's robot and tracker, then calibrate and report", _run_arguments)
 def cmd_run(args: argparse.Namespace) -> int:
+    from campaign.calibrate.outputs import run_files
     from campaign.workflows import run_campaign
-    from campaign.report.terminal import render_parameters, render_stages, render_stop
 
     cell = load_cell(args.config)
     out = _stdout()
@@ -64,15 +64,24 @@ def cmd_run(args: argparse.Namespace) -> int:
     if result.iso9283 is not None:                     # plan.kind: iso9283
         from campaign.report.terminal import render_iso
         render_iso(out, result.iso9283)
-        out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
+        out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html, report_figures/ (PNG)",
+                  markup=False)
         return EXIT_OK
-    render_stages(out, result.processed.report)
-    render_parameters(out, result.processed.report)
-    render_stop(out, result.processed.report)
-    print_plausibility(out, result.processed.report.plausibility)
-    out.print(f"run directory {result.run_dir}: log.jsonl, data.csv (interchange), report.json, model.json",
-              markup=False)
+    _print_calibration(out, result.processed.report)
+    out.print(f"run directory {result.run_dir}: " + ", ".join(run_files(result.processed.report)), markup=False)
     return EXIT_OK
+
+
+def _print_calibration(out: Console, report) -> None:
+    """The calibration's tables and lines, then its summary (model, held-out figures, verdict) last."""
+    from campaign.report.summary_text import render_summary
+    from campaign.report.terminal import render_parameters, render_stages, render_stop
+
+    render_stages(out, report)
+    render_parameters(out, report)
+    render_stop(out, report)
+    print_plausibility(out, report.plausibility)
+    render_summary(out, report.summary)
 
 
 def _plan_arguments(parser: argparse.ArgumentParser) -> None:
@@ -118,8 +127,8 @@ def _reprocess_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("reprocess", "calibrate and report offline from a run directory or an interchange CSV", _reprocess_arguments)
 def cmd_reprocess(args: argparse.Namespace) -> int:
+    from campaign.calibrate.outputs import output_files
     from campaign.workflows import reprocess
-    from campaign.report.terminal import render_parameters, render_stages, render_stop
 
     cell = load_cell(args.config)
     if not args.source.exists():
@@ -127,11 +136,8 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     with forced(args.force):
         processed = reprocess(args.source, cell, args.out, args.overwrite)
     out = _stdout()
-    render_stages(out, processed.report)
-    render_parameters(out, processed.report)
-    render_stop(out, processed.report)
-    print_plausibility(out, processed.report.plausibility)
-    out.print(f"wrote {args.out}/report.json and {args.out}/model.json", markup=False)
+    _print_calibration(out, processed.report)
+    out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
     return EXIT_OK
 
 

@@ -26,8 +26,9 @@ import yaml
 from campaign.config.bounded_yaml import load_limited, read_limited
 from campaign.config.reader import _Reader, _describe, _fmt, _keys
 from campaign.config.plan_schema import PlanConfig
-from campaign.config.schema import (CalibrationConfig, CampaignConfig, CorrectionConfig, JointConfig, MeasurementConfig,
-                                    OutputConfig, RobotConfig, SimulationConfig, ToolConfig, TrackerConfig)
+from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CampaignConfig, CorrectionConfig,
+                                    JointConfig, MeasurementConfig, OutputConfig, RobotConfig, SimulationConfig,
+                                    ToolConfig, TrackerConfig)
 from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, _NAME_RE
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
@@ -35,7 +36,7 @@ from robocal.noise import TrackerUncertainty
 
 from .cell_model import CellModel
 from .checks import check_config, check_joint_count, check_numerics
-from .sections import _calibration, _correction, _output, _plan, _simulation
+from .sections import _acceptance, _calibration, _correction, _output, _plan, _simulation
 
 
 __all__ = ["load_cell", "load_config", "parse_config"]
@@ -148,6 +149,7 @@ def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
         output=_output(r.section("output", OutputConfig, required=False)),
         source_path=r.file,
         sha256=sha256,
+        acceptance=_acceptance(r.section("acceptance", AcceptanceConfig, required=False)),
     )
 
 

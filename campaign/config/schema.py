@@ -283,13 +283,28 @@ class OutputConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class AcceptanceConfig:
+    """Optional pass/fail criterion on the final model's held-out test set (mm): ``max_rms_mm`` bounds its RMS,
+    ``max_mm`` its largest error; either may be omitted, and without the section no verdict is given."""
+
+    max_rms_mm: float | None = None
+    max_mm: float | None = None
+
+    @property
+    def configured(self) -> bool:
+        return self.max_rms_mm is not None or self.max_mm is not None
+
+
+@dataclass(frozen=True, slots=True)
 class CampaignConfig:
     """A whole campaign file.
 
     ``name`` is used in run directory names (letters, digits, ``_ . -``).
     ``source_path`` is the path the file was loaded from, as given;
     ``sha256`` is the hex digest of the file bytes (detects a changed config
-    on resume). ``calibration``, ``simulation`` and ``output`` are optional.
+    on resume). ``calibration``, ``simulation``, ``output`` and ``acceptance`` are optional;
+    ``acceptance: {max_rms_mm, max_mm}`` is the pass/fail criterion of the held-out test set (mm,
+    :class:`AcceptanceConfig`; absent: "no acceptance criterion configured").
     """
 
     name: str
@@ -303,6 +318,7 @@ class CampaignConfig:
     output: OutputConfig
     source_path: str
     sha256: str
+    acceptance: AcceptanceConfig = AcceptanceConfig()
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict (tuples become lists, mappings dicts)."""

@@ -1,4 +1,4 @@
-"""Readers of the plan, calibration, correction, simulation and output sections of a config file."""
+"""Readers of the plan, calibration, correction, simulation, output and acceptance sections of a config file."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -8,8 +8,9 @@ from campaign.config.plan_section import optimal_keys
 from campaign.config.reader import _ListPath, _Reader, _describe, _fmt
 from campaign.config.plan_schema import (BoxConfig, CheckPosesConfig, GridConfig, Iso9283Config, NestConfig,
                                          NestsConfig, PlanConfig, TestSetConfig)
-from campaign.config.schema import (CalibrationConfig, CorrectionConfig, EffectSpec, FaultsConfig, JointConfig,
-                                    OutputConfig, RobotConfig, SimulationConfig, ToolConfig, TrackerConfig)
+from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CorrectionConfig, EffectSpec, FaultsConfig,
+                                    JointConfig, OutputConfig, RobotConfig, SimulationConfig, ToolConfig,
+                                    TrackerConfig)
 from campaign.config.values import (CALIBRATION_METHODS, CORRECTION_GENERATORS, ERROR_FUNCTIONS, JOINT_SETS,
                                     OUTLIER_SCREENS, PLAN_ORDERS, RESIDUAL_MODELS, Vec3, WEIGHT_FUNCTIONS, _NAME_RE,
                                     _ORTHONORMAL_TOL)
@@ -263,3 +264,9 @@ def _faults(r: _Reader) -> FaultsConfig:
 
 def _output(r: _Reader) -> OutputConfig:
     return OutputConfig(dir=r.string("dir", "runs"))
+
+
+def _acceptance(r: _Reader) -> AcceptanceConfig:
+    """Each bound optional (absent or null: not checked)."""
+    return AcceptanceConfig(*(None if r.data.get(k) is None else r.number(k, positive=True)
+                              for k in ("max_rms_mm", "max_mm")))

@@ -8,6 +8,8 @@ import numpy as np
 
 from campaign.run.output_dirs import Claim
 
+from campaign.io.quantities import floor_mm
+
 
 PLOTS_MISSING = "matplotlib is not importable: no plots (it is a dependency: reinstall the package)"
 
@@ -52,9 +54,9 @@ def plot_floor(report: dict) -> tuple[float, str, float | None]:
     floor = report["noise_floor_mm"]
     over = any("floor is overestimated" in n for n in report.get("notes", []))
     if over and report.get("noise_floor_specs_mm"):
-        return (report["noise_floor_specs_mm"], f"noise floor (specs) {report['noise_floor_specs_mm']:.3f} mm",
+        return (report["noise_floor_specs_mm"], f"noise floor (specs) {floor_mm(report['noise_floor_specs_mm'])} mm",
                 floor)
-    return floor, f"noise floor ({report['noise_floor_source']}) {floor:.3f} mm", None
+    return floor, f"noise floor ({report['noise_floor_source']}) {floor_mm(floor)} mm", None
 
 
 def _floor_lines(ax, report, vertical=False):

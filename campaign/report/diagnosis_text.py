@@ -9,6 +9,8 @@ from campaign.io.terminal_text import clean, keep_words, print_notes
 from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 
+from campaign.io.quantities import floor_mm
+
 
 # ============================================================================ terminal
 def _mm(v) -> str:
@@ -63,8 +65,9 @@ def render(console: Console, report: dict) -> None:
     console.print(Text.assemble(("Sim-to-real gap", "bold"), clean(
         f" of {report['source']} ({n['calib']} calib, {n['test']} test, {n['check']} check rows; config "
         f"{report['config']})")))
-    console.print(f"noise floor {_mm(floor)} mm from {report['noise_floor_source']} (specs "
-                  f"{_mm(report['noise_floor_specs_mm'])} mm); geometric model {_mm(report['baseline_test_rms_mm'])} mm "
+    console.print(f"noise floor {floor_mm(floor)} mm from {report['noise_floor_source']} (specs "
+                  f"{floor_mm(report['noise_floor_specs_mm'])} mm); geometric model "
+                  f"{_mm(report['baseline_test_rms_mm'])} mm "
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
     render_preparation(console, report.get("preparation"))     # read-back lag -> joint set; nest drift
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")

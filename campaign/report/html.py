@@ -33,6 +33,10 @@ from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
+from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
+from campaign.io.quantities import FLOOR_FMT, condition_scale
+from .summary_text import FORMATS, banner, held_out_line, model_line, origin, reason_lines, verdict_line
+
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
 
 
@@ -158,13 +162,34 @@ def diagnosis_figures(report: dict) -> list:
         return [Figure(p.stem, titles.get(p.stem, p.stem), "From the diagnosis.", p.read_bytes()) for p in paths]
 
 
-def render_html(src: ReportSources, figures: dict[str, list]) -> str:
+HTML_FORMATS = {**FORMATS, "mm": ".4f"}
+"""The summary's formats in HTML: mm figures as in the page's Table 3."""
+
+
+def summary_markup(report: CalibrationReport | None, num) -> dict | None:
+    """The summary's lines (``campaign.report.summary_text``) as HTML, every number tagged with its
+    ``summary.*`` key of report.json; None without a summary."""
+    s = None if report is None else report.summary
+    if s is None:
+        return None
+    def n(key: str, kind: str) -> Markup:
+        return num("calibration", f"summary.{key}", HTML_FORMATS[kind])
+    t = Markup.escape
+    return {"banner": banner(s), "origin": origin(s), "model": model_line(s, n, t), "reasons": reason_lines(s, t),
+            "held_out": held_out_line(s, n, t), "verdict": verdict_line(s, n, t), "result": s.verdict.result}
+
+
+def render_html(src: ReportSources, figures: dict[str, list], figures_name: str = "report_figures") -> str:
     env = Environment(loader=PackageLoader("campaign.report", "templates"), autoescape=select_autoescape(["html", "j2"]),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
+    num = _num_factory(src.docs())
+    ident = dict(src.calibration.identification) if src.calibration else {}
     return env.get_template("report.html.j2").render(
-        src=src, figures=figures, b64=b64, num=_num_factory(src.docs()), stages=STAGES,
-        n_figures=sum(len(v) for v in figures.values()))
+        src=src, figures=figures, b64=b64, num=num, stages=STAGES, floor_fmt=FLOOR_FMT, ident=ident,
+        summary=summary_markup(src.calibration, num), figures_name=figures_name, glossary=GLOSSARY,
+        uncorrected_vs_nominal=UNCORRECTED_VS_NOMINAL,
+        condition=condition_scale, n_figures=sum(len(v) for v in figures.values()))
 
 
 def figures_dir(html: Path) -> Path:
@@ -201,5 +226,5 @@ def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = N
     for fs in figures.values():
         for f in fs:
             atomic_write(png_dir / f"{f.name}.png", f.png)
-    atomic_write(html, redact(render_html(src, figures)).encode())
+    atomic_write(html, redact(render_html(src, figures, png_dir.name)).encode())
     return html

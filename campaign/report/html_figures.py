@@ -16,6 +16,8 @@ from campaign.calibrate.calibration_report import COMPENSATED, KINEMATIC, NOMINA
 from campaign.calibrate.report_points import PointTable
 from campaign.correct.verify_report import VerifyReport
 
+from campaign.io.quantities import floor_mm
+
 COLORS = {NOMINAL: "tab:red", KINEMATIC: "tab:blue", COMPENSATED: "tab:green"}     # the stages drawn
 DRAWN = tuple((s.name, s.short) for s in STAGES if s.name in COLORS)
 _SHORT = dict(DRAWN)
@@ -120,7 +122,7 @@ def histogram_figure(report: CalibrationReport, points: PointTable | None) -> Fi
     for ax, (key, label) in zip(axes, stages):
         e = err[key]
         ax.hist(e[np.isfinite(e)], bins=20, color=COLORS[key], alpha=0.8)
-        ax.axvline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor:.3f} mm")
+        ax.axvline(floor, color="k", ls="--", lw=1, label=f"noise floor {floor_mm(floor)} mm")
         ax.set_title(label)
         ax.set_xlabel("|error| on test points (mm)")
         ax.set_ylabel("points")

@@ -12,6 +12,9 @@ from campaign.correct.verify_report import VerifyReport
 from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
 
+from .glossary import UNCORRECTED_VS_NOMINAL
+from campaign.io.quantities import condition_scale, floor_mm
+
 
 def _mm(v) -> str:
     return "-" if v is None else f"{v:.3f}"
@@ -45,8 +48,9 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                       f"points, RMS {cv.rms_without_mm:.4f} -> {cv.rms_with_mm:.4f} mm "
                       f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
-    console.print(f"noise floor {_mm(floor)} mm (from {report.noise_floor_source}; specs "
-                  f"{_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f}   "
+    console.print(f"noise floor {floor_mm(floor)} mm (from {report.noise_floor_source}; specs "
+                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f} "
+                  f"({condition_scale(report.condition_number)}: good <= 100, fair <= 10000)   "
                   f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
     render_identity(console, report)
 
@@ -56,7 +60,7 @@ def layer_line(lay: LayerSummary) -> str:
     gp = ""
     if lay.approximation is not None:
         how = "exact GP" if lay.approximation == "exact" else f"inducing-point GP, {lay.n_inducing} inputs"
-        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {_mm(lay.noise_floor_mm)} mm)"
+        gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {floor_mm(lay.noise_floor_mm)} mm)"
     return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
             f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "
             f"({lay.folds}-fold), test set {_mm(lay.test_rms_mm)} mm")
@@ -101,7 +105,7 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
             if t["taken"]:
                 tried[t["effect"]] = t
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
-        console.print(f"physical effects ({len(tried)} tried, CV RMS mm; geometry alone "
+        console.print(f"physical effects ({len(tried)} tried; CV RMS on the calibration points, mm; geometry alone "
                       f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
     for fe in () if effects is None else effects.fitted:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
@@ -183,7 +187,7 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
     held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
     console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
                   f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
-                  f"{fc.floor_mm:.4f} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
+                  f"{floor_mm(fc.floor_mm)} mm; expected held-out RMS {held:.4f} mm if the model is complete", markup=False)
     if blocks:
         console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
 
@@ -206,7 +210,7 @@ def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
 def render_verify(console: Console, rep: VerifyReport) -> None:
     """verify.json's passes: corrected and held points, figures over all and over corrected points (mm)."""
     floor = rep.noise_floor_mm
-    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor {floor:.3f} mm)")
+    t = Table(title=f"Verification on {rep.n} test points, mm (noise floor from the specs {floor_mm(floor)} mm)")
     for col in ("stage", "corrected", "held", "RMS all", "RMS corr.", "max corr.", "RMS corr. / floor"):
         t.add_column(col, justify="left" if col == "stage" else "right")
     fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
@@ -217,6 +221,7 @@ def render_verify(console: Console, rep: VerifyReport) -> None:
     console.print(keep_words(t, console.width))
     console.print("corrected (corr.) = points whose correction was commanded; held = commanded at their planned "
                   "joints", markup=False)
+    console.print(UNCORRECTED_VS_NOMINAL, markup=False)
     for p in rep.passes:
         for why, count in p.held.items():
             console.print(f"{p.stage}: {count} held: {why}", markup=False)
@@ -272,7 +277,7 @@ def render_iso(console, report: dict) -> None:
                       f"{d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, RD +-{d['rd_mm']:.4f} mm; "
                       + rp_verdict(run, report.get("repeatability_spec_mm")), highlight=False,
                       style=None if run.get("rp_within_spec") is not False else "yellow")
-    console.print(f"frame: {report['frame']}; noise floor {report['noise_floor_mm']:.4f} mm (tracker and robot "
+    console.print(f"frame: {report['frame']}; noise floor {floor_mm(report['noise_floor_mm'])} mm (tracker and robot "
                   "repeatability; the measured RP includes the tracker's noise)", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)

@@ -63,9 +63,12 @@ def estimate_duration_s(points: Sequence[PlanPoint], cell: CellModel) -> float:
 
 class RunEta:
     """Remaining time of a run: predicted move and reading times, each scaled by its measured / predicted ratio
-    over the points done so far (``t_start_s`` -> ``t_measure_s`` -> ``t_end_s`` of the log records)."""
+    over the points done so far (``t_start_s`` -> ``t_measure_s`` -> ``t_end_s`` of the log records);
+    ``simulated``: the cell's clock is a mock cell's (the text says so)."""
 
-    def __init__(self, predicted_move_s: np.ndarray, predicted_read_s: np.ndarray | None = None) -> None:
+    def __init__(self, predicted_move_s: np.ndarray, predicted_read_s: np.ndarray | None = None,
+                 simulated: bool = False) -> None:
+        self.simulated = simulated              # a mock cell: the times are its simulated clock's
         self.move = np.asarray(predicted_move_s, float)
         self.read = np.zeros_like(self.move) if predicted_read_s is None else np.asarray(predicted_read_s, float)
         self.done = 0
@@ -97,5 +100,6 @@ class RunEta:
         return float(k_move * self.move[self.done:].sum() + k_read * self.read[self.done:].sum())
 
     def text(self) -> str:
+        """``ETA h:mm:ss``, labelled ``(simulated time)`` on a mock cell."""
         s = int(round(self.remaining_s()))
-        return f"ETA {s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+        return f"ETA {s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" + (" (simulated time)" if self.simulated else "")

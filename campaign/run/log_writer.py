@@ -3,6 +3,7 @@ is atomic and a resume cuts a torn tail (the format: ``campaign.run.log_reader``
 from __future__ import annotations
 
 from contextlib import contextmanager
+from datetime import datetime, timezone
 try:  # POSIX advisory locking; absent on Windows.
     import fcntl
 except ImportError:  # pragma: no cover - non-POSIX
@@ -238,7 +239,7 @@ class RunLog:
         """Write the ``stop`` record and close the file; idempotent.
 
         ``exit_status`` is one of ``success``, ``abort``, ``fail``, ``paused``;
-        ``n_points`` counts every point record in the log.
+        ``n_points`` counts every point record in the log; ``closed_utc`` is the wall-clock time (ISO 8601, UTC).
         """
         if exit_status not in EXIT_STATUSES:
             raise ValueError(f"exit_status must be one of {EXIT_STATUSES}, got {exit_status!r}")
@@ -246,7 +247,8 @@ class RunLog:
             return
         try:
             if not self._broken:
-                stop = {"exit_status": exit_status, "reason": str(reason), "n_points": self._n_points}
+                stop = {"exit_status": exit_status, "reason": str(reason), "n_points": self._n_points,
+                        "closed_utc": datetime.now(timezone.utc).isoformat()}
                 self._append("stop", stop)
         finally:
             self._release()

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Iterator, Mapping, Sequence
+from urllib.parse import urlsplit
 
 from drivers.base import DriverError, TrackerReading
 
@@ -150,10 +151,26 @@ def run_logging(console=None) -> Iterator[RunLogging]:
 
 
 def identification(contents) -> dict:
-    """The identification fields of a run log's start record (for report.json)."""
+    """What identifies a run log's measurement (for report.json): the start record's hardware identity, versions,
+    identity check and config/plan hashes; ``started_utc`` / ``finished_utc`` (start record, last stop record);
+    ``measuring_s``, first move to last reading on the cell's clock (simulated time on a mock cell); and
+    ``simulated_devices``, the roles ("robot", "tracker") whose driver URL is ``mock://``."""
     start = contents.start
-    return {k: start[k] for k in ("robot_identity", "tracker_identity", "driver_versions", "software_version",
-                                  "identity_check") if k in start}
+    out = {k: start[k] for k in ("robot_identity", "tracker_identity", "driver_versions", "software_version",
+                                 "identity_check", "config_sha256", "plan_sha256") if k in start}
+    out["started_utc"] = start.get("created_utc")
+    out["finished_utc"] = next((s["closed_utc"] for s in reversed(contents.stops) if "closed_utc" in s), None)
+    t0 = [p["t_start_s"] for p in contents.points if isinstance(p.get("t_start_s"), (int, float))]
+    t1 = [p["t_end_s"] for p in contents.points if isinstance(p.get("t_end_s"), (int, float))]
+    out["measuring_s"] = float(max(t1) - min(t0)) if t0 and t1 else None
+    out["simulated_devices"] = simulated_devices(start.get("config") or {})
+    return out
+
+
+def simulated_devices(config: Mapping) -> list[str]:
+    """The roles ("robot", "tracker") of a config dict whose driver URL is a simulation (``mock://``)."""
+    return [role for role in ("robot", "tracker")
+            if urlsplit(str((config.get(role) or {}).get("url", ""))).scheme == "mock"]
 
 
 def identity_changes(start: dict, now: dict) -> list[str]:

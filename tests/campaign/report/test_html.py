@@ -56,7 +56,7 @@ def check_page(run_dir: Path, tmp_path: Path, name: str):
 @pytest.fixture(scope="module")
 def mock_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("report")
-    cfg = small_config(tmp)
+    cfg = small_config(tmp, acceptance={"max_rms_mm": 0.1, "max_mm": 0.3})
     assert main(["run", str(cfg), "--out", str(tmp / "run")]) == 0
     assert main(["verify", str(tmp / "run")]) == 0                 # rewrites report.html with the verify passes
     return tmp / "run", cfg
@@ -85,12 +85,91 @@ def test_mock_run_report_in_headless_chromium(mock_run, tmp_path):
     assert page.figures >= 6 and "seed 000 Table 3" in page.text and "Closed-loop verification" in page.text
 
 
+def _strings(node) -> list[str]:
+    """Every string value of a JSON document, longest first."""
+    if isinstance(node, str):
+        return [node]
+    items = node.values() if isinstance(node, dict) else node if isinstance(node, list) else ()
+    return sorted((t for v in items for t in _strings(v)), key=len, reverse=True)
+
+
 @pytest.mark.system
 @needs_browser
-def test_diagnosis_with_an_effect_in_headless_chromium(tmp_path):
+def test_summary_first_and_traceability_in_headless_chromium(mock_run, tmp_path):
+    """The summary is the first section: SIMULATED banner, the model in one line, the held-out figures and the
+    verdict, every number in it tagged with its report.json key and equal to it (the untagged text holds no digit
+    that is not one of the summary's own strings); the traceability section shows the serials and a sign-off."""
+    run_dir, _ = mock_run
+    doc = json.loads((run_dir / "report.json").read_text())
+    summary = doc["summary"]
+    with Chromium(tmp_path / "profile") as browser:
+        page = browser.load((run_dir / "report.html").resolve().as_uri())
+        sections = browser.evaluate("[...document.querySelectorAll('section')].map(s => s.id)")
+        got = browser.evaluate("""(() => { const s = document.querySelector('section#summary');
+            const bare = s.cloneNode(true); bare.querySelectorAll('[data-key]').forEach(e => e.remove());
+            return {text: s.innerText, bare: bare.textContent, model: document.querySelectorAll('#summary-model').length,
+                    banner: (document.querySelector('#simulated-banner') || {}).innerText || '',
+                    keys: [...s.querySelectorAll('[data-key]')].map(e => e.dataset.key),
+                    trace: document.querySelector('section#traceability').innerText}; })()""")
+    assert page.errors == [] and check_numbers(page, run_dir) > 0
+    assert sections[0] == "summary" and "traceability" in sections and sections[-1] == "glossary"
+    assert got["banner"].startswith("SIMULATED") and summary["simulated_devices"] == ["robot", "tracker"]
+    assert got["model"] == 1 and "parameters identified" in got["text"] and "residual layer" in got["text"]
+    assert "verdict: PASS" in got["text"] and summary["verdict"]["result"] == "pass"
+    assert {"summary.held_out.mean_mm", "summary.held_out.rms_mm", "summary.held_out.max_mm",
+            "summary.rms_over_floor", "summary.noise_floor_mm", "summary.verdict.max_rms_mm",
+            "summary.verdict.max_mm", "summary.model.n_identified"} <= set(got["keys"])
+    assert all(k.startswith("summary.") for k in got["keys"])
+    bare = got["bare"]
+    for text in _strings(summary):
+        bare = bare.replace(text, "")
+    assert not any(c.isdigit() for c in bare), bare                     # no number that is not from report.json
+    final = doc["stages"]["compensated"]["test"]
+    assert summary["held_out"] == final and summary["noise_floor_mm"] == doc["noise_floor_mm"]
+    assert summary["rms_over_floor"] == pytest.approx(final["rms_mm"] / doc["noise_floor_mm"], rel=1e-12)
+    for role in ("robot", "tracker"):
+        assert doc[f"{role}_identity"]["serial"] in got["trace"]
+    assert doc["config_sha256"] in got["trace"] and "Sign-off" in got["trace"]
+
+
+@pytest.mark.system
+def test_report_of_an_earlier_version_says_it_has_no_summary(mock_run, tmp_path):
+    run_dir, _ = mock_run
+    old = tmp_path / "old"
+    old.mkdir()
+    doc = json.loads((run_dir / "report.json").read_text())
+    del doc["summary"]
+    (old / "report.json").write_text(json.dumps(doc))
+    assert main(["report", str(old), "--out", str(tmp_path / "old.html")]) == 0
+    html = (tmp_path / "old.html").read_text()
+    assert 'id="summary-none"' in html and "earlier version" in html and html.index('id="summary"') < html.index(
+        'id="cell"')
+
+
+@pytest.mark.system
+def test_report_html_is_byte_reproducible(mock_run, tmp_path):
+    """Written twice from the same JSON documents, the report is the same bytes (no clock, no random order)."""
+    run_dir, _ = mock_run
+    assert main(["report", str(run_dir), "--out", str(tmp_path / "a.html")]) == 0
+    assert main(["report", str(run_dir), "--out", str(tmp_path / "b.html")]) == 0
+    a, b = (tmp_path / "a.html").read_text(), (tmp_path / "b.html").read_text()
+    assert a.replace("a_figures", "b_figures") == b
+
+
+@pytest.mark.system
+@needs_browser
+def test_diagnosis_with_an_effect_in_headless_chromium(tmp_path, capsys):
     cfg = small_config(tmp_path, **{"simulation.effects": [{"name": "backlash", "scale": 1.0}]})
     run_dir = tmp_path / "run"
     assert main(["run", str(cfg), "--out", str(run_dir)]) == 0
+    out = " ".join(capsys.readouterr().out.split())      # the summary last, then the files (wrapped or not)
+    tail = out[out.index("SIMULATED: the robot and tracker"):]
+    assert tail.index("model: ") < tail.index("held-out test set (final model") < tail.index("verdict: none: no "
+                                                                                               "acceptance criterion")
+    assert tail.endswith(f"run directory {run_dir}: log.jsonl, data.csv (interchange), report.json, model.json, "
+                         "report.html, report_figures/ (PNG)")
+    fitted = read_report(run_dir).effects.fitted[0]["params"]
+    assert "effects backlash(J" in tail and f"b1 {fitted['b1']['value']:.3g} rad" in tail
     assert main(["diagnose", str(run_dir), "--config", str(cfg)]) == 0
     diag = json.loads((run_dir / "diagnosis.json").read_text())
     accepted = [f for f in diag["findings"] if f["accepted"]]

@@ -10,6 +10,7 @@ import sys
 import textwrap
 import time
 import zlib
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,8 @@ def test_round_trip(tmp_path):
     assert c.points[0] == point(0)
     assert c.points[-1]["q_cmd_deg"] == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
     assert c.events == [{"type": "pause", "reason": "operator"}]
+    closed = datetime.fromisoformat(c.stops[0].pop("closed_utc"))      # the wall-clock time the log closed
+    assert closed.tzinfo is not None and abs((datetime.now(timezone.utc) - closed).total_seconds()) < 600
     assert c.stops == [{"exit_status": "success", "reason": "all done", "n_points": 5}]
     assert not c.torn_tail
     blob = (run / LOG_NAME).read_bytes()
@@ -154,6 +157,7 @@ def test_context_manager_records_failure(tmp_path):
             log.append_point(point(0))
             raise RuntimeError("tracker lost the beam")
     stop = read_log(tmp_path).stops[-1]
+    assert stop.pop("closed_utc")
     assert stop == {"exit_status": "fail", "reason": "RuntimeError: tracker lost the beam", "n_points": 1}
 
 

@@ -1,6 +1,8 @@
 """Traceability and ETA: identification in the start record and report.json, campaign.log, a keep-out run whose
 every executed move stays clear, and an ETA that converges during the run."""
 
+from datetime import datetime
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from campaign.run.eta import RunEta, estimate_duration_s, point_times_s
 from campaign.workflows import run_campaign
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
+from campaign.run.traceability import simulated_devices
 from drivers.mock import MockRobot
 from robocal.sweep import Boxes, flange_points_base, sample_segments
 from tests.campaign.helpers import read_report, small_config
@@ -32,8 +35,30 @@ def test_mock_run_carries_identification_and_writes_campaign_log(tmp_path):
         assert set(doc["tracker_identity"]) >= {"vendor", "model", "serial", "firmware"}
         assert doc["driver_versions"]["robot_driver"] == "drivers.mock.MockRobot"
         assert doc["software_version"]
+    ident = dict(read_report(run).identification)
+    contents = read_log(run)
+    assert (ident["config_sha256"], ident["plan_sha256"]) == (start["config_sha256"], start["plan_sha256"])
+    assert ident["started_utc"] == start["created_utc"] and ident["finished_utc"] == contents.stops[-1]["closed_utc"]
+    assert datetime.fromisoformat(ident["started_utc"]) <= datetime.fromisoformat(ident["finished_utc"])
+    recs = contents.records()
+    assert ident["measuring_s"] == max(r.t_end_s for r in recs) - min(r.t_start_s for r in recs) > 0
+    assert ident["simulated_devices"] == ["robot", "tracker"]
     text = (run / "campaign.log").read_text()
     assert "MOCK-R-0001" in text and "run success" in text
+
+
+@pytest.mark.unit
+def test_simulated_devices_are_the_mock_urls():
+    cfg = {"robot": {"url": "abb-rws://192.168.125.1"}, "tracker": {"url": "mock://tracker"}}
+    assert simulated_devices(cfg) == ["tracker"]
+    assert simulated_devices({"robot": {"url": "mock://robot"}, "tracker": {"url": "emscon://10.0.0.2"}}) == ["robot"]
+    assert simulated_devices({}) == []
+
+
+@pytest.mark.unit
+def test_eta_on_a_mock_cell_is_labelled_simulated_time():
+    assert RunEta(np.array([30.0, 30.0]), simulated=True).text() == "ETA 0:01:00 (simulated time)"
+    assert RunEta(np.array([3600.0, 5.0])).text() == "ETA 1:00:05"
 
 
 @pytest.mark.system
