@@ -22,8 +22,8 @@ GLOSSARY = (
      "Measured on points the model never saw: the test set, or the left-out fold of a cross-validation."),
     ("nominal",
      "The controller's nominal kinematic model, with the tracker-to-base registration and the SMR offset fitted to "
-     "the calibration points. Its RMS on the calibration set (plausibility line) and on the test set (Table 3) are "
-     "two numbers of the same model on different points."),
+     "the calibration points. Its RMS on the calibration set (plausibility line) and on the test set (the "
+     "position-error table) are two numbers of the same model on different points."),
     ("uncorrected (verify)", UNCORRECTED[0].upper() + UNCORRECTED[1:] + "."),
     ("noise floor",
      "The RMS position error a perfect model would still show: tracker noise plus the robot's repeatability, from "

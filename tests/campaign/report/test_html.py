@@ -70,7 +70,7 @@ def test_run_writes_report_html_and_png_figures(mock_run):
     assert len(pngs) >= 6 and html.count("<figure") == len(pngs)
     report = read_report(run_dir)
     assert len(report.points["point_id"]) == report.n.calib + report.n.test + report.n.check
-    assert "Table 3" in html and "Identifiability" in html and "Excluded points" in html
+    assert "Position error on the held-out test set" in html and "Identifiability" in html and "Excluded points" in html
 
 
 @pytest.mark.system
@@ -82,7 +82,7 @@ def test_mock_run_report_in_headless_chromium(mock_run, tmp_path):
     assert {f"stages.{s}.test.rms_mm" for s in ("nominal", "kinematic", "compensated")} <= keys
     assert {"noise_floor_mm", "condition_number", "residual_cv.gain"} <= keys
     assert any(n["doc"] == "verify0" and n["key"].endswith(".rms_mm") for n in page.numbers)
-    assert page.figures >= 6 and "seed 000 Table 3" in page.text and "Closed-loop verification" in page.text
+    assert page.figures >= 6 and "Position error on the held-out test set" in page.text and "Closed-loop verification" in page.text
 
 
 def _strings(node) -> list[str]:
