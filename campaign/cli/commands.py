@@ -73,15 +73,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _print_calibration(out: Console, report) -> None:
-    """The calibration's tables and lines, then its summary (model, held-out figures, verdict) last."""
+    """The calibration's summary first (banner, model, held-out figures, verdict), then its tables and lines."""
     from campaign.report.summary_text import render_summary
     from campaign.report.terminal import render_parameters, render_stages, render_stop
 
+    render_summary(out, report.summary)
     render_stages(out, report)
     render_parameters(out, report)
     render_stop(out, report)
     print_plausibility(out, report.plausibility)
-    render_summary(out, report.summary)
 
 
 def _plan_arguments(parser: argparse.ArgumentParser) -> None:

@@ -162,10 +162,11 @@ def test_diagnosis_with_an_effect_in_headless_chromium(tmp_path, capsys):
     cfg = small_config(tmp_path, **{"simulation.effects": [{"name": "backlash", "scale": 1.0}]})
     run_dir = tmp_path / "run"
     assert main(["run", str(cfg), "--out", str(run_dir)]) == 0
-    out = " ".join(capsys.readouterr().out.split())      # the summary last, then the files (wrapped or not)
+    out = " ".join(capsys.readouterr().out.split())      # the summary first, the files last (wrapped or not)
     tail = out[out.index("SIMULATED: the robot and tracker"):]
     assert tail.index("model: ") < tail.index("held-out test set (final model") < tail.index("verdict: none: no "
                                                                                                "acceptance criterion")
+    assert tail.index("verdict: none") < tail.index("Position error on the test set")   # then the stage table
     assert tail.endswith(f"run directory {run_dir}: log.jsonl, data.csv (interchange), report.json, model.json, "
                          "report.html, report_figures/ (PNG)")
     fitted = read_report(run_dir).effects.fitted[0]["params"]
