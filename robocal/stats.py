@@ -29,6 +29,10 @@ def error_stats(err_mm: np.ndarray) -> ErrorStats:
 # significance of a cross-validated gain: per-point squared errors of two models on the same held-out points
 SIGNIFICANT_T = 3.0          # one-sided paired t (p ~ 1e-3 under the null)
 SIGNIFICANT_GAIN = 0.02      # and at least 2 % lower CV RMS
+# a choice made for prediction alone (a residual layer, which claims no cause): the one-standard-error rule
+# (Hastie, Tibshirani & Friedman, ESL 7.10): the richer model when its CV error is lower by more than one standard
+# error of the paired difference, and by at least SIGNIFICANT_GAIN
+ONE_SE_T = 1.0
 
 
 @dataclass(frozen=True)
@@ -43,7 +47,13 @@ class PairedGain:
 
     @property
     def significant(self) -> bool:
+        """Evidence for a claim (an effect, structure): t > 3 and a gain above 2 %."""
         return self.t > SIGNIFICANT_T and self.gain > SIGNIFICANT_GAIN
+
+    @property
+    def beats_one_se(self) -> bool:
+        """Better for prediction by the one-standard-error rule: t > 1 and a gain above 2 %."""
+        return self.t > ONE_SE_T and self.gain > SIGNIFICANT_GAIN
 
     def to_dict(self) -> dict:
         return {"rms_base_mm": self.rms_base_mm, "rms_cand_mm": self.rms_cand_mm, "gain": self.gain, "t": self.t,

@@ -9,7 +9,7 @@ from robocal.gp import MultiOutputGP
 from robocal.identify import calibrate
 from robocal.layers import choose_layer, layer_summary
 from robocal.model import CalibratedModel
-from robocal.stats import error_stats
+from robocal.stats import error_stats, paired_gain
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 LO, HI = np.radians([-100, -60, -100, -150, -100, -150]), np.radians([100, 90, 40, 150, 100, 150])
@@ -70,3 +70,39 @@ def test_cv_predicted_held_out_rms_of_the_chosen_layer_matches_the_test_set():
         assert lay["approximation"] == "exact" and lay["noise_mm"] >= floor * (1 - 1e-9)
         assert lay["calib_rms_mm"] < lay["cv_predicted_rms_mm"]
         assert lay["cv_predicted_rms_mm"] == pytest.approx(lay["test_rms_mm"], rel=0.15)
+
+
+@pytest.mark.unit
+def test_a_layer_is_kept_by_the_one_standard_error_rule_and_a_claim_needs_t_above_3():
+    """Per-point squared errors whose paired difference has mean 0.2 and std 1 over 100 points: t = 2. The layer
+    rule (t > 1 and > 2 % lower RMS) keeps the candidate; the evidence for a claim (t > 3) is not there."""
+    z = np.random.default_rng(0).normal(size=100)
+    z = (z - z.mean()) / z.std(ddof=1)
+    for mean, kept, significant in ((0.2, True, False), (0.35, True, True), (0.05, False, False),
+                                    (-0.2, False, False)):
+        g = paired_gain(np.full(100, 2.0), 2.0 - (mean + z))
+        assert g.t == pytest.approx(10 * mean)
+        assert (g.beats_one_se, g.significant) == (kept, significant)
+    g = paired_gain(np.full(100, 2.0), 2.0 - (0.02 + 0.01 * z))      # t = 20 but a 0.5 % gain: not kept
+    assert g.t > 3 and g.gain < 0.02 and not g.beats_one_se
+
+
+@pytest.mark.system             # a seeded study (20 sparse campaigns)
+def test_no_layer_is_kept_on_pure_noise_at_sparse_poses():
+    """Geometric-only IRB 2600 cells, 60 or 120 random poses of the grid, 10 seeds: the residual is measurement
+    noise, and the one-standard-error rule keeps no layer on any of the 20 (the GP's CV gain is negative on noise:
+    bounded noise, hyperparameters re-fitted per fold)."""
+    qc_all, qt = irb2600_poses()
+    kept = []
+    for seed in range(10):
+        for n in (60, 120):
+            rng = np.random.default_rng(100 + seed)
+            cell = make_cell(irb2600(), rng)
+            qc = qc_all[rng.choice(len(qc_all), n, replace=False)]
+            pc, cov = measure(cell, qc, rng)
+            model = CalibratedModel(calibrate(irb2600(), qc, pc, cov).kinematics)
+            choice = choose_layer(model, qc, pc, noise_floor_mm=cell.noise_floor(qt))
+            kept.append(choice.kind)
+            assert all(not v["kept"] for k, v in choice.cv.items() if k != "none")
+    print(f"layers kept on 20 noise-only campaigns: {sum(k != 'none' for k in kept)}")
+    assert kept == ["none"] * 20
