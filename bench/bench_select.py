@@ -53,7 +53,7 @@ UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 N_RANDOM = 5
 
 
-CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter")
+CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd")
 
 
 class _IDesign(_Design):
@@ -134,9 +134,27 @@ def _farthest_first(X: np.ndarray, n: int) -> np.ndarray:
     return np.array(out), float(d.max())
 
 
+def _herding(X: np.ndarray, first: np.ndarray, n: int) -> np.ndarray:
+    """``first`` then rows of X (M, d) by kernel herding up to n: each next row the one that brings the chosen set's
+    kernel mean closest to the pool's (a representative sample; Gaussian kernel, median-distance bandwidth)."""
+    d2 = np.maximum(np.sum(X**2, 1)[:, None] + np.sum(X**2, 1)[None] - 2.0 * X @ X.T, 0.0)
+    K = np.exp(-d2 / np.median(d2[np.triu_indices(len(X), 1)]))
+    mu, chosen = K.mean(1), list(first)
+    taken = np.zeros(len(X), bool)
+    taken[chosen] = True
+    acc = K[:, chosen].sum(1)
+    while len(chosen) < n:
+        k = int(np.argmax(np.where(taken, -np.inf, mu - acc / (len(chosen) + 1))))
+        chosen.append(k)
+        taken[k] = True
+        acc += K[:, k]
+    return np.array(chosen)
+
+
 def choose(ctx, n: int, name: str) -> np.ndarray:
     """Candidate indices (n,) by criterion ``name``: d_spread (``campaign select``), d (pure Bayesian D), i (pool
-    prediction variance), di (D and I as log-ratios), d_cover / i_cover (plus a GP coverage term), kcenter."""
+    prediction variance), di (D and I as log-ratios), d_cover / i_cover (plus a GP coverage term), kcenter,
+    d_herd (D-spread for 1.2 x the identifiable parameters, then kernel herding: robust to an unmodelled part)."""
     crit, H, X, noise = ctx
     if name == "d_spread":
         return d_optimal(crit.A, n, crit.spread).chosen
@@ -144,6 +162,8 @@ def choose(ctx, n: int, name: str) -> np.ndarray:
         return d_optimal(crit.A, n).chosen
     if name == "kcenter":
         return _farthest_first(X, n)[0]
+    if name == "d_herd":              # a compromise design: D for identifiability, then representative rows
+        return _herding(X, d_optimal(crit.A, min(n, math.ceil(1.2 * crit.identifiable)), crit.spread).chosen, n)
     M, L = crit.A.shape[0], crit.A.shape[2]
     d = _IDesign(crit.A, H)
     cov = None
