@@ -142,7 +142,8 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
 
 
 def _select_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", metavar="DATA.csv", type=Path, help="an interchange CSV of a measured campaign")
+    parser.add_argument("data", metavar="DATA", type=Path,
+                        help="a measured campaign: an interchange CSV or a run directory (its log)")
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise)")
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
@@ -152,7 +153,8 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
 @command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
-    from campaign.data.interchange_csv import read_csv, write_csv
+    from campaign.data.interchange_csv import write_csv
+    from campaign.data.source import load_source
     from campaign.calibrate.select_rows import select_rows
 
     cell = load_cell(args.config)
@@ -163,7 +165,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     from campaign.run.output_dirs import check_file
 
     check_file(args.out, args.overwrite)
-    ds = read_csv(args.data)
+    ds = load_source(args.data).dataset
     keep = select_rows(ds, cell, args.points)
     write_csv(args.out, ds.subset(keep))
     n_cal = int(ds.mask("calib").sum())

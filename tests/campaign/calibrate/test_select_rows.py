@@ -73,3 +73,26 @@ def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_p
     code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", data)
     assert_one_line(code, out, err, 2, "overwrite")
     assert snapshot(tmp_path) == before
+
+
+def test_select_reads_a_run_directory_like_its_interchange_csv(tmp_path, capsys):
+    """``select RUN_DIR`` reads the run's durable log (as ``reprocess`` does) and chooses the same rows as from the
+    run's own data.csv; the nest and test rows stay in the subset, which reprocesses."""
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(CONFIG.read_text().replace("dir: runs", f"dir: {tmp_path / 'runs'}"))
+    run = tmp_path / "run"
+    code, _, err = cli(capsys, "run", cfg, "--out", run)
+    assert code == 0, err
+    full = read_csv(run / "data.csv")
+    n = int(full.mask("calib").sum()) // 3
+    code, text, err = cli(capsys, "select", run, "--config", cfg, "--points", n, "--out", tmp_path / "from_log.csv")
+    assert code == 0, err
+    code, _, err = cli(capsys, "select", run / "data.csv", "--config", cfg, "--points", n,
+                       "--out", tmp_path / "from_csv.csv")
+    assert code == 0, err
+    a, b = read_csv(tmp_path / "from_log.csv"), read_csv(tmp_path / "from_csv.csv")
+    assert a.point_id == b.point_id and int(a.mask("calib").sum()) == n
+    assert set(a.set) - {"calib"} == set(full.set) - {"calib"}           # test, check and nest rows kept
+    assert sum(s != "calib" for s in a.set) == sum(s != "calib" for s in full.set)
+    code, _, err = cli(capsys, "reprocess", tmp_path / "from_log.csv", "--config", cfg, "--out", tmp_path / "re")
+    assert code == 0, err
