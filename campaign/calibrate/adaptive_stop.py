@@ -56,8 +56,13 @@ class StopCheck:
     reason: str
 
     def to_event(self) -> dict:
-        fields = {k: (list(map(list, v)) if k == "curve" else v) for k, v in self.__dict__.items()}
+        """The log event: JSON values only (a prediction not yet possible, inf or NaN, is null)."""
+        fields = {k: (list(map(list, v)) if k == "curve" else _finite_or_none(v)) for k, v in self.__dict__.items()}
         return {"type": STOP_EVENT, **fields}
+
+
+def _finite_or_none(value):
+    return None if isinstance(value, float) and not np.isfinite(value) else value
 
 
 def stop_checks(contents: LogContents | None) -> list[dict]:
@@ -226,9 +231,9 @@ class AdaptivePasses:
 
 
 def stop_summary(contents: LogContents, measured_rms_mm: float | None) -> StopSummary | None:
-    """``report.json``'s ``stop``: every refit of a ``stop: auto`` run (predicted curve, decision) and, beside the
-    prediction at the stop, the held-out RMS the final model reached on the test set."""
-    checks = [c for c in stop_checks(contents) if "predicted_rms_mm" in c]
+    """``report.json``'s ``stop``: every refit of a ``stop: auto`` run that gave a prediction (predicted curve,
+    decision) and, beside the prediction at the stop, the held-out RMS the final model reached on the test set."""
+    checks = [c for c in stop_checks(contents) if c.get("predicted_rms_mm") is not None]
     if not checks:
         return None
     last = checks[-1]
