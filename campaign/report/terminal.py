@@ -118,8 +118,10 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
     if ch and ch.candidates:
         figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}" + ("" if k == "none" else f" (t {v['t']:+.1f})")
                          for k, v in ch.candidates.items())
+        weak = ch.chosen != "none" and not ch.candidates.get(ch.chosen, {}).get("significant", True)
         console.print(f"residual layer by {ch.folds}-fold CV on the calibration points (RMS mm): {figs} -> "
-                      f"{ch.chosen}")
+                      f"{ch.chosen}" + (" (kept for prediction by the one-standard-error rule; t <= 3 is no evidence "
+                                        "of structure)" if weak else ""), markup=False)
     for e in report.excluded_points:
         console.print(f"excluded {e.point_id}: {e.reason}")
     if report.structure_note:
