@@ -57,7 +57,7 @@ UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 N_RANDOM = 5
 
 
-CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd")
+CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd", "d_fill")
 
 
 class _IDesign(_Design):
@@ -138,6 +138,17 @@ def _farthest_first(X: np.ndarray, n: int) -> np.ndarray:
     return np.array(out), float(d.max())
 
 
+def _fill(X: np.ndarray, first: np.ndarray, n: int) -> np.ndarray:
+    """``first`` then rows of X (M, d) farthest from every chosen one, up to n."""
+    chosen = list(first)
+    d = np.min(np.linalg.norm(X[:, None, :] - X[None, chosen, :], axis=2), axis=1)
+    while len(chosen) < n:
+        k = int(np.argmax(d))
+        chosen.append(k)
+        d = np.minimum(d, np.linalg.norm(X - X[k], axis=1))
+    return np.array(chosen)
+
+
 def _herding(X: np.ndarray, first: np.ndarray, n: int) -> np.ndarray:
     """``first`` then rows of X (M, d) by kernel herding up to n: each next row the one that brings the chosen set's
     kernel mean closest to the pool's (a representative sample; Gaussian kernel, median-distance bandwidth)."""
@@ -166,6 +177,9 @@ def choose(ctx, n: int, name: str) -> np.ndarray:
         return d_optimal(crit.A, n).chosen
     if name == "kcenter":
         return _farthest_first(X, n)[0]
+    if name == "d_fill":              # D for identifiability, then farthest-first (space-filling) rows
+        first = d_optimal(crit.A, min(n, math.ceil(1.2 * crit.identifiable)), crit.spread).chosen
+        return _fill(X, first, n)
     if name == "d_herd":              # a compromise design: D for identifiability, then representative rows
         return _herding(X, d_optimal(crit.A, min(n, math.ceil(1.2 * crit.identifiable)), crit.spread).chosen, n)
     M, L = crit.A.shape[0], crit.A.shape[2]
