@@ -51,9 +51,7 @@ class DiagnosisReport:
 
 
 def _check(ds: Dataset, cfg: CampaignConfig) -> None:
-    n = len(cfg.robot.joints)
-    if ds.n_joints != n:
-        raise DataError(ds.source, f"has {ds.n_joints} joint columns but the config's robot has {n} joints")
+    ds.require_joints(len(cfg.robot.joints))
     n_cal = int(ds.mask("calib").sum())
     if n_cal < MIN_CALIB_ROWS:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")

@@ -166,9 +166,7 @@ def check_dataset(ds, cell: CellModel):
     when forced, else unchanged."""
     cfg = cell.config
     state = Plausibility()
-    n = len(cfg.robot.joints)
-    if ds.q_deg.shape[1] != n:
-        raise DataError(ds.source, f"has {ds.q_deg.shape[1]} joint columns but the config's robot has {n} joints")
+    ds.require_joints(len(cfg.robot.joints))
     ds = _check_magnitudes(ds)
     keep, state, limits_msg = _check_limits(ds, cfg, state)
     inside = ds.subset(keep) if limits_msg else ds

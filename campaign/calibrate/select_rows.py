@@ -22,6 +22,7 @@ from campaign.errors import DataError
 def select_rows(ds: Dataset, cell: CellModel, n: int) -> np.ndarray:
     """(N,) bool: the rows of the subset with ``n`` calibration rows chosen by the optimal-plan criterion;
     DataError when the data holds fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %."""
+    ds.require_joints(cell.kinematics.n)
     cal = np.flatnonzero(ds.mask("calib"))
     if len(cal) < n:
         raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")

@@ -52,9 +52,7 @@ class Calibrated:
 
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
-    n = len(cfg.robot.joints)
-    if ds.q_deg.shape[1] != n:
-        raise DataError(ds.source, f"has {ds.q_deg.shape[1]} joint columns but the config's robot has {n} joints")
+    ds.require_joints(len(cfg.robot.joints))
     if ds.mask("calib").sum() < 10:
         raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
 

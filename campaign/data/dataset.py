@@ -6,6 +6,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from campaign.errors import DataError
 from campaign.run.log_records import SETS
 from robocal.approach import approach_signs
 
@@ -105,6 +106,11 @@ class Dataset:
     def n_joints(self) -> int:
         """Number of joint columns n."""
         return int(self.q_deg.shape[1])
+
+    def require_joints(self, n: int) -> None:
+        """DataError unless the data has ``n`` joint columns (those of the config's robot)."""
+        if self.n_joints != n:
+            raise DataError(self.source, f"has {self.n_joints} joint columns but the config's robot has {n} joints")
 
     def mask(self, set_name: str) -> np.ndarray:
         """Boolean (N,) array: rows whose ``set`` is ``set_name``."""

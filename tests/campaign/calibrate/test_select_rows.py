@@ -72,6 +72,12 @@ def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_p
     assert_one_line(code, out, err, 2, "--points 10", "identifiable + 10 %")
     code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", data)
     assert_one_line(code, out, err, 2, "overwrite")
+    five = tmp_path / "five_joints.csv"                        # the data of another robot: q6 missing
+    rows = [line.split(",") for line in data.read_text().splitlines()]
+    five.write_text("\n".join(",".join(r[:7] + r[8:]) for r in rows) + "\n")
+    before = snapshot(tmp_path)
+    code, out, err = cli(capsys, "select", five, "--config", CONFIG, "--points", 80, "--out", tmp_path / "s.csv")
+    assert_one_line(code, out, err, 2, "has 5 joint columns", "6 joints")
     assert snapshot(tmp_path) == before
 
 
