@@ -8,20 +8,35 @@ row (test, check, nest) and the chosen calibration rows, all in their original (
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.design import criterion, d_optimal
+from robocal.design import Forecast, criterion, d_optimal, forecast
 from robocal.identify import IdentificationError, register
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 
+FORECAST_MAX_ROWS = 20_000      # the forecast of all rows (a Jacobian of every row and parameter) up to this size
 
-def select_rows(ds: Dataset, cell: CellModel, n: int) -> np.ndarray:
-    """(N,) bool: the rows of the subset with ``n`` calibration rows chosen by the optimal-plan criterion;
-    DataError when the data holds fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %."""
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """The rows of the subset (N,) bool, and what the parameter uncertainty predicts of the subset's and of all
+    calibration rows (``robocal.design.Forecast``, at the test rows; None for all rows beyond
+    ``FORECAST_MAX_ROWS``)."""
+    keep: np.ndarray
+    n_chosen: int
+    n_calib: int
+    subset: Forecast
+    everything: Forecast | None
+
+
+def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
+    """The subset with ``n`` calibration rows chosen by the optimal-plan criterion; DataError when the data has
+    another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %."""
     ds.require_joints(cell.kinematics.n)
     cal = np.flatnonzero(ds.mask("calib"))
     if len(cal) < n:
@@ -35,11 +50,18 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> np.ndarray:
     except IdentificationError as exc:
         raise DataError(ds.source, f"cannot register the calibration rows: {exc}") from None
     payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
-    crit = criterion(kin, q, cell.weights(ds)[0][cal], payload)
+    cov = cell.weights(ds)[0]
+    crit = criterion(kin, q, cov[cal], payload)
     need = math.ceil(1.1 * crit.identifiable)
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable} parameters these rows "
                                    f"determine: at least {need} (identifiable + 10 %)")
+    chosen = d_optimal(crit.A, n, crit.spread).chosen
     keep = ~ds.mask("calib")
-    keep[cal[d_optimal(crit.A, n, crit.spread).chosen]] = True
-    return keep
+    keep[cal[chosen]] = True
+    test = np.flatnonzero(ds.mask("test") & np.all(np.isfinite(ds.q_deg), axis=1))
+    at = test if len(test) else cal                       # judged at the test rows, else at the calibration rows
+    q_at, cov_at = np.radians(ds.q_deg[at]), cov[at]
+    sub = forecast(kin, q[chosen], cov[cal][chosen], q_at, cov_at, payload)
+    every = forecast(kin, q, cov[cal], q_at, cov_at, payload) if len(cal) <= FORECAST_MAX_ROWS else None
+    return Selection(keep, n, len(cal), sub, every)

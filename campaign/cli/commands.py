@@ -156,6 +156,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     from campaign.data.interchange_csv import write_csv
     from campaign.data.source import load_source
     from campaign.calibrate.select_rows import select_rows
+    from campaign.report.terminal import render_selection
 
     cell = load_cell(args.config)
     if args.points < 1:
@@ -166,12 +167,9 @@ def cmd_select(args: argparse.Namespace) -> int:
 
     check_file(args.out, args.overwrite)
     ds = load_source(args.data).dataset
-    keep = select_rows(ds, cell, args.points)
-    write_csv(args.out, ds.subset(keep))
-    n_cal = int(ds.mask("calib").sum())
-    _stdout().print(f"selected {args.points} of {n_cal} calibration rows by the optimal-plan criterion (D-optimal, "
-                    f"joints spread), kept the {int((~ds.mask('calib')).sum())} other rows; wrote {args.out}",
-                    markup=False)
+    sel = select_rows(ds, cell, args.points)
+    write_csv(args.out, ds.subset(sel.keep))
+    render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 
 

@@ -194,6 +194,19 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
         console.print(f"plan.stop: auto: refits after {', '.join(map(str, blocks))} calibration points", markup=False)
 
 
+def render_selection(console: Console, sel, n_other: int, out) -> None:
+    """``campaign select``: what was kept, and the AP(theta) RMS the parameter uncertainty predicts for the subset
+    and for all calibration rows (``campaign.calibrate.select_rows.Selection``)."""
+    console.print(f"selected {sel.n_chosen} of {sel.n_calib} calibration rows by the optimal-plan criterion "
+                  f"(D-optimal, joints spread), kept the {n_other} other rows; wrote {out}", markup=False)
+    every = "" if sel.everything is None else (f", all {sel.n_calib} rows {sel.everything.model_rms_effects_mm:.4f} "
+                                               "mm")
+    console.print(f"predicted AP(theta) RMS from the parameter uncertainty (geometry and pose-dependent effects, at "
+                  f"the test rows): {sel.n_chosen} rows {sel.subset.model_rms_effects_mm:.4f} mm{every}; noise floor "
+                  f"{floor_mm(sel.subset.floor_mm)} mm. What the unmodelled part adds shows only in the held-out "
+                  "figures of `campaign reprocess` on the subset", markup=False)
+
+
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:
     console.print(f"plan {plan.sha256[:12]}: {plan.count('calib')} calib + {plan.count('test')} test points, "
                   f"{plan.count('check')} check-pose measurements, "

@@ -1,6 +1,8 @@
 """``campaign select``: N calibration rows of a measured campaign by the optimal-plan criterion."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -45,6 +47,9 @@ def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path,
     code, text, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", out)
     assert code == 0, err
     assert "selected 80 of" in text
+    sub_mm, all_mm = map(float, re.search(r"80 rows ([0-9.]+) mm, all \d+ rows ([0-9.]+) mm", " ".join(text.split())
+                                          ).groups())
+    assert 0 < all_mm < sub_mm                  # fewer rows: a larger parameter uncertainty at the test rows
     full, sub = read_csv(data), read_csv(out)
     assert int(sub.mask("calib").sum()) == 80 and int(sub.mask("test").sum()) == 30
     pos = [full.point_id.index(i) for i in sub.point_id]
