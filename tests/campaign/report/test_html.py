@@ -71,6 +71,9 @@ def test_run_writes_report_html_and_png_figures(mock_run):
     report = read_report(run_dir)
     assert len(report.points["point_id"]) == report.n.calib + report.n.test + report.n.check
     assert "Position error on the held-out test set" in html and "Identifiability" in html and "Excluded points" in html
+    final_rms = report.stages["compensated"].test.rms_mm                   # the RMS / floor column, as the terminal's
+    assert (f'data-key="stages.compensated.test.rms_mm" data-scale="{1.0 / report.noise_floor_mm!r}" data-fmt=".2f" '
+            f'data-value="{final_rms!r}">{final_rms / report.noise_floor_mm:.2f}</span>') in html
 
 
 @pytest.mark.system
