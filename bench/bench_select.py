@@ -34,13 +34,14 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from campaign.calibrate.effects_stage import effect_choices, effect_meta  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
 from robocal.design import _Design, criterion, criterion_effects, d_optimal, design_columns  # noqa: E402
-from robocal.identify import register  # noqa: E402
+from robocal.identify import calibrate, register  # noqa: E402
 from robocal.kinematics import ParamLayout  # noqa: E402
 
 
@@ -57,7 +58,7 @@ UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 N_RANDOM = 5
 
 
-CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd", "d_fill")
+CRITERIA = ("d_spread", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd", "d_fill", "d_fx")
 
 
 class _IDesign(_Design):
@@ -169,14 +170,18 @@ def _herding(X: np.ndarray, first: np.ndarray, n: int) -> np.ndarray:
 def choose(ctx, n: int, name: str) -> np.ndarray:
     """Candidate indices (n,) by criterion ``name``: d_spread (``campaign select``), d (pure Bayesian D), i (pool
     prediction variance), di (D and I as log-ratios), d_cover / i_cover (plus a GP coverage term), kcenter,
-    d_herd (D-spread for 1.2 x the identifiable parameters, then kernel herding: robust to an unmodelled part)."""
-    crit, H, X, noise = ctx
+    d_herd (D-spread for 1.2 x the identifiable parameters, then kernel herding: robust to an unmodelled part),
+    d_fill (the same, then farthest-first), d_fx (D-spread on the effects the whole data set supports)."""
+    crit, H, X, noise, supported = ctx
     if name == "d_spread":
         return d_optimal(crit.A, n, crit.spread).chosen
     if name == "d":
         return d_optimal(crit.A, n).chosen
     if name == "kcenter":
         return _farthest_first(X, n)[0]
+    if name == "d_fx":                # D-spread on geometry + the effects the whole data set supports
+        c = supported()
+        return d_optimal(c.A, n, c.spread).chosen
     if name == "d_fill":              # D for identifiability, then farthest-first (space-filling) rows
         first = d_optimal(crit.A, min(n, math.ceil(1.2 * crit.identifiable)), crit.spread).chosen
         return _fill(X, first, n)
@@ -227,7 +232,21 @@ def crit_of(ds: Dataset, cell):
     B = J * prior
     theta = [c for c, _, k in ParamLayout.of(kin).joint_cols if k == 0]
     lever = np.sqrt(np.mean(np.sum(J[:, :, theta] ** 2, axis=1), axis=0))       # mm/rad per joint
-    return crit, np.einsum("nip,niq->pq", B, B) / len(q), q * lever, np.trace(cov, axis1=1, axis2=2) / 3.0
+    supported = lambda: criterion(kin, q, cov, payload, supported_effects(ds, cell))  # noqa: E731
+    return crit, np.einsum("nip,niq->pq", B, B) / len(q), q * lever, np.trace(cov, axis1=1, axis2=2) / 3.0, supported
+
+
+def supported_effects(ds: Dataset, cell) -> list:
+    """The pose-dependent effects the effect engine takes on all calibration rows of ``ds`` (around their
+    geometric fit): the model this campaign supports, for the ``d_fx`` criterion."""
+    cal = np.flatnonzero(ds.mask("calib"))
+    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
+    cov = cell.weights(ds)[0][cal]
+    geo = calibrate(cell.kinematics, q, p, cov, cell.options)
+    layout = ParamLayout.of(geo.kinematics)
+    cols = np.array([layout.index(name) for name in geo.identified])
+    choices, _ = effect_choices(cell, geo.kinematics, cols, q, p, cov, effect_meta(ds, cell, cal))
+    return [c for c in choices if not c.build(geo.kinematics.n).needs]
 
 
 def sim_dataset(tmp: Path, name: str, seed: int):

@@ -369,11 +369,13 @@ class Criterion:
     identifiable: int
 
 
-def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_kg: float = 0.0) -> Criterion:
+def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_kg: float = 0.0,
+              effects: list[EffectChoice] | None = None) -> Criterion:
     """The selection criterion of candidate poses q (M, n) rad measured with covariances (M, 3, 3) mm^2: geometry
-    and the pose-dependent effects ``auto`` may take (``criterion_effects``), whitened and prior-scaled."""
+    and the pose-dependent effects ``auto`` may take (``criterion_effects``; or the given ``effects``), whitened
+    and prior-scaled."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    effects = criterion_effects(kin, q, payload_kg)
+    effects = criterion_effects(kin, q, payload_kg) if effects is None else effects
     J, names, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), float(payload_kg))}, effects)
     A = information_rows(J, cov_mm2, prior)
     layout = ParamLayout.of(kin)
