@@ -233,5 +233,6 @@ def _residual_reason(report) -> str:
         return f"configured (calibration.residual: {m.residual_config})"
     if ch is not None and ch.candidates:
         return (f"chosen by {ch.folds}-fold cross-validation on the calibration points among "
-                f"{', '.join(ch.candidates)} (a layer is kept when it beats none by more than one standard error of the CV difference)")
+                f"{', '.join(ch.candidates)} (a layer is kept when it beats none by more than one standard error of "
+                "the CV difference)")
     return "no candidate layer"
