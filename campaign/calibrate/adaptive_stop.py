@@ -56,13 +56,9 @@ class StopCheck:
     reason: str
 
     def to_event(self) -> dict:
-        """The log event: JSON values only (a prediction not yet possible, inf or NaN, is null)."""
-        fields = {k: (list(map(list, v)) if k == "curve" else _finite_or_none(v)) for k, v in self.__dict__.items()}
+        """The log event (a prediction not yet possible is inf here; the log stores it as null)."""
+        fields = {k: (list(map(list, v)) if k == "curve" else v) for k, v in self.__dict__.items()}
         return {"type": STOP_EVENT, **fields}
-
-
-def _finite_or_none(value):
-    return None if isinstance(value, float) and not np.isfinite(value) else value
 
 
 def stop_checks(contents: LogContents | None) -> list[dict]:

@@ -33,6 +33,17 @@ def _write_all(fd: int, payload: bytes) -> None:
         view = view[n:]
 
 
+def _finite_json(value):
+    """``value`` (dicts, lists, tuples, scalars) with every non-finite float replaced by None."""
+    if isinstance(value, float):
+        return value if value == value and value not in (float("inf"), float("-inf")) else None
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_json(v) for v in value]
+    return value
+
+
 @contextmanager
 def _signals_deferred():
     """Block SIGINT, SIGTERM and SIGHUP in this thread for the duration (main thread, POSIX); a signal that
@@ -230,10 +241,12 @@ class RunLog:
         return seq
 
     def append_event(self, data: dict) -> int:
-        """Durably append an event (``{"type": "pause"|"fault"|..., ...}``); return its seq."""
+        """Durably append an event (``{"type": "pause"|"fault"|..., ...}``); return its seq. An event is a note
+        about the run, not a measurement: a non-finite float in it is stored as null, so a note can never stop
+        the run (a point record with one is still refused)."""
         if not isinstance(data, dict) or not isinstance(data.get("type"), str):
             raise TypeError("event data must be a dict with a string 'type'")
-        return self._append("event", data)
+        return self._append("event", _finite_json(data))
 
     def close(self, exit_status: str = "success", reason: str = "") -> None:
         """Write the ``stop`` record and close the file; idempotent.
