@@ -19,6 +19,8 @@ from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 
+from .plausibility import check_dataset
+
 FORECAST_MAX_ROWS = 20_000      # the forecast of all rows (a Jacobian of every row and parameter) up to this size
 
 
@@ -32,12 +34,15 @@ class Selection:
     n_calib: int
     subset: Forecast
     everything: Forecast | None
+    judged_at: str = "test rows"           # where the forecasts are evaluated: "test rows", else "calibration rows"
 
 
 def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     """The subset with ``n`` calibration rows chosen by the optimal-plan criterion; DataError when the data has
-    another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %."""
-    ds.require_joints(cell.kinematics.n)
+    another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %;
+    the data-alone plausibility checks of ``reprocess`` first (``check_dataset``: PlausibilityError unless
+    forced)."""
+    check_dataset(ds, cell)
     cal = np.flatnonzero(ds.mask("calib"))
     if len(cal) < n:
         raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")
@@ -64,4 +69,4 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     q_at, cov_at = np.radians(ds.q_deg[at]), cov[at]
     sub = forecast(kin, q[chosen], cov[cal][chosen], q_at, cov_at, payload)
     every = forecast(kin, q, cov[cal], q_at, cov_at, payload) if len(cal) <= FORECAST_MAX_ROWS else None
-    return Selection(keep, n, len(cal), sub, every)
+    return Selection(keep, n, len(cal), sub, every, "test rows" if len(test) else "calibration rows")

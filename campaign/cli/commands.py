@@ -148,6 +148,7 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
     overwrite_argument(parser)
+    _force_argument(parser)
 
 
 @command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
@@ -167,7 +168,8 @@ def cmd_select(args: argparse.Namespace) -> int:
 
     check_file(args.out, args.overwrite)
     ds = load_source(args.data).dataset
-    sel = select_rows(ds, cell, args.points)
+    with forced(args.force):
+        sel = select_rows(ds, cell, args.points)
     write_csv(args.out, ds.subset(sel.keep))
     render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK

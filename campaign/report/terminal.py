@@ -202,7 +202,7 @@ def render_selection(console: Console, sel, n_other: int, out) -> None:
     every = "" if sel.everything is None else (f", all {sel.n_calib} rows {sel.everything.model_rms_effects_mm:.4f} "
                                                "mm")
     console.print(f"predicted AP(theta) RMS from the parameter uncertainty (geometry and pose-dependent effects, at "
-                  f"the test rows): {sel.n_chosen} rows {sel.subset.model_rms_effects_mm:.4f} mm{every}; noise floor "
+                  f"the {sel.judged_at}): {sel.n_chosen} rows {sel.subset.model_rms_effects_mm:.4f} mm{every}; noise floor "
                   f"{floor_mm(sel.subset.floor_mm)} mm. What the unmodelled part adds shows only in the held-out "
                   "figures of `campaign reprocess` on the subset", markup=False)
 

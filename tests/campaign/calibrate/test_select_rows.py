@@ -84,6 +84,28 @@ def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_p
     code, out, err = cli(capsys, "select", five, "--config", CONFIG, "--points", 80, "--out", tmp_path / "s.csv")
     assert_one_line(code, out, err, 2, "has 5 joint columns", "6 joints")
     assert snapshot(tmp_path) == before
+    far = tmp_path / "far.csv"                                  # a reading no tracker gives
+    rows[1][-3] = "1e12"
+    far.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    before = snapshot(tmp_path)
+    code, out, err = cli(capsys, "select", far, "--config", CONFIG, "--points", 80, "--out", tmp_path / "s.csv")
+    assert_one_line(code, out, err, 2, "not a tracker reading")
+    assert snapshot(tmp_path) == before
+
+
+def test_select_runs_the_plausibility_checks_of_reprocess_and_force_overrides_them(tmp_path, capsys):
+    """Another robot's data (an IRB 2600 campaign against the UR10 config): refused as ``reprocess`` refuses it,
+    one line, nothing written; ``--force`` selects anyway."""
+    data = _campaign_csv(tmp_path / "data.csv")
+    other = ROOT / "configs" / "ur10.yaml"
+    before = snapshot(tmp_path)
+    code, out, err = cli(capsys, "select", data, "--config", other, "--points", 80, "--out", tmp_path / "s.csv")
+    assert_one_line(code, out, err, 2, "does this data belong to this robot", "--force")
+    assert snapshot(tmp_path) == before
+    code, out, err = cli(capsys, "select", data, "--config", other, "--points", 80, "--out", tmp_path / "s.csv",
+                         "--force")
+    assert code == 0, err
+    assert int(read_csv(tmp_path / "s.csv").mask("calib").sum()) == 80
 
 
 def test_select_reads_a_run_directory_like_its_interchange_csv(tmp_path, capsys):
