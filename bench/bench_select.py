@@ -37,12 +37,11 @@ sys.path.insert(0, str(ROOT))
 from campaign.calibrate.effects_stage import effect_choices, effect_meta  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
-from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
-from campaign.plan.build import build_plan  # noqa: E402
 from robocal.design import _Design, criterion, criterion_effects, d_optimal, design_columns  # noqa: E402
 from robocal.identify import calibrate, register  # noqa: E402
 from robocal.kinematics import ParamLayout  # noqa: E402
+from tests.campaign.helpers import simulated_campaign  # noqa: E402
 
 
 GEAR = [1.4e-4, 1.4e-4, 7.0e-5, 7.0e-5]
@@ -256,17 +255,7 @@ def sim_dataset(tmp: Path, name: str, seed: int):
     path = tmp / f"{cfg_name}-{seed}.yaml"
     path.write_text(yaml.safe_dump(d, sort_keys=False))
     cell = load_cell(path)
-    plan = build_plan(cell)
-    cal = [p for p in plan.points if p.set == "calib"]
-    test = sorted((p for p in plan.points if p.set == "test"), key=lambda p: p.point_id)
-    sim = simulated_cell(cell)
-    q_cal, q_test = np.radians([p.q_deg for p in cal]), np.radians([p.q_deg for p in test])
-    p_cal, _ = sim.measure(q_cal, np.random.default_rng(seed))
-    p_test, _ = sim.measure(q_test, np.random.default_rng(10_000 + seed))
-    ds = Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
-                 ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
-                 np.vstack([p_cal, p_test]), source="bench")
-    return ds, cell
+    return simulated_campaign(cell, seed), cell
 
 
 def ur5_dataset(tmp: Path):

@@ -92,3 +92,39 @@ def read_report(directory: Path) -> CalibrationReport:
 def read_verify(path: Path) -> VerifyReport:
     """A ``verify.json``, as the typed record."""
     return VerifyReport.from_dict(json.loads(Path(path).read_text()))
+
+
+def simulated_campaign(cell, seed: int):
+    """The cell's plan measured once on its simulated cell (``campaign.config.simulation``): calibration points
+    in plan order (noise seed ``seed``), then the test points by id (seed 10 000 + ``seed``), as a Dataset."""
+    import numpy as np
+
+    from campaign.config.simulation import simulated_cell
+    from campaign.data.dataset import Dataset
+    from campaign.plan.build import build_plan
+
+    plan = build_plan(cell)
+    cal = [p for p in plan.points if p.set == "calib"]
+    test = sorted((p for p in plan.points if p.set == "test"), key=lambda p: p.point_id)
+    sim = simulated_cell(cell)
+    q_cal, q_test = np.radians([p.q_deg for p in cal]), np.radians([p.q_deg for p in test])
+    p_cal, _ = sim.measure(q_cal, np.random.default_rng(seed))
+    p_test, _ = sim.measure(q_test, np.random.default_rng(10_000 + seed))
+    return Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
+                   ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
+                   np.vstack([p_cal, p_test]), source="simulated")
+
+
+def layer_kept_without_claim(ds, cell, cell_none, label: str) -> tuple[float, float] | None:
+    """When the default calibration of ``ds`` keeps a residual layer without the t > 3 of a claim: the held-out
+    RMS (mm) without a layer (``cell_none``: the same config with ``residual: none``) and with it; else None."""
+    from campaign.calibrate.stages import calibrate_dataset
+
+    rep = calibrate_dataset(ds, cell).report
+    chosen = rep.residual_choice.chosen
+    if chosen == "none" or rep.residual_choice.candidates[chosen]["significant"]:
+        return None
+    without, with_ = calibrate_dataset(ds, cell_none).report.final.test.rms_mm, rep.final.test.rms_mm
+    print(f"{label}: {chosen} kept at t {rep.residual_choice.candidates[chosen]['t']:.2f}; held-out RMS without "
+          f"{without:.4f} mm, with {with_:.4f} mm")
+    return without, with_
