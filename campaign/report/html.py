@@ -208,7 +208,7 @@ def report_targets(directory: str | os.PathLike, out: str | os.PathLike | None =
     if out is None or Path(out).resolve() == default.resolve():
         if not overwrite:
             check_campaign_dir(directory, "report")
-        html = check_file(default, overwrite=True)           # the directory's own report, written again
+        html = check_file(default, overwrite=True, own=True)  # the directory's own report, written again
     else:
         html = check_file(out, overwrite)
     return html, check_dir(figures_dir(html), "figures", overwrite, source=html.name, option="figures directory")

@@ -13,7 +13,8 @@ Every directory a command creates carries a marker, ``.campaign-owner.json`` (``
   ``--overwrite``: reprocessing or correcting writes a new directory and never replaces a run's model. Only the
   run's own additions (``report``, ``verify``, ``diagnose`` of that run) go there, through :func:`check_campaign_dir`;
 * an existing output *file* named by the user (``report --out FILE``, ``diagnose --json FILE``, ``export``,
-  ``plan --csv``) is refused unless ``--overwrite``.
+  ``plan --csv``, ``select --out``, ``import --out``) is refused unless ``--overwrite``; one of a run directory's
+  own files (its log, model, data) is refused even with ``--overwrite``: a run's files are its evidence.
 
 :meth:`Claim.take` creates the directory and writes the marker just before the first output is written.
 """
@@ -124,14 +125,18 @@ def check_campaign_dir(path: str | Path, what: str) -> Path:
     return path
 
 
-def check_file(path: str | Path, overwrite: bool = False, option: str = "--out") -> Path:
+def check_file(path: str | Path, overwrite: bool = False, option: str = "--out", own: bool = False) -> Path:
     """An output file named by the user: its directory must exist; an existing file is refused unless
-    ``overwrite``; a directory in the way is always refused. DataError, nothing written."""
+    ``overwrite``, and always when it is in a run directory (unless ``own``: the directory's own report, written
+    again by ``report``); a directory in the way is always refused. DataError, nothing written."""
     path = Path(path)
     if path.is_dir():
         raise DataError(str(path), f"{option} is a directory, expected a file name")
     if not path.parent.is_dir():
         raise DataError(str(path), "the directory does not exist")
+    if not own and (path.exists() or path.is_symlink()) and is_run_dir(path.resolve().parent):
+        raise DataError(str(path), f"{option} is a file of a run directory (the run's evidence): it is never "
+                                   "replaced, even with --overwrite; give a new path")
     if (path.exists() or path.is_symlink()) and not overwrite:
         raise DataError(str(path), f"{option}: the file exists: {OVERWRITE_HINT}")
     return path

@@ -166,6 +166,11 @@ def _foreign_plan(w, b):
     return ["run", b["config"], "--out", w / "mine"]
 
 
+def _link(link: Path, target: Path) -> Path:
+    link.symlink_to(target)
+    return link
+
+
 def _report_existing_file(w, b):
     (w / "mine.html").write_text("<p>my page</p>\n")
     (w / "figures").mkdir()
@@ -231,6 +236,15 @@ CASES: dict[str, Case] = {
     "diagnose_json_an_existing_file": Case(
         lambda w, b: ["diagnose", b["run"] / "data.csv", "--config", b["config"], "--json",
                       _write(w / "d.json", "{}")], needles=("d.json", "exists")),
+    "select_out_over_a_runs_log_even_with_overwrite": Case(
+        lambda w, b: ["select", _copy_run(w, b), "--config", b["config"], "--points", 40, "--out",
+                      w / "run" / "log.jsonl", "--overwrite"], needles=("log.jsonl", "run directory", "never")),
+    "diagnose_json_over_a_runs_model_even_with_overwrite": Case(
+        lambda w, b: ["diagnose", _copy_run(w, b) / "data.csv", "--config", b["config"], "--json",
+                      w / "run" / "model.json", "--overwrite"], needles=("model.json", "run directory")),
+    "export_through_a_link_to_a_runs_file": Case(
+        lambda w, b: ["export", _copy_run(w, b) / "model.json", "--dh-csv", _link(w / "dh.csv", w / "run" / "data.csv"),
+                      "--overwrite"], needles=("dh.csv", "run directory")),
     "correct_into_a_foreign_directory": Case(
         lambda w, b: ["correct", "--config", b["config"], "--model", b["run"] / "model.json", "--targets",
                       _targets(w, ["A", "B"]), "--out", _write(w / "out" / "notes.txt", "mine\n").parent],
