@@ -90,7 +90,8 @@ def _check_outputs(args: argparse.Namespace):
 
     if args.json:
         check_file(args.json, args.overwrite, "--json")
-    if args.html is not None:
+    if args.html is not None:                     # a page of the diagnosis alone: never a run's own report.html
+        check_file(args.html, args.overwrite, "--html")
         report_targets(args.html.parent, args.html, args.overwrite)
     elif args.source.is_dir():
         check_campaign_dir(args.source, "diagnose")

@@ -242,6 +242,9 @@ CASES: dict[str, Case] = {
     "diagnose_json_over_a_runs_model_even_with_overwrite": Case(
         lambda w, b: ["diagnose", _copy_run(w, b) / "data.csv", "--config", b["config"], "--json",
                       w / "run" / "model.json", "--overwrite"], needles=("model.json", "run directory")),
+    "diagnose_html_over_a_runs_report": Case(
+        lambda w, b: ["diagnose", _copy_run(w, b) / "data.csv", "--config", b["config"], "--html",
+                      w / "run" / "report.html"], needles=("report.html", "run directory")),
     "export_through_a_link_to_a_runs_file": Case(
         lambda w, b: ["export", _copy_run(w, b) / "model.json", "--dh-csv", _link(w / "dh.csv", w / "run" / "data.csv"),
                       "--overwrite"], needles=("dh.csv", "run directory")),
