@@ -362,11 +362,14 @@ def prediction(G_plan: np.ndarray, n_done: int, n_points: np.ndarray, Gw: np.nda
 @dataclass(frozen=True, eq=False)
 class Criterion:
     """What the selection works on: whitened, prior-scaled rows A (M, 3, L) with column ``names``, the values
-    (M, J) of the joints to spread (``spread_joints``), and how many columns the candidates can identify."""
+    (M, J) of the joints to spread (``spread_joints``), how many columns the candidates can identify, and how many
+    of the geometric ones (what every calibration identifies; the effects are taken only when the data support
+    them)."""
     A: np.ndarray
     names: tuple[str, ...]
     spread: np.ndarray
     identifiable: int
+    identifiable_geometric: int
 
 
 def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_kg: float = 0.0,
@@ -380,8 +383,10 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
     A = information_rows(J, cov_mm2, prior)
     layout = ParamLayout.of(kin)
     theta = [c for c, _, k in layout.joint_cols if k == 0]
-    P = identifiable_count(A, names, layout.size, priority_order(layout))
-    return Criterion(A, names, q[:, spread_joints(J[:, :, theta])], P)
+    order = priority_order(layout)
+    P = identifiable_count(A, names, layout.size, order)
+    P_geo = identifiable_count(A[:, :, :layout.size], names[:layout.size], layout.size, order)
+    return Criterion(A, names, q[:, spread_joints(J[:, :, theta])], P, P_geo)
 
 
 @dataclass(frozen=True, eq=False)

@@ -35,11 +35,13 @@ class Selection:
     subset: Forecast
     everything: Forecast | None
     judged_at: str = "test rows"           # where the forecasts are evaluated: "test rows", else "calibration rows"
+    effects_need: int = 0                  # rows that also determine every pose-dependent effect ``auto`` may take
 
 
 def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     """The subset with ``n`` calibration rows chosen by the optimal-plan criterion; DataError when the data has
-    another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable parameters + 10 %;
+    another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable geometric parameters
+    + 10 % (the calibration's own minimum; the effects ``auto`` may take need more rows, which the record notes);
     the data-alone plausibility checks of ``reprocess`` first (``check_dataset``: PlausibilityError unless
     forced)."""
     check_dataset(ds, cell)
@@ -57,10 +59,10 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
     cov = cell.weights(ds)[0]
     crit = criterion(kin, q, cov[cal], payload)
-    need = math.ceil(1.1 * crit.identifiable)
+    need = math.ceil(1.1 * crit.identifiable_geometric)
     if n < need:
-        raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable} parameters these rows "
-                                   f"determine: at least {need} (identifiable + 10 %)")
+        raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
+                                   f"parameters these rows determine: at least {need} (identifiable + 10 %)")
     chosen = d_optimal(crit.A, n, crit.spread).chosen
     keep = ~ds.mask("calib")
     keep[cal[chosen]] = True
@@ -69,4 +71,5 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     q_at, cov_at = np.radians(ds.q_deg[at]), cov[at]
     sub = forecast(kin, q[chosen], cov[cal][chosen], q_at, cov_at, payload)
     every = forecast(kin, q, cov[cal], q_at, cov_at, payload) if len(cal) <= FORECAST_MAX_ROWS else None
-    return Selection(keep, n, len(cal), sub, every, "test rows" if len(test) else "calibration rows")
+    return Selection(keep, n, len(cal), sub, every, "test rows" if len(test) else "calibration rows",
+                     math.ceil(1.1 * crit.identifiable))

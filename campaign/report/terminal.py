@@ -205,6 +205,10 @@ def render_selection(console: Console, sel, n_other: int, out) -> None:
                   f"the {sel.judged_at}): {sel.n_chosen} rows {sel.subset.model_rms_effects_mm:.4f} mm{every}; noise floor "
                   f"{floor_mm(sel.subset.floor_mm)} mm. What the unmodelled part adds shows only in the held-out "
                   "figures of `campaign reprocess` on the subset", markup=False)
+    if sel.n_chosen < sel.effects_need:
+        console.print(f"note: {sel.n_chosen} rows determine the geometry but not every pose-dependent effect "
+                      f"`effects: auto` may take (that needs {sel.effects_need}): a physical effect may go undetected "
+                      "and stay in the residual", markup=False)
 
 
 def render_plan(console: Console, plan: Plan, duration_s: float) -> None:

@@ -129,3 +129,27 @@ def test_select_reads_a_run_directory_like_its_interchange_csv(tmp_path, capsys)
     assert sum(s != "calib" for s in a.set) == sum(s != "calib" for s in full.set)
     code, _, err = cli(capsys, "reprocess", tmp_path / "from_log.csv", "--config", cfg, "--out", tmp_path / "re")
     assert code == 0, err
+
+
+def test_select_needs_the_geometry_only_and_notes_when_effects_need_more_rows(tmp_path, capsys):
+    """The minimum of ``--points`` is the calibration's own (identifiable geometric parameters + 10 %): one row
+    fewer is refused, that many are selected and reprocess; below what also determines every pose-dependent effect
+    ``auto`` may take, the output says so; at or above it, it does not."""
+    data = _campaign_csv(tmp_path / "data.csv")
+    ds, cell = read_csv(data), load_cell(CONFIG)
+    cal = ds.mask("calib")
+    q = np.radians(ds.q_deg[cal])
+    c = criterion(register(cell.kinematics, q, ds.p_tracker_mm[cal]), q, cell.weights(ds)[0][cal], cell.payload_kg)
+    geo, every = int(np.ceil(1.1 * c.identifiable_geometric)), int(np.ceil(1.1 * c.identifiable))
+    assert geo < every <= int(cal.sum())
+    code, out, err = cli(capsys, "select", data, "--config", CONFIG, "--points", geo - 1, "--out", tmp_path / "a.csv")
+    assert_one_line(code, out, err, 2, f"--points {geo - 1}", f"{c.identifiable_geometric} geometric",
+                    f"at least {geo}")
+    code, text, err = cli(capsys, "select", data, "--config", CONFIG, "--points", geo, "--out", tmp_path / "s.csv")
+    assert code == 0, err
+    assert f"(that needs {every})" in " ".join(text.split())
+    code, _, err = cli(capsys, "reprocess", tmp_path / "s.csv", "--config", CONFIG, "--out", tmp_path / "re")
+    assert code == 0, err
+    code, text, err = cli(capsys, "select", data, "--config", CONFIG, "--points", every, "--out", tmp_path / "e.csv")
+    assert code == 0, err
+    assert "note:" not in text
