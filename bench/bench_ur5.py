@@ -31,7 +31,7 @@ from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.importers import import_target_dif, read_target_dif_file  # noqa: E402
 from campaign.calibrate.plausibility import check_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from robocal.elastic import elastic_flange  # noqa: E402
+from robocal.elastic import EffectChoice, elastic_flange  # noqa: E402
 from robocal.frames import transform_points  # noqa: E402
 
 UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
@@ -94,7 +94,8 @@ def stages(tmp: Path) -> list:
     for name, s in report.stages.items():
         t = s.test
         print(f"   {name:34s} {t.mean_mm:7.4f} {t.rms_mm:7.4f} {t.max_mm:7.4f}")
-    eff = ", ".join(f"{e['name']}{e['options'].get('joint', e['options'].get('joints', ''))}"
+    eff = ", ".join(EffectChoice(e["name"], tuple((k, tuple(v) if isinstance(v, list) else v)
+                                                  for k, v in e["options"].items())).label
                     for e in report.effects.fitted) or "none"
     print(f"   noise floor (specs) {report.noise_floor_mm:.4f}; effects taken: {eff}; residual layer: "
           f"{report.method.residual}; excluded points: {len(report.excluded_points)}")

@@ -127,17 +127,67 @@ class BlockedCV:
         """Held-out error vectors (N, 3) mm of the columns ``cols`` under one blocking."""
         cols = np.asarray(cols, int)
         G, c, per = self._gram[blocking]
-        out = np.empty((len(self.yw), 3))
         GS, cS = G[np.ix_(cols, cols)], c[cols]
         ridge = RIDGE * np.eye(len(cols))
         X = np.empty((len(per), len(cols)))                  # every fold's fit of ``cols``
         for f, (rows, Gf, cf) in enumerate(per):
             X[f] = np.linalg.solve(GS - Gf[np.ix_(cols, cols)] + ridge, cS - cf[cols])
+        return self._predict_errors(X, cols, blocking)
+
+    def _explained(self, G, c, base, alts) -> np.ndarray:
+        """(K,) weighted sum of squares each alternative column set explains beyond ``base`` (fits on the Gram G,
+        c): the larger, the smaller the residual of base + that set on the same rows."""
+        every = np.concatenate(alts)
+        Gbb = G[np.ix_(base, base)] + RIDGE * np.eye(len(base))
+        Gbe = G[np.ix_(base, every)]
+        Z = np.linalg.solve(Gbb, np.column_stack([c[base], Gbe]))       # base's share once, for every alternative
+        r_all = c[every] - Gbe.T @ Z[:, 0]
+        S_all = G[np.ix_(every, every)] - Gbe.T @ Z[:, 1:]
+        m = len(alts[0])
+        if all(len(a) == m for a in alts):            # every alternative adds its Schur complement's part (batched)
+            K = len(alts)
+            S = S_all.reshape(K, m, K, m)[np.arange(K), :, np.arange(K), :] + RIDGE * np.eye(m)
+            r = r_all.reshape(K, m)
+            return np.einsum("ki,ki->k", r, np.linalg.solve(S, r[:, :, None])[:, :, 0])
+        out, at = np.empty(len(alts)), 0
+        for k, a in enumerate(alts):
+            i = slice(at, at + len(a))
+            at += len(a)
+            out[k] = r_all[i] @ np.linalg.solve(S_all[i, i] + RIDGE * np.eye(len(a)), r_all[i])
+        return out
+
+    def scan_pick(self, base_cols, alts) -> int:
+        """Index of the alternative column set (each beside ``base_cols``) that fits all points best."""
+        G, c, _ = self._gram[0]
+        return int(np.argmax(self._explained(G, c, np.asarray(base_cols, int), [np.asarray(a, int) for a in alts])))
+
+    def scan_errors(self, base_cols, alts, blocking: int = 0) -> np.ndarray:
+        """Held-out error vectors (N, 3) mm of a scan: in every fold the alternative column set that fits the
+        training rows best (beside ``base_cols``) is chosen on those rows alone and predicts the held-out rows.
+        The choice is part of what is cross-validated (nested), so picking the best of many alternatives does not
+        make the held-out errors optimistic."""
+        base = np.asarray(base_cols, int)
+        alts = [np.asarray(a, int) for a in alts]
+        union = np.concatenate([base] + alts)
+        where = {int(col): i for i, col in enumerate(union)}
+        G, c, per = self._gram[blocking]
+        X = np.zeros((len(per), len(union)))
+        for f, (rows, Gf, cf) in enumerate(per):
+            Gt, ct = G - Gf, c - cf
+            k = int(np.argmax(self._explained(Gt, ct, base, alts)))
+            cols = np.concatenate([base, alts[k]])
+            x = np.linalg.solve(Gt[np.ix_(cols, cols)] + RIDGE * np.eye(len(cols)), ct[cols])
+            X[f, [where[int(col)] for col in cols]] = x
+        return self._predict_errors(X, union, blocking)
+
+    def _predict_errors(self, X: np.ndarray, cols: np.ndarray, blocking: int) -> np.ndarray:
+        """Held-out error vectors (N, 3) mm of the per-fold fits X (folds, len(cols)) of the columns ``cols``."""
         at = self._fold_at[blocking]
+        out = np.empty((len(self.yw), 3))
         for s in range(0, len(out), CHUNK_ROWS):    # row blocks: all folds' predictions, each row keeps its own
             b = slice(s, s + CHUNK_ROWS)
             m = len(at[b])
-            pred = (X @ self._At[cols, b].reshape(len(cols), -1)).reshape(len(per), m, 3)
+            pred = (X @ self._At[cols, b].reshape(len(cols), -1)).reshape(len(X), m, 3)
             e_w = self.yw[b] - pred[at[b], np.arange(m)]
             out[b] = np.matmul(self.L[b], e_w[:, :, None])[:, :, 0]
         return out

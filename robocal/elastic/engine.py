@@ -18,7 +18,7 @@ from ..effects import GravityModel
 from ..identify import CalibrationOptions
 from ..kinematics import Kinematics
 from .fit import ElasticResult, calibrate_elastic
-from .library import LibraryOptions, candidates
+from .library import LibraryOptions, candidates, scan_families
 from .model import EffectChoice, FittedEffect
 from .physical import reading
 from .select import EffectSelection, select_effects
@@ -52,14 +52,15 @@ def select(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_track
            options: EngineOptions = EngineOptions()) -> EngineResult:
     """Candidates + selection on the calibration rows (no fit yet): what ``effects: auto`` takes."""
     cands, cannot = candidates(kin_geo, q_rad, meta, gravity, options.library)
+    scans, not_scanned = scan_families(q_rad, options.library)
 
     def plausible(choice: EffectChoice, values: np.ndarray) -> bool:
         eff = choice.build(kin_geo.n)
         fe = FittedEffect(choice, values, np.full(eff.k, np.nan), eff.param_names, eff.unit)
         return reading(fe, kin_geo, q_rad, meta, gravity, options.library)["plausible"]
     sel = select_effects(kin_geo, geo_cols, q_rad, p_tracker_mm, cov_mm2, meta, cands, options.folds, options.seed,
-                         options.max_effects, plausible)
-    return EngineResult(sel, tuple(cannot), tuple(cands))
+                         options.max_effects, plausible, scans)
+    return EngineResult(sel, tuple(cannot + not_scanned), tuple(cands))
 
 
 def run_engine(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,

@@ -26,6 +26,13 @@ class LibraryOptions:
     harmonics: tuple[int, ...] = (1, 2, 3, 4)
     degrees_per_harmonic: float = 45.0    # a joint covering S degrees is offered the first S / 45 harmonics (1-4):
     #                                       over a narrow range more harmonics only add polynomial terms
+    scan_max_order: int = 40              # cyclic errors of a higher order (an encoder's track, a gear's teeth):
+    scan_min_periods: float = 2.0         # each joint is scanned over the orders with at least 2 periods over its
+    #                                       span (fewer look like a polynomial) up to 40 per revolution
+    scan_points_per_period: float = 4.0   # and at most the order whose period holds 4 of the joint's distinct values
+    #                                       on average: sparser, a high order aliases to a low one at the measured
+    #                                       poses, which cross-validation on those poses cannot see
+    scan_max_rows: int = 20_000           # the scan's columns (N x 3 x 2 per order) are kept up to this many rows
     backlash_min_side: int = 5            # approaches from each side needed on a joint, at least ...
     backlash_min_side_fraction: float = 0.05   # ... and this share of the rows
     lag_min_move_std_deg: float = 1.0     # joints whose moves vary less cannot show a read-back lag
@@ -106,6 +113,37 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
         cannot.append({"effect": "axis_coupling", "joints": [4, 5, 6], "reason": "needs a 6-axis wrist whose J4 and J5 "
                        "move" if n >= 6 else "needs a 6-axis wrist"})
     return out, cannot
+
+
+def scan_orders(span_deg: float, n_values: int, opt: LibraryOptions = LibraryOptions()) -> tuple[int, ...]:
+    """The orders (periods per revolution) a joint covering ``span_deg`` with ``n_values`` distinct angles is
+    scanned over: above the low harmonics it is offered, with at least ``scan_min_periods`` periods over the span,
+    up to ``scan_max_order`` and to ``scan_points_per_period`` values per period."""
+    low = int(np.clip(span_deg // opt.degrees_per_harmonic, 1, len(opt.harmonics)))
+    span = max(span_deg, 1e-9)
+    first = max(opt.harmonics[low - 1] + 1, math.ceil(opt.scan_min_periods * 360.0 / span))
+    last = min(opt.scan_max_order, math.floor(n_values * 360.0 / (opt.scan_points_per_period * span)))
+    return tuple(range(first, last + 1))
+
+
+def scan_families(q_rad: np.ndarray, opt: LibraryOptions = LibraryOptions()
+                  ) -> tuple[list[tuple[EffectChoice, ...]], list[dict]]:
+    """(families, cannot_tell): per joint that covers ``gear_min_span_deg``, the single-order cyclic errors
+    ``gear_cyclic(Jj hk)`` of its ``scan_orders``; the selection takes at most one order of a family per round,
+    chosen inside its cross-validation (``BlockedCV.scan_errors``)."""
+    q = np.atleast_2d(q_rad)
+    N, n = q.shape
+    if N > opt.scan_max_rows:
+        return [], [{"effect": "gear_cyclic", "joints": list(range(1, n + 1)),
+                     "reason": f"cyclic errors of a higher order are scanned up to {opt.scan_max_rows} rows"}]
+    out = []
+    for j in range(1, n + 1):
+        span = math.degrees(float(np.ptp(q[:, j - 1])))
+        values = len(np.unique(np.round(np.degrees(q[:, j - 1]), 2)))
+        orders = scan_orders(span, values, opt) if span >= opt.gear_min_span_deg else ()
+        if orders:
+            out.append(tuple(EffectChoice("gear_cyclic", (("joint", j), ("harmonics", (k,)))) for k in orders))
+    return out, []
 
 
 def _backlash(meta, N, n, opt, cannot) -> list[EffectChoice]:

@@ -1,16 +1,18 @@
 """Which effects the data support: forward selection by blocked cross-validation around the geometric solution.
 
 Every round tries each remaining candidate on top of the geometry + the effects taken so far (linearised at the
-geometric solution) and takes the one with the lowest held-out error, if its gain is significant: one-sided
-paired t of the per-point squared errors > 3 and held-out RMS lower by > 2 % (``robocal.stats.paired_gain``), or
-t > 2 and > 10 % lower,
-the per-point errors being the mean over the blockings (pose blocks and, when the measurement order is known,
-order blocks), and the gain positive under each blocking on its own. An effect just taken loses the parts the
+geometric solution) and takes the one with the lowest held-out error, if its gain is significant: one-sided paired t
+of the per-point squared errors > 3 and held-out RMS lower by > 2 % (``robocal.stats.paired_gain``), or t > 2 and >
+10 % lower, the per-point errors being the mean over the blockings (pose blocks and, when the measurement order is
+known, order blocks), and the gain positive under each blocking on its own. An effect just taken loses the parts the
 data do not need (a joint, a harmonic, a memory term: removing the part must cost t >= 2); refinements of it
-(compliance's free mass distribution) join the candidates. At the end every taken effect must still be needed
-given the others (removing it costs t >= 2 and >= 1 % of RMS), else it is dropped.
-Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a
-plausible one before an implausible best), and never drops an effect; consistency is reported, never used here.
+(compliance's free mass distribution) join the candidates. A joint's cyclic errors of a higher order (an encoder's
+track, a gear's teeth: two periods over the joint's span up to 40 per revolution) are one candidate per joint, a
+scan: in every fold the order that fits the training rows best predicts the held-out rows, so the pick among many
+orders is cross-validated too (nested); the order taken is the one that fits all rows best. At the end every taken
+effect must still be needed given the others (removing it costs t >= 2 and >= 1 % of RMS), else it is dropped.
+Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a plausible
+one before an implausible best), and never drops an effect; consistency is reported, never used here.
 """
 from __future__ import annotations
 
@@ -98,7 +100,9 @@ class EffectSelection:
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
                           f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
                           "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
-                          "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking",
+                          "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking; "
+                          "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
+                          "every fold (nested)",
                 "taken": [c.label for c in self.taken], "geometric_cv_rms_mm": self.geometric_cv_rms_mm,
                 "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
@@ -143,16 +147,20 @@ def _rms(se) -> float:
 
 def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
                    cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
-                   max_effects: int = 6, plausible=None) -> EffectSelection:
+                   max_effects: int = 6, plausible=None, scans=()) -> EffectSelection:
     """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
     columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
     values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
-    over them < 2) a plausible one is preferred to an implausible best."""
+    over them < 2) a plausible one is preferred to an implausible best. ``scans``: families of alternatives
+    (``library.scan_families``: one joint's cyclic errors of every higher order); each family is one candidate
+    per round, its member chosen inside every fold of the cross-validation (nested: the scan's pick among many
+    orders does not make its held-out errors optimistic) and, to be taken, on all rows."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     pool = list(dict.fromkeys(candidates))
     extra = [r for c in pool for r in refinements(c, n) if r not in pool]
-    design = _Design(kin, geo_cols, q, meta, pool + extra)
+    families = [tuple(f) for f in scans if len(f)]
+    design = _Design(kin, geo_cols, q, meta, pool + extra + [c for f in families for c in f if c not in pool + extra])
     r0 = np.asarray(p_tracker_mm, float) - design.p0
     blockings = [Blocking("pose blocks", pose_blocks(q, folds, seed))]
     if meta.get("order") is not None:
@@ -169,8 +177,16 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     trials, steps = [], []
     for rnd in range(1, max_effects + 1):
         scored = []
-        for c in pool:
-            se = errors(model, design.cols[c])
+        tried = [(c, errors(model, design.cols[c])) for c in pool]
+        in_model = np.concatenate([design.geo] + [e[1] for e in model])
+        for family in families:
+            live = [c for c in family if not any(c in (e[0], e[2]) for e in model)]
+            if live:
+                alts = [design.cols[c] for c in live]
+                tried.append((live[cv.scan_pick(in_model, alts)],
+                              {b.name: np.sum(cv.scan_errors(in_model, alts, i) ** 2, axis=1)
+                               for i, b in enumerate(cv.blockings)}))
+        for c, se in tried:
             g = paired_gain(_mean(base), _mean(se))
             each = all(_rms(se[b]) < _rms(base[b]) for b in se)
             trials.append(Trial(rnd, c.label, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.rms_base_mm,
@@ -215,7 +231,14 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
                 break
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
-                           tuple(c.label for c in candidates), absorbed, tuple(e[2].label for e in model), shadowed)
+                           tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
+                           tuple(e[2].label for e in model), shadowed)
+
+
+def _family_label(family) -> str:
+    """``gear_cyclic(J1 h9-40)``: a scan family by its joint and range of orders."""
+    hs = [h for c in family for h in dict(c.options)["harmonics"]]
+    return family[0].with_options(harmonics=(min(hs),)).label.replace(f"h{min(hs)}", f"h{min(hs)}-{max(hs)}")
 
 
 def _plausible_pick(scored, cv, design, model, plausible) -> int:
@@ -239,12 +262,16 @@ def _supported(g) -> bool:
 
 def alternatives(a: EffectChoice, b: EffectChoice) -> bool:
     """Two candidates for the same physical effect (another warm-up time constant, another drift degree, the
-    same joint's effect): once one is taken the other is no longer tried (refinements are)."""
+    same joint's effect; for a cyclic error, the same joint and a common order): once one is taken the other is no
+    longer tried (refinements are)."""
     if a.name != b.name:
         return False
     if a.name in ("thermal_drift", "registration_drift"):
         return True
-    return dict(a.options).get("joint") == dict(b.options).get("joint")
+    oa, ob = dict(a.options), dict(b.options)
+    if a.name == "gear_cyclic" and not set(oa.get("harmonics", (1, 2))) & set(ob.get("harmonics", (1, 2))):
+        return False                     # other orders of the same joint's cyclic error: a low and a high one
+    return oa.get("joint") == ob.get("joint")
 
 
 def _prune(errors, design, model, choice, full, step, n):

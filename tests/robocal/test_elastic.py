@@ -1,13 +1,15 @@
 """The one effect engine (robocal.elastic): blocked cross-validation, candidates and what cannot be told, forward
 selection on independent truth campaigns (robocal/simulation/truth_cell.py), the joint fit, the physical reading, the model."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from robocal.effects import GravityModel, apply_effects, joint_compliance
+from robocal.effects import GravityModel, apply_effects, effect_regressor, gear_cyclic, joint_compliance
 from robocal.elastic import (BlockedCV, Blocking, EffectChoice, FittedEffect, calibrate_elastic, candidates,
                              order_blocks, pose_blocks, reading, run_engine, select)
+from robocal.elastic.library import LibraryOptions, scan_families, scan_orders
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.model import CalibratedModel
@@ -51,6 +53,67 @@ def test_blocked_cv_equals_a_brute_force_refit_per_fold():
         x = np.linalg.lstsq(Aw, np.einsum("nij,nj->ni", W[tr], y[tr]).reshape(-1), rcond=None)[0]
         ref[te] = np.sum((y[te] - A[te][:, :, cols] @ x) ** 2, axis=1)
     np.testing.assert_allclose(se, ref, rtol=1e-6)
+
+
+def _scan_problem(seed: int, signal: float = 0.0, N: int = 90, K: int = 12):
+    """A base design (N, 3, 4) and K two-column alternatives; y = noise (+ ``signal`` x alternative 5)."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(N, 3, 4 + 2 * K))
+    y = rng.normal(0, 1.0, (N, 3)) + signal * A[:, :, 4 + 10:4 + 12] @ np.array([1.0, -0.5])
+    alts = [np.array([4 + 2 * k, 5 + 2 * k]) for k in range(K)]
+    fold = np.arange(N) % 5
+    cv = BlockedCV(A, y, np.broadcast_to(np.eye(3), (N, 3, 3)).copy(), [Blocking("pose", fold)])
+    return A, y, alts, fold, cv
+
+
+@pytest.mark.unit
+def test_a_scan_is_cross_validated_with_its_pick_inside_every_fold():
+    """``scan_errors`` equals a brute-force refit per fold that picks the alternative on the training rows alone;
+    ``scan_pick`` is the alternative that fits all rows best."""
+    A, y, alts, fold, cv = _scan_problem(3)                # noise: the folds pick different alternatives
+    base = np.arange(4)
+    ref = np.empty(len(y))
+
+    def fit(rows, cols):
+        x = np.linalg.lstsq(A[rows][:, :, cols].reshape(-1, len(cols)), y[rows].reshape(-1), rcond=None)[0]
+        return x, float(np.sum((y[rows] - A[rows][:, :, cols] @ x) ** 2))
+    for f in range(5):
+        tr, te = fold != f, fold == f
+        best = min(alts, key=lambda a: fit(tr, np.concatenate([base, a]))[1])
+        cols = np.concatenate([base, best])
+        ref[te] = np.sum((y[te] - A[te][:, :, cols] @ fit(tr, cols)[0]) ** 2, axis=1)
+    np.testing.assert_allclose(np.sum(cv.scan_errors(base, alts) ** 2, axis=1), ref, rtol=1e-6)
+    picks = {min(range(len(alts)), key=lambda k: fit(fold != f, np.concatenate([base, alts[k]]))[1]) for f in range(5)}
+    assert len(picks) > 1                                 # (so the test sees a pick made on all rows)
+    assert _scan_problem(3, signal=0.4)[4].scan_pick(base, alts) == 5
+
+
+@pytest.mark.unit
+def test_a_nested_scan_is_not_optimistic_on_noise_where_picking_on_all_rows_is():
+    """Pure noise, 40 seeds: the order picked on all rows and then cross-validated looks better than the base
+    (selection bias); nested, the same scan does not."""
+    nested, picked = [], []
+    for seed in range(40):
+        A, y, alts, fold, cv = _scan_problem(100 + seed)
+        base = np.arange(4)
+        e0 = np.mean(cv.squared_errors(base)["pose"])
+        nested.append(np.mean(np.sum(cv.scan_errors(base, alts) ** 2, axis=1)) / e0)
+        best = alts[cv.scan_pick(base, alts)]
+        picked.append(np.mean(cv.squared_errors(np.concatenate([base, best]))["pose"]) / e0)
+    assert np.mean(picked) < 1.0 < np.mean(nested)
+
+
+@pytest.mark.unit
+def test_the_scan_offers_orders_with_two_periods_over_the_span_and_four_values_per_period():
+    assert scan_orders(81.0, 1000) == tuple(range(9, 41))      # 2 periods over 81 deg from the 9th; 40 at most
+    assert scan_orders(360.0, 1000) == tuple(range(5, 41))     # above the low harmonics 1-4 of a full turn
+    assert scan_orders(300.0, 39) == tuple(range(5, 12))       # 39 values over 300 deg: 4 per period up to the 11th
+    assert scan_orders(300.0, 10) == ()
+    q = np.radians(np.column_stack([np.linspace(-40, 41, 100), np.full(100, 10.0)]))
+    families, cannot = scan_families(q)
+    assert [dict(f[0].options)["joint"] for f in families] == [1] and len(families[0]) == 32
+    assert scan_families(q, LibraryOptions(scan_max_rows=99)) == ([], [{
+        "effect": "gear_cyclic", "joints": [1, 2], "reason": "cyclic errors of a higher order are scanned up to 99 rows"}])
 
 
 @pytest.mark.unit
@@ -103,6 +166,25 @@ def test_nothing_is_taken_on_geometric_only_data():
         _, _, _, _, eng = engine_on(simulate([], seed, SMALL))
         assert eng.taken == () and eng.elastic is None
         assert len({t.label for t in eng.selection.trials}) >= 10
+
+
+@pytest.mark.system
+def test_a_cyclic_error_of_a_high_order_is_found_at_its_order_and_predicts_the_test_rows():
+    """A J1 cyclic error of 14 periods per revolution (20 arcsec) on a geometric truth campaign: the scan takes
+    ``gear_cyclic(J1 h14)``, and the model predicts the test rows better than the geometry."""
+    camp = simulate([], 31, SMALL)
+    amp = np.radians(20.0 / 3600.0) * np.array([0.8, -0.6])
+    eff = gear_cyclic(1, (14,))
+    dp = effect_regressor(camp.truth_kin, camp.q_cmd_rad, {}, eff) @ amp
+    inp, geo, cols, meta, eng = engine_on(replace(camp, p_mm=camp.p_mm + dp))
+    assert "gear_cyclic(J1 h14)" in [c.label for c in eng.taken]
+    fe = next(f for f in eng.elastic.effects if f.choice.label == "gear_cyclic(J1 h14)")
+    np.testing.assert_allclose(fe.values, amp, atol=0.25 * np.abs(amp).max())
+    test = np.flatnonzero(inp.test)
+    tmeta = {k: (None if v is None else np.asarray(v)[test]) for k, v in inp.meta().items()}
+    model = CalibratedModel(eng.elastic.kinematics, None, None, eng.elastic.effects)
+    e_geo = rms(inp.p_mm[test] - smr_tracker(geo.kinematics, inp.q_rad[test]))
+    assert rms(inp.p_mm[test] - model.smr_tracker(inp.q_rad[test], tmeta)) < 0.8 * e_geo
 
 
 @pytest.mark.system
