@@ -108,12 +108,15 @@ def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict
     return out
 
 
-def rival_class(step) -> list[dict]:
+def rival_class(step, later=()) -> list[dict]:
     """Rivals of a taken effect with another name that predicted held-out points as well (the winner's paired t
-    over them < 2): one confusable class, with the experiment that separates each."""
+    over them < 2): one confusable class, with the experiment that separates each. A rival that a later step
+    (``later``: the steps taken after this one) took, or that rivalled it, belongs to that step: the model holds
+    both structures, so the data did tell this effect from it."""
+    elsewhere = {s.choice.label for s in later} | {r[0] for s in later for r in s.rivals}
     out = []
     for label, name, rms, t in step.rivals:
-        if name == step.choice.name:
+        if name == step.choice.name or label in elsewhere:
             continue
         out.append({"effect": name, "label": label, "cv_rms_mm": rms, "t_winner_over_it": t,
                     "experiment": separating_experiment(step.choice.name, name, f"{step.choice.label} {label}")})

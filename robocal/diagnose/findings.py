@@ -61,7 +61,7 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
 def _class(fe, eff, k, step, sel, ctx, opt) -> tuple[list[dict], dict | None]:
     """(the confusable class of an accepted effect: rivals that predicted as well, candidates it explains
     entirely, a drift in measurement order it is confounded with; the confound itself or None)."""
-    conf = rival_class(step)
+    conf = rival_class(step, [s for s in sel.steps if s.round > step.round])
     conf += [{"effect": lb.split("(")[0], "label": lb, "share_explained": share,
               "experiment": separating_experiment(fe.choice.name, lb.split("(")[0], f"{fe.choice.label} {lb}"),
               "why": f"{fe.choice.label} explains {100 * share:.0f} % of its signature beyond the geometry"}

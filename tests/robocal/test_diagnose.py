@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from robocal.diagnose import diagnose, structure_test, where_analysis
-from robocal.diagnose.evidence import follows_order
+from robocal.diagnose.evidence import follows_order, rival_class
+from robocal.elastic import EffectChoice, Step
 from robocal.diagnose.selfcheck import truth_input
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 
@@ -120,3 +121,18 @@ def test_where_names_the_far_reach_region_in_words():
     assert any(t.startswith("far reach (radius >") and "vs floor" in t for t in text)
     assert not any(t.startswith("near reach") for t in text)
     assert len(maps["joints"]) == 6 and maps["workspace"]["n"]
+
+
+@pytest.mark.unit
+def test_a_rival_that_a_later_step_took_or_rivalled_is_not_in_the_class_of_the_first():
+    """Round 1 takes a J1 order-13 error before compliance and a J2 first harmonic (as good); round 2 takes the J2
+    harmonic, with compliance its rival. The model holds both structures: compliance is the J2 harmonic's class,
+    not the J1 error's (the public UR5 campaign's case)."""
+    j1 = EffectChoice("gear_cyclic", (("joint", 1), ("harmonics", (13,))))
+    j2 = EffectChoice("gear_cyclic", (("joint", 2), ("harmonics", (1,))))
+    comp = ("joint_compliance(J2,3)", "joint_compliance", 0.108, 1.2)
+    first = Step(j1, 1, 0.119, 0.107, {}, 13.5, 0.10, [comp, (j2.label, "gear_cyclic", 0.107, 1.2)])
+    second = Step(j2, 2, 0.107, 0.095, {}, 14.1, 0.11, [comp])
+    assert [x["label"] for x in rival_class(first)] == ["joint_compliance(J2,3)"]       # alone, as before
+    assert rival_class(first, [second]) == []
+    assert [x["label"] for x in rival_class(second)] == ["joint_compliance(J2,3)"]
