@@ -23,7 +23,7 @@ campaign the large held-out set gains (``ur5-split`` mean below 1). The first ru
 1.04 (all 1000 rows: 0.87). On the 520 held-out poses of the split the 100-row subsets average 0.96 and the
 500-row pools 0.82-0.88; the 20 poses are one small, shared judge, so the rule now asks the large one.
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_scan.py [--seeds 1 2 3] [--forms ...] [--time]
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_scan.py [--seeds 1 2 3] [--forms ...] [--time] [--periodogram]
 """
 from __future__ import annotations
 
@@ -83,6 +83,52 @@ def timing(repeats: int = 3) -> None:
           f"{med[0]:.2f} s, with it {med[1]:.2f} s (ratio {med[1] / med[0]:.2f})")
 
 
+def periodogram(k_max: int = 60, top: int = 6) -> None:
+    """What found the scan: the UR5 campaign's residual after its effects (default process without the scan),
+    regressed per joint on a sin(k q) + b cos(k q) through the joint's column of the Jacobian, k = 1..k_max, by
+    5-fold CV over the calibration rows; the best orders for all rows and the best one of 10 random 100-row
+    subsets, with its amplitude; and the GP layer's length scale of J1."""
+    from bench_select import ur5_dataset
+    from robocal.kinematics import ParamLayout, identification_jacobian
+    ds, cell = ur5_dataset(None)
+    engine.scan_families = _no_scan
+
+    def best_orders(d):
+        res = calibrate_dataset(d, cell)
+        kin, pts = res.model.kinematics, res.points
+        cal = np.array([s == "calib" for s in pts.set])
+        q, e = np.radians(np.asarray(pts.q_deg))[cal], np.asarray(pts.err_base_mm["elastic"])[cal]
+        R = np.asarray(kin.T_tracker_base)[:3, :3]
+        J = np.einsum("ij,njp->nip", R.T, identification_jacobian(kin, q)[1])
+        theta = {j: c for c, j, k in ParamLayout.of(kin).joint_cols if k == 0}
+        fold = np.random.default_rng(0).permutation(len(e)) % 5
+        rows = []
+        for j in range(kin.n):
+            for k in range(1, k_max + 1):
+                X = J[:, :, theta[j]][:, :, None] * np.stack([np.sin(k * q[:, j]), np.cos(k * q[:, j])], 1)[:, None]
+                se = np.empty(len(e))
+                for f in range(5):
+                    tr = fold != f
+                    x = np.linalg.lstsq(X[tr].reshape(-1, 2), e[tr].reshape(-1), rcond=None)[0]
+                    se[~tr] = np.sum((e[~tr] - X[~tr] @ x) ** 2, axis=1)
+                amp = np.hypot(*np.linalg.lstsq(X.reshape(-1, 2), e.reshape(-1), rcond=None)[0])
+                rows.append((float(np.sqrt(se.mean())), j + 1, k, float(np.degrees(amp) * 3600.0)))
+        return float(np.sqrt(np.mean(np.sum(e**2, axis=1)))), sorted(rows), res
+    base, rows, res = best_orders(ds)
+    print(f"UR5, all 1000 rows: residual after the effects {base:.4f} mm (5-fold CV of one order per line):")
+    for cv, j, k, amp in rows[:top]:
+        print(f"   J{j} order {k:2d}: CV RMS {cv:.4f} mm, amplitude {amp:.1f} arcsec")
+    print(f"   GP layer length scale of J1: {res.model.residual.gp.models[0].length[0]:.3f} rad")
+    cal = np.flatnonzero(ds.mask("calib"))
+    for r in range(10):
+        keep = ~ds.mask("calib")
+        keep[np.random.default_rng(r).choice(cal, 100, replace=False)] = True
+        b, rs, _ = best_orders(ds.subset(keep))
+        print(f"   100-row subset {r}: best J{rs[0][1]} order {rs[0][2]} ({b:.4f} -> {rs[0][0]:.4f} mm, "
+              f"{rs[0][3]:.1f} arcsec)")
+    engine.scan_families = SCAN
+
+
 def split_sets(seeds):
     """The UR5 split: all 500 calibration rows and 3 seeded random 100-row subsets per split."""
     for seed, ds, cell, n in ur5_split_datasets(seeds):
@@ -94,9 +140,13 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--forms", nargs="+", default=["ur5-real", "ur5-split", *FORMS, DRIFT])
     ap.add_argument("--time", action="store_true", help="only time the UR5 calibration without and with the scan")
+    ap.add_argument("--periodogram", action="store_true", help="only the UR5 residual's best cyclic orders per joint")
     args = ap.parse_args()
     if args.time:
         timing()
+        return
+    if args.periodogram:
+        periodogram()
         return
     print("held-out RMS (mm) of the default process without and with the scan; ratio; scan effects taken")
     print(f"{'form':26s}{'data set':>16s}{'no scan':>10s}{'scan':>10s}{'ratio':>8s}{'taken':>7s}", flush=True)

@@ -5,7 +5,7 @@ Measured: 0.0879 mm against 0.0616 mm with all 1000 (1.43 x; paired bootstrap ov
 1.27-1.63 x) and a random median of 0.0886 mm. The goal of 1.2 x all is not met:
 ``test_select_100_of_1000_ur5_poses_reaches_the_goal`` is a strict xfail. Since the effect engine scans every joint
 for cyclic errors of a higher order (bench/bench_scan.py), all 1000 poses resolve a J1 error of 13 periods per
-revolution and four more such terms (0.0705 -> 0.0616 mm); 100 poses find the J1 term but not the rest. The
+revolution and four more such terms (0.0705 -> 0.0616 mm); the chosen 100 poses take the J1 term, not the rest. The
 criterion was chosen by held-out prediction over this campaign and four simulated cells (bench/bench_select.py),
 not on this campaign alone; its margin over the random median is small."""
 from __future__ import annotations
