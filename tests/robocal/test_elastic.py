@@ -281,3 +281,18 @@ def test_select_is_deterministic():
     cal = np.flatnonzero(inp.calib)
     again = select(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], meta)
     assert again.selection.to_dict() == eng.selection.to_dict()
+
+
+@pytest.mark.system
+def test_the_scan_takes_nothing_on_sparse_geometric_only_campaigns():
+    """20 geometric-only truth campaigns of 40-100 calibration poses (pure noise beyond the geometry): no cyclic
+    error of a higher order is taken, where the scan tries about 30 orders per joint on each."""
+    tried = 0
+    for seed in range(20):
+        n = 40 + 3 * seed
+        _, _, _, _, eng = engine_on(simulate([], 300 + seed, TruthProtocol(n_calib=n, n_test=20, check_poses=3,
+                                                                          check_repeats=2)))
+        high = [c.label for c in eng.taken if c.name == "gear_cyclic" and min(dict(c.options)["harmonics"]) > 4]
+        assert high == [], f"seed {300 + seed}, {n} poses: {high}"
+        tried += sum(1 for lb in eng.selection.candidates if "-" in lb)
+    assert tried >= 40                                   # the scan ran (families on most joints)
