@@ -21,7 +21,9 @@ form's mean is above 1.02 (the simulated forms test false finds: none has a high
 campaign the large held-out set gains (``ur5-split`` mean below 1). The first run's rule (no form's mean above
 1.02) said "remove": the ``ur5-real`` form's ten 100-row subsets, all judged on the same 20 random poses, average
 1.04 (all 1000 rows: 0.87). On the 520 held-out poses of the split the 100-row subsets average 0.96 and the
-500-row pools 0.82-0.88; the 20 poses are one small, shared judge, so the rule now asks the large one.
+500-row pools 0.82-0.88; the 20 poses are one small, shared judge, so the rule now asks the large one. Caveat:
+the split's held-out poses are grid poses like the calibration rows, the 20 are random poses off the grid; the
+large judge is not drawn from the same distribution as the small one.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_scan.py [--seeds 1 2 3] [--forms ...] [--time] [--periodogram]
 """
