@@ -25,7 +25,8 @@ campaign the large held-out set gains (``ur5-split`` mean below 1). The first ru
 the split's held-out poses are grid poses like the calibration rows, the 20 are random poses off the grid; the
 large judge is not drawn from the same distribution as the small one.
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_scan.py [--seeds 1 2 3] [--forms ...] [--time] [--periodogram]
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_scan.py [--seeds 1 2 3] [--forms ...]
+        [--time] [--periodogram]
 """
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.elastic.engine as engine  # noqa: E402
-from bench_layer_rule import DRIFT, FORMS, data_sets, form_means, ratio_table, with_subsets  # noqa: E402  (FORMS: bench_select's and the OUTSIDE forms)
+# FORMS: bench_select's and the OUTSIDE forms
+from bench_layer_rule import DRIFT, FORMS, data_sets, form_means, ratio_table, with_subsets  # noqa: E402
 from bench_select import ur5_split_datasets  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 

@@ -94,9 +94,7 @@ def stages(tmp: Path) -> list:
     for name, s in report.stages.items():
         t = s.test
         print(f"   {name:34s} {t.mean_mm:7.4f} {t.rms_mm:7.4f} {t.max_mm:7.4f}")
-    eff = ", ".join(EffectChoice(e["name"], tuple((k, tuple(v) if isinstance(v, list) else v)
-                                                  for k, v in e["options"].items())).label
-                    for e in report.effects.fitted) or "none"
+    eff = ", ".join(EffectChoice.of_dict(e).label for e in report.effects.fitted) or "none"
     print(f"   noise floor (specs) {report.noise_floor_mm:.4f}; effects taken: {eff}; residual layer: "
           f"{report.method.residual}; excluded points: {len(report.excluded_points)}")
     for note in report.plausibility.notes:

@@ -6,6 +6,8 @@ import math
 from rich.console import Console
 from rich.table import Table
 
+from robocal.elastic import EffectChoice
+
 from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.calibrate.report_sections import LayerSummary
 from campaign.correct.verify_report import VerifyReport
@@ -111,7 +113,7 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
                                                                  if "stiffness_Nm_per_rad" in p else "")
                          for n, p in fe["params"].items())
-        console.print(f"  {fe['name']}: {vals}")
+        console.print(f"  {EffectChoice.of_dict(fe).label}: {vals}")
     for note in (effects and effects.notes) or ():
         console.print(f"  note: {note}")
     ch = report.residual_choice

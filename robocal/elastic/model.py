@@ -53,6 +53,12 @@ class EffectChoice:
             parts.append(f"tau {opts['tau_s'] / 3600.0:g} h")
         return self.name + (f"({' '.join(parts)})" if parts else "")
 
+    @classmethod
+    def of_dict(cls, d: dict) -> "EffectChoice":
+        """The choice of a fitted effect's dict (``FittedEffect.to_dict``: its name and options, lists as tuples)."""
+        opts = (d.get("options") or {}).items()
+        return cls(d["name"], tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in opts))
+
     def with_options(self, **changes) -> "EffectChoice":
         """The same effect with some options replaced (keys in the order of the original)."""
         opts = dict(self.options)
@@ -83,8 +89,7 @@ class FittedEffect:
 
     @classmethod
     def from_dict(cls, d: dict, n_joints: int) -> "FittedEffect":
-        opts = tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in (d.get("options") or {}).items())
-        choice = EffectChoice(d["name"], opts)
+        choice = EffectChoice.of_dict(d)
         eff = choice.build(n_joints)
         vals = np.array([float(d["params"][n]["value"]) for n in eff.param_names])
         std = np.array([np.nan if d["params"][n].get("std") is None else float(d["params"][n]["std"])
