@@ -24,6 +24,7 @@ import numpy as np
 from .effects import GravityModel, effect_regressor
 from .elastic import EffectChoice, candidates
 from .identify import analyse_identifiability, priority_order
+from .joint_gp import prior_columns
 from .kinematics import Kinematics, ParamLayout, identification_jacobian
 
 GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3}     # prior std of a geometric parameter by unit (1 mm, 1 mrad)
@@ -195,11 +196,30 @@ def d_optimal(A: np.ndarray, n: int, spread: np.ndarray | None = None, max_passe
     return DesignResult(order, float(np.linalg.slogdet(np.eye(L) + flat.T @ flat)[1]), swaps)
 
 
+def joint_levers(J_theta: np.ndarray) -> np.ndarray:
+    """RMS lever |dp/dq_j| (n,) mm/rad of every joint over the poses, from J_theta (N, 3, n) mm/rad."""
+    return np.sqrt(np.mean(np.sum(np.asarray(J_theta, float) ** 2, axis=1), axis=0))
+
+
 def spread_joints(J_theta: np.ndarray, fraction: float = 0.25) -> np.ndarray:
-    """Indices of the joints whose angle moves the point most: RMS lever |dp/dq_j| (from J_theta (N, 3, n) mm/rad)
-    at least ``fraction`` of the largest (the arm's major axes)."""
-    lever = np.sqrt(np.mean(np.sum(np.asarray(J_theta, float) ** 2, axis=1), axis=0))
+    """Indices of the joints whose angle moves the point most: RMS lever (``joint_levers``) at least ``fraction``
+    of the largest (the arm's major axes)."""
+    lever = joint_levers(J_theta)
     return np.flatnonzero(lever >= fraction * lever.max())
+
+
+def farthest_first(X: np.ndarray, n: int) -> np.ndarray:
+    """n rows (n,) of X (M, d), each the farthest from those chosen before (a k-center, space-filling design),
+    starting from the row nearest the centroid."""
+    X = np.asarray(X, float)
+    if not 0 < n <= len(X):
+        raise ValueError(f"cannot choose {n} of {len(X)} candidates")
+    d = np.linalg.norm(X - X[np.argmin(np.linalg.norm(X - X.mean(axis=0), axis=1))], axis=1)
+    out = [int(np.argmin(d))]
+    for _ in range(n - 1):
+        out.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(X - X[out[-1]], axis=1))
+    return np.array(out)
 
 
 # ---------------------------------------------------------------- measurement order
@@ -370,10 +390,11 @@ class Criterion:
     spread: np.ndarray
     identifiable: int
     identifiable_geometric: int
+    levers_mm_per_rad: np.ndarray | None = None     # every joint's RMS lever over the candidates (``joint_levers``)
 
 
 def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_kg: float = 0.0,
-              effects: list[EffectChoice] | None = None) -> Criterion:
+              effects: list[EffectChoice] | None = None, joint_curves: bool = False) -> Criterion:
     """The selection criterion of candidate poses q (M, n) rad measured with covariances (M, 3, 3) mm^2: geometry
     and the pose-dependent effects ``auto`` may take (``criterion_effects``; or the given ``effects``), whitened
     and prior-scaled."""
@@ -381,12 +402,16 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
     effects = criterion_effects(kin, q, payload_kg) if effects is None else effects
     J, names, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), float(payload_kg))}, effects)
     A = information_rows(J, cov_mm2, prior)
+    if joint_curves:
+        Jc, names_c, prior_c = prior_columns(kin, q)
+        A = np.concatenate([A, information_rows(Jc, cov_mm2, prior_c)], axis=2)
+        names = names + names_c
     layout = ParamLayout.of(kin)
     theta = [c for c, _, k in layout.joint_cols if k == 0]
     order = priority_order(layout)
     P = identifiable_count(A, names, layout.size, order)
     P_geo = identifiable_count(A[:, :, :layout.size], names[:layout.size], layout.size, order)
-    return Criterion(A, names, q[:, spread_joints(J[:, :, theta])], P, P_geo)
+    return Criterion(A, names, q[:, spread_joints(J[:, :, theta])], P, P_geo, joint_levers(J[:, :, theta]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -433,3 +458,16 @@ def forecast(kin: Kinematics, q_cal: np.ndarray, cov_cal: np.ndarray, q_test: np
     return Forecast(tuple(layout.names[c] for c in geo), tuple(layout.unit(layout.names[c]) for c in geo),
                     np.sqrt(np.diag(cov_geo)), rms_geo, rms_eff, floor,
                     float(ident.observability["O1"]), float(ident.condition_number))
+
+
+def space_filling(kin: Kinematics, crit: Criterion, q_rad: np.ndarray, n: int) -> tuple[np.ndarray, bool]:
+    """(n candidate indices, True) chosen farthest-first in joint space scaled by each joint's lever (mm: how far
+    a joint's angle moves the point), a design for a model with a non-parametric part; (the D-optimal choice with
+    the spread, False) when those n do not determine every geometric parameter the candidates determine."""
+    chosen = farthest_first(np.atleast_2d(q_rad) * crit.levers_mm_per_rad, n)
+    layout = ParamLayout.of(kin)
+    geo = crit.A[chosen][:, :, :layout.size]
+    if identifiable_count(geo, crit.names[:layout.size], layout.size, priority_order(layout)) \
+            >= crit.identifiable_geometric:
+        return chosen, True
+    return d_optimal(crit.A, n, crit.spread).chosen, False

@@ -22,12 +22,13 @@ import numpy as np
 from .elastic import kfold
 from .gp_layer import GPRResidual, gp_inputs
 from .gp import MultiOutputGP
+from .joint_gp import JointGPResidual, fit_joint_gp
 from .model import CalibratedModel
 from .residual import IDWResidual
 from .sparse_gp import EXACT_MAX_POINTS, SparseGP
 from .stats import paired_gain
 
-LAYER_KINDS = ("idw", "gpr")
+LAYER_KINDS = ("idw", "gpr", "joint_gp")
 
 
 def layer_targets(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None
@@ -66,6 +67,8 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
     if kind == "gpr":
         gp = fit_gp(gp_inputs(q_rad, payload_kg), e, seed, noise_floor_mm)
         return GPRResidual(gp, payload_kg is not None, None)
+    if kind == "joint_gp":
+        return fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm)[0]
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
 
@@ -103,16 +106,20 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
         X = gp_inputs(q_rad, payload_kg)
         gp = fit_gp(X, e, seed, noise_floor_mm)
         return np.sum(gp_cv_errors(gp, X, e, fold, seed) ** 2, axis=1), GPRResidual(gp, payload_kg is not None, None)
+    if kind == "joint_gp":
+        layer, err = fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm, fold)
+        return (np.sum(e**2, axis=1), None) if layer is None else (np.sum(err**2, axis=1), layer)
     raise ValueError(f"unknown residual layer {kind!r}")
 
 
 def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None,
-                 payload_kg: np.ndarray | None = None, candidates=LAYER_KINDS, folds: int = 5, seed: int = 0,
+                 payload_kg: np.ndarray | None = None, candidates=None, folds: int = 5, seed: int = 0,
                  idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None) -> LayerChoice:
     """none / IDW / GPR by k-fold CV on the calibration points: the candidate with the lowest CV RMS among those
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
     bound). Each candidate's figures record also whether its gain is significant (t > 3)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
+    candidates = LAYER_KINDS if candidates is None else candidates
     if len(q) < 4 * folds:
         return LayerChoice("none", None, {}, folds)
     fold = kfold(len(q), folds, seed)
@@ -142,6 +149,11 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
            "note": "calib_rms_mm is a fit to the points the layer interpolates, not an accuracy; "
                    "cv_predicted_rms_mm predicts the held-out RMS"}
     gp = getattr(choice.layer, "gp", None)
+    if isinstance(choice.layer, JointGPResidual):
+        lay = choice.layer
+        out.update(approximation=lay.approximation, n_train=int(lay.n_train), n_inducing=None,
+                   noise_mm=float(np.sqrt(3) * lay.noise_mm), noise_floor_mm=lay.noise_floor_mm,
+                   joint_curve_rms_arcsec={f"J{j}": float(np.degrees(v) * 3600) for j, v in lay.curve_rms_rad().items()})
     if gp is not None:
         out.update(approximation=gp.kind, n_train=int(gp.n_train),
                    n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,

@@ -17,10 +17,11 @@ from .kinematics import Kinematics, fk
 from .effects import effect_state
 from .elastic import FittedEffect, elastic_flange
 from .gp_layer import GPRResidual
+from .joint_gp import JointGPResidual
 from .residual import IDWResidual
 
 FORMAT = "robocal-model/1"
-RESIDUAL_KINDS = {"idw": IDWResidual, "gpr": GPRResidual}
+RESIDUAL_KINDS = {"idw": IDWResidual, "gpr": GPRResidual, "joint_gp": JointGPResidual}
 
 
 @dataclass(frozen=True, eq=False)

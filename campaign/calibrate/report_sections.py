@@ -64,6 +64,7 @@ class PredictiveStd:
 
 
 _GP_KEYS = ("approximation", "n_train", "n_inducing", "noise_mm", "noise_floor_mm")
+_CURVES = "joint_curve_rms_arcsec"
 
 
 @dataclass(frozen=True)
@@ -82,17 +83,22 @@ class LayerSummary:
     n_inducing: int | None = None
     noise_mm: float | None = None
     noise_floor_mm: float | None = None
+    joint_curve_rms_arcsec: Mapping[str, float] | None = None     # joint GP: each joint's curve, RMS over its range
 
     def to_dict(self) -> dict:
         out = record_dict(self)
-        if self.approximation is None:                      # the GP keys come together, for a GPR only
+        if self.approximation is None:                      # the GP keys come together, for a GP layer only
             for key in _GP_KEYS:
                 del out[key]
+        if self.joint_curve_rms_arcsec is None:
+            del out[_CURVES]
         return out
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "LayerSummary":
         gp = {k: get_field(d, k, True) for k in _GP_KEYS} if "approximation" in d else {}
+        if _CURVES in d:
+            gp[_CURVES] = object_field(d, _CURVES)
         return cls(text_field(d, "kind"), figure_field(d, "calib_rms_mm"), figure_field(d, "cv_predicted_rms_mm"),
                    count_field(d, "folds"), figure_field(d, "test_rms_mm"), text_field(d, "note", True) or "", **gp)
 

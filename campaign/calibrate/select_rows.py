@@ -1,9 +1,13 @@
-"""``campaign select``: which N calibration rows of a measured campaign an optimal plan would have measured.
+"""``campaign select``: which N calibration rows of a measured campaign would have done.
 
-The same criterion as ``plan.kind: optimal`` (``robocal.design``), on the measured rows: the identification
-Jacobian of the geometry and the pose-dependent effects at the measured joints, whitened by the calibration
-weights, with the major joints spread over their ranges. The subset keeps every row that is not a calibration
-row (test, check, nest) and the chosen calibration rows, all in their original (measurement) order.
+A space-filling design (``robocal.design.space_filling``): rows chosen farthest-first in joint space, each joint
+scaled by its lever (how far its angle moves the SMR), provided they determine every geometric parameter all the
+rows determine; else the D-optimal criterion of ``plan.kind: optimal`` (the identification Jacobian of the geometry
+and the pose-dependent effects, whitened by the calibration weights, with the major joints spread). The default
+calibration has non-parametric layers (the joint-error GP, the GPR) that need the poses spread, not pushed to the
+extremes that D-optimality favours; the choice was made by held-out prediction over a real and four simulated
+campaigns (``bench/bench_select.py``). The subset keeps every row that is not a calibration row (test, check,
+nest) and the chosen calibration rows, all in their original (measurement) order.
 """
 from __future__ import annotations
 
@@ -12,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.design import Forecast, criterion, d_optimal, forecast
+from robocal.design import Forecast, criterion, forecast, space_filling
 from robocal.identify import IdentificationError, register
 
 from campaign.config.cell_model import CellModel
@@ -21,6 +25,8 @@ from campaign.errors import DataError
 
 from .plausibility import check_dataset
 
+SPACE_FILLING = "space-filling in joint space, each joint scaled by its lever"
+D_FALLBACK = "D-optimal, joints spread (the space-filling rows left a geometric parameter undetermined)"
 FORECAST_MAX_ROWS = 20_000      # the forecast of all rows (a Jacobian of every row and parameter) up to this size
 
 
@@ -36,10 +42,11 @@ class Selection:
     everything: Forecast | None
     judged_at: str = "test rows"           # where the forecasts are evaluated: "test rows", else "calibration rows"
     effects_need: int = 0                  # rows that also determine every pose-dependent effect ``auto`` may take
+    criterion: str = SPACE_FILLING         # how the rows were chosen
 
 
 def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
-    """The subset with ``n`` calibration rows chosen by the optimal-plan criterion; DataError when the data has
+    """The subset with ``n`` calibration rows (see the module docstring); DataError when the data has
     another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable geometric parameters
     + 10 % (the calibration's own minimum; the effects ``auto`` may take need more rows, which the record notes);
     the data-alone plausibility checks of ``reprocess`` first (``check_dataset``: PlausibilityError unless
@@ -63,7 +70,7 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
                                    f"parameters these rows determine: at least {need} (identifiable + 10 %)")
-    chosen = d_optimal(crit.A, n, crit.spread).chosen
+    chosen, filled = space_filling(kin, crit, q, n)
     keep = ~ds.mask("calib")
     keep[cal[chosen]] = True
     test = np.flatnonzero(ds.mask("test") & np.all(np.isfinite(ds.q_deg), axis=1))
@@ -72,4 +79,4 @@ def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
     sub = forecast(kin, q[chosen], cov[cal][chosen], q_at, cov_at, payload)
     every = forecast(kin, q, cov[cal], q_at, cov_at, payload) if len(cal) <= FORECAST_MAX_ROWS else None
     return Selection(keep, n, len(cal), sub, every, "test rows" if len(test) else "calibration rows",
-                     math.ceil(1.1 * crit.identifiable))
+                     math.ceil(1.1 * crit.identifiable), SPACE_FILLING if filled else D_FALLBACK)

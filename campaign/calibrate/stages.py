@@ -21,6 +21,7 @@ from campaign.data.dataset import Dataset
 from campaign.errors import DataError, DataWarning
 from robocal.frames import transform_points
 from robocal.gp_layer import GPRResidual
+from robocal.joint_gp import MIN_SPAN_RAD, JointGPResidual
 from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
 from robocal.kinematics import smr_tracker
 from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
@@ -82,7 +83,7 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual, q: np.ndarray, payload, point_ids) -> tuple[PredictiveStd, np.ndarray]:
+def _pred_std(layer: GPRResidual | JointGPResidual, q: np.ndarray, payload, point_ids) -> tuple[PredictiveStd, np.ndarray]:
     """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
     report entry and the values (M,)."""
     if len(q) == 0:
@@ -242,7 +243,12 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
         choice = LayerChoice("none", None, {}, c.cv_folds)
     else:
         choice = choose_layer(model_el, qk, pk, candidates=(c.residual,), folds=c.cv_folds, **lay_kw)
-        choice = LayerChoice(c.residual, fit_layer(c.residual, model_el, qk, pk, **lay_kw), choice.cv, c.cv_folds)
+        forced = fit_layer(c.residual, model_el, qk, pk, **lay_kw)
+        if forced is None:                                  # joint_gp: no joint moves enough to carry a curve
+            warnings.warn(f"{ds.source}: calibration.residual: {c.residual}: no joint moves "
+                          f"{np.degrees(MIN_SPAN_RAD):.0f} deg over the "
+                          "calibration rows; no residual layer", DataWarning, stacklevel=2)
+        choice = LayerChoice(c.residual if forced is not None else "none", forced, choice.cv, c.cv_folds)
     layer = choice.layer
     if isinstance(layer, GPRResidual) and layer.uses_payload:
         layer = layer.with_payload(cfg.tool.payload_kg)
@@ -258,7 +264,7 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
                                 _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal)))
               for name, m in stage_models}
     spread, pred_std = None, None                         # (N,) GPR predictive std of the test rows, else NaN
-    if isinstance(model.residual, GPRResidual):
+    if isinstance(model.residual, (GPRResidual, JointGPResidual)):
         pred_std = np.full(len(ds), np.nan)
         spread, pred_std[test] = _pred_std(model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
     calib_ids = np.array(ds.point_id)[geo.rows]

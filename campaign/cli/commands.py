@@ -151,7 +151,7 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     _force_argument(parser)
 
 
-@command("select", "choose N calibration rows of a measured campaign by the optimal-plan criterion",
+@command("select", "choose N calibration rows of a measured campaign (space-filling, the geometry determined)",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
     from campaign.data.interchange_csv import write_csv

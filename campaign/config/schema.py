@@ -162,14 +162,17 @@ class CalibrationConfig:
     ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
     ``none``, or a list of effect specs (``name`` in ``robocal.effects.MODEL_EFFECTS``, optional ``params`` with the
     factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
-    ``residual`` ``auto`` chooses none / idw / gpr by k-fold CV and keeps a layer only on a significant gain.
+    ``residual`` ``auto`` chooses none / idw / gpr / joint_gp by k-fold CV and keeps a layer only when it beats
+    none by more than one standard error of the CV difference.
 
     ``residual`` (one of ``values.RESIDUAL_MODELS``) is the layer fitted on top of
     the kinematic model: ``idw`` inverse distance weighting over positions
     (seed 000), ``gpr`` Gaussian-process regression over joint angles, one
     model per base-frame axis (seed 003; the payload becomes an extra input
     when it varies across the calibration points; the report gives the
-    predictive standard deviation of every test point), ``none`` no layer.
+    predictive standard deviation of every test point), ``joint_gp`` one
+    angle-error curve per joint (a GP over that joint's angle) moved to the
+    SMR through the Jacobian (``robocal.joint_gp``), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
 
     ``joints`` (one of ``values.JOINT_SETS``, default auto) which joint values drive

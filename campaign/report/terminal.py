@@ -61,7 +61,10 @@ def layer_line(lay: LayerSummary) -> str:
     """The fitted residual layer's calibration RMS next to its CV-predicted held-out RMS, labelled."""
     gp = ""
     if lay.approximation is not None:
-        how = "exact GP" if lay.approximation == "exact" else f"inducing-point GP, {lay.n_inducing} inputs"
+        how = ("exact GP" if lay.approximation == "exact" else lay.approximation if lay.n_inducing is None
+               else f"inducing-point GP, {lay.n_inducing} inputs")
+        if lay.joint_curve_rms_arcsec:
+            how += " (" + ", ".join(f"{j} {v:.0f}\"" for j, v in lay.joint_curve_rms_arcsec.items()) + " RMS)"
         gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {floor_mm(lay.noise_floor_mm)} mm)"
     return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
             f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "
@@ -199,8 +202,8 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
 def render_selection(console: Console, sel, n_other: int, out) -> None:
     """``campaign select``: what was kept, and the AP(theta) RMS the parameter uncertainty predicts for the subset
     and for all calibration rows (``campaign.calibrate.select_rows.Selection``)."""
-    console.print(f"selected {sel.n_chosen} of {sel.n_calib} calibration rows by the optimal-plan criterion "
-                  f"(D-optimal, joints spread), kept the {n_other} other rows; wrote {out}", markup=False)
+    console.print(f"selected {sel.n_chosen} of {sel.n_calib} calibration rows ({sel.criterion}), kept the "
+                  f"{n_other} other rows; wrote {out}", markup=False)
     every = "" if sel.everything is None else (f", all {sel.n_calib} rows {sel.everything.model_rms_effects_mm:.4f} "
                                                "mm")
     console.print(f"predicted AP(theta) RMS from the parameter uncertainty (geometry and pose-dependent effects, at "

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from ..kinematics import ParamLayout, identification_jacobian
+from ..joint_gp import joint_directions
 from ..layers import fit_layer
 from .records import DiagnosisInput
 from .regions import structure_test, where_analysis
@@ -52,10 +53,12 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
     return out, maps
 
 
-def _layer_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray, str]:
-    """Residual vectors (M, 3) mm left on held-out points once the non-parametric layer of the calibration (GPR over
-    the joints, ``robocal.layers.fit_layer``) is fitted on the final model's calibration residuals (at most
-    ``layer_max_points`` of them, a seeded subset): on the test rows, or over the fit rows' pose blocks."""
+def _layer_heldout(opt, model, q, p, fit, test, fold, meta, kind: str = "gpr", floor_mm: float | None = None
+                   ) -> tuple[np.ndarray, str]:
+    """Residual vectors (M, 3) mm left on held-out points once a non-parametric layer of the calibration (``kind``:
+    GPR over the joints, or the joint-error GP; ``robocal.layers.fit_layer``) is fitted on the final model's
+    calibration residuals (at most ``layer_max_points`` of them, a seeded subset): on the test rows, or over the fit
+    rows' pose blocks."""
     kin = model.kinematics
     rng = np.random.default_rng(opt.seed)
     sub = lambda rows: {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}  # noqa: E731
@@ -63,7 +66,7 @@ def _layer_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray,
     def layer_errors(tr, te):
         if len(tr) > opt.layer_max_points:
             tr = np.sort(rng.choice(tr, opt.layer_max_points, replace=False))
-        lay = fit_layer("gpr", model, q[tr], p[tr], sub(tr), seed=opt.seed)
+        lay = fit_layer(kind, model, q[tr], p[tr], sub(tr), seed=opt.seed, noise_floor_mm=floor_mm)
         pm = model.kinematic_smr_base(q[te], sub(te))
         return _base(kin, p[te]) - pm - lay.predict(q[te], pm)
     if len(test):
@@ -74,6 +77,24 @@ def _layer_heldout(opt, model, q, p, fit, test, fold, meta) -> tuple[np.ndarray,
     return out, "cv"
 
 
+def joint_curves(opt, model, q, p, fit, meta, floor_mm: float) -> list[dict]:
+    """Each joint's angle-error curve of the joint-error GP fitted on the final model's calibration residuals (at
+    most ``layer_max_points`` rows, a seeded subset), largest first: its RMS over the joint's range (arcsec) and
+    how far it moves the SMR at those rows (RMS, mm)."""
+    rows = fit if len(fit) <= opt.layer_max_points else \
+        np.sort(np.random.default_rng(opt.seed).choice(fit, opt.layer_max_points, replace=False))
+    sub = {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}
+    lay = fit_layer("joint_gp", model, q[rows], p[rows], sub, noise_floor_mm=floor_mm)
+    if lay is None:
+        return []
+    moved = joint_directions(lay.kinematics, q[rows], lay.joints) * lay.curves_rad(q[rows])[:, None, :]
+    mm = np.sqrt(np.mean(np.sum(moved**2, axis=1), axis=0))
+    arcsec = lay.curve_rms_rad()
+    out = [{"joint": int(j) + 1, "rms_arcsec": float(np.degrees(arcsec[int(j) + 1]) * 3600), "rms_mm": float(v)}
+           for j, v in zip(lay.joints, mm)]
+    return sorted(out, key=lambda c: -c["rms_mm"])
+
+
 def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     """(unexplained_structure dict, neighbour structure tests, notes) of the final model."""
     F = float(inp.noise_floor_mm)
@@ -82,6 +103,10 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     lay, where = _layer_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit, test,
                               fold, meta)
     R_lay = float(np.sqrt(np.mean(np.sum(lay**2, axis=1))))
+    q_all, p_all = np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float)
+    lay_j, _ = _layer_heldout(opt, model, q_all, p_all, fit, test, fold, meta, "joint_gp", F)
+    R_joint = float(np.sqrt(np.mean(np.sum(lay_j**2, axis=1))))
+    curves = joint_curves(opt, model, q_all, p_all, fit, meta, F)
     inflate = math.sqrt(1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit)))
     excess = math.sqrt(max(R**2 - F**2, 0.0))
     removes = math.sqrt(max(R**2 - R_lay**2, 0.0))
@@ -110,11 +135,16 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     text = (f"unexplained structure: {excess:.3f} mm RMS over the noise floor after the final model (held-out "
             f"{R:.3f} mm vs floor {F:.3f} mm, {evaluated}); a non-parametric layer (GPR over the joints) removes "
             f"{removes:.3f} mm of it ({R:.3f} -> {R_lay:.3f} mm on the same points)")
+    removes_j = math.sqrt(max(R**2 - R_joint**2, 0.0))
+    text += (f"; one angle-error curve per joint (joint GP) removes {removes_j:.3f} mm ({R:.3f} -> {R_joint:.3f} mm)"
+             + (": largest " + ", ".join(f"J{c['joint']} {c['rms_mm']:.3f} mm ({c['rms_arcsec']:.0f}\")"
+                                         for c in curves[:3]) if curves else ""))
     if along:
         text += f"; strongest along {', '.join(along[:4])}"
     out = {"unexplained": flagged, "heldout_rms_mm": R, "floor_mm": F, "excess_over_floor_mm": excess,
            "layer": "GPR over the joints (the residual layer of reprocess)",
            "layer_heldout_rms_mm": R_lay, "layer_removes_mm": removes, "evaluation": where, "along": along,
+           "joint_layer_heldout_rms_mm": R_joint, "joint_layer_removes_mm": removes_j, "joint_curves": curves,
            "text": text if flagged else f"nothing unexplained: held-out {R:.3f} mm vs floor {F:.3f} mm "
                                           f"(a non-parametric layer gives {R_lay:.3f} mm)"}
     notes = [text] if flagged else []

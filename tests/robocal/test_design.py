@@ -6,8 +6,8 @@ import itertools
 import numpy as np
 import pytest
 
-from robocal.design import (_Design, blocked_cv, criterion, d_optimal, forecast, greedy_order, move_cost,
-                            predict_rms, short_tour, whiten_rows)
+from robocal.design import (_Design, blocked_cv, criterion, d_optimal, farthest_first, forecast, greedy_order,
+                            move_cost, predict_rms, short_tour, space_filling, whiten_rows)
 from robocal.identify import CalibrationOptions, calibrate
 from robocal.kinematics import ParamLayout, smr_tracker
 from robocal.pool import incidence_rad, tilted_rotations, wrist_flipped
@@ -165,14 +165,42 @@ def test_predicted_curve_matches_simulated_refits():
     assert np.mean(se2) - 3.0 - np.mean(var2) > 1.0
 
 
-@pytest.mark.unit
-def test_criterion_counts_the_parameters_a_pose_set_identifies():
+def _irb2600_criterion():
+    """(kinematics, calibration poses, their criterion) of the IRB 2600 test cell, 1e-3 mm^2 per axis."""
     kin = irb2600()
     qc, _ = irb2600_poses()
-    cov = np.broadcast_to(np.eye(3) * 1e-3, (len(qc), 3, 3))
-    c = criterion(kin, qc, cov)
+    return kin, qc, criterion(kin, qc, np.broadcast_to(np.eye(3) * 1e-3, (len(qc), 3, 3)))
+
+
+@pytest.mark.unit
+def test_criterion_counts_the_parameters_a_pose_set_identifies():
+    kin, qc, c = _irb2600_criterion()
     layout = ParamLayout.of(kin)
     assert c.A.shape == (len(qc), 3, len(c.names)) and c.names[: layout.size] == layout.names
     assert any(n.startswith("joint_compliance") for n in c.names) and any(n.startswith("gear_cyclic") for n in c.names)
     assert layout.size - 12 < c.identifiable < len(c.names)       # theta1, d1, the J6 terms, ... are not
     assert c.spread.shape == (len(qc), 3)                          # the major axes J1-J3
+
+
+@pytest.mark.unit
+def test_farthest_first_takes_the_farthest_point_at_every_step():
+    X = np.random.default_rng(2).normal(size=(200, 3))
+    chosen = farthest_first(X, 25)
+    assert len(set(chosen.tolist())) == 25
+    assert chosen[0] == np.argmin(np.linalg.norm(X - X.mean(axis=0), axis=1))
+    for t in range(1, 25):                          # brute force: the largest distance to the points chosen before
+        d = np.min(np.linalg.norm(X[:, None] - X[chosen[:t]][None], axis=2), axis=1)
+        assert d[chosen[t]] == pytest.approx(d.max())
+
+
+@pytest.mark.unit
+def test_space_filling_keeps_the_geometry_determined_or_falls_back_to_d_optimal():
+    from dataclasses import replace
+    kin, qc, c = _irb2600_criterion()
+    chosen, filled = space_filling(kin, c, qc, 60)
+    assert filled
+    np.testing.assert_array_equal(chosen, farthest_first(qc * c.levers_mm_per_rad, 60))
+    stricter = replace(c, identifiable_geometric=c.identifiable_geometric + 1)    # more than any subset determines
+    chosen, filled = space_filling(kin, stricter, qc, 60)
+    assert not filled
+    np.testing.assert_array_equal(chosen, d_optimal(c.A, 60, c.spread).chosen)

@@ -1,4 +1,4 @@
-"""``campaign select``: N calibration rows of a measured campaign by the optimal-plan criterion."""
+"""``campaign select``: N calibration rows of a measured campaign (space-filling, the geometry determined)."""
 from __future__ import annotations
 
 import re
@@ -34,19 +34,21 @@ def _campaign_csv(path):
     return path
 
 
-def _logdet(ds, cell):
-    cal = ds.mask("calib")
-    q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
-    c = criterion(register(cell.kinematics, q, p), q, cell.weights(ds)[0][cal])
-    flat = c.A.reshape(-1, c.A.shape[2])
-    return np.linalg.slogdet(np.eye(flat.shape[1]) + flat.T @ flat)[1]
+def _fill_distance(full, sub, cell):
+    """Largest distance (mm, joint space scaled by each joint's lever over all rows) from a calibration row of
+    ``full`` to its nearest calibration row of ``sub``: how well the subset covers the measured poses."""
+    cal = full.mask("calib")
+    q, p = np.radians(full.q_deg[cal]), full.p_tracker_mm[cal]
+    lever = criterion(register(cell.kinematics, q, p), q, cell.weights(full)[0][cal]).levers_mm_per_rad
+    X, Y = q * lever, np.radians(sub.q_deg[sub.mask("calib")]) * lever
+    return float(np.max(np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1)))
 
 
 def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path, capsys):
     data, out = _campaign_csv(tmp_path / "data.csv"), tmp_path / "subset.csv"
     code, text, err = cli(capsys, "select", data, "--config", CONFIG, "--points", 80, "--out", out)
     assert code == 0, err
-    assert "selected 80 of" in text
+    assert "selected 80 of" in text and "space-filling" in text
     sub_mm, all_mm = map(float, re.search(r"80 rows ([0-9.]+) mm, all \d+ rows ([0-9.]+) mm", " ".join(text.split())
                                           ).groups())
     assert 0 < all_mm < sub_mm                  # fewer rows: a larger parameter uncertainty at the test rows
@@ -63,8 +65,8 @@ def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path,
     for seed in range(5):
         keep = ~full.mask("calib")
         keep[np.random.default_rng(seed).choice(cal, 80, replace=False)] = True
-        rand.append(_logdet(full.subset(keep), cell))
-    assert _logdet(sub, cell) > max(rand)
+        rand.append(_fill_distance(full, full.subset(keep), cell))
+    assert _fill_distance(full, sub, cell) < min(rand)
 
 
 def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_path, capsys):
