@@ -23,7 +23,6 @@ Decision rule: the joint GP is offered if the mean over the forms is below 1, no
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -35,8 +34,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.layers as layers  # noqa: E402
-from bench_layer_rule import DRIFT, FORMS  # noqa: E402
-from bench_scan import ablation  # noqa: E402
+from bench_scan import ablation, ablation_parser  # noqa: E402
 from bench_select import ur5_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 
@@ -75,11 +73,7 @@ def timing(repeats: int = 3) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
-    ap.add_argument("--forms", nargs="+", default=["ur5-real", "ur5-split", *FORMS, DRIFT])
-    ap.add_argument("--time", action="store_true", help="only time the UR5 calibration without and with the layer")
-    args = ap.parse_args()
+    args = ablation_parser(__doc__, "the layer").parse_args()
     if args.time:
         timing()
         return
