@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.layers as layers  # noqa: E402
+from bench_layer_rule import TRUTH  # noqa: E402
 from bench_scan import ablation, ablation_parser  # noqa: E402
 from bench_select import ur5_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
@@ -73,7 +74,7 @@ def timing(repeats: int = 3) -> None:
 
 
 def main() -> None:
-    args = ablation_parser(__doc__, "the layer").parse_args()
+    args = ablation_parser(__doc__, "the layer", extra=(TRUTH,)).parse_args()
     if args.time:
         timing()
         return

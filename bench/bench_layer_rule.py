@@ -63,6 +63,7 @@ def held_out(ds, cell) -> list[tuple[float, str]]:
 
 
 DRIFT = "irb2600 drift, no nests"
+TRUTH = "truth cell, one effect each"
 
 
 def drift_runs(tmp: Path, seeds):
@@ -93,13 +94,29 @@ def drift_runs(tmp: Path, seeds):
             yield seed, read_csv(tmp / f"drift-{seed}-{k:g}" / "data.csv"), cell
 
 
+def truth_runs(tmp: Path, seeds):
+    """Campaigns of the independent truth simulator (``robocal.simulation.truth_cell``: its own IRB 2600-class
+    arm, mass model and effect instances; read-back joints, random order), one per truth effect and none, per
+    seed: (seed, dataset, cell of its robot with the default calibration settings)."""
+    from campaign.config.load import load_cell
+    from campaign.data.interchange_csv import read_csv
+    from robocal.simulation.truth_cell import TRUTH_NAMES, simulate
+    from tests.campaign.helpers import truth_csv
+    for seed in seeds:
+        for k, name in enumerate(("none",) + TRUTH_NAMES):
+            d = tmp / f"truth-{seed}-{k}"
+            d.mkdir(parents=True, exist_ok=True)
+            csv, cfg = truth_csv(d, simulate(() if name == "none" else (name,), 1000 * seed + k))
+            yield seed, read_csv(csv), load_cell(cfg)
+
+
 def data_sets(form: str, seeds, tmp: Path):
     """(label, dataset, cell) of a form: all rows and seeded random subsets of the calibration rows."""
     runs = [(0, *ur5_dataset(tmp))] if form == "ur5-real" else list(drift_runs(tmp, seeds)) if form == DRIFT \
-        else [(s, *sim_dataset(tmp, form, s)) for s in seeds]
+        else list(truth_runs(tmp, seeds)) if form == TRUTH else [(s, *sim_dataset(tmp, form, s)) for s in seeds]
     for seed, ds, cell in runs:
         n_cal = int(ds.mask("calib").sum())
-        n, k = (100, 10) if form == "ur5-real" else (round(n_cal / 3), 2 if form == DRIFT else 3)
+        n, k = (100, 10) if form == "ur5-real" else (round(n_cal / 3), 2 if form == DRIFT else 1 if form == TRUTH else 3)
         yield from with_subsets(seed, ds, cell, n, k)
 
 
@@ -107,10 +124,11 @@ def with_subsets(seed: int, ds, cell, n: int, k: int):
     """(label, dataset, cell): ``ds`` with all its calibration rows, then ``k`` seeded random ``n``-row subsets."""
     cal = np.flatnonzero(ds.mask("calib"))
     yield f"{seed} all {len(cal)}", ds, cell
+    ordered = ds.with_order_context()                   # a subset keeps how the robot reached each pose
     for r in range(k):
         keep = ~ds.mask("calib")
         keep[np.random.default_rng(r).choice(cal, n, replace=False)] = True
-        yield f"{seed} rand{r} {n}", ds.subset(keep), cell
+        yield f"{seed} rand{r} {n}", ordered.subset(keep), cell
 
 
 def ratio_table(forms, sets_of, held_out, row) -> dict[str, list[float]]:

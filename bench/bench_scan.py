@@ -157,12 +157,12 @@ def ablation(forms, seeds, held_out, last) -> tuple[bool, str]:
                   f"ur5-split {means.get('ur5-split', float('nan')):.4f}")
 
 
-def ablation_parser(doc: str, what: str) -> argparse.ArgumentParser:
-    """The options of an ablation bench: seeds, forms, and ``--time`` (only the UR5 calibration without and with
-    ``what``)."""
+def ablation_parser(doc: str, what: str, extra=()) -> argparse.ArgumentParser:
+    """The options of an ablation bench: seeds, forms (the default ones and ``extra``), and ``--time`` (only the UR5
+    calibration without and with ``what``)."""
     ap = argparse.ArgumentParser(description=doc.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
-    ap.add_argument("--forms", nargs="+", default=["ur5-real", "ur5-split", *FORMS, DRIFT])
+    ap.add_argument("--forms", nargs="+", default=["ur5-real", "ur5-split", *FORMS, DRIFT, *extra])
     ap.add_argument("--time", action="store_true", help=f"only time the UR5 calibration without and with {what}")
     return ap
 

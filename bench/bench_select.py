@@ -295,7 +295,7 @@ def evaluate(ds: Dataset, cell, n: int | None, criteria) -> dict[str, float]:
     def subset(idx):
         keep = ~ds.mask("calib")
         keep[cal[np.asarray(idx, int)]] = True
-        return held_out(ds.subset(keep), cell) / everything
+        return held_out(ds.with_order_context().subset(keep), cell) / everything   # as select writes it
     for c in criteria:
         out[c] = subset(choose(ctx, n, c))
     out["random"] = float(np.median([subset(np.random.default_rng(s).choice(len(cal), n, replace=False))

@@ -25,8 +25,12 @@ from campaign.data.dataset import Dataset
 def order_meta(ds: Dataset) -> dict:
     """What the measurement order gives each row of ``ds`` (rows in measurement order, as the interchange CSV
     defines them): approach signs, the signed last move and the move before (rad), the position in the order.
-    Computed before any row is set aside, then subset with the rows."""
+    Computed before any row is set aside, then subset with the rows; a subset of a campaign carries them from the
+    full order (``Dataset.order_context``)."""
     n = len(ds)
+    c = ds.order_context
+    if c is not None:                       # a subset of a campaign: the places of its rows in the full order
+        return {"approach": c.approach, "move": c.move_rad, "prev_move": c.prev_move_rad, "order": c.order}
     q = np.radians(ds.q_deg)
     move, prev = moves_from_order(q)
     return {"approach": approach_signs(q) if n > 1 else None, "move": move, "prev_move": prev,

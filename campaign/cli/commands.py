@@ -170,7 +170,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     ds = load_source(args.data).dataset
     with forced(args.force):
         sel = select_rows(ds, cell, args.points)
-    write_csv(args.out, ds.subset(sel.keep))
+    write_csv(args.out, ds.with_order_context().subset(sel.keep))   # each kept row: how the robot reached it
     render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 

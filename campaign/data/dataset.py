@@ -1,14 +1,14 @@
 """The measured points of a campaign in memory: :class:`Dataset` (what the CSV, the log and processing share)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from campaign.errors import DataError
 from campaign.run.log_records import SETS
-from robocal.approach import approach_signs
+from robocal.approach import approach_signs, moves_from_order
 
 _SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
 _ENV = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
@@ -22,6 +22,27 @@ def _float_array(value: Any, name: str, shape: tuple) -> np.ndarray:
         raise ValueError(f"Dataset.{name}: expected shape {shape}, got {arr.shape}")
     arr.setflags(write=False)
     return arr
+
+
+@dataclass(frozen=True, eq=False)
+class OrderContext:
+    """What the full measurement order gives each row, kept when rows are left out (a subset of a campaign still
+    carries how the robot reached each of its poses): approach signs (N, n) -1/0/+1, the signed last move and the
+    move before (N, n) rad (NaN next to a row without joints), the row's position in the order (N,)."""
+    approach: np.ndarray
+    move_rad: np.ndarray
+    prev_move_rad: np.ndarray
+    order: np.ndarray
+
+    @classmethod
+    def of(cls, q_deg: np.ndarray) -> "OrderContext":
+        """From all rows' joints (N, n) deg in measurement order (``robocal.approach``)."""
+        q = np.radians(np.asarray(q_deg, float))
+        move, prev = moves_from_order(q)
+        return cls(approach_signs(q), move, prev, np.arange(len(q), dtype=float))
+
+    def take(self, rows: np.ndarray) -> "OrderContext":
+        return OrderContext(self.approach[rows], self.move_rad[rows], self.prev_move_rad[rows], self.order[rows])
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +78,7 @@ class Dataset:
     env_pressure_hpa: np.ndarray | None = None
     env_humidity_pct: np.ndarray | None = None
     cov_mm2: np.ndarray | None = None  # (N, 3, 3) mm^2 from the tracker's own statistics (logs only), or None
+    order_context: OrderContext | None = None  # a subset's rows' places in the order they were measured in
 
     def __post_init__(self) -> None:
         put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
@@ -82,6 +104,11 @@ class Dataset:
             put("cov_mm2", _float_array(self.cov_mm2, "cov_mm2", (n_rows, 3, 3)))
         if self.qc_deg is not None:
             put("qc_deg", _float_array(self.qc_deg, "qc_deg", self.q_deg.shape))
+        if self.order_context is not None:
+            c = self.order_context
+            put("order_context", OrderContext(*(_float_array(getattr(c, k), f"order_context.{k}", shape) for k, shape in
+                                                (("approach", self.q_deg.shape), ("move_rad", self.q_deg.shape),
+                                                 ("prev_move_rad", self.q_deg.shape), ("order", (n_rows,))))))
         self._check_nests(put)
 
     def _check_nests(self, put: Callable[[str, Any], None]) -> None:
@@ -121,8 +148,9 @@ class Dataset:
     def subset(self, mask: Sequence[bool] | np.ndarray) -> "Dataset":
         """Rows selected by a boolean (N,) mask or an integer index array.
 
-        Row order is kept.  Note that :meth:`approach_sign` of a subset only
-        sees the subset's rows: compute it on the full dataset and index it.
+        Row order is kept, and the ``order_context`` when there is one (see :meth:`with_order_context`: a subset
+        that must keep how the robot reached its poses).  Note that :meth:`approach_sign` of a subset only sees the
+        subset's rows: compute it on the full dataset and index it.
         """
         sel = np.asarray(mask)
         if sel.dtype == bool:
@@ -133,13 +161,29 @@ class Dataset:
         kwargs: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name in ("point_id", "set") or (f.name == "nest_id" and value is not None):
+            if f.name == "order_context":
+                kwargs[f.name] = None if value is None else value.take(sel)
+            elif f.name in ("point_id", "set") or (f.name == "nest_id" and value is not None):
                 kwargs[f.name] = tuple(value[i] for i in sel)
             elif isinstance(value, np.ndarray):
                 kwargs[f.name] = value[sel]
             else:
                 kwargs[f.name] = value
         return Dataset(**kwargs)
+
+    def with_order_context(self) -> "Dataset":
+        """This dataset carrying every row's place in its measurement order (:class:`OrderContext`), so that a
+        :meth:`subset` keeps it: computed over the rows with joints, as the calibration does once the nest readings
+        are set aside (a nest row gets approach 0, unknown moves and the place of the robot row before it)."""
+        if self.order_context is not None:
+            return self
+        robot = np.all(np.isfinite(self.q_deg), axis=1)
+        ctx = OrderContext.of(self.q_deg[robot])
+        approach, move, prev = np.zeros(self.q_deg.shape), np.full(self.q_deg.shape, np.nan), np.full(self.q_deg.shape,
+                                                                                                          np.nan)
+        approach[robot], move[robot], prev[robot] = ctx.approach, ctx.move_rad, ctx.prev_move_rad
+        order = np.maximum(np.cumsum(robot) - 1, 0).astype(float)
+        return replace(self, order_context=OrderContext(approach, move, prev, order))
 
     def approach_sign(self, tol_deg: float = 0.0) -> np.ndarray:
         """(N, n) float array of -1/0/+1: direction each joint last moved in.

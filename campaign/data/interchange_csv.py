@@ -23,8 +23,10 @@ Format (one row per measurement, rows in measurement order)::
   are in measurement order); ``payload_kg`` is >= 0.  Optional ``env_temp_c`` (deg C),
   ``env_pressure_hpa`` (hPa), ``env_humidity_pct`` (%): the tracker's weather
   station; an empty cell means not read (NaN).
-* There is no approach column: approach directions come from row order
-  (:meth:`Dataset.approach_sign`).
+* Approach directions and last moves come from row order (:meth:`Dataset.approach_sign`). A subset of a campaign
+  (``campaign select``) carries them from the full order instead, in optional columns that come together:
+  ``approach1..n`` (-1/0/+1), ``move1..n`` and ``move_before1..n`` (deg, the signed last move and the one before;
+  empty = unknown) and ``order`` (the row's position in the full measurement order).
 
 Header names are matched case-insensitively and may come in any order;
 unknown or repeated columns are errors.  Blank lines and lines starting with
@@ -56,9 +58,9 @@ from campaign.errors import DataError
 from campaign.io.csv_cells import neutralise, restore
 from campaign.io.durable import atomic_write
 
-from .dataset import SETS, Dataset  # noqa: F401  (SETS and Dataset are re-exported)
+from .dataset import SETS, Dataset, OrderContext  # noqa: F401  (SETS and Dataset are re-exported)
 from .interchange_reader import (_SMR, _blank_cells, _check_ids, _check_scalars, _data_table, _is_skipped, _nest_ids,
-                                 _numbers, _parse_header, _parse_sets, _read_lines)
+                                 _numbers, _parse_header, _parse_sets, _read_lines, order_columns)
 from .interchange_writer import _blank_allowed, _check_writable, _header, _numeric_block
 
 __all__ = ["SETS", "Dataset", "read_csv", "write_csv"]
@@ -94,6 +96,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         names += _SMR[k]
     names += layout.scalars
     tail = [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc + list(layout.env)
+    tail += order_columns(layout.n_joints) * layout.has_order
     values = _numbers(table, layout, names + tail, src)
     for name, rows in blanks.items():
         values[rows, (names + tail).index(name)] = np.nan
@@ -109,6 +112,10 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra["qc_deg"] = values[:, m : m + n]
     for j, name in enumerate(layout.env):
         extra[name] = values[:, m + n * layout.has_qc + j]
+    if layout.has_order:
+        o = values[:, m + n * layout.has_qc + len(layout.env):]
+        extra["order_context"] = OrderContext(o[:, :n], np.radians(o[:, n:2 * n]), np.radians(o[:, 2 * n:3 * n]),
+                                              o[:, 3 * n])
     return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
                    **extra)
 

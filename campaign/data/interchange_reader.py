@@ -20,6 +20,7 @@ from campaign.io.csv_cells import restore
 from .dataset import _ENV, _SCALARS, SETS
 
 _QC_RE = re.compile(r"qc([1-9][0-9]*)")
+_ORDER_RE = re.compile(r"(approach|move|move_before)([1-9][0-9]*)")   # a subset's places in the full order
 _SMR = {2: ("x2", "y2", "z2"), 3: ("x3", "y3", "z3")}
 _Q_RE = re.compile(r"q([1-9][0-9]*)")
 _NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
@@ -47,6 +48,7 @@ class _Layout:
     has_qc: bool = False  # commanded joints qc1..qcn present
     env: tuple[str, ...] = ()  # environment columns present
     line: int | None = None  # the header's line number
+    has_order: bool = False  # approach1..n, move1..n, move_before1..n, order present (a subset of a campaign)
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -97,7 +99,28 @@ def _parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
     scalars = tuple(s for s in _SCALARS if s in seen)
     has_qc = _check_qc_columns(names, shown, n_joints, src, line_no)
     env = tuple(e for e in _ENV if e in seen)
-    return _Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no)
+    has_order = _check_order_columns(names, n_joints, src, line_no)
+    return _Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no, has_order)
+
+
+def order_columns(n_joints: int) -> list[str]:
+    """The order-context columns of a subset, in write order."""
+    return [f"{g}{k}" for g in ("approach", "move", "move_before") for k in range(1, n_joints + 1)] + ["order"]
+
+
+def _check_order_columns(names: list[str], n_joints: int, src: str, line_no: int | None) -> bool:
+    """The order-context columns come complete (all of ``order_columns``) or not at all; True if present."""
+    wanted = order_columns(n_joints)
+    have = [c for c in wanted if c in names]
+    extra = [c for c in names if (m := _ORDER_RE.fullmatch(c)) and int(m.group(2)) > n_joints]
+    if extra:
+        raise DataError(src, f"header: '{extra[0]}' but {n_joints} joint columns q1..q{n_joints}", line=line_no,
+                        column=f"'{extra[0]}'")
+    if have and len(have) < len(wanted):
+        missing = next(c for c in wanted if c not in names)
+        raise DataError(src, f"header: missing column '{missing}' (the order columns approach1.., move1.., "
+                        f"move_before1.., order come together)", line=line_no, column=f"'{missing}'")
+    return bool(have)
 
 
 def _check_qc_columns(names: list[str], shown: list[str], n_joints: int, src: str, line_no: int | None) -> bool:
@@ -124,7 +147,7 @@ def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
         match = _Q_RE.fullmatch(name)
         if match:
             joints.add(int(match.group(1)))
-        elif name not in known and not _QC_RE.fullmatch(name):
+        elif name not in known and not _QC_RE.fullmatch(name) and not _ORDER_RE.fullmatch(name) and name != "order":
             raise DataError(src, f"header: unknown column {_show(as_written)}")
     n_joints = max(joints, default=1)
     for name in ("point_id", "set", *(f"q{k}" for k in range(1, n_joints + 1)), "x", "y", "z"):
@@ -299,15 +322,16 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
 
 
 def _blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np.ndarray]:
-    """Empty cells that are allowed (joints, extra SMRs, temp_c, payload_kg on nest rows; environment columns
-    anywhere): set to "0" in ``table`` for the strict parser; returns {column: row indices} to become NaN."""
+    """Empty cells that are allowed (joints, extra SMRs, temp_c, payload_kg on nest rows; environment and move
+    columns anywhere): set to "0" in ``table`` for the strict parser; returns {column: row indices} to become NaN."""
     nest_rows = [i for i, s in enumerate(sets) if s == "nest"]
     nullable_on_nest = [f"q{k}" for k in range(1, layout.n_joints + 1)]
     nullable_on_nest += [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc
     nullable_on_nest += [c for k in layout.smr for c in _SMR[k]]
     nullable_on_nest += [s for s in ("temp_c", "payload_kg") if s in layout.scalars]
     out: dict[str, np.ndarray] = {}
-    for name, rows in [(c, nest_rows) for c in nullable_on_nest] + [(e, None) for e in layout.env]:
+    anywhere = list(layout.env) + [c for c in order_columns(layout.n_joints) if c.startswith("move")] * layout.has_order
+    for name, rows in [(c, nest_rows) for c in nullable_on_nest] + [(e, None) for e in anywhere]:
         pos = layout.index(name)
         col = table.column(pos)
         empty = [i for i in (range(len(col)) if rows is None else rows) if col[i] == ""]

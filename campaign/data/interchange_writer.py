@@ -8,7 +8,7 @@ import numpy as np
 from campaign.errors import DataError
 
 from .dataset import _ENV, _SCALARS, Dataset
-from .interchange_reader import _BAD_ID_CHARS, _SMR, MAX_ID_CHARS
+from .interchange_reader import _BAD_ID_CHARS, _SMR, MAX_ID_CHARS, order_columns
 
 
 def _header(ds: Dataset) -> list[str]:
@@ -20,7 +20,9 @@ def _header(ds: Dataset) -> list[str]:
     names += [s for s in _SCALARS if getattr(ds, s) is not None]
     if ds.qc_deg is not None:
         names += [f"qc{k}" for k in range(1, ds.n_joints + 1)]
-    return names + [e for e in _ENV if getattr(ds, e) is not None] + ["nest_id"] * (ds.nest_id is not None)
+    names += [e for e in _ENV if getattr(ds, e) is not None]
+    names += order_columns(ds.n_joints) * (ds.order_context is not None)
+    return names + ["nest_id"] * (ds.nest_id is not None)
 
 
 def _numeric_block(ds: Dataset) -> np.ndarray:
@@ -30,6 +32,9 @@ def _numeric_block(ds: Dataset) -> np.ndarray:
     parts += [getattr(ds, s)[:, None] for s in _SCALARS if getattr(ds, s) is not None]
     parts += [ds.qc_deg] if ds.qc_deg is not None else []
     parts += [getattr(ds, e)[:, None] for e in _ENV if getattr(ds, e) is not None]
+    c = ds.order_context
+    if c is not None:
+        parts += [c.approach, np.degrees(c.move_rad), np.degrees(c.prev_move_rad), c.order[:, None]]
     return np.hstack(parts)
 
 
@@ -39,7 +44,8 @@ def _blank_allowed(ds: Dataset, names: list[str]) -> np.ndarray:
     nest = np.array([s == "nest" for s in ds.set])
     on_nest = {f"q{k}" for k in range(1, ds.n_joints + 1)} | {f"qc{k}" for k in range(1, ds.n_joints + 1)}
     on_nest |= set(_SMR[2]) | set(_SMR[3]) | {"temp_c", "payload_kg"}
-    cols = [np.ones(len(ds), bool) if n in _ENV else (nest if n in on_nest else np.zeros(len(ds), bool))
+    anywhere = set(_ENV) | {c for c in order_columns(ds.n_joints) if c.startswith("move")}
+    cols = [np.ones(len(ds), bool) if n in anywhere else (nest if n in on_nest else np.zeros(len(ds), bool))
             for n in numeric]
     return np.stack(cols, axis=1)
 

@@ -374,3 +374,63 @@ def test_dataset_from_log_rejects_mixed_optional_fields(tmp_path):
         log.append_point({**base, "point_id": "B"})
     with pytest.raises(DataError, match=r"point record 2 \(point_id 'B'\): has no 't_s'"):
         dataset_from_log(read_log(tmp_path))
+
+
+@pytest.mark.unit
+def test_a_subset_keeps_each_rows_place_in_the_measurement_order_through_the_csv(tmp_path):
+    """A subset of ``Dataset.with_order_context`` carries the approach signs and last moves of the full order (not
+    those of the subset's own neighbours), ``write_csv`` writes them as the order columns and ``read_csv`` reads
+    them back bit for bit; a plain subset carries none."""
+    q = np.array([[0.0, 5.0], [1.0, 5.0], [1.0, 4.0], [0.5, 4.0], [0.5, 4.0], [2.0, 6.0]])
+    ds = Dataset(tuple("ABCDEF"), ("calib",) * 6, q, np.zeros((6, 3)))
+    assert ds.subset(np.array([True, False, False, True, False, True])).order_context is None
+    sub = ds.with_order_context().subset(np.array([True, False, False, True, False, True]))
+    c = sub.order_context
+    np.testing.assert_array_equal(c.approach, ds.approach_sign()[[0, 3, 5]])
+    np.testing.assert_allclose(np.degrees(c.move_rad), [[0, 0], [-0.5, 0], [1.5, 2]])
+    np.testing.assert_allclose(np.degrees(c.prev_move_rad), [[0, 0], [0, -1], [0, 0]])
+    np.testing.assert_array_equal(c.order, [0, 3, 5])
+    np.testing.assert_array_equal(sub.subset(np.array([False, True, True])).order_context.order, [3, 5])
+    path = tmp_path / "sub.csv"
+    write_csv(path, sub)
+    assert path.read_text().splitlines()[0].endswith(
+        "approach1,approach2,move1,move2,move_before1,move_before2,order")
+    back = read_csv(path)
+    assert_same(back, sub)
+    for name in ("approach", "move_rad", "prev_move_rad", "order"):
+        np.testing.assert_allclose(getattr(back.order_context, name), getattr(c, name), rtol=1e-15, atol=1e-18)
+    plain = HEADER6 + "\n" + "\n".join(ROWS6) + "\n"
+    assert read_csv(write(tmp_path, plain, "plain.csv")).order_context is None
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("header, expected", [
+    ("approach1,approach2", "header: missing column 'approach3' (the order columns approach1.., move1.., "
+                            "move_before1.., order come together)"),
+    ("approach7", "header: 'approach7' but 6 joint columns q1..q6"),
+])
+def test_order_columns_come_complete(tmp_path, header, expected):
+    extra = header.count(",") + 1
+    text = HEADER6 + "," + header + "\n" + "\n".join(r + ",0" * extra for r in ROWS6) + "\n"
+    with pytest.raises(DataError) as info:
+        read_csv(write(tmp_path, text))
+    assert expected in str(info.value) and "\n" not in str(info.value)
+
+
+@pytest.mark.unit
+def test_order_context_skips_nest_readings_as_the_calibration_does(tmp_path):
+    """A nest reading (no joints) between two robot rows: the robot row after it gets its move from the robot row
+    before the nest, as the calibration computes it once nest rows are set aside; the nest row's moves are unknown
+    (written empty, read back as NaN)."""
+    q = np.array([[0.0, 0.0], [1.0, 2.0], [np.nan, np.nan], [3.0, 1.0]])
+    ds = Dataset(("A", "B", "N1", "C"), ("calib", "calib", "nest", "test"), q, np.ones((4, 3)),
+                 t_s=[0.0, 1.0, 2.0, 3.0], nest_id=("", "", "N1", ""))
+    c = ds.with_order_context().order_context
+    np.testing.assert_allclose(np.degrees(c.move_rad[[1, 3]]), [[1, 2], [2, -1]])
+    assert np.isnan(c.move_rad[2]).all() and (c.approach[2] == 0).all()
+    np.testing.assert_array_equal(c.order, [0, 1, 1, 2])
+    path = tmp_path / "nest.csv"
+    write_csv(path, ds.with_order_context().subset(np.array([False, True, True, True])))
+    back = read_csv(path).order_context
+    np.testing.assert_allclose(np.degrees(back.move_rad[[0, 2]]), [[1, 2], [2, -1]])
+    assert np.isnan(back.move_rad[1]).all()
