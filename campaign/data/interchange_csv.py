@@ -60,7 +60,8 @@ from campaign.io.durable import atomic_write
 
 from .dataset import SETS, Dataset, OrderContext  # noqa: F401  (SETS and Dataset are re-exported)
 from .interchange_reader import (_SMR, _blank_cells, _check_ids, _check_scalars, _data_table, _is_skipped, _nest_ids,
-                                 _numbers, _parse_header, _parse_sets, _read_lines, order_columns)
+                                 _numbers, _parse_header, _parse_sets, _read_lines, check_order_columns,
+                                 order_columns)
 from .interchange_writer import _blank_allowed, _check_writable, _header, _numeric_block
 
 __all__ = ["SETS", "Dataset", "read_csv", "write_csv"]
@@ -114,6 +115,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[name] = values[:, m + n * layout.has_qc + j]
     if layout.has_order:
         o = values[:, m + n * layout.has_qc + len(layout.env):]
+        check_order_columns(o[:, :n], o[:, 3 * n], layout, line_nos, src)
         extra["order_context"] = OrderContext(o[:, :n], np.radians(o[:, n:2 * n]), np.radians(o[:, 2 * n:3 * n]),
                                               o[:, 3 * n])
     return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,

@@ -298,6 +298,22 @@ def _check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) 
                              "rows must be in measurement order", **where("t_s", i))
 
 
+def check_order_columns(approach: np.ndarray, order: np.ndarray, layout: _Layout, line_nos: list[int],
+                        src: str) -> None:
+    """An approach is -1, 0 or +1; ``order`` is >= 0 and never decreases (rows are in measurement order)."""
+    if (bad := np.argwhere(~np.isin(approach, (-1.0, 0.0, 1.0)))).size:
+        i, j = bad[0]
+        raise DataError(src, f"approach{j + 1} {approach[i, j]:g}: an approach is -1, 0 or +1", line=line_nos[i],
+                        column=f"'{layout.shown[layout.index(f'approach{j + 1}')]}'")
+    column = f"'{layout.shown[layout.index('order')]}'"
+    if (bad := np.flatnonzero(order < 0)).size:
+        raise DataError(src, f"order {order[bad[0]]:g} is negative", line=line_nos[bad[0]], column=column)
+    if (back := np.flatnonzero(np.diff(order) < 0)).size:
+        i = back[0] + 1
+        raise DataError(src, f"order goes back ({order[i]:g} after {order[i - 1]:g}): rows must be in measurement "
+                             "order", line=line_nos[i], column=column)
+
+
 def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
     """The ``nest_id`` column: required (non-empty) on nest rows, empty elsewhere; nest rows need ``t_s``."""
     first = next((i for i, s in enumerate(sets) if s == "nest"), None)

@@ -408,10 +408,20 @@ def test_a_subset_keeps_each_rows_place_in_the_measurement_order_through_the_csv
     ("approach1,approach2", "header: missing column 'approach3' (the order columns approach1.., move1.., "
                             "move_before1.., order come together)"),
     ("approach7", "header: 'approach7' but 6 joint columns q1..q6"),
+    ("approach1..6=2", "line 2, column 'approach1': approach1 2: an approach is -1, 0 or +1"),
+    ("order=3,1,2", "line 3, column 'order': order goes back (1 after 3): rows must be in measurement order"),
 ])
 def test_order_columns_come_complete(tmp_path, header, expected):
-    extra = header.count(",") + 1
-    text = HEADER6 + "," + header + "\n" + "\n".join(r + ",0" * extra for r in ROWS6) + "\n"
+    if "=" in header:                                   # a complete group with one bad value
+        full = ",".join(f"{g}{k}" for g in ("approach", "move", "move_before") for k in range(1, 7)) + ",order"
+        orders = header.split("=")[1].split(",") if header.startswith("order") else ["0", "1", "2"]
+        first = header.split("=")[1] if header.startswith("approach") else "0"
+        rows = [r + "," + ",".join([first if i == 0 else "0"] + ["0"] * 17) + "," + o for i, (r, o) in
+                enumerate(zip(ROWS6, orders))]
+        text = HEADER6 + "," + full + "\n" + "\n".join(rows) + "\n"
+    else:
+        extra = header.count(",") + 1
+        text = HEADER6 + "," + header + "\n" + "\n".join(r + ",0" * extra for r in ROWS6) + "\n"
     with pytest.raises(DataError) as info:
         read_csv(write(tmp_path, text))
     assert expected in str(info.value) and "\n" not in str(info.value)
