@@ -116,7 +116,8 @@ def data_sets(form: str, seeds, tmp: Path):
         else list(truth_runs(tmp, seeds)) if form == TRUTH else [(s, *sim_dataset(tmp, form, s)) for s in seeds]
     for seed, ds, cell in runs:
         n_cal = int(ds.mask("calib").sum())
-        n, k = (100, 10) if form == "ur5-real" else (round(n_cal / 3), 2 if form == DRIFT else 1 if form == TRUTH else 3)
+        subsets = 2 if form == DRIFT else 1 if form == TRUTH else 3
+        n, k = (100, 10) if form == "ur5-real" else (round(n_cal / 3), subsets)
         yield from with_subsets(seed, ds, cell, n, k)
 
 

@@ -42,7 +42,9 @@ from campaign.calibrate.effects_stage import effect_choices, effect_meta  # noqa
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
-from robocal.design import _Design, criterion, criterion_effects, d_optimal, design_columns, farthest_first  # noqa: E402
+from robocal.design import (_Design, criterion, criterion_effects, d_optimal, design_columns,  # noqa: E402
+                            farthest_first, information_rows)
+from robocal.joint_gp import prior_columns  # noqa: E402
 from robocal.identify import calibrate, register  # noqa: E402
 from robocal.kinematics import ParamLayout  # noqa: E402
 from tests.campaign.helpers import simulated_campaign  # noqa: E402
@@ -236,7 +238,10 @@ def crit_of(ds: Dataset, cell):
     theta = [c for c, _, k in ParamLayout.of(kin).joint_cols if k == 0]
     lever = np.sqrt(np.mean(np.sum(J[:, :, theta] ** 2, axis=1), axis=0))       # mm/rad per joint
     supported = lambda: criterion(kin, q, cov, payload, supported_effects(ds, cell))  # noqa: E731
-    curves = lambda: criterion(kin, q, cov, payload, joint_curves=True)  # noqa: E731
+    def curves():                     # with the joint-error GP layer's weights under their design prior
+        Jc, names_c, prior_c = prior_columns(kin, q)
+        return replace(crit, A=np.concatenate([crit.A, information_rows(Jc, cov, prior_c)], axis=2),
+                       names=crit.names + names_c)
     return (crit, np.einsum("nip,niq->pq", B, B) / len(q), q * lever, np.trace(cov, axis1=1, axis2=2) / 3.0,
             supported, curves)
 

@@ -24,7 +24,6 @@ import numpy as np
 from .effects import GravityModel, effect_regressor
 from .elastic import EffectChoice, candidates
 from .identify import analyse_identifiability, priority_order
-from .joint_gp import prior_columns
 from .kinematics import Kinematics, ParamLayout, identification_jacobian
 
 GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3}     # prior std of a geometric parameter by unit (1 mm, 1 mrad)
@@ -394,7 +393,7 @@ class Criterion:
 
 
 def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_kg: float = 0.0,
-              effects: list[EffectChoice] | None = None, joint_curves: bool = False) -> Criterion:
+              effects: list[EffectChoice] | None = None) -> Criterion:
     """The selection criterion of candidate poses q (M, n) rad measured with covariances (M, 3, 3) mm^2: geometry
     and the pose-dependent effects ``auto`` may take (``criterion_effects``; or the given ``effects``), whitened
     and prior-scaled."""
@@ -402,10 +401,6 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
     effects = criterion_effects(kin, q, payload_kg) if effects is None else effects
     J, names, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), float(payload_kg))}, effects)
     A = information_rows(J, cov_mm2, prior)
-    if joint_curves:
-        Jc, names_c, prior_c = prior_columns(kin, q)
-        A = np.concatenate([A, information_rows(Jc, cov_mm2, prior_c)], axis=2)
-        names = names + names_c
     layout = ParamLayout.of(kin)
     theta = [c for c, _, k in layout.joint_cols if k == 0]
     order = priority_order(layout)

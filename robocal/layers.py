@@ -1,8 +1,9 @@
 """Residual layers on top of a calibrated model, fitted and chosen by cross-validation.
 
 ``layer_targets`` gives, for calibration points, the measured SMR positions and the residuals measured - model in
-the robot base frame (kinematic layer with its physical effects). ``fit_layer`` fits an IDW (seed 000) or GPR
-(seed 003) layer on them. ``choose_layer`` compares none / IDW / GPR by k-fold CV on the calibration points (the
+the robot base frame (kinematic layer with its physical effects). ``fit_layer`` fits an IDW (seed 000), GPR
+(seed 003) or joint-error GP (``robocal.joint_gp``: one angle-error curve per joint) layer on them.
+``choose_layer`` compares none / IDW / GPR / joint GP by k-fold CV on the calibration points (the
 kinematic layer fixed) and keeps a layer when its CV gain over none passes the one-standard-error rule (one-sided
 paired t of the per-point squared errors > 1 and CV RMS lower by > 2 %, ``robocal.stats.paired_gain``): the layer
 is chosen for prediction and claims no cause, so the stricter test of a claim (t > 3) is only reported. With a
@@ -115,7 +116,8 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
 def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None,
                  payload_kg: np.ndarray | None = None, candidates=None, folds: int = 5, seed: int = 0,
                  idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None) -> LayerChoice:
-    """none / IDW / GPR by k-fold CV on the calibration points: the candidate with the lowest CV RMS among those
+    """none / IDW / GPR / joint GP (``candidates``, default ``LAYER_KINDS``) by k-fold CV on the calibration points:
+    the candidate with the lowest CV RMS among those
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
     bound). Each candidate's figures record also whether its gain is significant (t > 3)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
@@ -151,9 +153,10 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
     gp = getattr(choice.layer, "gp", None)
     if isinstance(choice.layer, JointGPResidual):
         lay = choice.layer
+        arcsec = {f"J{j}": float(np.degrees(v) * 3600) for j, v in lay.curve_rms_rad().items()}
         out.update(approximation=lay.approximation, n_train=int(lay.n_train), n_inducing=None,
                    noise_mm=float(np.sqrt(3) * lay.noise_mm), noise_floor_mm=lay.noise_floor_mm,
-                   joint_curve_rms_arcsec={f"J{j}": float(np.degrees(v) * 3600) for j, v in lay.curve_rms_rad().items()})
+                   joint_curve_rms_arcsec=arcsec)
     if gp is not None:
         out.update(approximation=gp.kind, n_train=int(gp.n_train),
                    n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,

@@ -83,7 +83,8 @@ def _varying_payload(ds: Dataset, cal: np.ndarray) -> np.ndarray | None:
     return np.asarray(ds.payload_kg, float)
 
 
-def _pred_std(layer: GPRResidual | JointGPResidual, q: np.ndarray, payload, point_ids) -> tuple[PredictiveStd, np.ndarray]:
+def _pred_std(layer: GPRResidual | JointGPResidual, q: np.ndarray, payload, point_ids
+              ) -> tuple[PredictiveStd, np.ndarray]:
     """GPR predictive standard deviation (eq. 8, 3-D: sqrt(sx^2 + sy^2 + sz^2), mm) of every test point: the
     report entry and the values (M,)."""
     if len(q) == 0:
