@@ -170,7 +170,13 @@ def run_process(main: Callable[[], int], line: Callable[[str], None]) -> None:
     """The console script: signals handled from the first instruction to the last (see :mod:`campaign.cli.signals`);
     ``main()`` runs the command; ``line(text)`` prints the one line of a signal that no one reported.
     Never returns: the process ends through :func:`campaign.cli.signals.exit_process`."""
+    import importlib
+
     from . import signals
+
+    # Before the handlers: C decimal (libmpdec) prints a warning on stderr when an import of it that a signal
+    # interrupted is retried, and libraries import it while the command loads (seen once in 33 SIGTERMs of `report`).
+    importlib.import_module("decimal")
 
     signals.install()
     code = EXIT_INTERRUPTED
