@@ -9,7 +9,7 @@ import pytest
 from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
-from robocal.design import criterion
+from robocal.design import criterion, d_optimal
 from robocal.identify import register
 from tests.campaign.helpers import ROOT
 from tests.campaign.hostile import assert_one_line, cli, snapshot
@@ -66,7 +66,11 @@ def test_select_keeps_n_calibration_rows_every_other_row_and_the_order(tmp_path,
         keep = ~full.mask("calib")
         keep[np.random.default_rng(seed).choice(cal, 80, replace=False)] = True
         rand.append(_fill_distance(full, full.subset(keep), cell))
-    assert _fill_distance(full, sub, cell) < min(rand)
+    q = np.radians(full.q_deg[cal])
+    c = criterion(register(cell.kinematics, q, full.p_tracker_mm[cal]), q, cell.weights(full)[0][cal])
+    keep = ~full.mask("calib")
+    keep[cal[d_optimal(c.A, 80, c.spread).chosen]] = True          # the plan's criterion, for comparison
+    assert _fill_distance(full, sub, cell) < min(rand + [_fill_distance(full, full.subset(keep), cell)])
 
 
 def test_select_refuses_more_rows_than_measured_and_overwriting_its_source(tmp_path, capsys):
