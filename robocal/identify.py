@@ -18,6 +18,7 @@ from .lm import levenberg_marquardt
 from .frames import fit_rigid, make_T, rotvec_to_matrix, skew
 from .kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian_t, parameter_difference,
                          smr_base, smr_tracker)
+from .parameters import GEOMETRY, ParameterTable
 
 
 class IdentificationError(ValueError):
@@ -81,6 +82,10 @@ class CalibrationResult:
         return [{"name": n, "unit": u, "delta": float(d), "std": None if not np.isfinite(s) else float(s),
                  "identified": n in ident}
                 for n, u, d, s in zip(self.names, self.units, self.delta, self.std)]
+
+    def table(self) -> ParameterTable:
+        """The parameter record of the geometric model (``robocal.parameters``)."""
+        return ParameterTable.of(self.kinematics, self.start, self.identified, self.std, GEOMETRY, self.sigma0)
 
 
 # ---------------------------------------------------------------- registration

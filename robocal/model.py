@@ -1,9 +1,11 @@
 """The calibrated model: the actual-pose predictor AP(theta) of seed 001.
 
 ``CalibratedModel`` = kinematic layer (identified geometry, registration, SMR) + optional residual layer
-(IDW, GPR or any object with ``predict(q_rad, p_base_mm) -> (N, 3)`` and ``to_dict``). It predicts where the
-SMR really is for given joint angles, and is what target correction and evaluation use. ``to_dict`` /
-``from_dict`` give a plain, unit-labelled structure for JSON or YAML (the file I/O lives in campaign/).
+(IDW, GPR or any object with ``predict(q_rad, p_base_mm) -> (N, 3)`` and ``to_dict``), with the record of its
+identified parameters (``robocal.parameters.ParameterTable``: values, deltas, std of the fit that made it). It
+predicts where the SMR really is for given joint angles, and is what target correction and evaluation use.
+``to_dict`` / ``from_dict`` give a plain, unit-labelled structure for JSON or YAML (the file I/O lives in campaign/);
+``from_dict`` reads the files of earlier versions, which have no parameter record.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from .effects import effect_state
 from .elastic import FittedEffect, elastic_flange
 from .gp_layer import GPRResidual
 from .joint_gp import JointGPResidual
+from .parameters import ParameterTable
 from .residual import IDWResidual
 
 FORMAT = "robocal-model/1"
@@ -31,6 +34,7 @@ class CalibratedModel:
     meta: dict | None = None
     effects: tuple[FittedEffect, ...] = ()     # physical effects of the elasto-geometric model
     payload_kg: float | None = None            # payload assumed by the effects when a point gives none
+    parameters: ParameterTable | None = None   # the identified kinematic parameters with their std (the record)
 
     def effect_meta(self, n: int, meta: Mapping | None = None) -> dict:
         """Per-point metadata of the effects: the given ``meta`` (payload_kg, approach, t_s, temp_c), the
@@ -79,7 +83,7 @@ class CalibratedModel:
         return transform_points(self.kinematics.T_tracker_base, self.smr_base(q_rad, meta))
 
     def without_residual(self) -> "CalibratedModel":
-        return CalibratedModel(self.kinematics, None, self.meta, self.effects, self.payload_kg)
+        return CalibratedModel(self.kinematics, None, self.meta, self.effects, self.payload_kg, self.parameters)
 
     def to_dict(self) -> dict:
         return {"format": FORMAT,
@@ -88,7 +92,8 @@ class CalibratedModel:
                 "kinematics": self.kinematics.to_dict(),
                 "effects": [fe.to_dict() for fe in self.effects], "payload_kg": self.payload_kg,
                 "residual": None if self.residual is None else self.residual.to_dict(),
-                "meta": self.meta or {}}
+                "meta": self.meta or {},
+                "parameters": None if self.parameters is None else self.parameters.to_dict()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "CalibratedModel":
@@ -103,7 +108,9 @@ class CalibratedModel:
         kin = Kinematics.from_dict(d["kinematics"])
         effects = tuple(FittedEffect.from_dict(e, kin.n) for e in d.get("effects") or [])
         pay = d.get("payload_kg")
-        return cls(kin, layer, d.get("meta") or {}, effects, None if pay is None else float(pay))
+        table = d.get("parameters")                  # absent from the files of earlier versions
+        return cls(kin, layer, d.get("meta") or {}, effects, None if pay is None else float(pay),
+                   None if table is None else ParameterTable.from_dict(table))
 
 
 def fit_idw_layer(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, power: float = 2.0,

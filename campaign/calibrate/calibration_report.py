@@ -44,7 +44,9 @@ class CalibrationReport:
 
     ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test and calib rows
     (mm, keyed by :data:`STAGES` names); ``noise_floor_mm`` with its source ("repeats" or "specs") and both
-    candidates; the identified ``parameters`` and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm);
+    candidates; the identified ``parameters`` (the rows of model.json's parameter record, from the fit named by
+    ``parameters_fit``; ``parameters_geometry_only``: the geometric fit's, when the exported model also has
+    physical effects) and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm);
     the method and effect choices; ``preparation`` (the JSON section of ``campaign.calibrate.prepare``); optional
     ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
     with the held-out RMS measured at the end); ``cell`` summary and per-point ``points`` table (JSON of
@@ -86,6 +88,8 @@ class CalibrationReport:
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
     summary: Summary | None = None
+    parameters_fit: str | None = None
+    parameters_geometry_only: tuple[ParameterRow, ...] | None = None
 
     @property
     def final(self) -> StageResult | None:
@@ -94,7 +98,11 @@ class CalibrationReport:
 
     def to_dict(self) -> dict:
         """The report.json object (the key order written so far)."""
-        out = {name: json_value(getattr(self, name)) for name in REPORT_KEYS}
+        out = {}
+        for name in REPORT_KEYS:
+            out[name] = json_value(getattr(self, name))
+            if name == "parameters":                 # the fit the rows come from, the geometry-only rows beside
+                out.update((k, json_value(getattr(self, k))) for k in PARAMETER_KEYS if getattr(self, k) is not None)
         if self.multi_smr is not None:
             out["multi_smr"] = self.multi_smr.to_dict()
         if self.stop is not None:
@@ -133,7 +141,9 @@ class CalibrationReport:
             record_field(data, "multi_smr", MultiSmrReport.from_dict, True),
             record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
-            record_field(data, "summary", Summary.from_dict, True))
+            record_field(data, "summary", Summary.from_dict, True), text_field(data, "parameters_fit", True),
+            records_field(data, "parameters_geometry_only", ParameterRow.from_dict, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
+PARAMETER_KEYS = ("parameters_fit", "parameters_geometry_only")     # written after ``parameters`` when present

@@ -71,7 +71,8 @@ def subset(meta: dict, rows) -> dict:
 @dataclass(frozen=True, eq=False)
 class ElasticStage:
     """``choices`` taken (configured or selected), ``engine`` the selection under ``auto`` (else None),
-    ``elastic`` their joint fit (None without effects), ``model`` the geometric or elasto-geometric model,
+    ``elastic`` their joint fit (None without effects), ``model`` the geometric or elasto-geometric model (with the
+    record of its parameters: ``CalibratedModel.parameters``),
     ``kept_rows`` the rows fitted (after the second fault screen), ``screen`` that screen (or the geometric one),
     ``meta`` the per-row metadata of every dataset row."""
     choices: tuple[EffectChoice, ...]
@@ -95,7 +96,7 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
     cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified], int)
     choices, engine = effect_choices(cell, result.kinematics, cols, q[kept], p[kept], cov_all[kept],
                                      subset(meta_all, kept))
-    model = CalibratedModel(result.kinematics, None, None, (), payload)
+    model = CalibratedModel(result.kinematics, None, None, (), payload, result.table())
     if not choices:
         return ElasticStage((), engine, None, model, kept, geo.screen, meta_all)
 
@@ -106,7 +107,11 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
         except (np.linalg.LinAlgError, ValueError) as exc:
             raise DataError(ds.source, f"elasto-geometric calibration failed: {exc}") from None
     elastic = fit(kept)
-    model = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload)
+
+    def elastic_model(el):                # the record: the geometry's std from the joint fit, deltas from nominal
+        table = el.table(result.start, result.identified)
+        return CalibratedModel(el.kinematics, None, None, el.effects, payload, table)
+    model = elastic_model(elastic)
     final_screen = geo.screen
     if cell.config.calibration.outliers == "local":
         # screen again against the model with its effects: structure the geometry alone could not fit is no
@@ -121,5 +126,5 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
         elif not np.array_equal(new_keep, geo.keep):
             kept = rc[new_keep]
             elastic = fit(kept)
-            model = CalibratedModel(elastic.kinematics, None, None, elastic.effects, payload)
+            model = elastic_model(elastic)
     return ElasticStage(tuple(choices), engine, elastic, model, kept, final_screen, meta_all)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, object_field, record_dict,
                                      record_field, record_map_field, records_field, text_field, vector_field)
 from robocal.identify import Unidentifiable
+from robocal.parameters import ParameterTable
 from robocal.stats import ErrorStats
 
 if TYPE_CHECKING:                                   # robocal.layers loads the GP stack: not needed to read a report
@@ -140,12 +141,15 @@ class RowCounts:
 
 @dataclass(frozen=True)
 class ParameterRow:
-    """An identification candidate: delta from nominal and its std (angles in deg), identified or fixed."""
+    """An identification candidate: delta from nominal and its std (angles in deg), identified or fixed, and its
+    value in the chain (None: a base entry, or a report of an earlier version). The rows of a report are those of
+    its model file (:func:`parameter_rows`)."""
     name: str
     unit: str
     delta: float
     std: float | None
     identified: bool
+    value: float | None = None
 
     def to_dict(self) -> dict:
         return record_dict(self)
@@ -153,7 +157,13 @@ class ParameterRow:
     @classmethod
     def from_dict(cls, d: Mapping) -> "ParameterRow":
         return cls(text_field(d, "name"), text_field(d, "unit"), figure_field(d, "delta"), figure_field(d, "std"),
-                   bool(get_field(d, "identified")))
+                   bool(get_field(d, "identified")), figure_field(d, "value"))
+
+
+def parameter_rows(table: ParameterTable) -> tuple[ParameterRow, ...]:
+    """The rows of a model's parameter record (``robocal.parameters``) exactly as model.json writes them (angles in
+    deg): the one conversion behind report.json ``parameters``, the terminal and the HTML tables."""
+    return tuple(ParameterRow.from_dict(row) for row in table.to_dict()["rows"])
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,8 @@ final model: + the residual layer that k-fold CV supports under ``calibration.re
 IDW / GPR layer; equal to the previous stage without a layer). A GPR layer's predictive standard deviation per
 test point is reported as ``stages.compensated.test_pred_std_mm``.
 Every figure is computed on held-out ``test`` rows; ``check`` rows (repeated poses) give the noise floor.
+The report's ``parameters`` are the rows of the written model's own record (``CalibratedModel.parameters``: the final
+fit's values and std); with physical effects the geometric fit's rows are reported beside them, labelled.
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ from .plausibility import check_dataset, check_deltas, registered_kinematics, st
 from .prepare import prepare
 from .report_points import PointTable, cell_summary, point_table, report_points_value
 from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, LayerSummary, MethodChoice,
-                              ParameterRow, PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult)
+                              PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult, parameter_rows)
 
 
 REPORT_FORMAT = "campaign-report/1"
@@ -254,7 +256,7 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
     if isinstance(layer, GPRResidual) and layer.uses_payload:
         layer = layer.with_payload(cfg.tool.payload_kg)
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
-                            model_el.effects, payload_model)
+                            model_el.effects, payload_model, model_el.parameters)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
     stage_models = [(NOMINAL, register(registered_kinematics(cell, plaus), q[cal], p[cal])),
                     (KINEMATIC, result.kinematics)]
@@ -294,7 +296,7 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
         n=RowCounts(int(cal.sum()), int(test.sum()), int(check.sum()), len(rejected_ids)),
         stages=stages, noise_floor_mm=floor, noise_floor_source="repeats" if repeats is not None else "specs",
         noise_floor_specs_mm=specs, noise_floor_repeats_mm=repeats,
-        parameters=_parameters(result), unidentifiable=tuple(result.unidentifiable),
+        parameters=parameter_rows(model.parameters), unidentifiable=tuple(result.unidentifiable),
         condition_number=result.condition_number, observability=result.observability,
         sigma0=result.sigma0, iterations=result.iterations, converged=result.converged,
         rejected_points=tuple(rejected_ids), excluded_points=tuple(excluded),
@@ -304,7 +306,8 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
                             c.effects if isinstance(c.effects, str) else "list", choice.kind, c.residual, cov_source),
         effects=_effects_report(selection, elastic), residual_choice=ResidualChoice.of(choice), plausibility=plaus,
         residual_cv=_residual_cv_summary(choice), preparation=prep.report, multi_smr=multi,
-        cell=cell_summary(cfg), points=points)
+        cell=cell_summary(cfg), points=points, parameters_fit=model.parameters.fit,
+        parameters_geometry_only=None if elastic is None else parameter_rows(result.table()))
     return Calibrated(report, model, result, table)
 
 
@@ -336,14 +339,3 @@ def _residual_cv_summary(choice: LayerChoice) -> ResidualCV | None:
     kind = choice.kind if choice.kind in cands else min(cands, key=lambda k: cands[k]["cv_rms_mm"])
     a, b = choice.cv["none"]["cv_rms_mm"], cands[kind]["cv_rms_mm"]
     return ResidualCV(choice.folds, kind, a, b, 1.0 - b / a, cands[kind]["t"], cands[kind]["significant"])
-
-
-def _parameters(result: CalibrationResult) -> tuple[ParameterRow, ...]:
-    """Parameter table with angles converted to degrees for people."""
-    rows = []
-    for row in result.parameters_table():
-        if row["unit"] == "rad":
-            row = dict(row, unit="deg", delta=float(np.degrees(row["delta"])),
-                       std=None if row["std"] is None else float(np.degrees(row["std"])))
-        rows.append(ParameterRow(**row))
-    return tuple(rows)

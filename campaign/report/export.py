@@ -10,7 +10,9 @@ project's forward kinematics exactly for standard DH, modified DH and Hayati's b
   origin of joint K = ``B_{K-1} A_K``, fixed joint ``flange`` = ``B_n``.
 
 The tool (the SMR centre, ``p_flange_smr_mm``) is a fixed link ``tool`` on the flange. The registration
-``T_tracker_base`` and any residual layer (IDW/GPR: not a kinematic chain) are stated in comments.
+``T_tracker_base`` and any residual layer (IDW/GPR: not a kinematic chain) are stated in comments, and so is every
+identified parameter with its std (the model's record, ``CalibratedModel.parameters``: the same numbers as
+report.json ``parameters``); the DH CSV and the RoboDK table carry the std beside each value.
 
 Joint limits (:class:`UrdfLimits`, from the config): position limits from ``robot.joints[].q_min_deg/q_max_deg``,
 velocity from ``robot.max_joint_speed_deg_s`` (rad/s, every joint), effort from the datasheet torques when given,
@@ -25,7 +27,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robocal.kinematics import Kinematics
+from robocal.kinematics import JOINT_PARAMS, Kinematics
 from robocal.model import CalibratedModel
 
 from campaign.config.schema import CampaignConfig
@@ -126,6 +128,7 @@ def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -
         kind = type(model.residual).__name__
         notes.append(f"NOT exported: the non-kinematic residual layer ({kind}) of the model corrects positions "
                      "beyond this chain; use model.json with campaign correct for the full accuracy")
+    notes += parameter_notes(model)
     lines = ['<?xml version="1.0"?>'] + [f"<!-- {n.replace('--', '-')} -->" for n in notes]
     lines.append(f"<robot name={quoteattr(name)}>")
     links = ["base_link"] + [f"link{i + 1}" for i in range(kin.n)] + ["flange", "tool"]
@@ -144,6 +147,36 @@ def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -
     return "\n".join(lines) + "\n"
 
 
+def parameter_std(model: CalibratedModel, name: str) -> float | None:
+    """The std of parameter ``name`` in the model's record (``CalibratedModel.parameters``) in the unit the exports
+    print (deg for angles, mm); None when it was not identified or the model has no record (an earlier version)."""
+    row = None if model.parameters is None else model.parameters.row(name)
+    if row is None or row.std is None:
+        return None
+    return float(np.degrees(row.std)) if row.unit == "rad" else float(row.std)
+
+
+def _std_text(model: CalibratedModel, name: str | None) -> str:
+    """``parameter_std`` as the RoboDK table prints it ("-": no parameter, or not identified)."""
+    v = None if name is None else parameter_std(model, name)
+    return "-" if v is None else f"{v:.6g}"
+
+
+def parameter_notes(model: CalibratedModel) -> list[str]:
+    """One line per identified parameter of the model's record: value (deg / mm; base entries have none: the base
+    is T_tracker_base), delta from nominal and std: the URDF's comments, where the format has no place for them."""
+    table = model.parameters
+    if table is None:
+        return ["parameter std: not recorded (a model.json of an earlier version)"]
+    out = [f"identified parameters of model.json (value, delta from nominal, base relative to the registered frame; "
+           f"std from the {table.fit} fit; deg and mm)"]
+    for row in (r.to_dict() for r in table.rows if r.identified):
+        value = "-" if row["value"] is None else f"{row['value']:.6f}"
+        sd = "-" if row["std"] is None else f"{row['std']:.6g}"
+        out.append(f"parameter {row['name']} {value} {row['unit']} delta {row['delta']:+.6f} std {sd}")
+    return out
+
+
 def dh_rows(kin: Kinematics) -> list[dict]:
     """One row per joint: theta offset, d, a, alpha, beta (deg / mm) and joint limits (deg)."""
     return [{"joint": i + 1, "convention": kin.convention, "theta_deg": float(np.degrees(kin.theta_rad[i])),
@@ -152,13 +185,22 @@ def dh_rows(kin: Kinematics) -> list[dict]:
              "q_max_deg": float(np.degrees(kin.q_max_rad[i]))} for i in range(kin.n)]
 
 
+DH_STD_COLUMNS = ("theta_std_deg", "d_std_mm", "a_std_mm", "alpha_std_deg", "beta_std_deg")
+
+
 def write_dh_csv(model: CalibratedModel, path: str | Path) -> Path:
-    """CSV of the calibrated table (``dh_rows``) plus a ``tool`` row (SMR centre in the flange frame, mm)."""
+    """CSV of the calibrated table (``dh_rows``) plus a ``tool`` row (SMR centre in the flange frame, mm), then the
+    std of each value (``DH_STD_COLUMNS``, from the model's record; empty where not identified; the tool row's
+    std of x, y, z in the first three)."""
     rows = dh_rows(model.kinematics)
     p = model.kinematics.p_flange_smr_mm
-    table = [[r["joint"], r["convention"]] + [f"{r[k]:.9g}" for k in list(r)[2:]] for r in rows]
-    table.append(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""])
-    return atomic_write(path, render_rows(list(rows[0]), table, text_columns=(0, 1)).encode("utf-8"))
+    cell = lambda v: "" if v is None else f"{v:.9g}"  # noqa: E731
+    table = [[r["joint"], r["convention"]] + [f"{r[k]:.9g}" for k in list(r)[2:]]
+             + [cell(parameter_std(model, f"{kind}{r['joint']}")) for kind in JOINT_PARAMS] for r in rows]
+    table.append(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""]
+                 + [cell(parameter_std(model, f"tool_{a}")) for a in "xyz"] + ["", ""])
+    return atomic_write(path, render_rows(list(rows[0]) + list(DH_STD_COLUMNS), table,
+                                          text_columns=(0, 1)).encode("utf-8"))
 
 
 def dhm_from_dh(kin: Kinematics) -> tuple[list[tuple[float, float, float, float]], tuple[float, float]]:
@@ -171,26 +213,44 @@ def dhm_from_dh(kin: Kinematics) -> tuple[list[tuple[float, float, float, float]
     return rows, (float(a[-1]), float(al[-1]))
 
 
+def _robodk_header(cols: tuple[str, ...]) -> str:
+    return f"{'joint':>5} " + " ".join(f"{c:>14}" for c in cols) + " " + " ".join(f"{'std_' + c:>18}" for c in cols)
+
+
 def robodk_text(model: CalibratedModel) -> str:
-    """The calibrated table as RoboDK users type it by hand (DHM columns alpha, a, theta, d; mm and deg)."""
+    """The calibrated table as RoboDK users type it by hand (DHM columns alpha, a, theta, d; mm and deg), each value's
+    std beside it (from the model's record; ``-``: not identified)."""
     kin = model.kinematics
     p = kin.p_flange_smr_mm
+    std = lambda name: _std_text(model, name)  # noqa: E731
     out = ["# Calibrated kinematics for manual entry (robot panel, DHM table). mm and deg.",
-           "# theta is the offset added to the controller's joint value."]
+           "# theta is the offset added to the controller's joint value; std_*: the value's standard deviation "
+           f"({'std from the ' + model.parameters.fit + ' fit' if model.parameters else 'not recorded'}; "
+           "- = not identified, kept at nominal)."]
     if kin.convention == "dh" and not np.any(kin.beta_rad):
         rows, (a_f, al_f) = dhm_from_dh(kin)
         out.append("# converted exactly from the standard-DH model: DHM row i takes alpha, a of DH joint i-1")
-        out.append(f"{'joint':>5} {'alpha_deg':>14} {'a_mm':>14} {'theta_deg':>14} {'d_mm':>14}")
-        out += [f"{i + 1:>5} {r[0]:>14.6f} {r[1]:>14.6f} {r[2]:>14.6f} {r[3]:>14.6f}" for i, r in enumerate(rows)]
-        out.append(f"# flange: then Tx({a_f:.6f} mm) Rx({al_f:.6f} deg) before the tool")
+        cols = ("alpha_deg", "a_mm", "theta_deg", "d_mm")
+        out.append(_robodk_header(cols))
+        for i, r in enumerate(rows):
+            names = (None, None) if i == 0 else (f"alpha{i}", f"a{i}")
+            names += (f"theta{i + 1}", f"d{i + 1}")
+            out.append(f"{i + 1:>5} " + " ".join(f"{v:>14.6f}" for v in r) + " "
+                       + " ".join(f"{std(n):>18}" for n in names))
+        n = kin.n
+        out.append(f"# flange: then Tx({a_f:.6f} mm) Rx({al_f:.6f} deg) before the tool (std_a_mm {std(f'a{n}')}, "
+                   f"std_alpha_deg {std(f'alpha{n}')})")
     else:
         label = "DHM (modified, Craig)" if kin.convention == "mdh" else "standard DH (Hayati beta: no exact DHM form)"
         out.append(f"# convention: {label}; beta = Hayati rotation about y (RoboDK calibration: 'beta' column)")
-        out.append(f"{'joint':>5} {'alpha_deg':>14} {'a_mm':>14} {'theta_deg':>14} {'d_mm':>14} {'beta_deg':>14}")
+        cols = ("alpha_deg", "a_mm", "theta_deg", "d_mm", "beta_deg")
+        out.append(_robodk_header(cols))
         for r in dh_rows(kin):
-            out.append(f"{r['joint']:>5} {r['alpha_deg']:>14.6f} {r['a_mm']:>14.6f} {r['theta_deg']:>14.6f} "
-                       f"{r['d_mm']:>14.6f} {r['beta_deg']:>14.6f}")
-    out.append(f"# tool (TCP = SMR centre, flange frame): X {p[0]:.6f}  Y {p[1]:.6f}  Z {p[2]:.6f} mm")
+            j = r["joint"]
+            out.append(f"{j:>5} " + " ".join(f"{r[c]:>14.6f}" for c in cols) + " "
+                       + " ".join(f"{std(c.split('_')[0] + str(j)):>18}" for c in cols))
+    out.append(f"# tool (TCP = SMR centre, flange frame): X {p[0]:.6f}  Y {p[1]:.6f}  Z {p[2]:.6f} mm (std_X "
+               f"{std('tool_x')}, std_Y {std('tool_y')}, std_Z {std('tool_z')})")
     if model.residual is not None or getattr(model, "effects", ()):
         out.append("# not representable here: the model's physical effects / residual layer (use model.json with "
                    "campaign correct)")

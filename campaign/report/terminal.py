@@ -144,16 +144,28 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
 
 
 def render_parameters(console: Console, report: CalibrationReport) -> None:
-    t = Table(title="Identified parameters (delta from nominal; base relative to the registered frame)")
-    for col in ("parameter", "delta", "std", "unit"):
+    """The identified parameters of the exported model (model.json's record) and, when the model has physical
+    effects, the geometry-only fit's deltas beside them, labelled."""
+    geo = {r.name: r for r in report.parameters_geometry_only or ()}
+    t = Table(title=parameters_title(report))
+    for col in ("parameter", "delta", "std", "unit") + (("geometry-only fit",) if geo else ()):
         t.add_column(col, justify="left" if col == "parameter" else "right")
     for row in report.parameters:
         if row.identified:
-            t.add_row(row.name, f"{row.delta:+.4f}", f"{row.std:.4f}", row.unit)
+            g = geo.get(row.name)
+            t.add_row(row.name, f"{row.delta:+.4f}", f"{row.std:.4f}", row.unit,
+                      *((f"{g.delta:+.4f}" if g else "-",) if geo else ()))
     console.print(keep_words(t, console.width))
     if report.unidentifiable:
         notes = ", ".join(f"{u.name} ({_why_fixed(u)})" for u in report.unidentifiable)
         console.print(f"fixed at nominal, not identifiable from this pose set: {notes}")
+
+
+def parameters_title(report: CalibrationReport) -> str:
+    """What the parameter table holds: the exported model's record, and from which fit its std come."""
+    fit = f"; std from the {report.parameters_fit} fit" if report.parameters_fit else ""
+    return f"Identified parameters of the exported model (model.json; delta from nominal, base relative to the " \
+           f"registered frame{fit})"
 
 
 def _why_fixed(u) -> str:

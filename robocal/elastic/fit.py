@@ -13,6 +13,7 @@ from ..effects import combine, effect_regressor
 from ..identify import CalibrationOptions, Unidentifiable, analyse_identifiability, whiten, whitening
 from ..kinematics import Kinematics, ParamLayout, apply_update, identification_jacobian
 from ..lm import levenberg_marquardt
+from ..parameters import GEOMETRY_AND_EFFECTS, ParameterTable
 from .model import FittedEffect, elastic_smr_tracker
 
 
@@ -54,7 +55,9 @@ def _whitened_design(W, J: np.ndarray, geo_cols: np.ndarray, R: np.ndarray, eff_
 @dataclass(frozen=True, eq=False)
 class ElasticResult:
     """Jointly identified geometry and effects, with diagnostics. ``residual_tracker_mm`` (N, 3) = measured -
-    model at the fitted points; ``unidentifiable`` lists effect parameters the pose set cannot separate."""
+    model at the fitted points; ``unidentifiable`` lists effect parameters the pose set cannot separate;
+    ``geometry_std`` (P,) the std of the geometric parameters from this joint fit, over the full ``ParamLayout``
+    (mm or rad, NaN where not identified)."""
     kinematics: Kinematics
     effects: tuple[FittedEffect, ...]
     unidentifiable: tuple[Unidentifiable, ...]
@@ -63,6 +66,13 @@ class ElasticResult:
     iterations: int
     converged: bool
     condition_number: float
+    geometry_std: np.ndarray | None = None
+
+    def table(self, start: Kinematics, identified) -> ParameterTable:
+        """The parameter record of the model (``robocal.parameters``): deltas from ``start`` (the geometric fit's
+        start), the geometric parameters ``identified`` with their std from this joint fit."""
+        return ParameterTable.of(self.kinematics, start, identified, self.geometry_std, GEOMETRY_AND_EFFECTS,
+                                 self.sigma0)
 
     def pairs(self, n_joints: int) -> list:
         return [(fe.choice.build(n_joints), fe.values) for fe in self.effects]
@@ -119,6 +129,8 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     std_all = np.sqrt(np.maximum(np.diag(cov), 0.0)) / D
     std_eff = np.full(K, np.nan)
     std_eff[eff_keep] = std_all[len(geo_cols):]
+    std_geo = np.full(layout.size, np.nan)
+    std_geo[geo_cols] = std_all[:len(geo_cols)]
     fitted, start = [], 0
     for c, e in zip(choices, built):
         sl = slice(start, start + e.k)
@@ -127,6 +139,6 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     unident = tuple(u for u in ident.unidentifiable if u.name in eff_names)
     p_model = elastic_smr_tracker(kin, q, meta, [(e, f.values) for e, f in zip(built, fitted)])
     return ElasticResult(kin, tuple(fitted), unident, p_meas - p_model, sigma0, it, converged,
-                         ident.condition_number)
+                         ident.condition_number, std_geo)
 
 

@@ -20,7 +20,8 @@ PIN = Path(__file__).resolve().parents[1] / "data" / "pinned_irb2600_small.json"
 
 
 def _figures(report: dict) -> dict:
-    """The numbers a user reads: counts, every stage's statistics, noise floor, identified parameters."""
+    """The numbers a user reads: counts, every stage's statistics, noise floor, identified parameters (the exported
+    model's, and the geometry-only fit's beside them)."""
     return {
         "n": report["n"],
         "stages": {s: {k: v for k, v in rows.items() if k in ("test", "calib")}
@@ -28,6 +29,7 @@ def _figures(report: dict) -> dict:
         "noise_floor_mm": report["noise_floor_mm"],
         "noise_floor_source": report["noise_floor_source"],
         "parameters": {p["name"]: [p["delta"], p["std"]] for p in report["parameters"]},
+        "parameters_geometry_only": {p["name"]: [p["delta"], p["std"]] for p in report["parameters_geometry_only"]},
         "T_tracker_base": report["T_tracker_base"],
     }
 
