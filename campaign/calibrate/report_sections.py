@@ -207,6 +207,27 @@ class MethodChoice:
 
 
 @dataclass(frozen=True)
+class EffectCounts:
+    """"taken of tried", one meaning everywhere: ``tried`` the candidates the forward selection tried (a scan over a
+    joint's cyclic orders counts once, a refinement that joined the candidates once), ``taken`` the effects the
+    model carries."""
+    taken: int
+    tried: int
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+
+def tried_candidates(selection: Mapping) -> list[str]:
+    """The candidates a selection (``robocal.elastic.EffectSelection.to_dict``) tried, in the order first tried;
+    for a report of an earlier version (trials without their candidate) the candidates offered at the start."""
+    trials = selection.get("trials") or ()
+    if any("candidate" not in t for t in trials):
+        return list(selection.get("candidates") or ())
+    return list(dict.fromkeys(t["candidate"] for t in trials))
+
+
+@dataclass(frozen=True)
 class EffectsReport:
     """The physical effects: the CV selection and the fitted effects as ``robocal.elastic`` writes them, the
     effect parameters fixed as unidentifiable; with an elastic stage its sigma0, notes and condition number."""
@@ -217,8 +238,19 @@ class EffectsReport:
     notes: tuple[str, ...] | None = None
     condition_number: float | None = None
 
+    @property
+    def counts(self) -> EffectCounts | None:
+        """How many candidates the selection tried and how many the model took (None without a selection)."""
+        sel = self.selection
+        if not sel:
+            return None
+        return EffectCounts(len(sel.get("taken") or ()), len(tried_candidates(sel)))
+
     def to_dict(self) -> dict:
-        return record_dict(self, omit_none=("sigma0", "notes", "condition_number"))
+        out = record_dict(self, omit_none=("sigma0", "notes", "condition_number"))
+        if self.counts is not None:
+            out["counts"] = self.counts.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "EffectsReport":

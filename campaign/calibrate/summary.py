@@ -214,17 +214,20 @@ def _reasons(report) -> Reasons:
 
 def _effects_reason(report) -> str:
     setting = report.method.effects if report.method else None
-    sel = None if report.effects is None else report.effects.selection
-    if sel:
-        n = len(sel.get("candidates") or ())
-        taken = len(sel.get("taken") or ())
+    counts = None if report.effects is None else report.effects.counts
+    if counts is not None:
         how = "forward selection by cross-validation on the calibration points"
-        return f"{how}: {taken} of {n} candidates taken" if taken else f"{how}: none of {n} candidates helped"
+        return f"{how}: {taken_of_tried(counts)}"
     if setting == "list":
         return "configured (calibration.effects)"
     if setting in (None, "none", "off"):
         return "none configured (calibration.effects)"
     return f"calibration.effects: {setting}"
+
+
+def taken_of_tried(counts) -> str:
+    """"2 of 22 candidates taken" (``report_sections.EffectCounts``): the one wording of the count everywhere."""
+    return f"{counts.taken} of {counts.tried} candidates taken"
 
 
 def _residual_reason(report) -> str:

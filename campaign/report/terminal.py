@@ -10,6 +10,7 @@ from robocal.elastic import EffectChoice
 
 from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.calibrate.report_sections import LayerSummary
+from campaign.calibrate.summary import taken_of_tried
 from campaign.correct.verify_report import VerifyReport
 from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
@@ -104,14 +105,16 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
     effects = report.effects
     sel = None if effects is None else effects.selection
     if sel:
-        tried = {}
+        tried = {}                                  # per candidate: its first trial, or the one that took it
         for t in sel["trials"]:
-            tried.setdefault(t["effect"], t)
+            key = t.get("candidate", t["effect"])
+            tried.setdefault(key, t)
             if t["taken"]:
-                tried[t["effect"]] = t
-        figs = ", ".join(f"{k} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}" for k, v in tried.items())
-        console.print(f"physical effects ({len(tried)} tried; CV RMS on the calibration points, mm; geometry alone "
-                      f"{sel['geometric_cv_rms_mm']:.4f}): {figs}")
+                tried[key] = t
+        figs = ", ".join(f"{v['effect']} {v['cv_rms_mm']:.4f}{' (taken)' if v['taken'] else ''}"
+                         for v in tried.values())
+        console.print(f"physical effects ({taken_of_tried(effects.counts)}; CV RMS on the calibration points, mm; "
+                      f"geometry alone {sel['geometric_cv_rms_mm']:.4f}): {figs}")
     for fe in () if effects is None else effects.fitted:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
                                                                  if "stiffness_Nm_per_rad" in p else "")

@@ -41,7 +41,8 @@ KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects
 @dataclass(frozen=True)
 class Trial:
     """One candidate tried in one round: held-out RMS (mm, mean over the blockings and per blocking) against the
-    model so far, relative gain, paired t, whether it was taken."""
+    model so far, relative gain, paired t, whether it was taken; ``candidate`` the candidate it was tried as (a scan
+    family's label for the member the scan picked; else ``label``)."""
     round: int
     label: str
     cv_rms_mm: float
@@ -50,11 +51,12 @@ class Trial:
     gain: float
     t: float
     taken: bool
+    candidate: str = ""
 
     def to_dict(self) -> dict:
-        return {"round": self.round, "effect": self.label, "cv_rms_mm": self.cv_rms_mm,
-                "cv_rms_by_blocking_mm": self.by_blocking_mm, "base_cv_rms_mm": self.base_cv_rms_mm,
-                "gain": self.gain, "t": self.t, "taken": self.taken}
+        return {"round": self.round, "effect": self.label, "candidate": self.candidate or self.label,
+                "cv_rms_mm": self.cv_rms_mm, "cv_rms_by_blocking_mm": self.by_blocking_mm,
+                "base_cv_rms_mm": self.base_cv_rms_mm, "gain": self.gain, "t": self.t, "taken": self.taken}
 
 
 @dataclass(eq=False)
@@ -177,20 +179,20 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     trials, steps = [], []
     for rnd in range(1, max_effects + 1):
         scored = []
-        tried = [(c, errors(model, design.cols[c])) for c in pool]
+        tried = [(c, c.label, errors(model, design.cols[c])) for c in pool]
         in_model = np.concatenate([design.geo] + [e[1] for e in model])
         for family in families:
             live = [c for c in family if not any(c in (e[0], e[2]) for e in model)]
             if live:
                 alts = [design.cols[c] for c in live]
-                tried.append((live[cv.scan_pick(in_model, alts)],
+                tried.append((live[cv.scan_pick(in_model, alts)], _family_label(family),
                               {b.name: np.sum(cv.scan_errors(in_model, alts, i) ** 2, axis=1)
                                for i, b in enumerate(cv.blockings)}))
-        for c, se in tried:
+        for c, as_candidate, se in tried:
             g = paired_gain(_mean(base), _mean(se))
             each = all(_rms(se[b]) < _rms(base[b]) for b in se)
             trials.append(Trial(rnd, c.label, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.rms_base_mm,
-                                g.gain, g.t, False))
+                                g.gain, g.t, False, as_candidate))
             if _supported(g) and each:
                 scored.append((g.rms_cand_mm, len(trials) - 1, c, se, g))
         if not scored:

@@ -149,9 +149,12 @@ def _report_dict() -> dict:
                                                    [0.0, 0.0, 0.0, 1.0]],
         "method": {"estimator": "robust_ridge", "weights": "igg3", "outliers": "local", "effects": "auto",
                    "residual": "gpr", "residual_config": "auto", "measurement_covariance": "spec"},
-        "effects": {"selection": {"taken": ["joint_compliance(J2,3)"], "trials": []},
+        "effects": {"selection": {"taken": ["joint_compliance(J2,3)"], "trials": [
+                        {"effect": "joint_compliance(J2,3)", "candidate": "joint_compliance(J2,3)", "taken": True},
+                        {"effect": "gear_cyclic(J1 h8)", "candidate": "gear_cyclic(J1 h5-40)", "taken": False},
+                        {"effect": "gear_cyclic(J1 h9)", "candidate": "gear_cyclic(J1 h5-40)", "taken": False}]},
                     "fitted": [{"name": "joint_compliance", "options": {}, "params": {}}], "unidentifiable": [],
-                    "sigma0": 0.95, "notes": [], "condition_number": 40.0},
+                    "sigma0": 0.95, "notes": [], "condition_number": 40.0, "counts": {"taken": 1, "tried": 2}},
         "residual_choice": {"chosen": "gpr", "folds": 5, "test": "paired t", "candidates": {
             "none": {"cv_rms_mm": 0.03}, "gpr": {"cv_rms_mm": 0.02, "gain": 0.33, "t": 4.0, "significant": True}}},
         "plausibility": {"unit": "mm", "scale": 1.0, "nominal_rms_mm": 0.41, "bound_mm": 23.0, "rejected_rows": [],
