@@ -58,7 +58,9 @@ class CalibrationResult:
 
     ``delta``/``std`` follow ``names`` (all candidates; std NaN where not identified), in mm or rad;
     the base entries are relative to the registered start frame. ``point_weights`` (N,) are the final
-    robust weights (0 = rejected); ``residual_tracker_mm`` (N, 3) = measured - model.
+    robust weights (0 = rejected); ``residual_tracker_mm`` (N, 3) = measured - model. ``condition_number`` and
+    ``observability`` are those of the column-scaled, whitened Jacobian of the identified parameters at the solution
+    (the quantity ``robocal.design.forecast`` predicts at the nominal geometry).
     """
     kinematics: Kinematics
     start: Kinematics
@@ -420,6 +422,9 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
                                     if c not in identified),
                             ident.condition_number, ident.observability, ident.rel)
     r, A = _linearise(kin, q, p_meas, W, cols, D)
+    # the identified columns only: a column admitted only marginally at the solution is kept at its start value
+    # and amplifies no noise into the identified ones (it would turn a good condition number into a poor one)
+    obs = observability_indices(A / np.linalg.norm(A, axis=0))
     w_rows = np.repeat(w, 3)
     N = A.T @ (w_rows[:, None] * A)
     n_eff = np.count_nonzero(w_rows)
@@ -431,6 +436,6 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
     return CalibrationResult(
         kinematics=kin, start=start, names=layout.names, identified=tuple(layout.names[c] for c in cols),
         delta=parameter_difference(kin, start), std=std, unidentifiable=ident.unidentifiable,
-        condition_number=ident.condition_number, observability=ident.observability, point_weights=w,
+        condition_number=obs["condition_number"], observability=obs, point_weights=w,
         residual_tracker_mm=p_meas - p_model, sigma0=sigma0, iterations=iters, converged=converged,
         units=tuple(layout.unit(n) for n in layout.names))

@@ -22,3 +22,15 @@ def condition_scale(value: float | None) -> str:
     if value is None:
         return "-"
     return next(word for bound, word in CONDITION_SCALE if value <= bound)
+
+
+def condition_meaning(n_parameters: int, forecast: bool) -> str:
+    """What a condition number is of, in one line: ``campaign plan``'s forecast (``forecast``) and a calibration
+    report print the same quantity, the column-scaled Jacobian of the geometric parameters identified, at two
+    places (the nominal geometry on the planned poses; the identified geometry on the measured points)."""
+    if forecast:
+        return (f"of the {n_parameters} identifiable geometric parameters at the nominal geometry on the plan's "
+                "calibration poses; the run reports the same quantity at the identified geometry on the measured "
+                "points")
+    return (f"of the {n_parameters} identified geometric parameters at the identified geometry on the measured points; "
+            "campaign plan forecasts the same quantity at the nominal geometry on the planned poses")

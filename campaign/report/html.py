@@ -34,7 +34,7 @@ from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
 from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
-from campaign.io.quantities import FLOOR_FMT, condition_scale
+from campaign.io.quantities import FLOOR_FMT, condition_meaning, condition_scale
 from .summary_text import FORMATS, banner, held_out_line, model_line, origin, reason_lines, verdict_line
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
@@ -189,7 +189,7 @@ def render_html(src: ReportSources, figures: dict[str, list], figures_name: str 
         src=src, figures=figures, b64=b64, num=num, stages=STAGES, floor_fmt=FLOOR_FMT, ident=ident,
         summary=summary_markup(src.calibration, num), figures_name=figures_name, glossary=GLOSSARY,
         uncorrected_vs_nominal=UNCORRECTED_VS_NOMINAL,
-        condition=condition_scale, n_figures=sum(len(v) for v in figures.values()))
+        condition=condition_scale, condition_meaning=condition_meaning, n_figures=sum(len(v) for v in figures.values()))
 
 
 def figures_dir(html: Path) -> Path:

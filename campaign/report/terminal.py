@@ -16,7 +16,7 @@ from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
 
 from .glossary import UNCORRECTED_VS_NOMINAL
-from campaign.io.quantities import condition_scale, floor_mm
+from campaign.io.quantities import condition_meaning, condition_scale, floor_mm
 
 
 def _mm(v) -> str:
@@ -52,9 +52,11 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                       f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
     console.print(f"noise floor {floor_mm(floor)} mm (from {report.noise_floor_source}; specs "
-                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   condition number {report.condition_number:.0f} "
-                  f"({condition_scale(report.condition_number)}: good <= 100, fair <= 10000)   "
-                  f"sigma0 {report.sigma0:.2f}   rejected points {report.n.rejected}")
+                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   sigma0 {report.sigma0:.2f}   rejected points "
+                  f"{report.n.rejected}")
+    console.print(f"condition number {report.condition_number:.0f} ({condition_scale(report.condition_number)}: good "
+                  f"<= 100, fair <= 10000) {condition_meaning(sum(p.identified for p in report.parameters), False)}",
+                  markup=False)
     render_identity(console, report)
 
 
@@ -205,7 +207,9 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
              for n, u, s in zip(fc.names, fc.units, fc.std)]
     text = ", ".join(f"{n} {v:.4f} {u}" for n, v, u in sorted(shown, key=lambda t: -t[1])[:4])
     console.print(f"forecast (unit-weight error 1): {len(fc.names)} geometric parameters identifiable, largest std "
-                  f"{text}; O1 {fc.O1:.3g}, condition number {fc.condition_number:.0f}", markup=False)
+                  f"{text}; O1 {fc.O1:.3g}", markup=False)
+    console.print(f"condition number {fc.condition_number:.0f} ({condition_scale(fc.condition_number)}) "
+                  f"{condition_meaning(len(fc.names), True)}", markup=False)
     held = (fc.floor_mm**2 + fc.model_rms_effects_mm**2) ** 0.5
     console.print(f"predicted AP(theta) RMS at the test poses from the parameter uncertainty: {fc.model_rms_mm:.4f} mm "
                   f"(geometry), {fc.model_rms_effects_mm:.4f} mm (with the pose-dependent effects); noise floor "
