@@ -1,7 +1,8 @@
 """The public UR5 + API GTS3800 campaign (tests/data/serial_robots_datasets, MIT): imported, then the DEFAULT
 ``reprocess`` (configs/ur5.yaml has no calibration section), judged on the 20 random held-out poses against the
 published hybrid MDH + neural-network result (mean 0.1549 mm). ``-s`` prints every stage next to the published
-figures (docs/results.md)."""
+figures (docs/results.md). The same reprocess is checked for one record per number (tests/campaign/one_record.py):
+every output prints model.json's parameters, every "taken of tried" count equals report.json."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,6 +15,7 @@ from campaign.calibrate.report_sections import RowCounts
 from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import cli
+from tests.campaign.one_record import check_everything
 
 pytestmark = pytest.mark.system
 
@@ -58,6 +60,11 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
     tool = report.plausibility.tool
     assert tool.determined == 3 and 3.0 < tool.difference_mm[0] < 6.0
     assert "put [" in text and "in tool.p_flange_smr_mm" in text
+    # one record per number (issue 31), on the same reprocess: every output prints model.json's parameters
+    checked = check_everything(text, out, ROOT / "configs" / "ur5.yaml")
+    with capsys.disabled():
+        print(f"  one record: {checked}")
+    assert checked["urdf chain max mm"] < 1e-9
 
 
 def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):

@@ -156,3 +156,47 @@ def test_urdf_without_config_or_with_bad_torques_is_one_line_exit_2(tmp_path, ca
     assert main(["export", str(model), "--urdf", str(tmp_path / "r.urdf"), "--config", config,
                  "--effort-nm", "0"]) == 2
     assert main(["export", str(model), "--dh-csv", str(tmp_path / "dh.csv")]) == 0      # no URDF: no config needed
+
+
+def _recorded_model(tmp_path: Path, kin: Kinematics, record: bool = True) -> Path:
+    """DIR/model.json of ``kin`` with small errors and a parameter record (every joint parameter but the last
+    joint's identified, std 0.001 * (1 + column)); ``record`` False: a model.json of an earlier version."""
+    import json
+
+    from robocal.kinematics import ParamLayout
+    from robocal.parameters import GEOMETRY, ParameterTable
+
+    layout = ParamLayout.of(kin)
+    cal = kin.with_(a_mm=kin.a_mm + 0.3, alpha_rad=kin.alpha_rad + 1e-4, theta_rad=kin.theta_rad - 2e-4)
+    ident = [n for n in layout.names if n[-1].isdigit() and not n.endswith(str(kin.n))]
+    std = np.where(np.isin(layout.names, ident), 0.001 * (1 + np.arange(layout.size)), np.nan)
+    doc = CalibratedModel(cal, parameters=ParameterTable.of(cal, kin, ident, std, GEOMETRY, 1.0)).to_dict()
+    if not record:
+        del doc["parameters"]
+    (tmp_path / "model.json").write_text(json.dumps(doc))
+    return tmp_path
+
+
+def test_every_export_carries_the_records_values_and_std(tmp_path):
+    """DH CSV, RoboDK table (the exact DHM form: std of alpha, a from the previous DH joint) and URDF comments of a
+    standard-DH model without beta print its record's values and std (the same checks as the campaign runs)."""
+    from tests.campaign.one_record import check_dh_csv, check_robodk, check_urdf, export_all
+
+    config = ROOT / "configs" / "irb2600.yaml"
+    out = _recorded_model(tmp_path, load_cell(config).kinematics)
+    files = export_all(out, config)
+    assert "converted exactly" in files["robodk"].read_text()
+    assert check_dh_csv(files["dh"], out) == 25 and check_robodk(files["robodk"], out) == 6 * 4 - 2
+    assert check_urdf(files["urdf"], out) < 1e-9
+
+
+def test_a_model_json_without_a_record_still_exports(tmp_path):
+    """model.json of an earlier version (no ``parameters``): loaded, exported with the std left empty and said so."""
+    config = ROOT / "configs" / "irb2600.yaml"
+    out = _recorded_model(tmp_path, load_cell(config).kinematics, record=False)
+    from tests.campaign.one_record import export_all
+
+    files = export_all(out, config)
+    rows = files["dh"].read_text().splitlines()
+    assert rows[1].endswith(",,,,,") and "parameter std: not recorded" in files["urdf"].read_text()
+    assert "not recorded" in files["robodk"].read_text()
