@@ -1,9 +1,14 @@
 """Target correction end to end on the mock cell: correct CLI, write-back bounds, closed-loop verify."""
+import csv
 import json
+import re
 
+import numpy as np
 import pytest
 
 from campaign.cli import main
+from campaign.config.load import load_cell
+from campaign.plan.poses import solve_targets, tool_rotation
 from drivers.rapid import check_rapid_syntax, parse_rapid_module
 from tests.campaign.helpers import ROOT, read_verify, small_config
 
@@ -80,3 +85,35 @@ def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path
     assert all(0 < s < 1 for s in stds)
     ur = json.loads((out / "targets_ur.json").read_text())
     assert all(t["predicted_std_mm"] > 0 for t in ur["targets"])
+
+
+def _correct(run_dir, tmp_path, rows, *formats, model=None):
+    """``campaign correct`` of the targets ``rows`` (``id,x,y,z``) with the run's model (or ``model``); the exit code
+    and the output directory."""
+    targets = tmp_path / "targets.csv"
+    targets.write_text("target_id,x,y,z\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    code = main(["correct", "--config", CONFIG, "--model", str(model or run_dir / "model.json"), "--targets",
+                 str(targets), "--out", str(out)] + [a for f in formats for a in ("--format", f)])
+    return code, out
+
+
+def _csv_rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_a_rejected_target_names_the_reason_as_the_plan_does(run_dir, tmp_path, capsys):
+    code, out = _correct(run_dir, tmp_path, ["A,900,0,1000", "LOW,400,0,200", "FAR,3000,0,1000"], "csv")
+    assert code == 0
+    said = capsys.readouterr().out
+    rejected = {r["target_id"]: r["reason"] for r in _csv_rows(out / "rejected.csv")}
+    cell = load_cell(CONFIG)
+    _, _, skipped = solve_targets(cell.config, cell.kinematics, np.array([[400.0, 0, 200], [3000.0, 0, 1000]]),
+                                  ["LOW", "FAR"], ["test"] * 2, tool_rotation(cell.config.plan.tool_direction), None)
+    planned = {s.point_id: s.reason for s in skipped}
+    print(rejected, planned)
+    assert re.fullmatch(r"joint 2 would be at -1\d\d\.\d deg, outside \[-95, 155\]", rejected["LOW"])
+    assert rejected["LOW"] == planned["LOW"] and f"LOW: {rejected['LOW']}" in said
+    assert (rejected["FAR"], planned["FAR"]) == ("unreachable with the plan's fixed SMR orientation",
+                                                 "unreachable with the fixed SMR orientation")
