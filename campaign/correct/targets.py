@@ -23,6 +23,7 @@ from robocal.ik import branch_signature, solve_on_branch
 from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 
+from .accuracy import HeldOut, predicted_errors_mm, rotation_errors_deg
 from .bounds import CorrectedTarget, Rejected, check_targets
 
 
@@ -187,10 +188,12 @@ def recorded_identity(model: CalibratedModel, model_path: str | Path | None = No
 
 def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                     T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
-                    allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
+                    allow_absacc: bool = False, held_out: HeldOut | None = None,
+                    ) -> tuple[list[CorrectedTarget], list[Rejected]]:
     """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason (an
     unreachable one with the plan's reason: ``campaign.plan.poses.unreachable_reasons``). The tool point (default
-    ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot
+    ``T_tool``) is the model's SMR at its identified offset. Each target's predicted error comes from the model's
+    ``held_out`` figures (``accuracy.held_out_of``; None: unknown, nan). An Absolute Accuracy robot
     (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
     absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     cfg, kin = cell.config, cell.kinematics
@@ -211,13 +214,15 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
         std = predictive_std_mm(model, c.q_rad)
+        held = held_out if held_out is not None else HeldOut(None, "no held-out figures given")
+        err, rot = predicted_errors_mm(held, std, c.pos_err_mm), rotation_errors_deg(held, c.rot_err_rad)
         for j, i in enumerate(idx):
             accepted.append(CorrectedTarget(
                 target_id=targets.ids[i], q_nominal_deg=tuple(np.degrees(q_nom[i])),
                 q_corrected_deg=tuple(np.degrees(c.q_rad[j])), p_command_base_mm=tuple(cmd[j, :3, 3]),
                 quat_command_wxyz=tuple(matrix_to_quat(cmd[j:j + 1, :3, :3])[0]), confdata=tuple(int(v) for v in conf[j]),
-                predicted_residual_mm=float(c.pos_err_mm[j]),
-                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j])), predicted_std_mm=float(std[j])))
+                solver_tolerance_mm=float(c.pos_err_mm[j]), predicted_error_mm=float(err[j]),
+                predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j])))
     lim = _limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
