@@ -192,6 +192,7 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
+    from campaign.correct.accuracy import held_out_of, summary_lines
     from campaign.correct.targets import check_model_fits, correct_targets, read_targets_csv, recorded_identity
     from campaign.correct.write_back import read_rejected, write_corrected
     from campaign.run.output_dirs import check_dir, source_key
@@ -204,16 +205,20 @@ def cmd_correct(args: argparse.Namespace) -> int:
     with forced(args.force):
         check_model_fits(cell, model, str(args.model))
     targets = read_targets_csv(args.targets, tool_rotation(cell.config.plan.tool_direction))
-    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model))
+    held = held_out_of(model, args.model)
+    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model),
+                                         held_out=held)
     out = _stdout()
     try:
         paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
         _print_rejected(out, len(targets.ids), args.out)
-    res = [t.predicted_residual_mm for t in accepted]
-    out.print(f"{len(targets.ids) - len(read_rejected(args.out))} of {len(targets.ids)} targets corrected "
-              f"(predicted residual max {max(res, default=0):.2e} mm); wrote {', '.join(p.name for p in paths)} "
-              f"in {args.out}", markup=False)
+    refused = {target_id for target_id, _ in read_rejected(args.out)}
+    out.print(f"{len(targets.ids) - len(refused)} of {len(targets.ids)} targets corrected; wrote "
+              f"{', '.join(p.name for p in paths)} in {args.out}", markup=False)
+    written = [t for t in accepted if t.target_id not in refused]
+    for line in summary_lines(written, held, cell.config.correction.threshold_mm):
+        out.print(line, markup=False)
     return EXIT_OK
 
 

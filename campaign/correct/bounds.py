@@ -10,14 +10,16 @@ from typing import Any, Iterable, Mapping, Sequence
 # The writer tag in the header comment of every written file: kept as first published with the /1 formats (files on
 # controllers carry it); it names the writer, not a module path.
 GENERATOR = "campaign.writeback"
-RAPID_FORMAT = "rapid-cal-targets/1"
-URSCRIPT_FORMAT = "urscript-cal-targets/1"
-UR_JSON_FORMAT = "ur-joint-targets/1"
+# /2: the predicted position error (and the solver tolerance, apart) replace /1's "predicted residual", which was
+# the solver's convergence.
+RAPID_FORMAT = "rapid-cal-targets/2"
+URSCRIPT_FORMAT = "urscript-cal-targets/2"
+UR_JSON_FORMAT = "ur-joint-targets/2"
 
 JOINT_DECIMALS = 6        # deg
 POSITION_DECIMALS = 4     # mm
 QUAT_DECIMALS = 9         # quaternion components
-RESIDUAL_DECIMALS = 4     # mm
+ERROR_DECIMALS = 4        # mm (predicted errors in controller files)
 UR_RAD_DECIMALS = 9       # rad in URScript
 QUAT_UNIT_TOL = 1e-6      # |norm - 1| accepted by check_targets
 UR_MAX_V_RAD_S = math.pi  # URScript joint speed bound (rad/s)
@@ -36,10 +38,14 @@ class CorrectedTarget:
     base frame) to command so that the controller's nominal model reaches the
     corrected joints; ``quat_command_wxyz``: its orientation, unit quaternion
     (w, x, y, z) as ABB writes it; ``confdata``: ABB (cf1, cf4, cf6, cfx).
-    ``predicted_residual_mm``: predicted position error left after correction
-    (mm); ``predicted_rot_err_deg``: predicted orientation error (deg), nan when
-    not applicable; ``predicted_std_mm``: 3-D predictive standard deviation of the
-    residual layer at the corrected joints (GPR), nan when the model has none.
+    ``solver_tolerance_mm``: the pseudo-target iteration's remaining distance
+    between the model's pose and the target (mm; its convergence, not an
+    accuracy); ``predicted_error_mm``: the position error the robot can expect
+    (mm; :data:`campaign.correct.accuracy.PREDICTED_ERROR_METHOD`), nan when
+    unknown; ``predicted_rot_err_deg``: predicted orientation error (deg), nan
+    unless orientation was measured (three SMRs); ``predicted_std_mm``: 3-D
+    predictive standard deviation of the residual layer at the corrected joints
+    (GPR), nan when the model has none.
     """
 
     target_id: str
@@ -48,7 +54,8 @@ class CorrectedTarget:
     p_command_base_mm: tuple[float, float, float]
     quat_command_wxyz: tuple[float, float, float, float]
     confdata: tuple[int, int, int, int]
-    predicted_residual_mm: float
+    solver_tolerance_mm: float
+    predicted_error_mm: float = math.nan
     predicted_rot_err_deg: float = math.nan
     predicted_std_mm: float = math.nan
 
@@ -141,15 +148,13 @@ def _shape_problems(t: CorrectedTarget, n: int) -> list[str]:
     out += _vector_problems(t.q_nominal_deg, n, "q_nominal_deg")
     out += _vector_problems(t.p_command_base_mm, 3, "p_command_base_mm")
     out += _vector_problems(t.quat_command_wxyz, 4, "quat_command_wxyz")
-    res = _as_float(t.predicted_residual_mm)
+    res = _as_float(t.solver_tolerance_mm)
     if res is None or not math.isfinite(res) or res < 0:
-        out.append(f"predicted_residual_mm must be finite and >= 0, got {t.predicted_residual_mm!r}")
-    rot = _as_float(t.predicted_rot_err_deg)
-    if rot is None or math.isinf(rot) or rot < 0:
-        out.append(f"predicted_rot_err_deg must be nan or finite >= 0, got {t.predicted_rot_err_deg!r}")
-    std = _as_float(t.predicted_std_mm)
-    if std is None or math.isinf(std) or std < 0:
-        out.append(f"predicted_std_mm must be nan or finite >= 0, got {t.predicted_std_mm!r}")
+        out.append(f"solver_tolerance_mm must be finite and >= 0, got {t.solver_tolerance_mm!r}")
+    for name in ("predicted_error_mm", "predicted_rot_err_deg", "predicted_std_mm"):
+        v = _as_float(getattr(t, name))
+        if v is None or math.isinf(v) or v < 0:
+            out.append(f"{name} must be nan or finite >= 0, got {getattr(t, name)!r}")
     conf = tuple(t.confdata) if isinstance(t.confdata, (tuple, list)) else ()
     if len(conf) != 4 or not all(isinstance(c, Integral) and not isinstance(c, bool) for c in conf):
         out.append(f"confdata must be 4 integers (cf1, cf4, cf6, cfx), got {t.confdata!r}")
@@ -206,8 +211,8 @@ def check_targets(targets: Iterable[CorrectedTarget], q_min_deg: Sequence[float]
     """Split targets into (accepted, rejected), both in input order.
 
     A target is rejected, with a one-line reason naming the joint and the
-    values, when: a field is non-finite or malformed (``predicted_rot_err_deg``
-    may be nan); a corrected joint (deg) leaves ``[q_min_deg, q_max_deg]``;
+    values, when: a field is non-finite or malformed (the predicted errors and
+    std may be nan); a corrected joint (deg) leaves ``[q_min_deg, q_max_deg]``;
     ``|q_corrected - q_nominal|`` on a joint exceeds ``max_joint_correction_deg``
     (deg); the command position is more than ``max_position_correction_mm`` (mm)
     from ``p_target_base_mm[target_id]`` (mm, base frame); the quaternion is not

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import textwrap
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -12,7 +13,8 @@ from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggre
                                     rapid_ident_problem, rapid_string)
 
 from campaign.io.durable import atomic_write
-from .bounds import (GENERATOR, JOINT_DECIMALS, POSITION_DECIMALS, QUAT_DECIMALS, RAPID_FORMAT, RESIDUAL_DECIMALS,
+from .accuracy import PREDICTED_ERROR_METHOD
+from .bounds import (GENERATOR, JOINT_DECIMALS, POSITION_DECIMALS, QUAT_DECIMALS, RAPID_FORMAT, ERROR_DECIMALS,
                      CorrectedTarget, _as_float, _require_writable)
 
 def _rapid_quat(q: Sequence[float]) -> list[str]:
@@ -45,9 +47,15 @@ def _rapid_extax(external_axes: Sequence[float] | Mapping[str, Sequence[float]] 
 
 
 
-def _rapid_header(module_name: str, n: int, persistent: bool) -> list[str]:
+def _rapid_header(module_name: str, n: int, persistent: bool, with_error: bool) -> list[str]:
     """The comment block at the top of the module (deterministic: no date)."""
     kind = "PERS" if persistent else "CONST"
+    if with_error:
+        error = ["    !   err_cal_mm{i}  predicted position error (mm):",
+                 *("    !                  " + line for line in textwrap.wrap(PREDICTED_ERROR_METHOD, 66))]
+    else:
+        error = ["    ! No err_cal_mm array: the predicted position error is unknown (no held-out",
+                 "    ! figures of the model beside it)."]
     return [
         "    !" + "*" * 70,
         f"    ! {module_name}: {n} corrected target{'' if n == 1 else 's'}.",
@@ -58,7 +66,7 @@ def _rapid_header(module_name: str, n: int, persistent: bool) -> list[str]:
         "    !   jt_cal{i}      corrected joints (deg), for MoveAbsJ",
         "    !   rt_cal{i}      command pose: position mm, quaternion w,x,y,z, robot base",
         "    !                  frame, confdata cf1,cf4,cf6,cfx, for MoveJ/MoveL",
-        "    !   res_cal_mm{i}  predicted residual position error (mm)",
+        *error,
         f"    ! Data are {kind}; unused external axes are 9E9.  Do not edit by hand.",
         "    !" + "*" * 70,
     ]
@@ -73,7 +81,7 @@ def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str 
     if problem:
         raise ValueError(f"module_name: {problem}")
     storage = "PERS" if persistent else "CONST"
-    jt, rt, ids, res = [], [], [], []
+    jt, rt, ids, err = [], [], [], []
     for t in items:
         ext = rapid_aggregate(_rapid_extax(external_axes, t.target_id))
         joints = rapid_aggregate(fixed_literal(q, JOINT_DECIMALS) for q in t.q_corrected_deg)
@@ -82,14 +90,17 @@ def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str 
         conf = rapid_aggregate(str(int(c)) for c in t.confdata)
         rt.append(rapid_aggregate([pos, rapid_aggregate(_rapid_quat(t.quat_command_wxyz)), conf, ext]))
         ids.append(rapid_string(t.target_id))
-        res.append(fixed_literal(t.predicted_residual_mm, RESIDUAL_DECIMALS))
-    lines = [f"MODULE {module_name}", *_rapid_header(module_name, len(items), persistent), "",
+        e = float(t.predicted_error_mm)
+        err.append(fixed_literal(e, ERROR_DECIMALS) if math.isfinite(e) else None)
+    with_error = all(e is not None for e in err)
+    lines = [f"MODULE {module_name}", *_rapid_header(module_name, len(items), persistent, with_error), "",
              "    ! Number of targets.", f"    CONST num n_cal:={len(items)};",
              "    ! Source target ids.", *rapid_array_lines(storage, "string", "id_cal", ids),
              "    ! Corrected joints (deg).", *rapid_array_lines(storage, "jointtarget", "jt_cal", jt),
              "    ! Command poses (mm, quaternion w-first, base frame).",
              *rapid_array_lines(storage, "robtarget", "rt_cal", rt),
-             "    ! Predicted residual position errors (mm).", *rapid_array_lines(storage, "num", "res_cal_mm", res),
+             *(["    ! Predicted position errors (mm).", *rapid_array_lines(storage, "num", "err_cal_mm", err)]
+               if with_error else []),
              "ENDMODULE", ""]
     text = "\n".join(lines)
     errors = check_rapid_syntax(text, max_line_len=RAPID_MAX_LINE_ID)
@@ -106,7 +117,8 @@ def write_rapid_module(path: str | os.PathLike, targets: Iterable[CorrectedTarge
 
     Arrays ``id_cal{N}`` (string), ``jt_cal{N}`` (jointtarget, deg, 6 decimals),
     ``rt_cal{N}`` (robtarget: mm 4 decimals, quaternion 9 decimals, confdata),
-    ``res_cal_mm{N}`` (num, mm) and ``CONST num n_cal``; ``CONST`` data, or
+    ``err_cal_mm{N}`` (num, mm: predicted position error; left out when a
+    target's is unknown) and ``CONST num n_cal``; ``CONST`` data, or
     ``PERS`` when ``persistent``.  ``external_axes``: None (all ``9E9``), up to
     6 values (deg or mm) for every target, or a mapping target id -> values.
     Raises ValueError, writing nothing, for an invalid target or one outside

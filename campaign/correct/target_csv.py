@@ -22,7 +22,8 @@ def _csv_float(x: float) -> str:
 def _csv_header(n: int, with_std: bool = True) -> list[str]:
     return (["target_id"] + [f"q{j}" for j in range(1, n + 1)] + [f"q{j}_nominal" for j in range(1, n + 1)]
             + ["x_cmd", "y_cmd", "z_cmd", "qw", "qx", "qy", "qz", "cf1", "cf4", "cf6", "cfx",
-               "predicted_residual_mm", "predicted_rot_err_deg"] + (["predicted_std_mm"] if with_std else []))
+               "predicted_error_mm", "predicted_rot_err_deg", "solver_tolerance_mm"]
+            + (["predicted_std_mm"] if with_std else []))
 
 
 def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
@@ -32,8 +33,9 @@ def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequenc
     with_std = any(not math.isnan(float(t.predicted_std_mm)) for t in items)   # no all-nan column
     rows = ([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
              *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
-             *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_residual_mm),
-             _csv_float(t.predicted_rot_err_deg)] + ([_csv_float(t.predicted_std_mm)] if with_std else [])
+             *(str(int(c)) for c in t.confdata), _csv_float(t.predicted_error_mm),
+             _csv_float(t.predicted_rot_err_deg), _csv_float(t.solver_tolerance_mm)]
+            + ([_csv_float(t.predicted_std_mm)] if with_std else [])
             for t in items)
     return render_rows(_csv_header(len(q_min_deg), with_std), rows, text_columns=(0,))
 
@@ -44,7 +46,8 @@ def write_targets_csv(path: str | os.PathLike, targets: Iterable[CorrectedTarget
 
     Columns ``target_id, q1..qn`` (corrected, deg), ``q1_nominal..qn_nominal``
     (deg), ``x_cmd, y_cmd, z_cmd`` (mm, base), ``qw, qx, qy, qz``, ``cf1, cf4,
-    cf6, cfx``, ``predicted_residual_mm``, ``predicted_rot_err_deg``,
+    cf6, cfx``, ``predicted_error_mm`` (nan: unknown), ``predicted_rot_err_deg``
+    (nan unless three SMRs measured orientation), ``solver_tolerance_mm``,
     ``predicted_std_mm`` (only when some target has one: GPR layer).  Floats are written exactly (``repr``), so
     :func:`read_corrected_targets_csv` gives back identical values.  ValueError, writing
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
@@ -71,12 +74,12 @@ def read_corrected_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]
         try:
             nums = [float(v) for v in row[1:2 * n + 8]]
             conf = tuple(int(v) for v in row[2 * n + 8:2 * n + 12])
-            res, rot = float(row[2 * n + 12]), float(row[2 * n + 13])
-            std = float(row[2 * n + 14]) if with_std else math.nan
+            err, rot, tol = (float(v) for v in row[2 * n + 12:2 * n + 15])
+            std = float(row[2 * n + 15]) if with_std else math.nan
         except ValueError as e:
             raise ValueError(f"{path}: line {k}: {e}") from None
         out.append(CorrectedTarget(restore(row[0]), tuple(nums[n:2 * n]), tuple(nums[:n]), tuple(nums[2 * n:2 * n + 3]),
-                                   tuple(nums[2 * n + 3:2 * n + 7]), conf, res, rot, std))
+                                   tuple(nums[2 * n + 3:2 * n + 7]), conf, tol, err, rot, std))
     return out
 
 

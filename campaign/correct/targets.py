@@ -17,11 +17,13 @@ import numpy as np
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
+from campaign.plan.poses import unreachable_reasons
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
 from robocal.ik import branch_signature, solve_on_branch
 from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 
+from .accuracy import HeldOut, predicted_errors_mm, rotation_errors_deg
 from .bounds import CorrectedTarget, Rejected, check_targets
 
 
@@ -30,10 +32,12 @@ ENSEMBLE = ("multiply", "quaternion")
 
 @dataclass(frozen=True)
 class Targets:
-    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3)."""
+    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3), and what the
+    orientations are (named in the reason of an unreachable target)."""
     ids: tuple[str, ...]
     p_base_mm: np.ndarray
     R_base: np.ndarray
+    orientation: str = "the plan's fixed SMR orientation"
 
 
 def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
@@ -79,10 +83,8 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
             bad = int(np.argmax(np.abs(norm - 1)))
             raise DataError(src, f"quaternion of {ids[bad]!r} is not unit (norm {norm[bad]:.4f})")
         from robocal.correct import quat_to_matrix
-        R = quat_to_matrix(q)
-    else:
-        R = np.broadcast_to(default_R, (len(ids), 3, 3)).copy()
-    return Targets(tuple(ids), v[:, :3], R)
+        return Targets(tuple(ids), v[:, :3], quat_to_matrix(q), "the orientation given in the targets file")
+    return Targets(tuple(ids), v[:, :3], np.broadcast_to(default_R, (len(ids), 3, 3)).copy())
 
 
 def _is_float(x: str) -> bool:
@@ -186,18 +188,23 @@ def recorded_identity(model: CalibratedModel, model_path: str | Path | None = No
 
 def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                     T_tool: np.ndarray | None = None, *, robot_identity: dict | None = None,
-                    allow_absacc: bool = False) -> tuple[list[CorrectedTarget], list[Rejected]]:
-    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason.
-    The tool point (default ``T_tool``) is the model's SMR at its identified offset. An Absolute Accuracy robot
+                    allow_absacc: bool = False, held_out: HeldOut | None = None,
+                    ) -> tuple[list[CorrectedTarget], list[Rejected]]:
+    """Corrected joints for Cartesian targets; out-of-bound or unreachable ones are rejected with a reason (an
+    unreachable one with the plan's reason: ``campaign.plan.poses.unreachable_reasons``). The tool point (default
+    ``T_tool``) is the model's SMR at its identified offset. Each target's predicted error comes from the model's
+    ``held_out`` figures (``accuracy.held_out_of``; None: unknown, nan). An Absolute Accuracy robot
     (``robot_identity``, default: ``model.meta``) is refused unless ``allow_absacc``."""
     absacc_guard(robot_identity if robot_identity is not None else recorded_identity(model), allow=allow_absacc)
     cfg, kin = cell.config, cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
     R_flange = targets.R_base @ T_tool[:3, :3].T
-    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, np.radians(cfg.plan.q_ref_deg),
-                                point_mm=T_tool[:3, 3])
-    rejected = [Rejected(targets.ids[i], "unreachable on the plan's robot configuration with the nominal model")
-                for i in np.flatnonzero(~ok)]
+    q_ref = np.radians(cfg.plan.q_ref_deg)
+    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, q_ref, point_mm=T_tool[:3, 3])
+    unreachable = np.flatnonzero(~ok)
+    why = unreachable_reasons(kin, targets.p_base_mm[unreachable], R_flange[unreachable], q_ref,
+                              orientation=targets.orientation, point_mm=T_tool[:3, 3])
+    rejected = [Rejected(targets.ids[i], w) for i, w in zip(unreachable, why)]
     idx = np.flatnonzero(ok)
     accepted: list[CorrectedTarget] = []
     if len(idx):
@@ -207,13 +214,15 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
         std = predictive_std_mm(model, c.q_rad)
+        held = held_out if held_out is not None else HeldOut(None, "no held-out figures given")
+        err, rot = predicted_errors_mm(held, std, c.pos_err_mm), rotation_errors_deg(held, c.rot_err_rad)
         for j, i in enumerate(idx):
             accepted.append(CorrectedTarget(
                 target_id=targets.ids[i], q_nominal_deg=tuple(np.degrees(q_nom[i])),
                 q_corrected_deg=tuple(np.degrees(c.q_rad[j])), p_command_base_mm=tuple(cmd[j, :3, 3]),
                 quat_command_wxyz=tuple(matrix_to_quat(cmd[j:j + 1, :3, :3])[0]), confdata=tuple(int(v) for v in conf[j]),
-                predicted_residual_mm=float(c.pos_err_mm[j]),
-                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j])), predicted_std_mm=float(std[j])))
+                solver_tolerance_mm=float(c.pos_err_mm[j]), predicted_error_mm=float(err[j]),
+                predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j])))
     lim = _limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,

@@ -6,13 +6,15 @@ import json
 import math
 import os
 import re
+import textwrap
 from pathlib import Path
 from typing import Iterable, Sequence
 
 from drivers.rapid.literals import fixed_literal
 
 from campaign.io.durable import atomic_write
-from .bounds import (GENERATOR, RESIDUAL_DECIMALS, UR_JSON_FORMAT, UR_MAX_A_RAD_S2, UR_MAX_V_RAD_S, UR_RAD_DECIMALS,
+from .accuracy import PREDICTED_ERROR_METHOD
+from .bounds import (GENERATOR, ERROR_DECIMALS, UR_JSON_FORMAT, UR_MAX_A_RAD_S2, UR_MAX_V_RAD_S, UR_RAD_DECIMALS,
                      URSCRIPT_FORMAT, CorrectedTarget, _as_float, _require_writable)
 
 def render_ur_json(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
@@ -21,26 +23,34 @@ def render_ur_json(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[fl
     items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=6)
     doc = {
         "format": UR_JSON_FORMAT,
-        "units": {"q": "rad", "predicted_residual": "mm"},
+        "units": {"q": "rad", "predicted_error": "mm", "predicted_std": "mm", "solver_tolerance": "mm"},
+        "predicted_error_method": PREDICTED_ERROR_METHOD,
         "targets": [{
             "id": t.target_id,
             "q_rad": [math.radians(float(q)) for q in t.q_corrected_deg],
             "q_deg": [float(q) for q in t.q_corrected_deg],
             "q_nominal_rad": [math.radians(float(q)) for q in t.q_nominal_deg],
-            "predicted_residual_mm": float(t.predicted_residual_mm),
-            "predicted_std_mm": None if math.isnan(float(t.predicted_std_mm)) else float(t.predicted_std_mm),
+            "predicted_error_mm": _number_or_null(t.predicted_error_mm),
+            "predicted_std_mm": _number_or_null(t.predicted_std_mm),
+            "solver_tolerance_mm": float(t.solver_tolerance_mm),
         } for t in items],
     }
     return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+
+
+def _number_or_null(x: float) -> float | None:
+    """A finite float, or None (JSON null) for nan: unknown or not applicable."""
+    return None if math.isnan(float(x)) else float(x)
 
 
 def write_ur_json(path: str | os.PathLike, targets: Iterable[CorrectedTarget], *,
                   q_min_deg: Sequence[float], q_max_deg: Sequence[float]) -> Path:
     """Write the accepted targets (6 joints) as UR JSON atomically; return the path.
 
-    ``{"format": "ur-joint-targets/1", "units": {...}, "targets": [{"id",
-    "q_rad", "q_deg", "q_nominal_rad", "predicted_residual_mm"}]}``; angles in
-    rad (``q_deg`` in deg), full float precision.  ValueError, writing
+    ``{"format": "ur-joint-targets/2", "units": {...}, "predicted_error_method",
+    "targets": [{"id", "q_rad", "q_deg", "q_nominal_rad", "predicted_error_mm",
+    "predicted_std_mm", "solver_tolerance_mm"}]}``; angles in rad (``q_deg`` in
+    deg), full float precision, null for an unknown predicted error or std.  ValueError, writing
     nothing, for an invalid target or one outside ``[q_min_deg, q_max_deg]``.
     """
     return atomic_write(path, render_ur_json(targets, q_min_deg=q_min_deg, q_max_deg=q_max_deg).encode("ascii"))
@@ -70,12 +80,15 @@ def render_urscript(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[f
     if not _UR_NAME_RE.match(name) or name in _UR_KEYWORDS:
         raise ValueError(f"name: {name!r} is not a URScript function name")
     lines = [f"# {name}: {len(items)} corrected targets, written by {GENERATOR} ({URSCRIPT_FORMAT}).",
-             "# Joints in rad; each target: '# <target id> predicted_residual_mm=<mm>' then movej.",
+             "# Joints in rad; each target: '# <target id> predicted_error_mm=<mm or unknown>' then movej.",
+             *("# " + line for line in textwrap.wrap("predicted_error_mm: " + PREDICTED_ERROR_METHOD + ".", 96)),
              "# Only targets that passed the safety bounds are here.",
              f"def {name}():"]
     for t in items:
         q = ",".join(fixed_literal(math.radians(float(x)), UR_RAD_DECIMALS) for x in t.q_corrected_deg)
-        lines.append(f"  # {t.target_id} predicted_residual_mm={fixed_literal(t.predicted_residual_mm, RESIDUAL_DECIMALS)}")
+        e = float(t.predicted_error_mm)
+        error = fixed_literal(e, ERROR_DECIMALS) if math.isfinite(e) else "unknown"
+        lines.append(f"  # {t.target_id} predicted_error_mm={error}")
         lines.append(f"  movej([{q}], a={fixed_literal(a, 6)}, v={fixed_literal(v, 6)})")
     lines += ["end", ""]
     text = "\n".join(lines)
@@ -91,7 +104,7 @@ def write_urscript(path: str | os.PathLike, targets: Iterable[CorrectedTarget], 
     """Write a URScript program ``def name(): movej(...) ... end`` atomically; return the path.
 
     One ``movej([q1..q6] rad, a=a_rad_s2 rad/s^2, v=v_rad_s rad/s)`` per
-    target, preceded by ``# <id> predicted_residual_mm=<mm>``.  ValueError,
+    target, preceded by ``# <id> predicted_error_mm=<mm or unknown>``.  ValueError,
     writing nothing, for an invalid target, one outside the joint limits
     (deg), or a/v outside (0, 40] rad/s^2 / (0, pi] rad/s.
     """

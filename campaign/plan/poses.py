@@ -51,16 +51,19 @@ def grid_points(center, size, step) -> tuple[np.ndarray, np.ndarray]:
     return lo + idx * step, idx
 
 
-def _skip_reasons(kin: Kinematics, p: np.ndarray, R, q_ref) -> list[str]:
-    """Why each of the targets p (M, 3) cannot be planned (one batched IK from q_ref)."""
+def unreachable_reasons(kin: Kinematics, p: np.ndarray, R, q_ref, *, orientation: str = "the fixed SMR orientation",
+                        point_mm=None) -> list[str]:
+    """Why each of the targets p (M, 3) mm is not reachable on q_ref's branch (one batched IK from q_ref, flange
+    orientation R, flange point ``point_mm`` (default the SMR); ``orientation`` names R in the reason): the plan's
+    skipped points and ``correct``'s rejected targets."""
     if len(p) == 0:
         return []
-    res = solve_ik(kin, p, R, q_ref)
+    res = solve_ik(kin, p, R, q_ref, point_mm=point_mm)
     reasons = []
     for q, conv in zip(res.q_rad, res.converged):
         bad = np.flatnonzero((q < kin.q_min_rad) | (q > kin.q_max_rad))
         if not conv:
-            reasons.append("unreachable with the fixed SMR orientation")
+            reasons.append(f"unreachable with {orientation}")
         elif len(bad):
             j = bad[0]
             reasons.append(f"joint {j + 1} would be at {np.degrees(q[j]):.1f} deg, outside "
@@ -96,7 +99,8 @@ def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets
     q_ref = np.radians(cfg.plan.q_ref_deg)
     q_all, ok = solve_on_branch(kin, p, R, q_ref)
     bad = np.flatnonzero(~ok)
-    skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in zip(bad, _skip_reasons(kin, p[bad], R, q_ref))]
+    reasons = unreachable_reasons(kin, p[bad], R, q_ref)
+    skipped = [Skipped(ids[i], sets[i], tuple(p[i]), w) for i, w in zip(bad, reasons)]
     wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p), 90.0)
     near = ok & (wrist < WRIST_MARGIN_DEG)
     skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the wrist singularity "

@@ -1,5 +1,6 @@
 """Three SMRs end to end: the SMR triangle screens calib and test rows (model-free), a non-rigid SMR group is bad
 input, and ``verify`` reports the tool orientation (seed 003: SMR 1 measured, SMRs 2-3 predicted, adjusted)."""
+import csv
 import json
 from dataclasses import replace
 
@@ -83,6 +84,21 @@ def test_verify_with_three_smrs_reports_the_tool_orientation(tmp_path, capsys):
     assert "tool orientation error" in out
     # the position-only correction leaves the orientation error (the simulated robot's geometry) as it was
     assert abs(a["model-corrected"].rms / a["uncorrected (planned joints)"].rms - 1) < 0.05
+    # ... and `correct` predicts it at the same points: the model's orientation at the corrected joints with the
+    # three-SMR calibration's held-out orientation RMS
+    with open(run / "plan.csv", newline="") as fh:
+        tests = [r for r in csv.DictReader(fh) if r["set"] == "test"]
+    (tmp_path / "t.csv").write_text("target_id,x,y,z\n" + "".join(
+        f"{r['point_id']},{r['x_base_mm']},{r['y_base_mm']},{r['z_base_mm']}\n" for r in tests))
+    assert main(["correct", "--config", str(cfg), "--model", str(run / "model.json"), "--targets",
+                 str(tmp_path / "t.csv"), "--out", str(tmp_path / "c"), "--format", "csv"]) == 0
+    assert "held-out RMS" in capsys.readouterr().out
+    with open(tmp_path / "c" / "targets.csv", newline="") as fh:
+        rot = np.array([float(r["predicted_rot_err_deg"]) for r in csv.DictReader(fh)]) * 3600
+    rms = np.sqrt(np.mean(rot**2))
+    print(f"predicted orientation error {rms:.1f} arcsec RMS on {len(rot)} targets; measured after correction "
+          f"{a['model-corrected'].rms:.1f}")
+    assert len(rot) == len(tests) and abs(rms / a["model-corrected"].rms - 1) < 0.05
     # the estimate from SMR 1 + two predicted SMRs agrees with the orientation measured from all three (itself
     # ~30 arcsec noisy: 0.02 mm over a 150-210 mm triangle), far below the robot's own orientation error
     from campaign.calibrate.multi_smr import measured_flange_poses, pose_estimator

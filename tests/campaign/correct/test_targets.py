@@ -1,11 +1,21 @@
-"""Target correction end to end on the mock cell: correct CLI, write-back bounds, closed-loop verify."""
+"""Target correction end to end on the mock cell: correct CLI, write-back bounds, the predicted error of every
+target, closed-loop verify."""
+import csv
 import json
+import math
+import re
+import shutil
 
+import numpy as np
 import pytest
 
 from campaign.cli import main
+from campaign.config.load import load_cell
+from campaign.correct.accuracy import held_out_of
+from campaign.calibrate.outputs import load_model
+from campaign.plan.poses import solve_targets, tool_rotation
 from drivers.rapid import check_rapid_syntax, parse_rapid_module
-from tests.campaign.helpers import ROOT, read_verify, small_config
+from tests.campaign.helpers import ROOT, read_report, read_verify, small_config
 
 pytestmark = pytest.mark.system
 
@@ -55,6 +65,9 @@ def test_closed_loop_verify_reaches_the_noise_floor(run_dir):
     floor, stages = report.noise_floor_mm, report.stages
     ratios = {k: v.rms_mm / floor for k, v in stages.items()}
     print("verify RMS / floor: " + ", ".join(f"{k} {r:.2f}" for k, r in ratios.items()))
+    predicted = held_out_of(load_model(run_dir / "model.json"), run_dir / "model.json").rms_mm   # what correct states
+    print(f"model-corrected RMS {stages['model-corrected'].rms_mm:.4f} mm vs predicted {predicted:.4f} mm")
+    assert 0.8 < stages["model-corrected"].rms_mm / predicted < 1.25
     assert ratios["uncorrected (planned joints)"] > 10
     assert ratios["model-corrected"] <= 1.2
     assert ratios["after correction (all passes pooled)"] <= 1.2
@@ -80,3 +93,106 @@ def test_gpr_model_reports_the_predictive_std_of_every_corrected_target(tmp_path
     assert all(0 < s < 1 for s in stds)
     ur = json.loads((out / "targets_ur.json").read_text())
     assert all(t["predicted_std_mm"] > 0 for t in ur["targets"])
+    rms = read_report(run).final.test.rms_mm                  # the layer's std at each target enters the prediction
+    for t in ur["targets"]:
+        assert t["predicted_error_mm"] == pytest.approx(
+            math.sqrt(rms**2 + t["predicted_std_mm"]**2 + t["solver_tolerance_mm"]**2), rel=1e-12)
+
+
+def _correct(run_dir, tmp_path, rows, *formats, model=None):
+    """``campaign correct`` of the targets ``rows`` (``id,x,y,z``) with the run's model (or ``model``); the exit code
+    and the output directory."""
+    targets = tmp_path / "targets.csv"
+    targets.write_text("target_id,x,y,z\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    code = main(["correct", "--config", CONFIG, "--model", str(model or run_dir / "model.json"), "--targets",
+                 str(targets), "--out", str(out)] + [a for f in formats for a in ("--format", f)])
+    return code, out
+
+
+def _csv_rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_correct_states_the_predicted_error_from_the_held_out_figures_and_the_solver_tolerance_apart(
+        run_dir, tmp_path, capsys):
+    code, out = _correct(run_dir, tmp_path, ["A,900,0,1000", "B,1100,300,800"], "rapid", "ur", "csv")
+    assert code == 0
+    said = " ".join(capsys.readouterr().out.split())
+    final = read_report(run_dir).final.test
+    rows = _csv_rows(out / "targets.csv")
+    for r in rows:
+        tol = float(r["solver_tolerance_mm"])
+        assert tol < 1e-4                                        # the config's threshold_mm: converged
+        assert float(r["predicted_error_mm"]) == pytest.approx(math.hypot(final.rms_mm, tol), rel=1e-12)
+        assert math.isnan(float(r["predicted_rot_err_deg"]))      # one SMR: the orientation was never measured
+    print(said)
+    assert (f"predicted position error (predicted_error_mm) {final.rms_mm:.3f} mm: held-out RMS {final.rms_mm:.3f} mm "
+            f"of the final model on {final.n} test points ({run_dir / 'report.json'};") in said
+    assert "solver tolerance (solver_tolerance_mm)" in said and "predicted_rot_err_deg is nan" in said
+    assert "residual" not in said
+    errors = [float(r["predicted_error_mm"]) for r in rows]
+    assert parse_rapid_module((out / "CalTargets.mod").read_text())["err_cal_mm"] == [round(e, 4) for e in errors]
+    assert [t["predicted_error_mm"] for t in json.loads((out / "targets_ur.json").read_text())["targets"]] == errors
+    assert f"# A predicted_error_mm={errors[0]:.4f}".rstrip("0") in (out / "targets_ur.script").read_text()
+
+
+def test_a_model_away_from_its_report_has_an_unknown_predicted_error(run_dir, tmp_path, capsys):
+    lonely = tmp_path / "model"
+    lonely.mkdir()
+    shutil.copy(run_dir / "model.json", lonely)
+    code, out = _correct(run_dir, tmp_path, ["A,900,0,1000", "B,1100,300,800"], "rapid", "ur", "csv",
+                         model=lonely / "model.json")
+    assert code == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert "predicted position error: unknown (no report.json beside model.json" in said
+    assert all(math.isnan(float(r["predicted_error_mm"])) for r in _csv_rows(out / "targets.csv"))
+    rapid = (out / "CalTargets.mod").read_text()
+    assert "err_cal_mm" not in parse_rapid_module(rapid) and "predicted position error is unknown" in rapid
+    assert all(t["predicted_error_mm"] is None for t in json.loads((out / "targets_ur.json").read_text())["targets"])
+    assert (out / "targets_ur.script").read_text().count("predicted_error_mm=unknown") == 2
+
+
+def test_held_out_figures_come_only_from_the_models_own_calibration_report(run_dir, tmp_path):
+    model = load_model(run_dir / "model.json")
+    report = read_report(run_dir)
+    held = held_out_of(model, run_dir / "model.json")
+    assert (held.rms_mm, held.n, held.noise_floor_mm) == (report.final.test.rms_mm, report.final.test.n,
+                                                          report.noise_floor_mm)
+    assert held.rot_rms_deg is None
+    doc = json.loads((run_dir / "report.json").read_text())
+
+    def beside(text):
+        d = tmp_path / f"d{len(list(tmp_path.iterdir()))}"
+        d.mkdir()
+        (d / "report.json").write_text(text)
+        return held_out_of(model, d / "model.json")
+
+    no_test = json.loads(json.dumps(doc))
+    no_test["stages"]["compensated"]["test"] = {"max_mm": None, "mean_mm": None, "rms_mm": None, "n": 0}
+    for text, why in ((json.dumps({**doc, "source": "another/log.jsonl"}), "another calibration"),
+                      (json.dumps({**doc, "format": "campaign-iso9283/1"}), "not a calibration report"),
+                      ("{", "not readable"), (json.dumps(no_test), "no test points")):
+        unknown = beside(text)
+        assert unknown.rms_mm is None and why in unknown.source, (why, unknown.source)
+    three = {"n_smr": 3, "p_flange_smr_mm": [[0, 0, 40]] * 3, "sigma0": 1.0, "converged": True, "test": {},
+             "orientation_error_arcsec": {"mean": 30.0, "rms": 36.0, "max": 50.0, "n": 12}}
+    held3 = beside(json.dumps({**doc, "multi_smr": three}))
+    assert held3.rot_rms_deg == pytest.approx(0.01) and held3.rot_n == 12 and held3.rms_mm == held.rms_mm
+
+
+def test_a_rejected_target_names_the_reason_as_the_plan_does(run_dir, tmp_path, capsys):
+    code, out = _correct(run_dir, tmp_path, ["A,900,0,1000", "LOW,400,0,200", "FAR,3000,0,1000"], "csv")
+    assert code == 0
+    said = capsys.readouterr().out
+    rejected = {r["target_id"]: r["reason"] for r in _csv_rows(out / "rejected.csv")}
+    cell = load_cell(CONFIG)
+    _, _, skipped = solve_targets(cell.config, cell.kinematics, np.array([[400.0, 0, 200], [3000.0, 0, 1000]]),
+                                  ["LOW", "FAR"], ["test"] * 2, tool_rotation(cell.config.plan.tool_direction), None)
+    planned = {s.point_id: s.reason for s in skipped}
+    print(rejected, planned)
+    assert re.fullmatch(r"joint 2 would be at -1\d\d\.\d deg, outside \[-95, 155\]", rejected["LOW"])
+    assert rejected["LOW"] == planned["LOW"] and f"LOW: {rejected['LOW']}" in said
+    assert (rejected["FAR"], planned["FAR"]) == ("unreachable with the plan's fixed SMR orientation",
+                                                 "unreachable with the fixed SMR orientation")

@@ -41,7 +41,9 @@ def make_targets(n: int = 12, seed: int = 1, ids=None) -> list[CorrectedTarget]:
         tid = ids[k] if ids else f"P{k + 1:03d}"
         out.append(CorrectedTarget(tid, tuple(map(float, q_nom)), tuple(map(float, q_cor)),
                                    tuple(map(float, rng.uniform(-2500, 2500, 3))), tuple(map(float, quat)),
-                                   conf, float(rng.uniform(0, 0.3)), rot, float(rng.uniform(0.001, 0.05))))
+                                   conf, solver_tolerance_mm=float(rng.uniform(0, 1e-4)),
+                                   predicted_error_mm=float(rng.uniform(0.02, 0.3)), predicted_rot_err_deg=rot,
+                                   predicted_std_mm=float(rng.uniform(0.001, 0.05))))
     return out
 
 
@@ -111,7 +113,9 @@ def test_position_bound_rejection():
     ("q_nominal_deg", (0.0, 0.0, math.inf, 0.0, 0.0, 0.0), ["non-finite", "q_nominal_deg[2]"]),
     ("p_command_base_mm", (1.0, math.nan, 2.0), ["non-finite", "p_command_base_mm[1]"]),
     ("quat_command_wxyz", (math.nan, 0.0, 0.0, 1.0), ["non-finite", "quat_command_wxyz[0]"]),
-    ("predicted_residual_mm", math.inf, ["predicted_residual_mm"]),
+    ("solver_tolerance_mm", math.nan, ["solver_tolerance_mm"]),
+    ("predicted_error_mm", math.inf, ["predicted_error_mm"]),
+    ("predicted_error_mm", -0.1, ["predicted_error_mm"]),
     ("predicted_rot_err_deg", math.inf, ["predicted_rot_err_deg"]),
     ("quat_command_wxyz", (0.5, 0.0, 0.0, 0.0), ["norm 0.5"]),
     ("confdata", (0, 0, 0.5, 1), ["confdata"]),
@@ -128,8 +132,8 @@ def test_malformed_or_non_finite_targets_are_rejected(field, value, words):
     assert "\n" not in rejected[0].reason
 
 
-def test_nan_rotation_error_is_allowed():
-    t = dataclasses.replace(make_targets(1)[0], predicted_rot_err_deg=math.nan)
+def test_nan_predicted_errors_are_allowed():
+    t = dataclasses.replace(make_targets(1)[0], predicted_rot_err_deg=math.nan, predicted_error_mm=math.nan)
     assert check([t]) == ([t], [])
 
 
@@ -197,7 +201,7 @@ def test_writers_refuse_targets_outside_their_limits(tmp_path, writer):
 
 
 @pytest.mark.parametrize("bad", [
-    lambda t: dataclasses.replace(t, predicted_residual_mm=math.nan),
+    lambda t: dataclasses.replace(t, solver_tolerance_mm=math.nan),
     lambda t: dataclasses.replace(t, quat_command_wxyz=(0.0, 0.0, 0.0, 0.0)),
     lambda t: "not a target",
 ])
@@ -233,7 +237,7 @@ def test_written_rapid_module_passes_the_syntax_check(tmp_path, persistent):
     assert text.startswith("MODULE CalTargets\n") and text.endswith("ENDMODULE\n")
     storage = "PERS" if persistent else "CONST"
     for decl in ("jointtarget jt_cal{25}:=[", "robtarget rt_cal{25}:=[", "string id_cal{25}:=[",
-                 "num res_cal_mm{25}:=["):
+                 "num err_cal_mm{25}:=["):
         assert f"    {storage} {decl}" in text
     assert "CONST num n_cal:=25;" in text
     assert max(len(line) for line in text.split("\n")) <= literals.RAPID_MAX_LINE
@@ -259,10 +263,10 @@ def test_rapid_round_trip_to_written_precision(tmp_path):
     targets = make_targets(len(TRICKY_IDS) + 20, seed=11, ids=list(TRICKY_IDS) + [f"R{k}" for k in range(20)])
     path = rapid_module.write_rapid_module(tmp_path / "m.mod", targets, module_name="Cal_2024_Cell3", **LIMITS)
     data = rapid.parse_rapid_module(path.read_text(encoding="ascii"))
-    assert list(data) == ["n_cal", "id_cal", "jt_cal", "rt_cal", "res_cal_mm"]
+    assert list(data) == ["n_cal", "id_cal", "jt_cal", "rt_cal", "err_cal_mm"]
     assert data["n_cal"] == len(targets)
     assert data["id_cal"] == [t.target_id for t in targets]
-    for t, jt, rt, res in zip(targets, data["jt_cal"], data["rt_cal"], data["res_cal_mm"]):
+    for t, jt, rt, err in zip(targets, data["jt_cal"], data["rt_cal"], data["err_cal_mm"]):
         assert np.allclose(jt[0], t.q_corrected_deg, rtol=0, atol=0.5e-6 + 1e-12)
         assert jt[1] == [9e9] * 6
         assert np.allclose(rt[0], t.p_command_base_mm, rtol=0, atol=0.5e-4 + 1e-9)
@@ -271,7 +275,20 @@ def test_rapid_round_trip_to_written_precision(tmp_path):
         assert abs(np.linalg.norm(rt[1]) - 1.0) <= 1e-8
         assert rt[2] == list(t.confdata) and all(isinstance(c, int) for c in rt[2])
         assert rt[3] == [9e9] * 6
-        assert abs(res - t.predicted_residual_mm) <= 0.5e-4 + 1e-12
+        assert abs(err - t.predicted_error_mm) <= 0.5e-4 + 1e-12
+
+
+def test_an_unknown_predicted_error_is_said_so_in_every_format(tmp_path):
+    targets = [dataclasses.replace(t, predicted_error_mm=math.nan) for t in make_targets(3)]
+    paths = write_all(tmp_path, targets)
+    text = paths["rapid"].read_text()
+    assert "err_cal_mm" not in rapid.parse_rapid_module(text) and "predicted position error is unknown" in text
+    assert [d["predicted_error_mm"] for d in json.loads(paths["ur_json"].read_text())["targets"]] == [None] * 3
+    assert paths["urscript"].read_text().count("predicted_error_mm=unknown") == 3
+    assert all(math.isnan(t.predicted_error_mm) for t in target_csv.read_corrected_targets_csv(paths["csv"]))
+    mixed = make_targets(3)                  # one unknown: no array rather than an invented number for that target
+    mixed[1] = targets[1]
+    assert "err_cal_mm" not in rapid.parse_rapid_module(rapid_module.render_rapid_module(mixed, **LIMITS))
 
 
 def test_rapid_quaternion_is_renormalised():
@@ -456,15 +473,16 @@ def test_ur_json_round_trip(tmp_path):
     targets = make_targets(8, seed=5, ids=list(TRICKY_IDS) + ["u1", "u2", "u3"])
     path = ur_program.write_ur_json(tmp_path / "t.json", targets, **LIMITS)
     doc = json.loads(path.read_text(encoding="ascii"))
-    assert doc["format"] == "ur-joint-targets/1"
-    assert doc["units"] == {"q": "rad", "predicted_residual": "mm"}
+    assert doc["format"] == "ur-joint-targets/2"
+    assert doc["units"] == {"q": "rad", "predicted_error": "mm", "predicted_std": "mm", "solver_tolerance": "mm"}
     assert [d["id"] for d in doc["targets"]] == [t.target_id for t in targets]
     for t, d in zip(targets, doc["targets"]):
-        assert set(d) == {"id", "q_rad", "q_deg", "q_nominal_rad", "predicted_residual_mm", "predicted_std_mm"}
+        assert set(d) == {"id", "q_rad", "q_deg", "q_nominal_rad", "predicted_error_mm", "predicted_std_mm",
+                          "solver_tolerance_mm"}
         assert d["q_deg"] == list(t.q_corrected_deg)
         assert np.allclose(np.degrees(d["q_rad"]), t.q_corrected_deg, rtol=0, atol=1e-12)
         assert np.allclose(np.degrees(d["q_nominal_rad"]), t.q_nominal_deg, rtol=0, atol=1e-12)
-        assert d["predicted_residual_mm"] == t.predicted_residual_mm
+        assert d["predicted_error_mm"] == t.predicted_error_mm and d["solver_tolerance_mm"] == t.solver_tolerance_mm
 
 
 def test_urscript_is_sane(tmp_path):
@@ -478,7 +496,7 @@ def test_urscript_is_sane(tmp_path):
     assert len(moves) == len(targets)
     for t, move in zip(targets, moves):
         comment = lines[lines.index(move) - 1]
-        assert comment.startswith(f"# {t.target_id} predicted_residual_mm=")
+        assert comment == f"# {t.target_id} predicted_error_mm={literals.fixed_literal(t.predicted_error_mm, 4)}"
         m = re.fullmatch(r"movej\(\[([^\]]*)\], a=0\.8, v=0\.25\)", move)
         q = [float(v) for v in m.group(1).split(",")]
         assert np.allclose(np.degrees(q), t.q_corrected_deg, rtol=0, atol=np.degrees(0.5e-9) + 1e-9)
@@ -520,8 +538,8 @@ def test_targets_csv_round_trip(tmp_path):
     path = target_csv.write_targets_csv(tmp_path / "targets.csv", targets, **LIMITS)
     header = path.read_text(encoding="utf-8").split("\n")[0]
     assert header == ("target_id,q1,q2,q3,q4,q5,q6,q1_nominal,q2_nominal,q3_nominal,q4_nominal,q5_nominal,"
-                      "q6_nominal,x_cmd,y_cmd,z_cmd,qw,qx,qy,qz,cf1,cf4,cf6,cfx,predicted_residual_mm,"
-                      "predicted_rot_err_deg,predicted_std_mm")
+                      "q6_nominal,x_cmd,y_cmd,z_cmd,qw,qx,qy,qz,cf1,cf4,cf6,cfx,predicted_error_mm,"
+                      "predicted_rot_err_deg,solver_tolerance_mm,predicted_std_mm")
     back = target_csv.read_corrected_targets_csv(path)
     assert len(back) == len(targets)
     for a, b in zip(targets, back):
