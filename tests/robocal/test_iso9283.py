@@ -148,3 +148,6 @@ def test_a_tracker_noisier_than_the_scatter_leaves_no_robot_rp():
     cov = np.diag([0.05**2] * 3)
     s = split_rp(np.random.default_rng(0).normal(0, 0.001, (10, 3)), cov)
     assert s.rp_robot_mm == 0.0 and s.rp_robot_low_mm == 0.0 and s.rp_robot_high_mm == 0.0
+    # one wild cycle among four: RP - 2 u is below zero, so the interval starts at 0 (not at |RP - 2 u|)
+    s = split_rp(np.array([[0, 0, 0], [0.001, 0, 0], [0, 0.001, 0], [1.0, 0, 0]]), np.zeros((3, 3)))
+    assert s.rp_mm - 2 * s.u_rp_mm < 0 and s.rp_robot_low_mm == 0.0 < s.rp_robot_mm == pytest.approx(s.rp_mm)
