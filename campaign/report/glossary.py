@@ -62,7 +62,8 @@ GLOSSARY = (
     ("RP tracker, RP robot", "The tracker's contribution to the measured RP: the RP of an isotropic scatter with "
      "the mean squared spread of the tracker's noise at the pose (from the config's tracker.uncertainty). The "
      "robot's RP is the measured RP with it removed "
-     "in quadrature, \u221a(RP\u00b2 \u2212 RP_tracker\u00b2), with a 95 % interval from the measured RP \u2213 2 u (u: its "
+     "in quadrature, \u221a(RP\u00b2 \u2212 RP_tracker\u00b2), with a 95 % interval from the measured RP "
+     "\u2213 2 u (u: its "
      "jackknife standard uncertainty over the cycles). The ISO verdict compares the robot's RP with the "
      "datasheet's (robot.repeatability_mm): PASS when every pose's interval is at or below it, FAIL when one lies "
      "wholly above it, UNDECIDED otherwise."),

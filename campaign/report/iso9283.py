@@ -48,9 +48,9 @@ FRAME_FIT = ("least-squares rigid fit of the five barycentres to the commanded p
 TRACKER_SOURCE = "the tracker's specifications (tracker.uncertainty) at each pose's distance"
 UNDECIDED, NO_SPEC = "undecided", "no datasheet repeatability"
 DECISION_RULE = ("the robot's RP of every pose (the tracker's contribution removed in quadrature) against the "
-                 f"datasheet RP, with its 95 % interval (the measured RP plus or minus {COVERAGE_K:g} u, u its jackknife standard "
-                 "uncertainty over the cycles): PASS when every interval lies at or below the datasheet, FAIL when "
-                 "one lies wholly above it, UNDECIDED otherwise (the test cannot tell)")
+                 f"datasheet RP, with its 95 % interval (the measured RP plus or minus {COVERAGE_K:g} u, u its "
+                 "jackknife standard uncertainty over the cycles): PASS when every interval lies at or below the "
+                 "datasheet, FAIL when one lies wholly above it, UNDECIDED otherwise (the test cannot tell)")
 
 
 @dataclass(frozen=True)

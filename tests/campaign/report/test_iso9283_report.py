@@ -102,7 +102,8 @@ def test_terminal_summary_units_and_the_verdict_at_80_columns(tmp_path, rp_robot
     for col in ("AP (mm)", "APx (mm)", "APy (mm)", "APz (mm)", "l-bar", "S_l", "RP", "tracker", "robot, 95 %"):
         assert col in text
     flat = " ".join(text.split())
-    assert f"verdict: {verdict}: the robot's RP" in flat and "the datasheet RP 0.0400 mm (robot.repeatability_mm)" in flat
+    assert f"verdict: {verdict}: the robot's RP" in flat
+    assert "the datasheet RP 0.0400 mm (robot.repeatability_mm)" in flat
     pc = rep["runs"][0]["poses"][rep["runs"][0]["worst_pose"]]
     assert (f"measured {pc['rp_mm']:.4f} mm; tracker's contribution {pc['rp_tracker_mm']:.4f} mm; robot, the tracker "
             f"removed in quadrature, {pc['rp_robot_mm']:.4f} mm") in flat

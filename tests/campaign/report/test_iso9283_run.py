@@ -140,7 +140,8 @@ def test_iso_report_in_headless_chromium(calibrated_iso, tmp_path):
     probe = """(() => { const q = s => document.querySelector(s), t = s => (q(s) || {}).innerText || '';
         return {sections: [...document.querySelectorAll('section')].map(s => s.id), banner: t('#simulated-banner'),
                 verdict: t('#summary-verdict'), summary: t('section#summary'), trace: t('section#traceability'),
-                signoff: document.querySelectorAll('#signoff tr').length, link: (q('#calibration-report-link') || {}).href,
+                signoff: document.querySelectorAll('#signoff tr').length,
+                link: (q('#calibration-report-link') || {}).href,
                 rp: [...document.querySelectorAll('.summary-rp')].map(e => ({text: e.innerText,
                      keys: [...e.querySelectorAll('[data-key]')].map(n => n.dataset.key)})),
                 terms: [...document.querySelectorAll('#glossary dt')].map(e => e.innerText),
