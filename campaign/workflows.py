@@ -24,7 +24,7 @@ from campaign.plan.iso9283 import IsoCube, iso_cube, iso_plan
 from campaign.plan.points import Plan
 from campaign.plan.poses import tool_rotation
 from campaign.report.html import report_targets, write_report
-from campaign.report.iso9283 import finish
+from campaign.report.iso9283 import RUN_PREFIX as ISO_RUN_PREFIX, calibration_dir, finish, is_iso_run_of
 from campaign.run.devices import open_devices
 from campaign.run.eta import RunEta, point_times_s
 from campaign.run.log_reader import completed_point_ids, read_log
@@ -58,10 +58,12 @@ class RunResult:
 
 
 def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | None = None,
-                 console: Console | None = None, plan: Plan | None = None, overwrite: bool = False) -> RunResult:
+                 console: Console | None = None, plan: Plan | None = None, overwrite: bool = False,
+                 iso_model: tuple[CalibratedModel, Path] | None = None) -> RunResult:
     """Measure the plan of the cell's config (or the rest of it when resuming), then calibrate and report.
     ``run_dir`` must be new or empty (any directory but a run's with ``overwrite``: see
-    :mod:`campaign.run.output_dirs`)."""
+    :mod:`campaign.run.output_dirs`). An ISO 9283 plan is reported instead of calibrated, in the frame of
+    ``iso_model`` (the calibrated model and its file) when given."""
     cfg = cell.config
     console = console or stdout_console()
     if resume is not None:
@@ -109,10 +111,9 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
                 outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
-    from campaign.report.iso9283 import finish
     from campaign.plan.iso9283 import is_iso_plan
     if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
-        iso = finish(cell, run_dir)
+        iso = finish(cell, run_dir, *(iso_model or ()))
         write_report(run_dir)
         return RunResult(run_dir, outcome, None, iso)
     source = load_source(run_dir)
@@ -210,14 +211,20 @@ def corrected_joints(cell: CellModel, model: CalibratedModel, cube: IsoCube) -> 
 
 
 def run_iso9283(cell: CellModel, model: CalibratedModel | None, run_dir=None, console=None,
-                overwrite: bool = False):
+                overwrite: bool = False, model_path: Path | None = None):
     """``campaign iso9283``: nominal cycles, then (with a model) corrected cycles, through ``run_campaign`` (same
-    safety, log and lifecycle); returns (RunResult, report or None)."""
+    safety, log and lifecycle); returns (RunResult, report or None). With a model written by ``run`` or
+    ``reprocess`` (``model_path`` in a directory with its calibration report), the run goes by default to
+    ``DIR/iso9283-TIMESTAMP`` and DIR's report.html is written again to list it (checked before anything moves)."""
     cube = iso_cube(cell)
     plan = iso_plan(cell, None if model is None else corrected_joints(cell, model, cube))
-    result = run_campaign(cell, run_dir, None, console, plan=plan, overwrite=overwrite)
-    if result.iso9283 is None:
-        return result, None
-    report = finish(cell, result.run_dir, model)            # again with the model's registration as the frame
-    write_report(result.run_dir)
-    return replace(result, iso9283=report), report
+    cal_dir = None if model_path is None else calibration_dir(model_path)
+    if cal_dir is not None and run_dir is None:
+        run_dir = unique_path(cal_dir / f"{ISO_RUN_PREFIX}{datetime.now(timezone.utc).strftime('%Y%m%d-%H%M%S')}")
+    if cal_dir is not None and is_iso_run_of(run_dir, cal_dir):
+        report_targets(cal_dir)                                 # its report.html is the calibration's to rewrite
+    result = run_campaign(cell, run_dir, None, console, plan=plan, overwrite=overwrite,
+                          iso_model=None if model is None else (model, model_path))
+    if result.iso9283 is not None and cal_dir is not None and is_iso_run_of(result.run_dir, cal_dir):
+        write_report(cal_dir)                                   # the calibration report lists its ISO reports
+    return result, result.iso9283

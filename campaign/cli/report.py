@@ -98,7 +98,8 @@ def _iso_arguments(parser: argparse.ArgumentParser) -> None:
                         help="calibrated model: its registration gives the base frame, and corrected cycles follow "
                              "the nominal ones (before/after certificate)")
     parser.add_argument("--out", type=Path, metavar="RUN_DIR",
-                        help="run directory, new or empty (default: output.dir/NAME-TIMESTAMP)")
+                        help="run directory, new or empty (default: MODEL_DIR/iso9283-TIMESTAMP when the model "
+                             "lies beside its calibration report, listed there; else output.dir/NAME-TIMESTAMP)")
     overwrite_argument(parser)
     width_argument(parser)
 
@@ -114,11 +115,19 @@ def cmd_iso9283(args: argparse.Namespace) -> int:
     cell = load_cell(args.config)
     model = load_model(args.model) if args.model else None
     out = _stdout()
-    result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite)
+    result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite, model_path=args.model)
     o = result.outcome
     if report is None:
         _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     render_iso(out, report)
     out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)
+    link = (report.get("model") or {}).get("calibration_report")
+    if link:
+        from campaign.report.iso9283 import calibration_dir, is_iso_run_of
+
+        cal = calibration_dir(args.model)
+        listed = cal is not None and is_iso_run_of(result.run_dir, cal)
+        out.print(f"calibration report of the model: {(result.run_dir / link).resolve()}"
+                  + (" (written again: it lists this report)" if listed else ""), markup=False)
     return EXIT_OK

@@ -72,7 +72,8 @@ class Iso9283Config:
     """ISO 9283 pose test (``plan.kind: iso9283``): the largest cube inside the grid box (or ``edge_mm``),
     P1-P5 on its diagonal plane, ``cycles`` cycles (default 30).
 
-    Defaults: ``cycles`` 30 (int >= 2), ``edge_mm`` 0 = the largest cube inside the grid box.
+    Defaults: ``cycles`` 30 (int >= 3: a pose's RP and its uncertainty), ``edge_mm`` 0 = the largest cube inside
+    the grid box.
     """
 
     cycles: int = 30

@@ -76,7 +76,7 @@ def _nests(r: _Reader) -> NestsConfig:
 
 
 def _iso9283(r: _Reader) -> Iso9283Config:
-    return Iso9283Config(cycles=r.integer("cycles", 30, lo=2), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
+    return Iso9283Config(cycles=r.integer("cycles", 30, lo=3), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
 
 
 def _grid(r: _Reader) -> GridConfig:

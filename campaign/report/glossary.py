@@ -49,5 +49,27 @@ GLOSSARY = (
      "cross-validation shows it predicts held-out points."),
     ("SIMULATED", "A mock:// robot or tracker took part: the measurements come from the simulated cell of the "
      "config's simulation section, and the cell's times (measuring time, ETA) are simulated time."),
+    ("ISO 9283 cube, P1..P5, cycle", "The ISO 9283 pose test: P1 is the centre of the largest cube in the plan's "
+     "box, P2..P5 lie on the diagonals of one of its diagonal planes at 0.1 L from the corners (L: the diagonal's "
+     "length); the robot visits P1, P5, P4, P3, P2 in each of n cycles, so each pose is approached from the same "
+     "neighbour. Nominal targets are the poses commanded through the nominal model, corrected ones through the "
+     "calibrated model."),
+    ("AP, APx, APy, APz", "Pose accuracy of a pose (mm): APx, APy, APz are the barycentre of the n attained "
+     "positions minus the commanded position, per base-frame axis; AP = \u221a(APx\u00b2 + APy\u00b2 + APz\u00b2)."),
+    ("RP, l\u0304, S_l", "Pose repeatability of a pose (mm): RP = l\u0304 + 3 S_l, where l_i is the distance of "
+     "attained position i from the barycentre, l\u0304 the mean of the l_i and S_l their standard deviation (n - 1 "
+     "in the denominator). The measured RP includes the tracker's own scatter."),
+    ("RP tracker, RP robot", "The tracker's contribution to the measured RP: the RP of an isotropic scatter with "
+     "the mean squared spread of the tracker's noise at the pose (from the config's tracker.uncertainty). The "
+     "robot's RP is the measured RP with it removed "
+     "in quadrature, \u221a(RP\u00b2 \u2212 RP_tracker\u00b2), with a 95 % interval from the measured RP "
+     "\u2213 2 u (u: its "
+     "jackknife standard uncertainty over the cycles). The ISO verdict compares the robot's RP with the "
+     "datasheet's (robot.repeatability_mm): PASS when every pose's interval is at or below it, FAIL when one lies "
+     "wholly above it, UNDECIDED otherwise."),
+    ("AD", "Distance accuracy between two poses (P2 and P4, mm): the mean attained distance over the cycles minus "
+     "the commanded distance (per axis too: ADx, ADy, ADz)."),
+    ("RD", "Distance repeatability between the same two poses (mm): RD = \u00b13 S_D, S_D being the standard deviation "
+     "of the attained distances over the cycles; stated as \u00b1RD."),
 )
 """(term, definition) pairs, in reading order."""

@@ -4,7 +4,9 @@ Sources, all optional but at least one, found in the run (or output) directory:
 
 * ``report.json`` -- the calibration report (``campaign-report/1``) or the ISO 9283 report (``campaign-iso9283/1``);
 * ``diagnosis.json`` -- written by ``campaign diagnose`` (``campaign-diagnosis/1``);
-* ``verify-*/verify.json`` -- closed-loop verification passes (``campaign-verify/1``).
+* ``verify-*/verify.json`` -- closed-loop verification passes (``campaign-verify/1``);
+* ``iso9283-*/report.json`` -- beside a calibration report: the ISO 9283 runs made with its model, listed and
+  linked (``campaign.workflows.run_iso9283`` puts them there).
 
 Nothing is computed here: every number printed comes from these documents through :func:`_num`, which also
 tags it with ``data-doc``/``data-key``/``data-value`` so a browser test can compare the page with the JSON.
@@ -28,14 +30,15 @@ from drivers.redact import redact
 
 from campaign.io.durable import atomic_write
 from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file
-from campaign.calibrate.calibration_report import STAGES, CalibrationReport
+from campaign.calibrate.calibration_report import IDENTIFICATION_KEYS, STAGES, CalibrationReport
 from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
 from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
 from campaign.io.quantities import FLOOR_FMT, condition_meaning, condition_scale
-from .summary_text import FORMATS, banner, held_out_line, model_line, origin, reason_lines, verdict_line
+from .summary_text import (FORMATS, banner, held_out_line, iso_ap_line, iso_rp_line, iso_targets_line,
+                           iso_verdict_line, model_line, origin, reason_lines, simulated_banner, verdict_line)
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
 
@@ -54,12 +57,14 @@ class ReportSources:
     files: dict = field(default_factory=dict)          # doc name -> relative path, for the page's source list
     documents: dict = field(default_factory=dict)      # doc name -> parsed JSON document
     points: PointTable | None = None                   # the calibration's per-point rows (inline or points.csv)
+    iso_runs: tuple[tuple[str, dict], ...] = ()        # (directory, ISO report) of the runs made with this model
 
     def docs(self) -> dict:
         """Every document by name (the parsed one, else the record's ``to_dict()``)."""
         out = {k: v for k, v in (("calibration", self.calibration), ("iso9283", self.iso9283),
                                  ("diagnosis", self.diagnosis)) if v is not None}
         out.update({f"verify{i}": v for i, v in enumerate(self.verify)})
+        out.update({f"isorun{i}": doc for i, (_, doc) in enumerate(self.iso_runs)})
         return {k: self.documents.get(k) or (v.to_dict() if hasattr(v, "to_dict") else v) for k, v in out.items()}
 
 
@@ -103,9 +108,23 @@ def collect(directory: str | os.PathLike) -> ReportSources:
         files[f"verify{i}"] = str(p.relative_to(d))
     if not found and not verify:
         raise DataError(str(d), "no report.json, diagnosis.json or verify-*/verify.json to report on")
+    iso_runs = _iso_runs(d, files, docs) if "calibration" in found else ()
     first = next((docs.get(k, found[k]) for k in ("calibration", "iso9283", "diagnosis") if k in found), {})
     return ReportSources(f"{first.get('config', d.name)}: {d.name}", verify=tuple(verify), files=files,
-                         documents=docs, points=points, **found)
+                         documents=docs, points=points, iso_runs=iso_runs, **found)
+
+
+def _iso_runs(d: Path, files: dict, docs: dict) -> tuple[tuple[str, dict], ...]:
+    """The ISO 9283 reports in ``D/iso9283-*/`` (runs made with D's model), added to ``files``/``docs``."""
+    from .iso9283 import RUN_PREFIX
+
+    out = []
+    for p in sorted(d.glob(f"{RUN_PREFIX}*/report.json")):
+        doc = _read(p)
+        if doc.get("format") == ISO:
+            files[f"isorun{len(out)}"], docs[f"isorun{len(out)}"] = str(p.relative_to(d)), doc
+            out.append((p.parent.name, doc))
+    return tuple(out)
 
 
 def _lookup(doc: dict, key: str):
@@ -179,15 +198,30 @@ def summary_markup(report: CalibrationReport | None, num) -> dict | None:
             "held_out": held_out_line(s, n, t), "verdict": verdict_line(s, n, t), "result": s.verdict.result}
 
 
+def iso_summary_markup(doc: dict | None, num) -> dict | None:
+    """The ISO 9283 report's summary lines (``campaign.report.summary_text``) as HTML, every number tagged with its
+    key; None for a report of an earlier version (no ``summary``)."""
+    if doc is None or "summary" not in doc:
+        return None
+    def n(key: str, kind: str) -> Markup:
+        return num("iso9283", key, HTML_FORMATS[kind])
+    t = Markup.escape
+    return {"banner": simulated_banner(doc["summary"]["simulated_devices"]), "targets": iso_targets_line(doc, t),
+            "ap": iso_ap_line(doc, n, t), "rp": [iso_rp_line(doc, i, n, t) for i in range(len(doc["runs"]))],
+            "verdict": iso_verdict_line(doc, n, t), "result": doc["summary"]["verdict"]["result"]}
+
+
 def render_html(src: ReportSources, figures: dict[str, list], figures_name: str = "report_figures") -> str:
     env = Environment(loader=PackageLoader("campaign.report", "templates"), autoescape=select_autoescape(["html", "j2"]),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
     num = _num_factory(src.docs())
-    ident = dict(src.calibration.identification) if src.calibration else {}
+    ident = dict(src.calibration.identification) if src.calibration else {
+        k: src.iso9283[k] for k in IDENTIFICATION_KEYS if k in (src.iso9283 or {})}
     return env.get_template("report.html.j2").render(
         src=src, figures=figures, b64=b64, num=num, stages=STAGES, floor_fmt=FLOOR_FMT, ident=ident,
         summary=summary_markup(src.calibration, num), figures_name=figures_name, glossary=GLOSSARY,
+        iso_summary=iso_summary_markup(src.iso9283, num),
         uncorrected_vs_nominal=UNCORRECTED_VS_NOMINAL,
         condition=condition_scale, condition_meaning=condition_meaning, n_figures=sum(len(v) for v in figures.values()))
 

@@ -296,18 +296,28 @@ def iso_figures(iso: dict) -> list[Figure]:
     names = [pc["pose"] for pc in runs[0]["poses"]]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
     width = 0.8 / len(runs)
+    split = "rp_robot_mm" in runs[0]["poses"][0]
     for k, run in enumerate(runs):
         x = np.arange(len(names)) + k * width
         axes[0].bar(x, [pc["ap_mm"] for pc in run["poses"]], width, label=run["targets"])
-        axes[1].bar(x, [pc["rp_mm"] for pc in run["poses"]], width, label=run["targets"])
+        axes[1].bar(x, [pc["rp_mm"] for pc in run["poses"]], width, label=f"{run['targets']}, measured")
+        if split:                                   # the robot's RP (tracker removed) with its 95 % interval
+            robot = np.array([[pc["rp_robot_mm"], pc["rp_robot_low_mm"], pc["rp_robot_high_mm"]]
+                              for pc in run["poses"]])
+            axes[1].errorbar(x, robot[:, 0], yerr=[robot[:, 0] - robot[:, 1], robot[:, 2] - robot[:, 0]], fmt="o",
+                             color="k", ms=3, capsize=3, label="robot (tracker removed), 95 %" if k == 0 else None)
+    if split and iso.get("repeatability_spec_mm"):
+        axes[1].axhline(iso["repeatability_spec_mm"], color="r", ls="--", lw=1, label="datasheet RP")
     for ax, yl in zip(axes, ("AP (mm)", "RP (mm)")):
         ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2, names)
         ax.set_ylabel(yl)
         ax.legend(fontsize=8)
     axes[0].set_title("pose accuracy")
     axes[1].set_title("pose repeatability")
-    out.append(Figure("iso9283_ap_rp", "ISO 9283: AP and RP per pose", "Barycentre error and l-bar + 3 S_l.",
-                      _png(fig)))
+    caption = "Barycentre error, and RP = l̄ + 3 S_l as measured (bars)" + (
+        "; points: the robot's RP with the tracker's contribution removed in quadrature and its 95 % interval, "
+        "against the datasheet RP (dashed)." if split else ".")
+    out.append(Figure("iso9283_ap_rp", "ISO 9283: AP and RP per pose", caption, _png(fig)))
     run = runs[-1]
     dev = run.get("deviation_um")
     if dev:

@@ -16,10 +16,15 @@ JOINT_SETS = {"readback": "read-back", "commanded": "commanded"}
 
 def banner(s: Summary) -> str | None:
     """The SIMULATED line when a mock device took part, else None."""
-    if not s.simulated:
+    return simulated_banner(s.simulated_devices)
+
+
+def simulated_banner(devices) -> str | None:
+    """The SIMULATED line for the roles ("robot", "tracker") whose driver was ``mock://``; None for none."""
+    if not devices:
         return None
-    who = " and ".join(s.simulated_devices)
-    verb, s_ = ("were", "s") if len(s.simulated_devices) > 1 else ("was", "")
+    who = " and ".join(devices)
+    verb, s_ = ("were", "s") if len(devices) > 1 else ("was", "")
     return (f"SIMULATED: the {who} {verb} simulated (mock:// driver{s_}); these figures come from a simulated "
             "cell, not from a measurement")
 
@@ -81,8 +86,9 @@ def reason_lines(s: Summary, text: Callable[[str], str] = str) -> list[str]:
     return [text(f"why {k}: {why}") for k, why in s.reasons.items()]
 
 
-FORMATS = {"mm": ".3f", "ratio": ".2f", "count": "d", "value": ".3g", "floor": FLOOR_FMT}
-"""Each kind's format on the terminal (mm as in its tables; the floor by its one owner)."""
+FORMATS = {"mm": ".3f", "ratio": ".2f", "count": "d", "value": ".3g", "floor": FLOOR_FMT, "iso": ".4f"}
+"""Each kind's format on the terminal (mm as in its tables, ``iso`` as in the ISO 9283 tables; the floor by its
+one owner)."""
 
 
 def lookup(doc, key: str):
@@ -110,3 +116,68 @@ def render_summary(console, s: Summary | None) -> None:
     """Print the summary lines (nothing for a report without one)."""
     for line, style in summary_lines(s) if s is not None else ():
         console.print(line, style=style, markup=False, highlight=False)
+
+
+# ------------------------------------------------------------------------------ the ISO 9283 report's summary
+# ``num(key, kind)`` reads the ISO report (``campaign-iso9283/1``) from its root; the verdict's wording follows the
+# decision rule of ``campaign.report.iso9283``.
+
+
+def iso_targets_line(doc, text: Callable[[str], str] = str) -> str:
+    """Which targets were measured, with which model, in which base frame."""
+    m = doc.get("model")
+    if m:
+        return text(f"targets: nominal, then corrected with the calibrated model {m['path']} (sha256 "
+                    f"{m['sha256'][:12]}); base frame: the model's registration")
+    return text("targets: nominal only (no calibrated model; campaign iso9283 --model adds corrected targets); base "
+                "frame fitted to the barycentres, so AP leaves out what a rigid frame absorbs")
+
+
+def iso_ap_line(doc, num: Num, text: Callable[[str], str] = str) -> str:
+    """The largest AP of each target kind against the noise floor."""
+    parts = [text(f"{run['targets']} ") + num(f"runs.{i}.max_ap_mm", "iso") + text(" mm")
+             for i, run in enumerate(doc["runs"])]
+    return (text("AP max (largest of P1..P5): ") + text(", ").join(parts) + text("; noise floor ")
+            + num("noise_floor_mm", "floor") + text(" mm"))
+
+
+def iso_rp_line(doc, i: int, num: Num, text: Callable[[str], str] = str) -> str:
+    """The pose of run ``i`` with the largest robot RP: measured RP, the tracker's contribution, the robot's RP
+    and its 95 % interval."""
+    run = doc["runs"][i]
+    w = run["worst_pose"]
+    k = f"runs.{i}.poses.{w}."
+    return (text(f"RP, {run['targets']} targets, {run['poses'][w]['pose']} (largest robot RP): measured ")
+            + num(k + "rp_mm", "iso") + text(" mm; tracker's contribution ") + num(k + "rp_tracker_mm", "iso")
+            + text(" mm; robot, the tracker removed in quadrature, ") + num(k + "rp_robot_mm", "iso")
+            + text(" mm (95 % interval ") + num(k + "rp_robot_low_mm", "iso") + text(" to ")
+            + num(k + "rp_robot_high_mm", "iso") + text(" mm)"))
+
+
+def iso_verdict_line(doc, num: Num, text: Callable[[str], str] = str) -> str:
+    """PASS / FAIL / UNDECIDED of the robot's RP against the datasheet, or why there is no verdict."""
+    v = doc["summary"]["verdict"]
+    if v["spec_mm"] is None:
+        return text("verdict: none: no datasheet repeatability (set robot.repeatability_mm)")
+    spec = text("the datasheet RP ") + num("summary.verdict.spec_mm", "iso") + text(" mm (robot.repeatability_mm)")
+    if v["result"] == PASS:
+        return text("verdict: PASS: the robot's RP, 95 % interval included, is at or below ") + spec + text(
+            " at every pose")
+    if v["result"] == FAIL:
+        return (text("verdict: FAIL: the robot's RP exceeds ") + spec + text(" beyond its 95 % interval at ")
+                + text(", ".join(v["failed"])))
+    return (text("verdict: UNDECIDED: the robot's RP interval straddles ") + spec + text(
+        f" at {', '.join(v['undecided'])}: this test cannot tell (more cycles, or an instrument with a smaller "
+        "contribution, narrow the interval)"))
+
+
+def iso_summary_lines(doc) -> list[tuple[str, str]]:
+    """(text, rich style) lines of an ISO report's summary for the terminal: the banner first, the verdict last."""
+    def num(key: str, kind: str) -> str:
+        value = lookup(doc, key)
+        return "-" if value is None else format(value, FORMATS[kind])
+    out = [(line, "bold red") for line in (simulated_banner(doc["summary"]["simulated_devices"]),) if line]
+    out += [(iso_targets_line(doc), ""), (iso_ap_line(doc, num), "bold")]
+    out += [(iso_rp_line(doc, i, num), "bold") for i in range(len(doc["runs"]))]
+    style = {PASS: "bold green", FAIL: "bold red"}.get(doc["summary"]["verdict"]["result"], "yellow")
+    return out + [(iso_verdict_line(doc, num), style)]

@@ -295,32 +295,36 @@ def render_verify_drift(console: Console, rep: VerifyReport) -> None:
                           f"(|t| {math.hypot(*t):.3f} mm, mean over the pass)", markup=False)
 
 
-def rp_verdict(run: dict, spec_mm: float | None) -> str:
-    """The largest measured RP against the datasheet repeatability, in words (pass / fail)."""
-    if run.get("rp_within_spec") is None or not spec_mm:
-        return f"RP max {run['max_rp_mm']:.4f} mm (no datasheet repeatability to compare with)"
-    verdict = "pass" if run["rp_within_spec"] else "fail"
-    return (f"RP max {run['max_rp_mm']:.4f} mm vs datasheet repeatability {spec_mm:.4f} mm "
-            f"(robot.repeatability_mm): {verdict}")
-
-
 def render_iso(console, report: dict) -> None:
-    """Rich table per target kind: AP, APx/y/z, RP per pose (mm); AD/RD; RP against the datasheet."""
+    """An ISO 9283 report: its summary (banner, targets, AP, RP with the tracker's contribution, verdict), then per
+    target kind the AP table, the RP table (l-bar, S_l, measured RP, the tracker's contribution, the robot's RP and
+    its 95 % interval; mm) and AD/RD; the frame, the noise floor and the RP method last."""
+    from .summary_text import iso_summary_lines
+
+    for line, style in iso_summary_lines(report):
+        console.print(line, style=style or None, highlight=False)
     for run in report["runs"]:
         t = Table(title=f"ISO 9283 ({run['targets']} targets, {run['cycles']} cycles, cube edge "
                         f"{report['cube']['edge_mm']:.0f} mm)")
-        for col in ("pose", "AP (mm)", "APx (mm)", "APy (mm)", "APz (mm)", "RP (mm)"):
+        for col in ("pose", "AP (mm)", "APx (mm)", "APy (mm)", "APz (mm)"):
             t.add_column(col, justify="left" if col == "pose" else "right")
         for pc in run["poses"]:
             t.add_row(pc["pose"], f"{pc['ap_mm']:.4f}", f"{pc['apx_mm']:+.4f}", f"{pc['apy_mm']:+.4f}",
-                      f"{pc['apz_mm']:+.4f}", f"{pc['rp_mm']:.4f}")
+                      f"{pc['apz_mm']:+.4f}")
+        console.print(keep_words(t, console.width))
+        t = Table(title=f"RP ({run['targets']} targets), mm: measured, the tracker's contribution, the robot's")
+        for col in ("pose", "l-bar", "S_l", "RP", "tracker", "robot", "robot, 95 %"):
+            t.add_column(col, justify="left" if col == "pose" else "right")
+        for pc in run["poses"]:
+            t.add_row(pc["pose"], f"{pc['l_mean_mm']:.4f}", f"{pc['s_l_mm']:.4f}", f"{pc['rp_mm']:.4f}",
+                      f"{pc['rp_tracker_mm']:.4f}", f"{pc['rp_robot_mm']:.4f}",
+                      f"{pc['rp_robot_low_mm']:.4f} .. {pc['rp_robot_high_mm']:.4f}")
         console.print(keep_words(t, console.width))
         d = run["distance"]
-        console.print(f"{run['targets']}: AP max {run['max_ap_mm']:.4f} mm; distance {'-'.join(d['poses'])} "
-                      f"{d['distance_cmd_mm']:.1f} mm: AD {d['ad_mm']:+.4f} mm, RD +-{d['rd_mm']:.4f} mm; "
-                      + rp_verdict(run, report.get("repeatability_spec_mm")), highlight=False,
-                      style=None if run.get("rp_within_spec") is not False else "yellow")
+        console.print(f"{run['targets']}: distance {'-'.join(d['poses'])} {d['distance_cmd_mm']:.1f} mm: "
+                      f"AD {d['ad_mm']:+.4f} mm, RD ±{d['rd_mm']:.4f} mm (3 S_D)", highlight=False)
     console.print(f"frame: {report['frame']}; noise floor {floor_mm(report['noise_floor_mm'])} mm (tracker and robot "
-                  "repeatability; the measured RP includes the tracker's noise)", highlight=False)
+                  f"repeatability). RP: the tracker's contribution from {report['tracker_rp_source']}; verdict on "
+                  f"{report['decision_rule']}", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)

@@ -11,7 +11,8 @@ Every directory a command creates carries a marker, ``.campaign-owner.json`` (``
   gives ``--overwrite``;
 * a run directory (marker ``run``, or a ``log.jsonl``) is never written by another kind of command, even with
   ``--overwrite``: reprocessing or correcting writes a new directory and never replaces a run's model. Only the
-  run's own additions (``report``, ``verify``, ``diagnose`` of that run) go there, through :func:`check_campaign_dir`;
+  run's own additions (``report``, ``verify``, ``diagnose`` of that run, and an ``iso9283`` run made with its model
+  in a new ``iso9283-TIMESTAMP`` subdirectory) go there, through :func:`check_campaign_dir`;
 * an existing output *file* named by the user (``report --out FILE``, ``diagnose --json FILE``, ``export``,
   ``plan --csv``, ``select --out``, ``import --out``) is refused unless ``--overwrite``; one of a run directory's
   own files (its log, model, data) is refused even with ``--overwrite``: a run's files are its evidence.

@@ -24,9 +24,11 @@ def check_numbers(page, run_dir: Path) -> int:
     docs = {"calibration": "report.json", "iso9283": "report.json", "diagnosis": "diagnosis.json"}
     cache = {}
     verify = sorted(run_dir.glob("verify-*/verify.json"))
+    isos = sorted(run_dir.glob("iso9283-*/report.json"))              # ISO runs listed by a calibration report
     for n in page.numbers:
         doc_name = n["doc"]
-        path = verify[int(doc_name[6:])] if doc_name.startswith("verify") else run_dir / docs[doc_name]
+        path = verify[int(doc_name[6:])] if doc_name.startswith("verify") else isos[int(doc_name[6:])] \
+            if doc_name.startswith("isorun") else run_dir / docs[doc_name]
         doc = cache.setdefault(path, json.loads(path.read_text()))
         want = _lookup(doc, n["key"])
         if want is None:
