@@ -8,6 +8,7 @@ from rich.text import Text
 from campaign.io.terminal_text import clean, keep_words, print_notes
 from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
+from robocal.elastic import EffectChoice
 
 from campaign.io.quantities import floor_mm
 
@@ -23,7 +24,7 @@ def _short_evidence(f: dict) -> str:
         return f"cannot tell: {ev.get('reason', '')}"
     if not f["accepted"]:
         return ev.get("reason", "")
-    parts = [f"{ev['label']}", f"held-out {ev['cv_rms_before_mm']:.3f} -> {ev['cv_rms_after_mm']:.3f} mm "
+    parts = [f"held-out {ev['cv_rms_before_mm']:.3f} -> {ev['cv_rms_after_mm']:.3f} mm "
              f"(t {ev['cv_gain_t']:.1f}, {ev['cv_blocking']}; {100 * ev['excess_explained']:.0f} % of the excess)"]
     phys = ev.get("physical") or {}
     stiff = {k: v["stiffness_nm_per_rad"] for k, v in phys.items() if isinstance(v, dict) and "stiffness_nm_per_rad" in v}
@@ -43,16 +44,15 @@ def _short_evidence(f: dict) -> str:
     return "; ".join(parts)
 
 
-def joints_text(joints) -> str:
-    """``J1-J6`` for a run of three or more consecutive joints, else ``J2, J3`` (wraps between joints)."""
-    runs: list[list[int]] = []
-    for j in sorted(joints):
-        if runs and j == runs[-1][-1] + 1:
-            runs[-1].append(j)
-        else:
-            runs.append([j])
-    parts = [f"J{r[0]}-J{r[-1]}" if len(r) >= 3 else ", ".join(f"J{j}" for j in r) for r in runs]
-    return ", ".join(parts) or "-"
+def effect_label(entry: dict) -> str:
+    """A diagnosis finding's or undiagnosable entry's effect as ``EffectChoice.label`` names it, with the options
+    that tell candidates apart (``thermal_drift(J1,2,3 tau 1 h)``): the label the diagnosis recorded, else (an
+    effect the engine could not try, or an earlier diagnosis.json) the effect on its joints."""
+    label = entry.get("label") or (entry.get("evidence") or {}).get("label")
+    if label:
+        return label
+    joints = tuple(entry.get("joints") or ())
+    return EffectChoice(entry["effect"], (("joints", joints),) if joints else ()).label
 
 
 def render(console: Console, report: dict) -> None:
@@ -71,8 +71,8 @@ def render(console: Console, report: dict) -> None:
                   f"-> final {_mm(report['final_test_rms_mm'])} mm RMS on the {ev}", highlight=False)
     render_preparation(console, report.get("preparation"))     # read-back lag -> joint set; nest drift
     t = Table(title="Which effect, and how far the error shrinks (RMS, mm)")
-    for col, just in (("effect", "left"), ("joints", "left"), ("accepted", "left"), ("before", "right"),
-                      ("after", "right"), ("after / floor", "right"), ("note", "right")):
+    for col, just in (("effect", "left"), ("accepted", "left"), ("before", "right"), ("after", "right"),
+                      ("after / floor", "right"), ("note", "right")):      # the effect's label names its joints
         t.add_column(col, justify=just)
     notes = []
     for f in report["findings"]:
@@ -80,8 +80,8 @@ def render(console: Console, report: dict) -> None:
         style = "green" if f["accepted"] else ("dim" if f["evidence"].get("diagnosable", True) else "yellow")
         evidence = _short_evidence(f)
         if evidence:
-            notes.append(" ".join([f["effect"], *([joints_text(f["joints"])] if f["joints"] else [])]) + f": {evidence}")
-        t.add_row(f["effect"], joints_text(f["joints"]), "yes" if f["accepted"] else "no",
+            notes.append(f"{effect_label(f)}: {evidence}")
+        t.add_row(effect_label(f), "yes" if f["accepted"] else "no",
                   _mm(f["test_rms_before_mm"]), _mm(after), f"{after / floor:.2f}" if after and floor else "-",
                   f"[{len(notes)}]" if evidence else "", style=style)
     console.print(keep_words(t, console.width))
@@ -98,9 +98,8 @@ def render(console: Console, report: dict) -> None:
     else:
         console.print("where: no region of the geometric model's residual is significantly above the noise floor")
     for u in report.get("undiagnosable", []):
-        js = " " + joints_text(u["joints"]) if u.get("joints") else ""
         console.print(Text.assemble(("cannot tell from these data:", "yellow"),
-                                    clean(f" {u['effect']}{js}: {u['reason']} (to reveal it: {u['remedy']})")))
+                                    clean(f" {effect_label(u)}: {u['reason']} (to reveal it: {u['remedy']})")))
     us = report.get("unexplained_structure", {})
     if us:
         console.print(clean(us["text"]), style="red" if report["unexplained"] else None)

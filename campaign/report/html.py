@@ -30,15 +30,17 @@ from drivers.redact import redact
 
 from campaign.io.durable import atomic_write
 from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file
-from campaign.calibrate.calibration_report import IDENTIFICATION_KEYS, STAGES, CalibrationReport
+from campaign.calibrate.calibration_report import COMPENSATED, ELASTIC, IDENTIFICATION_KEYS, KINEMATIC, STAGES, CalibrationReport
 from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
 from campaign.calibrate.report_points import PointTable
 
 from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
 from campaign.io.quantities import FLOOR_FMT, condition_meaning, condition_scale
-from .summary_text import (FORMATS, banner, held_out_line, iso_ap_line, iso_rp_line, iso_targets_line,
-                           iso_verdict_line, model_line, origin, reason_lines, simulated_banner, verdict_line)
+from .diagnosis_text import effect_label
+from .summary_text import (FORMATS, banner, diagnosis_line, held_out_line, iso_ap_line, iso_rp_line, iso_targets_line,
+                           iso_verdict_line, model_line, origin, reason_lines, simulated_banner, verdict_line,
+                           verified_line)
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
 
@@ -185,17 +187,43 @@ HTML_FORMATS = {**FORMATS, "mm": ".4f"}
 """The summary's formats in HTML: mm figures as in the page's Table 3."""
 
 
-def summary_markup(report: CalibrationReport | None, num) -> dict | None:
+def summary_markup(src: ReportSources, num) -> dict | None:
     """The summary's lines (``campaign.report.summary_text``) as HTML, every number tagged with its
-    ``summary.*`` key of report.json; None without a summary."""
-    s = None if report is None else report.summary
+    ``summary.*`` key of report.json, then a line per verification (its ``verify.json``) and the diagnosis's
+    headline (``diagnosis.json``) when those have run; None without a summary."""
+    s = None if src.calibration is None else src.calibration.summary
     if s is None:
         return None
     def n(key: str, kind: str) -> Markup:
         return num("calibration", f"summary.{key}", HTML_FORMATS[kind])
+
+    def of(doc: str):
+        return lambda key, kind, scale=1.0: num(doc, key, HTML_FORMATS[kind], scale)
     t = Markup.escape
+    verified = [verified_line(v, of(f"verify{i}"), t) for i, v in enumerate(src.verify)]
+    diagnosis = diagnosis_line(src.diagnosis, of("diagnosis"), effect_label, t) if src.diagnosis else None
     return {"banner": banner(s), "origin": origin(s), "model": model_line(s, n, t), "reasons": reason_lines(s, t),
-            "held_out": held_out_line(s, n, t), "verdict": verdict_line(s, n, t), "result": s.verdict.result}
+            "held_out": held_out_line(s, n, t), "verdict": verdict_line(s, n, t), "result": s.verdict.result,
+            "verified": verified, "diagnosis": diagnosis}
+
+
+def cv_predicted_keys(report: CalibrationReport | None) -> dict[str, str]:
+    """Per stage, the report.json key of its CV-predicted held-out RMS (k-fold CV on the calibration points): the
+    effect selection's figures for the kinematic stage (geometry alone) and the physical-effects stage, the
+    residual layer's own CV for a final model with a layer (else the final model is the physical-effects one).
+    Stages without such a record are absent (the nominal stage is never cross-validated)."""
+    if report is None:
+        return {}
+    sel = report.effects.selection if report.effects else None
+    keys = {}
+    if sel and sel.get("geometric_cv_rms_mm") is not None:
+        keys[KINEMATIC] = "effects.selection.geometric_cv_rms_mm"
+    if sel and sel.get("final_cv_rms_mm") is not None:
+        keys[ELASTIC] = keys[COMPENSATED] = "effects.selection.final_cv_rms_mm"
+    layer = report.final.layer if report.final else None
+    if layer is not None:
+        keys[COMPENSATED] = "stages.compensated.layer.cv_predicted_rms_mm"
+    return {k: v for k, v in keys.items() if k in report.stages}
 
 
 def iso_summary_markup(doc: dict | None, num) -> dict | None:
@@ -220,8 +248,9 @@ def render_html(src: ReportSources, figures: dict[str, list], figures_name: str 
         k: src.iso9283[k] for k in IDENTIFICATION_KEYS if k in (src.iso9283 or {})}
     return env.get_template("report.html.j2").render(
         src=src, figures=figures, b64=b64, num=num, stages=STAGES, floor_fmt=FLOOR_FMT, ident=ident,
-        summary=summary_markup(src.calibration, num), figures_name=figures_name, glossary=GLOSSARY,
+        summary=summary_markup(src, num), figures_name=figures_name, glossary=GLOSSARY,
         iso_summary=iso_summary_markup(src.iso9283, num),
+        cv_keys=cv_predicted_keys(src.calibration), effect_label=effect_label,
         uncorrected_vs_nominal=UNCORRECTED_VS_NOMINAL,
         condition=condition_scale, condition_meaning=condition_meaning, n_figures=sum(len(v) for v in figures.values()))
 

@@ -203,19 +203,41 @@ def workspace_map_figure(report: CalibrationReport, points: PointTable | None) -
     if got is None:
         return None
     p, q, err = got
-    fig, axes = _subplots(1, 2, (11.5, 4.6), left=0.07, right=0.97, bottom=0.12, top=0.92, wspace=0.25)
+    return Figure("workspace_map", "Workspace map of the residuals, before and after (test set)",
+                  "Each held-out point at its radius and height, coloured by its error; both panels on one logarithmic "
+                  "colour scale, the noise floor marked on it.", _png(workspace_map(p, err, report.noise_floor_mm)))
+
+
+def workspace_map(p_base_mm: np.ndarray, err: dict, floor_mm_: float | None):
+    """The before (nominal) / after (final model) map of the test points' |error| (mm) over radius and height:
+    one colour norm for both panels (logarithmic, from the smallest to the largest error of either), one colour bar
+    with the noise floor marked. Returns the matplotlib figure."""
+    from matplotlib.colors import LogNorm
+
+    from matplotlib.ticker import FuncFormatter
+
+    fig, axes = _subplots(1, 2, (11.5, 4.6), left=0.07, right=0.86, bottom=0.12, top=0.92, wspace=0.22)
     axes = axes[0]
-    reach = np.hypot(p[:, 0], p[:, 1])
+    reach = np.hypot(p_base_mm[:, 0], p_base_mm[:, 1])
+    both = np.concatenate([err[NOMINAL], err[COMPENSATED]])
+    both = both[np.isfinite(both) & (both > 0)]
+    lo, hi = (float(both.min()), float(both.max())) if len(both) else (1e-3, 1.0)
+    norm = LogNorm(vmin=lo, vmax=max(hi, lo * 1.01))
     for ax, key, title in zip(axes, (NOMINAL, COMPENSATED), ("before: nominal model", "after: calibrated model")):
-        sc = ax.scatter(reach, p[:, 2], c=err[key], s=40, cmap="viridis", vmin=0)
-        fig.colorbar(sc, ax=ax, label="|error| (mm)")
+        sc = ax.scatter(reach, p_base_mm[:, 2], c=err[key], s=40, cmap="viridis", norm=norm)
         ax.set_title(title)
         ax.set_xlabel("radius from the J1 axis (mm)")
         ax.set_ylabel("height z (mm)")
         ax.grid(alpha=0.3)
-    return Figure("workspace_map", "Workspace map of the residuals, before and after (test set)",
-                  "Each held-out point at its radius and height, coloured by its error; each panel has its own scale.",
-                  _png(fig))
+    floor_shown = bool(floor_mm_) and lo <= floor_mm_ <= hi
+    bar = fig.colorbar(sc, cax=fig.add_axes((0.885, 0.12, 0.018, 0.8)),
+                       label="|error| (mm, log scale, both panels)" + ("; dashed: noise floor" if floor_shown else ""))
+    bar.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    bar.ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:e}"[0] in "25" else ""))
+    bar.ax.tick_params(which="minor", labelsize=7)
+    if floor_shown:
+        bar.ax.axhline(floor_mm_, color="w", ls="--", lw=1.5)
+    return fig
 
 
 def parameters_figure(report: CalibrationReport, points: PointTable | None = None) -> Figure | None:

@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from campaign.calibrate.summary import FAIL, PASS, Summary
+from campaign.correct.verify import POOLED, UNCORRECTED
+from campaign.correct.verify_report import VerifyReport
 
 from campaign.io.quantities import FLOOR_FMT
 
@@ -79,6 +81,46 @@ def verdict_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
                 + text(" on the held-out test set") + failed)
     hint = text(" (set acceptance.max_rms_mm, max_mm)") if not bounds else text("")
     return text(f"verdict: none: {v.result}") + hint
+
+
+def verified_line(v: VerifyReport, num: Callable[..., str], text: Callable[[str], str] = str) -> str:
+    """The closed-loop verification on the cell (``verify.json``): every corrected pass pooled (RMS, max, RMS as a
+    multiple of verify's noise floor), the model-corrected pass and the uncorrected one; or why no corrected pass
+    was measured. ``num(key, kind, scale=1.0)`` reads ``key`` of the verify document."""
+    if POOLED not in v.stages:
+        return text(f"verified on the cell: no corrected pass measured ({v.exit_status}: {v.reason})")
+    pooled, i = f"stages.{POOLED}", next(k for k, p in enumerate(v.passes) if p.stage == POOLED)
+    out = (text("verified on the cell (closed loop, ") + num("n", "count") + text(" test points; every corrected pass "
+           "pooled, ") + num(f"{pooled}.n", "count") + text(" measurements"))
+    if v.passes[i].n_held:
+        out += text(", ") + num(f"passes.{i}.n_held", "count") + text(" of them held at their planned joints")
+    out += (text("): RMS ") + num(f"{pooled}.rms_mm", "mm") + text(", max ") + num(f"{pooled}.max_mm", "mm")
+            + text(" mm; RMS = ") + num(f"{pooled}.rms_mm", "ratio", 1.0 / v.noise_floor_mm)
+            + text(" x the noise floor ") + num("noise_floor_mm", "floor") + text(" mm"))
+    for stage in ("model-corrected", UNCORRECTED):
+        if stage in v.stages:
+            out += text(f"; {stage} RMS ") + num(f"stages.{stage}.rms_mm", "mm") + text(" mm")
+    return out
+
+
+def diagnosis_line(d: dict, num: Callable[..., str], label: Callable[[dict], str],
+                   text: Callable[[str], str] = str) -> str:
+    """The diagnosis's headline (``diagnosis.json``): geometric -> final RMS, the effects accepted (``label``
+    names each) and whether structure remains unexplained above the noise floor."""
+    on = "the test set" if d.get("evaluation") == "test" else "cross-validation"
+    accepted = [label(f) for f in d["findings"] if f["accepted"]]
+    out = (text("diagnosis: geometric model ") + num("baseline_test_rms_mm", "mm") + text(" -> final ")
+           + num("final_test_rms_mm", "mm") + text(f" mm RMS on {on}; effects accepted: ")
+           + text(", ".join(accepted) or "none"))
+    us = d.get("unexplained_structure") or {}
+    if d.get("unexplained"):
+        out += text("; structure remains unexplained")
+        if us.get("excess_over_floor_mm") is not None:
+            out += (text(": ") + num("unexplained_structure.excess_over_floor_mm", "mm")
+                    + text(" mm RMS over the noise floor"))
+    else:
+        out += text("; nothing unexplained above the noise floor")
+    return out
 
 
 def reason_lines(s: Summary, text: Callable[[str], str] = str) -> list[str]:

@@ -113,7 +113,7 @@ def other_findings(engine: EngineResult, final: float, opt: DiagnosisOptions, n:
         elif absorbed > opt.absorbed_limit and ever.get(c.label, -np.inf) < 3.0:
             ev.update(diagnosable=False, remedy=REMEDY[c.name],
                       reason=f"{100 * absorbed:.0f} % absorbed by the geometric model")
-            cannot.append({"effect": c.name, "joints": list(eff.joints), "reason": ev["reason"],
+            cannot.append({"effect": c.name, "label": c.label, "joints": list(eff.joints), "reason": ev["reason"],
                            "remedy": REMEDY[c.name]})
         elif t is not None:
             ev["reason"] = (f"held-out RMS {t.base_cv_rms_mm:.4f} -> {t.cv_rms_mm:.4f} mm (gain {100 * t.gain:+.1f} %, "

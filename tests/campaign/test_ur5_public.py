@@ -16,6 +16,7 @@ from campaign.calibrate.stages import calibrate_dataset
 from tests.campaign.helpers import read_report, small_config
 from tests.campaign.hostile import cli
 from tests.campaign.one_record import check_everything
+from tests.campaign.report.html_page import empty_columns, read_page, sentence_joins
 
 pytestmark = pytest.mark.system
 
@@ -65,6 +66,12 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
     with capsys.disabled():
         print(f"  one record: {checked}")
     assert checked["urdf chain max mm"] < 1e-9
+    # its report.html: the layer's note (a layer was kept), no sentence run into the next, no column all "-"
+    page = read_page((out / "report.html").read_text())
+    assert report.final.layer is not None and "the residual layer interpolates its own points" in page.text
+    assert sentence_joins(page.text) == [] and not any(empty_columns(rows) for rows in page.tables.values())
+    cv = {row[0]: row[-1] for row in page.tables["table3-table"][1:]}
+    assert cv["final model (+ residual layer, if any)"] == f"{report.final.layer.cv_predicted_rms_mm:.4f}"
 
 
 def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):

@@ -8,6 +8,7 @@ import pytest
 
 from campaign.cli import main
 from campaign.io import terminal_text
+from campaign.report.diagnosis_text import effect_label
 from tests.campaign.helpers import small_config
 
 BOX = "│┃"
@@ -48,7 +49,7 @@ def test_run_diagnose_and_verify_fit_80_columns_without_breaking_words(tmp_path,
     diag = capsys.readouterr()
     _check_lines(diag.out + diag.err, 80)
     d = json.loads((tmp_path / "run" / "diagnosis.json").read_text())
-    phrases = [f["effect"] for f in d["findings"]]
+    phrases = [effect_label(f) for f in d["findings"]]                 # thermal_drift(J1,2,3 tau 1 h): whole
     phrases += [f["evidence"].get("reason", "") for f in d["findings"]]
     phrases += [u["reason"] + " " + u["remedy"] for u in d.get("undiagnosable", [])]
     _check_words(diag.out, phrases)
