@@ -153,7 +153,7 @@ def test_iso_report_in_headless_chromium(calibrated_iso, tmp_path):
         back = browser.evaluate(probe)["back"]
     assert page.errors == [] and cal_page.errors == []
     n_iso, n_cal = check_numbers(page, iso), check_numbers(cal_page, cal)
-    assert got["sections"][0] == "summary" and got["sections"][-1] == "glossary" and "traceability" in got["sections"]
+    assert got["sections"][0] == "summary" and got["sections"][-2:] == ["glossary", "signoff"] and "traceability" in got["sections"]
     assert got["banner"].startswith("SIMULATED: the robot and tracker were simulated")
     result = rep["summary"]["verdict"]["result"]
     assert got["verdict"].startswith(f"verdict: {result.upper()}") and "datasheet RP 0.0400 mm" in got["verdict"]
@@ -163,7 +163,7 @@ def test_iso_report_in_headless_chromium(calibrated_iso, tmp_path):
         assert [k + f for f in ("rp_mm", "rp_tracker_mm", "rp_robot_mm", "rp_robot_low_mm", "rp_robot_high_mm")] \
             == line["keys"]
         assert "measured" in line["text"] and "tracker's contribution" in line["text"] and "quadrature" in line["text"]
-    assert "Sign-off" in got["trace"] and got["signoff"] == 4
+    assert "Signed at the end of this report" in got["trace"] and got["signoff"] == 4
     for role in ("robot", "tracker"):
         assert rep[f"{role}_identity"]["serial"] in got["trace"]
     assert rep["model"]["sha256"] in got["trace"] and rep["config_sha256"] in got["trace"]
