@@ -29,7 +29,7 @@ from campaign.run.devices import open_devices
 from campaign.run.eta import RunEta, point_times_s
 from campaign.run.log_reader import completed_point_ids, read_log
 from campaign.run.log_writer import RunLog
-from campaign.run.output_dirs import RUN, Claim, check_dir, source_key
+from campaign.run.output_dirs import RUN, Claim, check_dir, check_finished_run, source_key
 from campaign.run.resume_checks import check_resume
 from campaign.run.runner import RunOutcome, closing_on_error, pending
 from campaign.run.session import (RunProgress, continue_clock, default_run_dir, make_runner, observe_points, open_log,
@@ -161,6 +161,7 @@ def verify(run_dir: Path, console: Console | None = None):
     from campaign.calibrate.multi_smr import pose_estimator
     from campaign.calibrate.outputs import load_model
 
+    check_finished_run(run_dir, "verify")
     cell = load_cell(run_dir / "config.yaml")
     cfg = cell.config
     model = load_model(run_dir / "model.json")
