@@ -20,7 +20,8 @@ from campaign.data.interchange_csv import write_csv
 from campaign.data.source import load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
-from campaign.plan.iso9283 import IsoCube, iso_cube, iso_plan
+from campaign.plan.acceptance import acceptance_warnings
+from campaign.plan.iso9283 import IsoCube, is_iso_plan, iso_cube, iso_plan
 from campaign.plan.points import Plan
 from campaign.plan.poses import tool_rotation
 from campaign.report.html import report_targets, write_report
@@ -76,6 +77,8 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
+        for line in [] if is_iso_plan(plan) else acceptance_warnings(cell):   # before anything connects or moves
+            logger.warning(line)
         devices = stack.enter_context(open_devices(cell))
         robot, tracker, clock = devices.robot, devices.tracker, devices.clock
         runner = make_runner(cell, devices, first_pass=resume is None)
@@ -110,7 +113,6 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
     from campaign.report.iso9283 import finish
-    from campaign.plan.iso9283 import is_iso_plan
     if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
         iso = finish(cell, run_dir)
         write_report(run_dir)
