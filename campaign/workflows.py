@@ -17,7 +17,7 @@ from campaign.calibrate.plausibility import is_forced
 from campaign.config.cell_model import CellModel
 from campaign.config.load import load_cell
 from campaign.data.interchange_csv import write_csv
-from campaign.data.source import load_source
+from campaign.data.source import csv_provenance, load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
 from campaign.plan.acceptance import acceptance_warnings
@@ -144,6 +144,8 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
         stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+    else:                                       # an interchange CSV: where it came from, no device named
+        processed = replace(processed, report=processed.report.without_devices(csv_provenance(dataset)))
     processed = replace(processed, report=replace(processed.report,
                                                   summary=summarize(processed.report, cell.config.acceptance)))
     if isinstance(out_dir, Claim):

@@ -7,6 +7,7 @@ Each registers itself with :func:`campaign.cli.common.command`; each handler rec
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
@@ -194,7 +195,9 @@ def cmd_select(args: argparse.Namespace) -> int:
     ds = load_source(args.data).dataset
     with forced(args.force):
         sel = select_rows(ds, cell, args.points)
-    write_csv(args.out, ds.with_order_context().subset(sel.keep))   # each kept row: how the robot reached it
+    subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
+    origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
+    write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
     render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 

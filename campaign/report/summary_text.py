@@ -25,9 +25,11 @@ def banner(s: Summary) -> str | None:
 
 
 def origin(s: Summary) -> str | None:
-    """A line when the devices are not recorded (data from a CSV), else None."""
-    return None if s.simulated_devices is not None else \
-        "devices not recorded (data from an interchange CSV): whether they were simulated is not known"
+    """A line when the devices are not recorded (data from a CSV: where they came from), else None."""
+    if s.simulated_devices is not None:
+        return None
+    where = s.provenance or "devices not recorded (data from an interchange CSV)"
+    return f"{where}: whether they were simulated is not known"
 
 
 def model_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
