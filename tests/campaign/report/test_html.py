@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 
 from campaign.cli import main
-from tests.campaign.browser import Chromium, chromium
+from tests.campaign.browser import Chromium, skip_without_browser
 from tests.campaign.helpers import read_report, small_config
 
-needs_browser = pytest.mark.skipif(chromium() is None, reason="chromium not installed (.ci/run installs it)")
+needs_browser = pytest.mark.skipif(skip_without_browser(), reason="chromium not installed (tests/run installs it)")
 
 
 def _lookup(doc, key):
