@@ -77,7 +77,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
-        for line in [] if is_iso_plan(plan) else acceptance_warnings(cell):   # before anything connects or moves
+        for line in [] if is_iso_plan(plan) else acceptance_warnings(cell, plan):   # before anything connects/moves
             logger.warning(line)
         devices = stack.enter_context(open_devices(cell))
         robot, tracker, clock = devices.robot, devices.tracker, devices.clock

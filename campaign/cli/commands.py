@@ -40,11 +40,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _warn_acceptance(cell) -> None:
-    """One warning line on stderr per acceptance bound below what the noise the specs predict allows."""
+def _warn_acceptance(cell, plan=None) -> None:
+    """One warning line on stderr per acceptance bound below what the noise the specs predict allows (at the plan's
+    test points when there is a plan)."""
     from campaign.plan.acceptance import acceptance_warnings
 
-    for line in acceptance_warnings(cell):
+    for line in acceptance_warnings(cell, plan):
         _stderr().print(f"warning: {line}", style="yellow", markup=False)
 
 
@@ -116,7 +117,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         check_file(args.csv, args.overwrite, "--csv")
     plan = build_plan(cell)
     render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
-    _warn_acceptance(cell)
+    _warn_acceptance(cell, plan)
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast

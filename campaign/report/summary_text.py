@@ -81,8 +81,8 @@ def verdict_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
 def _below_noise(v, num: Num, text: Callable[[str], str]) -> str:
     """The bounds a perfect model would fail on the measured noise alone, or nothing."""
     notes = {"max_rms_mm": text("RMS bound below the noise floor ") + num("noise_floor_mm", "floor") + text(" mm"),
-             "max_mm": text("max bound below ") + num("verdict.noise_max_mm", "mm") + text(" mm, the median largest of ")
-             + num("held_out.n", "count") + text(" errors of noise alone")}
+             "max_mm": text("max bound below ") + num("verdict.noise_max_mm", "mm")
+             + text(" mm, the median largest of ") + num("held_out.n", "count") + text(" errors of noise alone")}
     if not v.below_noise:
         return text("")
     which = "this bound" if len(v.below_noise) == 1 else "these bounds"

@@ -5,6 +5,7 @@ a reprocess output) and ``export --urdf`` (which takes the run's own config)."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -73,10 +74,12 @@ def test_validate_and_plan_warn_about_a_bound_below_the_predicted_floor(tmp_path
     assert code == 0 and out.startswith("OK ")
     lines = err.strip().splitlines()
     assert len(lines) == 2 and all(line.startswith("warning: acceptance.max") for line in lines), lines
-    assert "below the noise floor: the noise floor the specs predict at the plan's 30 test points" in lines[0]
+    assert "below the noise floor: the noise floor the specs predict at the config's 30 test points" in lines[0]
     assert "the median largest of 30 errors of noise alone" in lines[1]
     code, out, err = cli(capsys, "plan", tight)
     assert code == 0 and err.count("warning: acceptance.") == 2
+    planned = re.search(r"at the plan's (\d+) test points is (\d\.\d{3}) mm", err)          # its test points, the floor
+    assert planned and f"noise floor {planned[2]} mm" in " ".join(out.split())  # its forecast prints
     code, out, err = run_campaign_process(["validate", ROOT / "configs" / "irb2600.yaml"], tmp_path)
     assert code == 0 and err == ""                  # the demo's criterion sits above its floor
 
