@@ -17,10 +17,11 @@ from campaign.calibrate.plausibility import is_forced
 from campaign.config.cell_model import CellModel
 from campaign.config.load import load_cell
 from campaign.data.interchange_csv import write_csv
-from campaign.data.source import load_source
+from campaign.data.source import csv_provenance, load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
-from campaign.plan.iso9283 import IsoCube, iso_cube, iso_plan
+from campaign.plan.acceptance import acceptance_warnings
+from campaign.plan.iso9283 import IsoCube, is_iso_plan, iso_cube, iso_plan
 from campaign.plan.points import Plan
 from campaign.plan.poses import tool_rotation
 from campaign.report.html import report_targets, write_report
@@ -29,7 +30,7 @@ from campaign.run.devices import open_devices
 from campaign.run.eta import RunEta, point_times_s
 from campaign.run.log_reader import completed_point_ids, read_log
 from campaign.run.log_writer import RunLog
-from campaign.run.output_dirs import RUN, Claim, check_dir, source_key
+from campaign.run.output_dirs import RUN, Claim, check_dir, check_finished_run, source_key
 from campaign.run.resume_checks import check_resume
 from campaign.run.runner import RunOutcome, closing_on_error, pending
 from campaign.run.session import (RunProgress, continue_clock, default_run_dir, make_runner, observe_points, open_log,
@@ -78,6 +79,8 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         check_resume(resume, cfg, plan)                     # ... and vs the rebuilt plan, before anything connects
     with ExitStack() as stack:
         logging_ = stack.enter_context(run_logging(console))    # campaign.log once the run directory exists
+        for line in [] if is_iso_plan(plan) else acceptance_warnings(cell, plan):   # before anything connects/moves
+            logger.warning(line)
         devices = stack.enter_context(open_devices(cell))
         robot, tracker, clock = devices.robot, devices.tracker, devices.clock
         runner = make_runner(cell, devices, first_pass=resume is None)
@@ -111,7 +114,6 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
                 outcome = runner.execute(todo, log)
     if outcome.exit_status != "success":
         return RunResult(run_dir, outcome, None)
-    from campaign.plan.iso9283 import is_iso_plan
     if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
         iso = finish(cell, run_dir, *(iso_model or ()))
         write_report(run_dir)
@@ -143,6 +145,8 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
         stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+    else:                                       # an interchange CSV: where it came from, no device named
+        processed = replace(processed, report=processed.report.without_devices(csv_provenance(dataset)))
     processed = replace(processed, report=replace(processed.report,
                                                   summary=summarize(processed.report, cell.config.acceptance)))
     if isinstance(out_dir, Claim):
@@ -162,6 +166,7 @@ def verify(run_dir: Path, console: Console | None = None):
     from campaign.calibrate.multi_smr import pose_estimator
     from campaign.calibrate.outputs import load_model
 
+    check_finished_run(run_dir, "verify")
     cell = load_cell(run_dir / "config.yaml")
     cfg = cell.config
     model = load_model(run_dir / "model.json")

@@ -70,3 +70,14 @@ def noise_floor_mm(p_tracker_mm: np.ndarray, tracker: TrackerUncertainty, repeat
     tr = np.trace(tracker.covariance(p_tracker_mm), axis1=1, axis2=2)
     s = repeatability_sigma_mm(repeatability_rp_mm)
     return float(np.sqrt(np.mean(tr + 3.0 * s**2)))
+
+
+def noise_max_mm(floor_rms_mm: float, n: int) -> float:
+    """The median of the largest of ``n`` 3-D errors of a perfect model (mm): isotropic Gaussian noise whose 3-D RMS
+    is ``floor_rms_mm``, so |e|^2 / (floor^2 / 3) is chi-squared with 3 degrees of freedom and the largest of n is
+    below m with probability F(m)^n = 1/2. A bound on the largest held-out error below it fails more often than not
+    on noise alone."""
+    from scipy.special import gammaincinv
+
+    p = 0.5 ** (1.0 / max(int(n), 1))
+    return float(floor_rms_mm / np.sqrt(3.0) * np.sqrt(2.0 * gammaincinv(1.5, p)))

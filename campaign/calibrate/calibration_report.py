@@ -34,7 +34,7 @@ STAGES = (Stage(NOMINAL, "nominal (uncompensated)", "nominal"),
 
 IDENTIFICATION_KEYS = ("robot_identity", "tracker_identity", "driver_versions", "software_version", "identity_check",
                        "config_sha256", "plan_sha256", "started_utc", "finished_utc", "measuring_s",
-                       "simulated_devices")
+                       "simulated_devices", "provenance")
 _N_REPORT_KEYS = 26                                       # the always-present report.json keys, before multi_smr
 
 
@@ -116,6 +116,14 @@ class CalibrationReport:
     def with_identification(self, ident: Mapping) -> "CalibrationReport":
         """A copy carrying the run log's hardware identification (``robot_identity``... ``software_version``)."""
         return replace(self, identification=tuple((k, ident[k]) for k in IDENTIFICATION_KEYS if k in ident))
+
+    def without_devices(self, provenance: str) -> "CalibrationReport":
+        """A copy for data that record no device (an interchange CSV): ``provenance`` says where they came from, and
+        the cell summary keeps the config's robot and tracker models but not its driver URLs (None: the config's
+        devices, not the data's)."""
+        cell = self.cell if not isinstance(self.cell, Mapping) else {**self.cell, "robot_url": None,
+                                                                         "tracker_url": None}
+        return replace(self, identification=(("provenance", provenance),), cell=cell)
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "CalibrationReport":

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, record_dict, record_field,
                                      records_field, text_field)
 
+from robocal.noise import noise_max_mm
+
 from .report_sections import ErrorFigures
 
 PASS, FAIL, NO_CRITERION, NO_TEST_SET = "pass", "fail", "no acceptance criterion", "no held-out test set"
@@ -101,11 +103,15 @@ class Reasons:
 @dataclass(frozen=True)
 class Verdict:
     """The final model's held-out figures against ``acceptance`` (mm bounds, None = not set): ``result`` is
-    ``pass``, ``fail``, or why there is no verdict; ``failed`` names each bound exceeded."""
+    ``pass``, ``fail``, or why there is no verdict; ``failed`` names each bound exceeded; ``below_noise`` each bound
+    a perfect model would fail on the measured noise alone (``AcceptanceConfig.below_noise``), with
+    ``noise_max_mm`` the median largest noise-only error at the test set's size (None without a verdict)."""
     max_rms_mm: float | None
     max_mm: float | None
     result: str
     failed: tuple[str, ...] = ()
+    below_noise: tuple[str, ...] = ()
+    noise_max_mm: float | None = None
 
     def to_dict(self) -> dict:
         return record_dict(self)
@@ -113,14 +119,16 @@ class Verdict:
     @classmethod
     def from_dict(cls, d: Mapping) -> "Verdict":
         return cls(figure_field(d, "max_rms_mm"), figure_field(d, "max_mm"), text_field(d, "result"),
-                   tuple(list_field(d, "failed", True) or ()))
+                   tuple(list_field(d, "failed", True) or ()), tuple(list_field(d, "below_noise", True) or ()),
+                   figure_field(d, "noise_max_mm"))
 
 
 @dataclass(frozen=True)
 class Summary:
     """``report.json``'s ``summary``: ``simulated_devices`` (roles behind ``mock://``; None: not recorded, e.g.
     data from a CSV), the ``model`` and its ``reasons``, the final model on the held-out test set (``held_out``,
-    None without test rows), the noise floor (mm) and RMS / floor, and the acceptance ``verdict``."""
+    None without test rows), the noise floor (mm) and RMS / floor, the acceptance ``verdict``, and for data without
+    devices (a CSV) their ``provenance`` ("imported from FILE ...; devices not recorded")."""
     simulated_devices: tuple[str, ...] | None
     model: ModelSummary
     reasons: Reasons
@@ -128,6 +136,7 @@ class Summary:
     noise_floor_mm: float
     rms_over_floor: float | None
     verdict: Verdict
+    provenance: str | None = None
 
     @property
     def simulated(self) -> bool:
@@ -142,7 +151,8 @@ class Summary:
         return cls(None if sim is None else tuple(sim), record_field(d, "model", ModelSummary.from_dict),
                    record_field(d, "reasons", Reasons.from_dict),
                    record_field(d, "held_out", ErrorFigures.from_dict, True), figure_field(d, "noise_floor_mm"),
-                   figure_field(d, "rms_over_floor"), record_field(d, "verdict", Verdict.from_dict))
+                   figure_field(d, "rms_over_floor"), record_field(d, "verdict", Verdict.from_dict),
+                   text_field(d, "provenance", True))
 
 
 def summarize(report, acceptance=None) -> Summary:
@@ -152,13 +162,15 @@ def summarize(report, acceptance=None) -> Summary:
     held = final.test if final is not None and report.n.test and final.test.rms_mm is not None else None
     floor = report.noise_floor_mm
     ratio = held.rms_mm / floor if held is not None and floor else None
-    sim = dict(report.identification).get("simulated_devices")
+    ident = dict(report.identification)
+    sim = ident.get("simulated_devices")
     return Summary(None if sim is None else tuple(sim), _model(report), _reasons(report), held, floor, ratio,
-                   verdict(held, acceptance))
+                   verdict(held, acceptance, floor), ident.get("provenance"))
 
 
-def verdict(held: ErrorFigures | None, acceptance) -> Verdict:
-    """Pass when every configured bound holds on the held-out figures (mm)."""
+def verdict(held: ErrorFigures | None, acceptance, floor_mm: float | None = None) -> Verdict:
+    """Pass when every configured bound holds on the held-out figures (mm); with the measured noise floor
+    ``floor_mm``, the bounds that noise alone would fail are named."""
     rms_max = None if acceptance is None else acceptance.max_rms_mm
     max_max = None if acceptance is None else acceptance.max_mm
     if rms_max is None and max_max is None:
@@ -167,7 +179,10 @@ def verdict(held: ErrorFigures | None, acceptance) -> Verdict:
         return Verdict(rms_max, max_max, NO_TEST_SET)
     checks = (("max_rms_mm", held.rms_mm, rms_max), ("max_mm", held.max_mm, max_max))
     failed = tuple(name for name, value, bound in checks if bound is not None and value > bound)
-    return Verdict(rms_max, max_max, FAIL if failed else PASS, failed)
+    if not floor_mm:
+        return Verdict(rms_max, max_max, FAIL if failed else PASS, failed)
+    return Verdict(rms_max, max_max, FAIL if failed else PASS, failed, acceptance.below_noise(floor_mm, held.n),
+                   noise_max_mm(floor_mm, held.n))
 
 
 def _model(report) -> ModelSummary:

@@ -15,10 +15,11 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-__all__ = ["COMMANDS", "Command", "EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_OK", "build_parser",
-           "command", "main"]
-_LAZY = {"COMMANDS": "common", "Command": "common", "EXIT_BAD_INPUT": "common", "EXIT_FAILED": "common",
-         "EXIT_INTERRUPTED": "common", "EXIT_OK": "common", "command": "common", "build_parser": "entry"}
+__all__ = ["COMMANDS", "Command", "EXIT_ACCEPTANCE_FAIL", "EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_INTERRUPTED",
+           "EXIT_OK", "build_parser", "command", "main"]
+_LAZY = {"COMMANDS": "common", "Command": "common", "EXIT_ACCEPTANCE_FAIL": "common", "EXIT_BAD_INPUT": "common",
+         "EXIT_FAILED": "common", "EXIT_INTERRUPTED": "common", "EXIT_OK": "common", "command": "common",
+         "build_parser": "entry"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -9,6 +9,8 @@
   (the runner stops the robot and closes the log ``abort``; see :mod:`campaign.cli.signals`)
 * anything else -> a crash report (traceback, versions, command) in the run directory or a temporary file,
   one line naming it, exit 3. A traceback never reaches the terminal.
+* no error, but the calibration's verdict is FAIL against the config's ``acceptance`` bounds (``run``,
+  ``reprocess``) -> exit 4, every output written (the commands decide it; it is not an error)
 """
 from __future__ import annotations
 
@@ -21,10 +23,12 @@ from pathlib import Path
 
 from campaign.errors import CampaignError, ConfigError, DataError, PlausibilityError, Terminated
 
+# The exit codes, one table for the CLI (campaign.cli.common re-exports them; README "Exit codes")
 EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_BAD_INPUT = 2
-EXIT_CRASH = 3
+EXIT_FAILED = 1                 # run failed or paused, or a system failure under a valid path
+EXIT_BAD_INPUT = 2              # config, data, path, plausibility, identity
+EXIT_CRASH = 3                  # internal error (crash report)
+EXIT_ACCEPTANCE_FAIL = 4        # the outputs are written; the verdict against acceptance is FAIL
 EXIT_INTERRUPTED = 130
 
 # errno values meaning "the path you gave cannot be used" (input) rather than "the system failed" (run)
@@ -136,7 +140,7 @@ def _guarded(run, argv, run_dir_hint, fail) -> int:
                 code = run()
         finally:
             signals.disarm()                    # the exit code is being decided: a signal is recorded, not raised
-        for text in (_unique_warnings(caught) if code == EXIT_OK else []):   # one line each, success only
+        for text in (_unique_warnings(caught) if code in (EXIT_OK, EXIT_ACCEPTANCE_FAIL) else []):   # outputs written
             fail(f"warning: {text}", code)
         return code
     except BaseException as exc:  # noqa: BLE001 - this IS the boundary

@@ -7,12 +7,13 @@ Each registers itself with :func:`campaign.cli.common.command`; each handler rec
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
 
-from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
-                                 overwrite_argument, print_plausibility, width_argument)
+from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout,
+                                 command, overwrite_argument, print_plausibility, width_argument)
 from campaign.config.load import load_cell
 from campaign.errors import DataError
 from campaign.calibrate.plausibility import forced
@@ -27,14 +28,25 @@ def _config_argument(parser: argparse.ArgumentParser) -> None:
 def cmd_validate(args: argparse.Namespace) -> int:
     """Load and validate CONFIG (the checks of every command, the cell model's included); print a one-line
     summary."""
-    cfg = load_cell(args.config).config
+    cell = load_cell(args.config)
+    cfg = cell.config
     _stdout().print(
         f"OK {cfg.source_path}: {cfg.name}: {cfg.robot.model}, {cfg.robot.n_joints} joints, "
         f"robot {cfg.robot.url}, tracker {cfg.tracker.url}",
         style="green",
         markup=False,
     )
+    _warn_acceptance(cell)
     return EXIT_OK
+
+
+def _warn_acceptance(cell, plan=None) -> None:
+    """One warning line on stderr per acceptance bound below what the noise the specs predict allows (at the plan's
+    test points when there is a plan)."""
+    from campaign.plan.acceptance import acceptance_warnings
+
+    for line in acceptance_warnings(cell, plan):
+        _stderr().print(f"warning: {line}", style="yellow", markup=False)
 
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,7 +81,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK
     _print_calibration(out, result.processed.report)
     out.print(f"run directory {result.run_dir}: " + ", ".join(run_files(result.processed.report)), markup=False)
-    return EXIT_OK
+    return _verdict_exit(result.processed.report, result.run_dir)
 
 
 def _print_calibration(out: Console, report) -> None:
@@ -105,6 +117,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         check_file(args.csv, args.overwrite, "--csv")
     plan = build_plan(cell)
     render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
+    _warn_acceptance(cell, plan)
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
@@ -138,7 +151,20 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     out = _stdout()
     _print_calibration(out, processed.report)
     out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
-    return EXIT_OK
+    return _verdict_exit(processed.report, args.out)
+
+
+def _verdict_exit(report, out_dir: Path) -> int:
+    """EXIT_ACCEPTANCE_FAIL with one line on stderr when the verdict against ``acceptance`` is FAIL (the outputs are
+    written all the same), else EXIT_OK."""
+    from campaign.calibrate.summary import FAIL
+
+    v = None if report.summary is None else report.summary.verdict
+    if v is None or v.result != FAIL:
+        return EXIT_OK
+    _stderr().print(f"acceptance FAIL ({', '.join(v.failed)} exceeded on the held-out test set): every output is "
+                    f"written in {out_dir}; exit {EXIT_ACCEPTANCE_FAIL}", style="red", markup=False)
+    return EXIT_ACCEPTANCE_FAIL
 
 
 def _select_arguments(parser: argparse.ArgumentParser) -> None:
@@ -170,7 +196,9 @@ def cmd_select(args: argparse.Namespace) -> int:
     ds = load_source(args.data).dataset
     with forced(args.force):
         sel = select_rows(ds, cell, args.points)
-    write_csv(args.out, ds.with_order_context().subset(sel.keep))   # each kept row: how the robot reached it
+    subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
+    origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
+    write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
     render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 

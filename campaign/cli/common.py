@@ -1,4 +1,5 @@
-"""What every subcommand module shares: exit codes, the command registry, consoles, plausibility lines.
+"""What every subcommand module shares: exit codes (the table is :mod:`campaign.cli.boundary`'s), the command
+registry, consoles, plausibility lines.
 
 :mod:`campaign.cli.entry` builds the parser from the registry; the subcommand modules (``commands``,
 ``diagnose``, ``report``) register into it. They import this module, never each other.
@@ -12,13 +13,11 @@ from typing import TYPE_CHECKING
 
 from rich.console import Console
 
+from campaign.cli.boundary import (EXIT_ACCEPTANCE_FAIL, EXIT_BAD_INPUT, EXIT_CRASH, EXIT_FAILED,  # noqa: F401
+                                   EXIT_INTERRUPTED, EXIT_OK)                                      # (the one table)
+
 if TYPE_CHECKING:                      # the calibration modules load when a command needs them
     from campaign.calibrate.plausibility import Plausibility
-
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
 
 Handler = Callable[[argparse.Namespace], int]
 Configure = Callable[[argparse.ArgumentParser], None]

@@ -30,11 +30,14 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
     from campaign.cli import commands, diagnose, importing, report  # noqa: F401  (registration order = help order)
+    from campaign.run.traceability import software_version
 
     parser = _Parser(
         prog="campaign",
         description="Industrial-robot accuracy campaigns with a laser tracker.",
     )
+    parser.add_argument("--version", action="version", version=f"campaign {software_version()}",
+                        help="print the version of the campaign software and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for cmd in COMMANDS.values():
         child = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)

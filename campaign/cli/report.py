@@ -1,7 +1,7 @@
 """``campaign report``, ``campaign export`` and ``campaign iso9283``.
 
     campaign report RUN_DIR [--out report.html]
-    campaign export MODEL.json [--urdf robot.urdf --config CONFIG [--effort-nm N[,N...]]] [--dh-csv dh.csv]
+    campaign export MODEL.json [--urdf robot.urdf [--config CONFIG] [--effort-nm N[,N...]]] [--dh-csv dh.csv]
                    [--robodk robodk.txt] [--name NAME]
     campaign iso9283 CONFIG [--model MODEL.json] [--out RUN_DIR]
 
@@ -37,7 +37,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _export_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL.json", type=Path, help="model.json written by run or reprocess")
     parser.add_argument("--urdf", type=Path, metavar="FILE",
-                        help="URDF of the calibrated chain (tool = fixed link); needs --config for the joint limits")
+                        help="URDF of the calibrated chain (tool = fixed link); its joint limits come from --config, or from "
+                             "RUN/config.yaml when MODEL.json is a run's")
     parser.add_argument("--config", help="campaign YAML of the cell: joint limits and robot.max_joint_speed_deg_s "
                                          "for the URDF")
     parser.add_argument("--effort-nm", type=_torques, metavar="N[,N...]",
@@ -62,8 +63,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         if path is not None:
             check_file(path, args.overwrite, option)
     model = load_model(args.model)
-    limits = _urdf_limits(args, model) if args.urdf and args.config else None     # export: --urdf needs them
+    config = args.config or (_run_config(args.model) if args.urdf else None)
+    limits = _urdf_limits(args, model, config) if args.urdf and config else None     # export: --urdf needs them
     files = export(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
+    if limits is not None and not args.config:
+        _stdout().print(f"URDF joint limits and speeds from {config} (the config of the run that wrote "
+                        f"{args.model.name}; --config CONFIG to take another)", markup=False)
     _stdout().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
     if limits is not None and limits.effort_nm is None:
         _stdout().print("URDF: joint effort limits omitted (no --effort-nm); tools that require them (urdfdom, "
@@ -81,13 +86,22 @@ def _torques(text: str) -> tuple[float, ...]:
     return values
 
 
-def _urdf_limits(args: argparse.Namespace, model):
-    """The URDF's joint limits from --config (which must describe the model's robot) and --effort-nm."""
+def _run_config(model: Path) -> Path | None:
+    """The config of the run whose directory holds ``model`` (RUN/config.yaml), None elsewhere."""
+    from campaign.run.output_dirs import is_run_dir
+
+    config = model.parent / "config.yaml"
+    return config if model.parent.is_dir() and is_run_dir(model.parent) and config.is_file() else None
+
+
+def _urdf_limits(args: argparse.Namespace, model, config):
+    """The URDF's joint limits from ``config`` (--config or the run's; it must describe the model's robot) and
+    --effort-nm."""
     from campaign.config.load import load_cell
     from campaign.correct.targets import check_model_fits
     from campaign.report.export import UrdfLimits
 
-    cell = load_cell(args.config)
+    cell = load_cell(config)
     check_model_fits(cell, model, str(args.model))
     return UrdfLimits.of_config(cell.config, args.effort_nm)
 

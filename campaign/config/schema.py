@@ -12,7 +12,7 @@ from typing import Any
 
 # tracker.uncertainty: robocal owns the class and its numerics; the YAML section requires the four MPE terms
 # (micrometres, micrometres per metre) and takes coverage_k (default 2), see campaign.config.load._uncertainty
-from robocal.noise import TrackerUncertainty
+from robocal.noise import TrackerUncertainty, noise_max_mm
 
 from campaign.config.plan_schema import PlanConfig
 from campaign.config.values import Matrix4, Vec3
@@ -296,6 +296,14 @@ class AcceptanceConfig:
     @property
     def configured(self) -> bool:
         return self.max_rms_mm is not None or self.max_mm is not None
+
+    def below_noise(self, floor_mm: float, n_test: int) -> tuple[str, ...]:
+        """The bounds a perfect model fails more often than not on noise alone: ``max_rms_mm`` below the noise floor
+        ``floor_mm`` (3-D RMS, mm), ``max_mm`` below the median largest of ``n_test`` noise-only errors
+        (:func:`robocal.noise.noise_max_mm`)."""
+        rms = self.max_rms_mm is not None and self.max_rms_mm < floor_mm
+        big = self.max_mm is not None and n_test > 0 and self.max_mm < noise_max_mm(floor_mm, n_test)
+        return ("max_rms_mm",) * rms + ("max_mm",) * big
 
 
 @dataclass(frozen=True, slots=True)

@@ -79,6 +79,7 @@ class Dataset:
     env_humidity_pct: np.ndarray | None = None
     cov_mm2: np.ndarray | None = None  # (N, 3, 3) mm^2 from the tracker's own statistics (logs only), or None
     order_context: OrderContext | None = None  # a subset's rows' places in the order they were measured in
+    provenance: str = ""        # how the rows reached this dataset ("imported from FILE (campaign import ...)"), or ""
 
     def __post_init__(self) -> None:
         put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731

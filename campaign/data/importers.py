@@ -128,4 +128,6 @@ def import_target_dif(calib_csv: str | os.PathLike, test_csv: str | os.PathLike 
         qs.append(q)
         ps.append(target + dif_sign * dif)
     source = str(calib_csv) if test_csv is None else f"{calib_csv} + {test_csv}"
-    return Dataset(tuple(ids), tuple(sets), np.vstack(qs), np.vstack(ps), source=source)
+    files = str(calib_csv) if test_csv is None else f"{calib_csv} (calib) and {test_csv} (test)"
+    return Dataset(tuple(ids), tuple(sets), np.vstack(qs), np.vstack(ps), source=source,
+                   provenance=f"imported from {files} (campaign import target-dif)")

@@ -30,7 +30,9 @@ Format (one row per measurement, rows in measurement order)::
 
 Header names are matched case-insensitively and may come in any order;
 unknown or repeated columns are errors.  Blank lines and lines starting with
-``#`` are ignored; a UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
+``#`` are ignored, but for a ``# provenance: TEXT`` line before the header: where the rows came from
+(``campaign import`` and ``campaign select`` write one; :attr:`Dataset.provenance`).
+A UTF-8 BOM is tolerated.  The separator is ``,``, or ``;``
 when the header uses ``;`` -- then a decimal comma (``1,5``) is accepted too.
 Fields may be double-quoted but not span lines.  A text cell (``point_id``, ``nest_id``) that a spreadsheet would
 run as a formula is written with a leading ``'`` and read back without it (:mod:`campaign.io.csv_cells`).
@@ -57,6 +59,7 @@ import numpy as np
 from campaign.errors import DataError
 from campaign.io.csv_cells import neutralise, restore
 from campaign.io.durable import atomic_write
+from campaign.io.terminal_text import clean
 
 from .dataset import SETS, Dataset, OrderContext  # noqa: F401  (SETS and Dataset are re-exported)
 from .interchange_reader import (_SMR, _blank_cells, _check_ids, _check_scalars, _data_table, _is_skipped, _nest_ids,
@@ -119,7 +122,16 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra["order_context"] = OrderContext(o[:, :n], np.radians(o[:, n:2 * n]), np.radians(o[:, 2 * n:3 * n]),
                                               o[:, 3 * n])
     return Dataset(tuple(ids), tuple(sets), values[:, :n], values[:, n : n + 3], source=src, nest_id=nest_ids,
-                   **extra)
+                   provenance=_provenance(lines[:header_idx]), **extra)
+
+
+PROVENANCE = "# provenance:"
+
+
+def _provenance(comments: list[str]) -> str:
+    """The text of the last ``# provenance:`` line before the header ("" without one)."""
+    found = [ln.strip()[len(PROVENANCE):].strip() for ln in comments if ln.strip().startswith(PROVENANCE)]
+    return found[-1] if found else ""
 
 
 def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
@@ -135,6 +147,8 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     header = _header(dataset)
     _check_writable(dataset, src, numbers, _blank_allowed(dataset, header))
     lines = [",".join(header)]
+    if dataset.provenance:                      # one line: control characters and line breaks escaped
+        lines.insert(0, f"{PROVENANCE} " + clean(dataset.provenance).replace("\n", "\\n"))
     nest_ids = dataset.nest_id if dataset.nest_id is not None else None
     cell = (lambda v: "" if v != v else repr(v)) if np.isnan(numbers).any() else repr  # noqa: E731
     for i, (pid, set_name, row) in enumerate(zip(dataset.point_id, dataset.set, numbers.tolist())):

@@ -32,3 +32,9 @@ def load_source(source: str | os.PathLike) -> Source:
         return Source(read_csv(path))
     contents = read_log(path)
     return Source(dataset_from_log(contents), contents)
+
+
+def csv_provenance(dataset: Dataset) -> str:
+    """Where the rows of data without a run log came from, for its report: the CSV's provenance line (``campaign
+    import``: "imported from FILE ...") or the file itself, and that no device is recorded with them."""
+    return f"{dataset.provenance or f'read from the interchange CSV {dataset.source}'}; devices not recorded"

@@ -263,7 +263,8 @@ def export(model: CalibratedModel, urdf: Path | None = None, dh_csv: Path | None
     written = []
     if urdf:
         if limits is None:
-            raise DataError("--urdf", "the URDF's joint limits come from the config: give --config CONFIG")
+            raise DataError("--urdf", "the URDF's joint limits come from the config: give --config CONFIG (the model is not in a "
+                                     "run directory with its config.yaml)")
         atomic_write(Path(urdf), urdf_text(model, limits, name).encode())
         written.append(Path(urdf))
     if dh_csv:

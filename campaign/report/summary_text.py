@@ -32,9 +32,11 @@ def simulated_banner(devices) -> str | None:
 
 
 def origin(s: Summary) -> str | None:
-    """A line when the devices are not recorded (data from a CSV), else None."""
-    return None if s.simulated_devices is not None else \
-        "devices not recorded (data from an interchange CSV): whether they were simulated is not known"
+    """A line when the devices are not recorded (data from a CSV: where they came from), else None."""
+    if s.simulated_devices is not None:
+        return None
+    where = s.provenance or "devices not recorded (data from an interchange CSV)"
+    return f"{where}: whether they were simulated is not known"
 
 
 def model_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
@@ -78,7 +80,7 @@ def verdict_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
     if v.result in (PASS, FAIL):
         failed = text(f" (exceeded: {', '.join(v.failed)})") if v.failed else text("")
         return (text(f"verdict: {v.result.upper()} against acceptance ") + text(", ").join(bounds)
-                + text(" on the held-out test set") + failed)
+                + text(" on the held-out test set") + failed + _below_noise(v, num, text))
     hint = text(" (set acceptance.max_rms_mm, max_mm)") if not bounds else text("")
     return text(f"verdict: none: {v.result}") + hint
 
@@ -121,6 +123,18 @@ def diagnosis_line(d: dict, num: Callable[..., str], label: Callable[[dict], str
     else:
         out += text("; nothing unexplained above the noise floor")
     return out
+
+
+def _below_noise(v, num: Num, text: Callable[[str], str]) -> str:
+    """The bounds a perfect model would fail on the measured noise alone, or nothing."""
+    notes = {"max_rms_mm": text("RMS bound below the noise floor ") + num("noise_floor_mm", "floor") + text(" mm"),
+             "max_mm": text("max bound below ") + num("verdict.noise_max_mm", "mm")
+             + text(" mm, the median largest of ") + num("held_out.n", "count") + text(" errors of noise alone")}
+    if not v.below_noise:
+        return text("")
+    which = "this bound" if len(v.below_noise) == 1 else "these bounds"
+    return (text(f"; note: a perfect model would fail {which} more often than not: ")
+            + text("; ").join(notes[name] for name in v.below_noise))
 
 
 def reason_lines(s: Summary, text: Callable[[str], str] = str) -> list[str]:

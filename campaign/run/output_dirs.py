@@ -81,6 +81,28 @@ def is_run_dir(directory: Path) -> bool:
     return (marker is not None and marker["kind"] == RUN) or (Path(directory) / LOG_NAME).exists()
 
 
+RUN_FILES = ("config.yaml", LOG_NAME, "model.json")
+"""What a finished run's directory holds for the commands that go back to its cell (``verify``)."""
+
+
+def check_finished_run(path: str | Path, command: str) -> Path:
+    """``path`` as a finished run's directory (:data:`RUN_FILES`); else DataError (exit 2) saying what ``command``
+    needs, and why another command's output directory (``reprocess``: no robot measured it) cannot serve."""
+    directory = Path(path)
+    needs = f"{command} needs a run directory with {', '.join(RUN_FILES)} (written by campaign run)"
+    if not directory.is_dir():
+        raise DataError(str(directory), f"no such run directory: {needs}")
+    marker = read_marker(directory)
+    if marker is not None and marker["kind"] != RUN:
+        origin = f" from {marker['source']}" if marker["source"] else ""
+        raise DataError(str(directory), f"written by campaign {marker['kind']}{origin}, not by a run: no robot "
+                                        f"measured it, so it cannot be verified on the cell; {needs}")
+    missing = [name for name in RUN_FILES if not (directory / name).is_file()]
+    if missing:
+        raise DataError(str(directory), f"not a finished run (no {', '.join(missing)}): {needs}")
+    return directory
+
+
 def check_dir(path: str | Path, kind: str, overwrite: bool = False, source: str | None = None,
               option: str = "--out") -> Claim:
     """Check that ``kind`` may write into ``path`` (see module doc); DataError (nothing written) otherwise."""

@@ -1,12 +1,14 @@
 """Headless Chromium driven over the DevTools protocol (websocket-client), for the HTML report tests.
 
-Chromium is Debian's package (``.ci/run`` installs it); the browser gets a new empty profile, no network
-features, and is killed by its own process id when the page is done.
+Chromium is Debian's package (``tests/run``, the README's test command, installs it and sets
+``CAMPAIGN_TESTS_BROWSER=required``: a browser test then fails without it, never skips); the browser gets a new
+empty profile, no network features, and is killed by its own process id when the page is done.
 """
 from __future__ import annotations
 
 import base64
 import json
+import os
 import shutil
 import subprocess
 import time
@@ -20,6 +22,11 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 def chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def skip_without_browser() -> bool:
+    """Skip a browser test: Chromium is missing and the run does not require it (``tests/run`` does)."""
+    return chromium() is None and os.environ.get("CAMPAIGN_TESTS_BROWSER") != "required"
 
 
 @dataclass

@@ -45,6 +45,7 @@ def test_mock_campaign_reaches_the_noise_floor(full_run):
     for stage in report.stages.values():
         assert None not in (stage.test.max_mm, stage.test.mean_mm, stage.test.rms_mm, stage.test.n)
     assert report.unidentifiable and report.parameters
+    assert report.summary.verdict.result == "pass" and not report.summary.verdict.below_noise  # configs' acceptance
 
 
 def test_reprocess_of_exported_csv_reproduces_the_live_report(full_run, tmp_path):

@@ -178,7 +178,7 @@ def test_a_subset_keeps_how_the_robot_reached_each_pose(tmp_path, capsys):
         data, cfg = truth_csv(d, simulate((effect,), 1005 - k))
         code, _, err = cli(capsys, "select", data, "--config", cfg, "--points", 100, "--out", d / "sub.csv")
         assert code == 0, err
-        assert (d / "sub.csv").read_text().splitlines()[0].endswith(",order")
+        assert (d / "sub.csv").read_text().splitlines()[1].endswith(",order")     # after its provenance line
         cell = load_cell(cfg)
         everything = calibrate_dataset(read_csv(data), cell).report.final.test.rms_mm
         chosen = calibrate_dataset(read_csv(d / "sub.csv"), cell).report.final.test.rms_mm

@@ -10,6 +10,7 @@ from tests.campaign.helpers import ROOT
 
 def _with(tmp_path, acceptance):
     doc = yaml.safe_load((ROOT / "configs/irb2600.yaml").read_text())
+    doc.pop("acceptance", None)
     if acceptance is not None:
         doc["acceptance"] = acceptance
     path = tmp_path / "c.yaml"

@@ -7,11 +7,11 @@ import pytest
 import yaml
 
 from campaign.cli import main
-from tests.campaign.browser import Chromium, chromium
+from tests.campaign.browser import Chromium, skip_without_browser
 from tests.campaign.helpers import ROOT, read_report, small_config
 from tests.campaign.report.html_page import empty_columns, read_page, sentence_joins
 
-needs_browser = pytest.mark.skipif(chromium() is None, reason="chromium not installed (.ci/run installs it)")
+needs_browser = pytest.mark.skipif(skip_without_browser(), reason="chromium not installed (tests/run installs it)")
 
 
 def _lookup(doc, key):

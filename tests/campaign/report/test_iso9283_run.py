@@ -130,11 +130,11 @@ def test_iso_report_in_headless_chromium(calibrated_iso, tmp_path):
     RP line with the tracker's contribution beside the measured and the robot's RP (numbers equal report.json),
     traceability with the serials and the model, sign-off, glossary entries for AP, RP, AD and RD; the link to the
     calibration report resolves, and that page links back to this one."""
-    from tests.campaign.browser import Chromium, chromium
+    from tests.campaign.browser import Chromium, skip_without_browser
     from tests.campaign.report.test_html import check_numbers
 
-    if chromium() is None:
-        pytest.skip("chromium not installed (.ci/run installs it)")
+    if skip_without_browser():
+        pytest.skip("chromium not installed (tests/run installs it)")
     cal, iso, _ = calibrated_iso
     rep = json.loads((iso / "report.json").read_text())
     probe = """(() => { const q = s => document.querySelector(s), t = s => (q(s) || {}).innerText || '';

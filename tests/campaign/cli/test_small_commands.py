@@ -1,0 +1,35 @@
+"""What a new user hits at once: ``campaign --version``, and the import command that configs/ur5.yaml's comment
+gives (it runs as written, from the repository's root)."""
+from __future__ import annotations
+
+import re
+import shlex
+from importlib.metadata import version
+
+import pytest
+
+from campaign.cli import main
+from tests.campaign.helpers import ROOT
+from tests.campaign.hostile import run_campaign_process
+
+
+@pytest.mark.system
+def test_version_prints_the_installed_version(tmp_path):
+    code, out, err = run_campaign_process(["--version"], tmp_path)
+    assert (code, out, err) == (0, f"campaign {version('robot-accuracy-campaign')}\n", "")
+
+
+@pytest.mark.unit
+def test_the_ur5_config_comment_gives_commands_that_run(tmp_path, monkeypatch, capsys):
+    comments = " ".join(line.lstrip("# ") for line in (ROOT / "configs" / "ur5.yaml").read_text().splitlines()
+                        if line.startswith("#"))
+    commands = [shlex.split(c) for c in re.findall(r"`(campaign [^`]+)`", comments)]
+    assert [c[1] for c in commands] == ["import", "reprocess"], commands
+    monkeypatch.chdir(ROOT)                                   # "from the repository's root"
+    importing = commands[0][1:]
+    importing[importing.index("--out") + 1] = str(tmp_path / "data.csv")
+    assert main(importing) == 0, capsys.readouterr().err
+    assert "1000 calib + 20 test rows" in capsys.readouterr().out
+    from campaign.cli.entry import build_parser
+    args = build_parser().parse_args(commands[1][1:])         # the next command parses; tests/campaign/
+    assert args.config == "configs/ur5.yaml"                  # test_ur5_public.py runs it
