@@ -45,7 +45,7 @@ class CalibrationReport:
     ``n`` row counts (calib/test/check/rejected); ``stages`` per-stage error statistics on the test and calib rows
     (mm, keyed by :data:`STAGES` names); ``noise_floor_mm`` with its source ("repeats" or "specs") and both
     candidates; the identified ``parameters`` (the rows of model.json's parameter record, from the fit named by
-    ``parameters_fit``; ``parameters_geometry_only``: the geometric fit's, when the exported model also has
+    ``parameters_fit``, whose unit-weight error is ``parameters_sigma0``; ``parameters_geometry_only``: the geometric fit's, when the exported model also has
     physical effects) and their diagnostics; ``T_tracker_base`` (4, 4) registration (mm);
     the method and effect choices; ``preparation`` (the JSON section of ``campaign.calibrate.prepare``); optional
     ``multi_smr``; ``stop`` (``plan.stop: auto`` runs: every refit's predicted held-out RMS curve and decision,
@@ -90,6 +90,7 @@ class CalibrationReport:
     summary: Summary | None = None
     parameters_fit: str | None = None
     parameters_geometry_only: tuple[ParameterRow, ...] | None = None
+    parameters_sigma0: float | None = None          # the unit-weight error of the fit the parameters come from
 
     @property
     def final(self) -> StageResult | None:
@@ -150,8 +151,9 @@ class CalibrationReport:
             record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
             record_field(data, "summary", Summary.from_dict, True), text_field(data, "parameters_fit", True),
-            records_field(data, "parameters_geometry_only", ParameterRow.from_dict, True))
+            records_field(data, "parameters_geometry_only", ParameterRow.from_dict, True),
+            opt("parameters_sigma0"))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
-PARAMETER_KEYS = ("parameters_fit", "parameters_geometry_only")     # written after ``parameters`` when present
+PARAMETER_KEYS = ("parameters_fit", "parameters_sigma0", "parameters_geometry_only")     # written after ``parameters`` when present

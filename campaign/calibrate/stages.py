@@ -307,6 +307,7 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
         effects=_effects_report(selection, elastic), residual_choice=ResidualChoice.of(choice), plausibility=plaus,
         residual_cv=_residual_cv_summary(choice), preparation=prep.report, multi_smr=multi,
         cell=cell_summary(cfg), points=points, parameters_fit=model.parameters.fit,
+        parameters_sigma0=model.parameters.sigma0,
         parameters_geometry_only=None if elastic is None else parameter_rows(result.table()))
     return Calibrated(report, model, result, table)
 

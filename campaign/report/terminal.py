@@ -52,7 +52,7 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
                       f"({100 * cv.gain:+.0f} %): {verdict}")
     render_preparation(console, report.preparation)
     console.print(f"noise floor {floor_mm(floor)} mm (from {report.noise_floor_source}; specs "
-                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   sigma0 {report.sigma0:.2f}   rejected points "
+                  f"{floor_mm(report.noise_floor_specs_mm)} mm)   {_sigma0(report)}   rejected points "
                   f"{report.n.rejected}")
     console.print(f"condition number {report.condition_number:.0f} ({condition_scale(report.condition_number)}: good "
                   f"<= 100, fair <= 10000) {condition_meaning(sum(p.identified for p in report.parameters), False)}",
@@ -328,3 +328,11 @@ def render_iso(console, report: dict) -> None:
                   f"{report['decision_rule']}", highlight=False)
     if report["cube"]["note"]:
         console.print(f"cube: {report['cube']['note']}", highlight=False)
+
+
+def _sigma0(report: CalibrationReport) -> str:
+    """The unit-weight error of the fit the parameter table comes from, and the geometric estimator's beside it
+    when they differ (the exported model has physical effects)."""
+    if report.parameters_sigma0 is None or report.parameters_fit in (None, "geometry"):
+        return f"sigma0 {report.sigma0:.2f}"
+    return f"sigma0 {report.parameters_sigma0:.2f} ({report.parameters_fit} fit; geometry-only {report.sigma0:.2f})"
