@@ -273,7 +273,7 @@ def criterion_effects(kin: Kinematics, q_rad: np.ndarray, payload_kg: float) -> 
     the loaded joints, gear harmonics of every joint, wrist coupling): those a choice of poses must reveal.
     Backlash and thermal terms depend on the order and time of the measurements, not on the poses."""
     meta = {"payload_kg": np.full(len(np.atleast_2d(q_rad)), float(payload_kg))}
-    out = [c for c in candidates(kin, q_rad, meta, GravityModel())[0] if not c.build(kin.n).needs]
+    out = [c for c in candidates(kin, q_rad, meta, GravityModel.of_robot(kin.n))[0] if not c.build(kin.n).needs]
     return [c.with_options(harmonics=(1, 2)) if c.name == "gear_cyclic" else c
             for c in out]                    # the first two harmonics: what a pose set must reveal of a gear error
 

@@ -17,7 +17,7 @@ Joint numbers in names and ``joints`` are 1-based. Gravity acts through the one 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping
 
 import numpy as np
@@ -129,6 +129,17 @@ DEFAULT_LINK_MASSES_KG = (0.0, 35.0, 40.0, 12.0, 4.0, 1.0)
 MOVING_SHARE = 0.7      # the moving links carry ~70 % of a 6-axis arm's datasheet mass (base and J1 column the rest)
 
 
+def default_link_masses(n: int) -> tuple[float, ...]:
+    """Default lumped link masses (kg) of an n-joint arm: ``DEFAULT_LINK_MASSES_KG`` for six joints; for another
+    count the same mass distribution along the chain (its cumulative share at each link's end, resampled from
+    six links to n by chain position): heavy upper and lower arm, light wrist, the same total."""
+    if n == len(DEFAULT_LINK_MASSES_KG):
+        return DEFAULT_LINK_MASSES_KG
+    cum = np.concatenate([[0.0], np.cumsum(DEFAULT_LINK_MASSES_KG)])
+    at = np.interp(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, len(cum)), cum)
+    return tuple(float(m) for m in np.diff(at))
+
+
 @dataclass(frozen=True)
 class GravityModel:
     """The one gravity-torque model of the calibration: lumped link masses (kg, one per joint's link), the
@@ -145,7 +156,7 @@ class GravityModel:
     def of_robot(cls, n: int, link_masses_kg=None, mass_kg: float | None = None,
                  payload_cog_flange_mm=(0.0, 0.0, 0.0), gravity_base=(0.0, 0.0, -1.0)) -> "GravityModel":
         """From the config: explicit link masses, else the size law of the robot's mass class, else the default."""
-        shares = _link_masses(n, DEFAULT_LINK_MASSES_KG)
+        shares = np.asarray(default_link_masses(n), float)
         if link_masses_kg is not None:
             masses, source = _link_masses(n, link_masses_kg), "config"
         elif mass_kg is not None:
@@ -155,6 +166,13 @@ class GravityModel:
         g = np.asarray(gravity_base, float)
         return cls(tuple(float(m) for m in masses), tuple(float(v) for v in payload_cog_flange_mm),
                    tuple(float(v) for v in g / np.linalg.norm(g)), source)
+
+    def sized(self, n: int) -> "GravityModel":
+        """This model for an n-joint chain: the default masses resampled to n links (``default_link_masses``);
+        configured masses already have one per joint."""
+        if self.source != "default" or len(self.link_masses_kg) == n:
+            return self
+        return replace(self, link_masses_kg=default_link_masses(n))
 
     def options(self) -> tuple[tuple[str, object], ...]:
         """Keyword options of the elastic effect factories (stored with a fitted effect in model.json)."""
@@ -170,7 +188,7 @@ def _link_masses(n, masses):
 
 
 # ---------------------------------------------------------------- effect factories
-def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAULT_LINK_MASSES_KG,
+def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=None,
                      payload_cog_flange_mm=None, gravity_base=(0.0, 0.0, -1.0), n_joints: int = 6) -> Effect:
     """Joint compliance under gravity.
 
@@ -195,7 +213,8 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAUL
         raise ValueError(f"unknown compliance form {form!r} (expected gravity, levers or trig)")
 
     def basis(kin, q, meta):
-        tau = gravity_torques(kin, q, _link_masses(kin.n, link_masses_kg), _meta(meta, "payload_kg", len(q)),
+        masses = default_link_masses(kin.n) if link_masses_kg is None else link_masses_kg
+        tau = gravity_torques(kin, q, _link_masses(kin.n, masses), _meta(meta, "payload_kg", len(q)),
                               payload_cog_flange_mm, gravity_base)
         dq = _zeros_dq(q, len(joints))
         for k, j in enumerate(joints):
@@ -306,13 +325,21 @@ def thermal_drift(tau_s: float = 2700.0, joints=(2, 3)) -> Effect:
                   basis, typical=(1.2e-4,) + tuple(8.7e-5 for _ in joints), needs=("t_s",))
 
 
-def axis_coupling() -> Effect:
-    """Wrist coupling / ratio error: dq6 = e56 q5 + e46 q4, dq5 = e45 q4 (dimensionless)."""
+def axis_coupling(joints=(4, 5, 6)) -> Effect:
+    """Wrist coupling / ratio error of the wrist joints (a, b, c) (1-based; J4-J6 of a 6-axis arm, J5-J7 of a
+    7-axis one): dq_c = e_bc q_b + e_ac q_a, dq_b = e_ab q_a (dimensionless)."""
+    js = tuple(int(j) for j in joints)
+    if len(js) != 3 or js[1] != js[0] + 1 or js[2] != js[1] + 1 or js[0] < 1:
+        raise ValueError(f"axis_coupling joints: the three consecutive joints of a spherical wrist (e.g. [5, 6, 7]), "
+                         f"got {list(js)}")
+    a, b, c = js
+
     def basis(kin, q, meta):
         dq = _zeros_dq(q, 3)
-        dq[:, 5, 0], dq[:, 5, 1], dq[:, 4, 2] = q[:, 4], q[:, 3], q[:, 3]
+        dq[:, c - 1, 0], dq[:, c - 1, 1], dq[:, b - 1, 2] = q[:, b - 1], q[:, a - 1], q[:, a - 1]
         return Basis(dq=dq)
-    return Effect("axis_coupling", (4, 5, 6), ("e56", "e46", "e45"), "1", basis, typical=(4e-3, 2e-3, 2e-3))
+    return Effect("axis_coupling", (a, b, c), (f"e{b}{c}", f"e{a}{c}", f"e{a}{b}"), "1", basis,
+                  typical=(4e-3, 2e-3, 2e-3))
 
 
 def registration_drift(clock: str = "t_s", degree: int = 1, span: float = 3600.0) -> Effect:
@@ -411,7 +438,7 @@ FACTORY_KEYS = {"joint_compliance": {"joints", "form", "link_masses_kg", "payloa
                 "payload_deflection": {"joints", "payload_cog_flange_mm", "gravity_base"},
                 "gear_cyclic": {"joint", "harmonics"}, "backlash": {"joints"},
                 "readback_lag": {"joints", "memory_joints"}, "thermal_drift": {"tau_s", "joints"},
-                "axis_coupling": set(), "registration_drift": {"clock", "degree", "span"}}
+                "axis_coupling": {"joints"}, "registration_drift": {"clock", "degree", "span"}}
 
 
 def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:

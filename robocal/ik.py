@@ -10,8 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .chains import arm_angle_jacobian, branch_signs, wrap_rad
 from .frames import matrix_to_rotvec, transform_points
 from .kinematics import Kinematics, chain, within_limits
+
+NULL_STEP_RAD = 0.2       # largest self-motion step of one round towards the rest pose
+NULL_ROUNDS = 12
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,8 +37,9 @@ def pose_error(kin: Kinematics, q_rad, p_target_base_mm, R_target_base, point_mm
     return e_p, matrix_to_rotvec(R_target_base @ np.swapaxes(T[:, :3, :3], 1, 2))
 
 
-def _evaluate(kin, q, p_t, R_t, point, rows, w):
-    """Weighted pose error e (N, m) and Jacobian J (N, m, n) at q from ONE chain evaluation."""
+def _evaluate(kin, q, p_t, R_t, point, rows, w, psi_t=None):
+    """Weighted pose error e (N, m) and Jacobian J (N, m, n) at q from ONE chain evaluation; with arm-angle targets
+    psi_t (N,) rad one more row, the arm-angle error weighted as an orientation."""
     c = chain(kin, q, full=False)
     T = c.T_base_flange
     p = transform_points(T, point)
@@ -43,14 +48,22 @@ def _evaluate(kin, q, p_t, R_t, point, rows, w):
     e = np.concatenate([e_p, e_r], axis=1)[:, rows] * w
     v = np.cross(c.axis, p[:, None, :] - c.origin)
     J = np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(c.axis, 1, 2)], axis=1)[:, rows] * w[None, :, None]
-    return e, J
+    if psi_t is None:
+        return e, J
+    psi, J_psi = arm_angle_jacobian(kin, q)
+    return (np.concatenate([e, w[-1] * wrap_rad(psi_t - psi)[:, None]], axis=1),
+            np.concatenate([J, w[-1] * J_psi[:, None, :]], axis=1))
 
 
 def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.ndarray | None, q_seed_rad: np.ndarray,
              *, point_mm=None, tol_mm: float = 1e-6, tol_rad: float = 1e-9, max_iter: int = 200,
-             length_mm: float = 1000.0, w_bar: float = 1e-6) -> IKResult:
+             length_mm: float = 1000.0, w_bar: float = 1e-6, arm_angle_rad=None, q_rest_rad=None) -> IKResult:
     """Joint angles placing a flange-fixed point (default the SMR) at p_target (N, 3) mm in the base frame
-    with flange orientation R_target (N, 3, 3) (None = position only). q_seed (n,) or (N, n) rad."""
+    with flange orientation R_target (N, 3, 3) (None = position only). q_seed (n,) or (N, n) rad.
+
+    The redundancy of a seven-axis arm (docs/chains.md): ``arm_angle_rad`` (N,) or scalar holds each solution at
+    that arm angle (``robocal.chains.arm_angle_rad``); else ``q_rest_rad`` (n,) takes the solution nearest that
+    joint-space pose along the arm's self-motion; neither: the solution the iteration reaches from the seed."""
     p_t = np.atleast_2d(np.asarray(p_target_base_mm, float))
     N = len(p_t)
     point = kin.p_flange_smr_mm if point_mm is None else np.asarray(point_mm, float)
@@ -58,10 +71,13 @@ def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.nd
     R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (N, 3, 3))
     rows = slice(0, 6) if R_t is not None else slice(0, 3)
     w = np.array([1.0, 1.0, 1.0, length_mm, length_mm, length_mm])[rows]
-    sub = lambda idx: (p_t[idx], None if R_t is None else R_t[idx])
+    psi_t = None if arm_angle_rad is None else np.broadcast_to(np.asarray(arm_angle_rad, float), (N,))
+    if psi_t is not None and R_t is None:
+        raise ValueError("an arm angle is held only with a target orientation")
+    sub = lambda idx: (p_t[idx], None if R_t is None else R_t[idx], None if psi_t is None else psi_t[idx])
 
     active = np.arange(N)
-    e, J = _evaluate(kin, q, p_t, R_t, point, rows, w)
+    e, J = _evaluate(kin, q, p_t, R_t, point, rows, w, psi_t)
     mu = np.ones(N)                     # per-target damping multiplier, raised after a failed step
     it = 0
     for it in range(1, max_iter + 1):
@@ -74,7 +90,8 @@ def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.nd
         H = np.einsum("nij,nik->njk", J, J) + lam
         dq = np.linalg.solve(H, np.einsum("nij,ni->nj", J, e)[..., None])[..., 0]
         q_new = q[active] + dq
-        e_new, J_new = _evaluate(kin, q_new, *sub(active), point, rows, w)
+        p_a, R_a, psi_a = sub(active)
+        e_new, J_new = _evaluate(kin, q_new, p_a, R_a, point, rows, w, psi_a)
         better = np.einsum("ni,ni->n", e_new, e_new) < 2.0 * E
         q[active[better]] = q_new[better]
         e = np.where(better[:, None], e_new, e)
@@ -83,7 +100,36 @@ def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.nd
     e_p, e_r = pose_error(kin, q, p_t, R_t, point)
     pos, rot = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_r, axis=1)
     ok = (pos < tol_mm * 10) & (rot < max(tol_rad * 10, 1e-8))
-    return IKResult(q, ok, pos, rot, it)
+    if psi_t is not None:
+        ok &= np.abs(wrap_rad(psi_t - arm_angle_jacobian(kin, q)[0])) < max(tol_rad * 10, 1e-8)
+    res = IKResult(q, ok, pos, rot, it)
+    if q_rest_rad is not None and psi_t is None and R_t is not None and kin.n > 6:
+        return _nearest_rest(kin, res, p_t, R_t, np.asarray(q_rest_rad, float), point_mm=point, tol_mm=tol_mm,
+                             tol_rad=tol_rad, max_iter=max_iter, length_mm=length_mm, w_bar=w_bar)
+    return res
+
+
+def _nearest_rest(kin: Kinematics, res: IKResult, p_t, R_t, q_rest, **kw) -> IKResult:
+    """Move each converged solution along the arm's self-motion (the null space of its 6 x n Jacobian) to the
+    solution nearest ``q_rest`` (joint-space distance, local), re-converging the pose after every step."""
+    for _ in range(NULL_ROUNDS):
+        q = res.q_rad
+        c = chain(kin, q, full=False)
+        p = transform_points(c.T_base_flange, kw["point_mm"])
+        v = np.cross(c.axis, p[:, None, :] - c.origin)
+        J = np.concatenate([np.swapaxes(v, 1, 2) / kw["length_mm"], np.swapaxes(c.axis, 1, 2)], axis=1)
+        null = np.eye(kin.n) - np.linalg.pinv(J) @ J                          # (N, n, n) projector
+        step = np.einsum("nij,nj->ni", null, q_rest - q)
+        size = np.linalg.norm(step, axis=1)
+        step *= np.minimum(1.0, NULL_STEP_RAD / np.maximum(size, 1e-300))[:, None]
+        step[~res.converged] = 0.0
+        if np.max(size[res.converged], initial=0.0) < 1e-9:
+            break
+        moved = solve_ik(kin, p_t, R_t, q + step, **kw)
+        keep = moved.converged | ~res.converged
+        res = IKResult(np.where(keep[:, None], moved.q_rad, q), res.converged, np.where(keep, moved.pos_err_mm,
+                       res.pos_err_mm), np.where(keep, moved.rot_err_rad, res.rot_err_rad), res.iterations)
+    return res
 
 
 def _converged(e, w, tol_mm, tol_rad):
@@ -95,7 +141,10 @@ def _converged(e, w, tol_mm, tol_rad):
 
 def branch_signature(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """(N, 3) signs (shoulder, elbow, wrist) of a 6R arm's IK branch, computed geometrically:
-    wrist centre in front of/behind J2, forearm turning +/- about J2, and the sign of J5 bending."""
+    wrist centre in front of/behind J2, forearm turning +/- about J2, and the sign of J5 bending. Another chain:
+    ``robocal.chains.branch_signs`` (the side of each alignment of its spherical joints)."""
+    if kin.n != 6:
+        return branch_signs(kin, q_rad)
     c = chain(kin, q_rad)
     o2, o3, w = c.origin[:, 1], c.origin[:, 2], c.origin[:, 4]
     forward = c.dirs[2][0]                          # x axis after joint 1 (the arm's plane direction)
@@ -123,9 +172,12 @@ def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base
     """IK for many targets on q_ref's branch: solve from q_ref, then re-seed each failed target from the
     solution of its nearest solved neighbour (Cartesian distance), a few rounds.
 
-    Returns (q_rad (N, n), ok (N,) bool: converged, inside the limits, on q_ref's branch)."""
+    Returns (q_rad (N, n), ok (N,) bool: converged, inside the limits, on q_ref's branch). A seven-axis arm
+    takes, along its self-motion, the solution nearest q_ref (unless ``arm_angle_rad`` is given)."""
     p_t = np.atleast_2d(np.asarray(p_target_base_mm, float))
     R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (len(p_t), 3, 3))
+    if kin.n > 6 and "arm_angle_rad" not in kw:
+        kw = {**kw, "q_rest_rad": q_ref_rad}
     res = solve_ik(kin, p_t, R_t, q_ref_rad, **kw)
     q, ok = res.q_rad.copy(), reachable(kin, res, q_ref_rad)
     for _ in range(rounds):

@@ -17,7 +17,7 @@ from campaign.errors import ConfigError
 from .cell_model import CellModel
 from .simulation import simulated_effects
 
-SUPPORTED_JOINTS = 6            # plan (wrist singularity), IK branch, ABB confdata and UR write-back are 6R
+SUPPORTED_JOINTS = (4, 7)       # revolute arms of 4 to 7 joints (docs/chains.md: what else is refused and why)
 MAX_PLAN_POINTS = 20_000        # grid + test + check repeats: a real campaign has a few hundred
 MAX_GRID_POINTS = 10_000
 MAX_POOL_CELLS = 20_000         # candidate positions of an optimal plan (x orientations x branches)
@@ -54,10 +54,12 @@ def _check_joint_count(cfg, file: str) -> None:
 
 
 def check_joint_count(n: int, file: str) -> None:
-    """The campaign commands support 6-joint arms only (ConfigError at robot.joints otherwise)."""
-    if n != SUPPORTED_JOINTS:
-        raise ConfigError(file, "robot.joints", f"the campaign supports 6-joint arms (plan, IK branch and "
-                                                f"controller write-back are 6R), got {n} joints")
+    """The campaign commands support arms of 4 to 7 joints (ConfigError at robot.joints otherwise)."""
+    lo, hi = SUPPORTED_JOINTS
+    if not lo <= n <= hi:
+        raise ConfigError(file, "robot.joints", f"the campaign supports arms of {lo} to {hi} joints (fewer cannot "
+                                                f"place and orient an SMR; more have no IK redundancy rule here), "
+                                                f"got {n} joints")
 
 
 def grid_counts(cfg) -> tuple[int, int, int]:

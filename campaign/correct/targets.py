@@ -23,6 +23,7 @@ from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 
 from .bounds import CorrectedTarget, Rejected, check_targets
+from .configuration import configuration_reasons
 
 
 ENSEMBLE = ("multiply", "quaternion")
@@ -204,6 +205,9 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
         T_d = np.zeros((len(idx), 4, 4))
         T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = targets.R_base[idx], targets.p_base_mm[idx], 1.0
         c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q_nom[idx], T_tool)
+        changed = configuration_reasons(kin, c.q_rad, q_nom[idx])
+        rejected += [Rejected(targets.ids[i], why) for i, why in zip(idx, changed) if why]
+        idx, c = _kept(idx, c, [why is None for why in changed])
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
         std = predictive_std_mm(model, c.q_rad)
@@ -219,6 +223,13 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
     return ok_targets, rejected + bad
+
+
+def _kept(idx: np.ndarray, c: Correction, keep) -> tuple[np.ndarray, Correction]:
+    """The targets ``idx`` and their correction where ``keep``."""
+    k = np.asarray(keep, bool)
+    return idx[k], Correction(c.q_rad[k], c.pos_err_mm[k], c.rot_err_rad[k], c.error[k], c.iterations[k],
+                              c.generator[k])
 
 
 def predictive_std_mm(model: CalibratedModel, q_rad: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
+from .configuration import configuration_reasons
 from .targets import _limits_deg, model_pose_fn, run_correction
 from .verify_drift import VerifyDrift
 from .verify_report import VERIFY_FORMAT, VerifyReport
@@ -119,6 +120,7 @@ class VerifyPasses:
         self.held = held_reasons(self.q, self.q0, self.limit, self.lo, self.hi,
                                  self.cfg.correction.max_joint_correction_deg, moved,
                                  self.cfg.correction.max_position_correction_mm)
+        self.held = [h or c for h, c in zip(self.held, configuration_reasons(self.kin, self.q, self.q0))]
         self.safe = np.array([h is None for h in self.held])
         self.q = np.where(self.safe[:, None], self.q, self.q0)    # an unsafe correction is never commanded
         return [PlanPoint(f"{i}.v{self.k}", "verify", tuple(np.degrees(qq)), tuple(pd))

@@ -16,14 +16,16 @@ import json
 import numpy as np
 
 from campaign.config.schema import CampaignConfig
-from robocal.ik import solve_ik, solve_on_branch, wrist_angle_rad
+from robocal.chains import alignment_label, alignment_margin_rad, alignments
+from robocal.ik import solve_ik, solve_on_branch
 from robocal.kinematics import Kinematics
 
 from .motion_safety import PathGuard, with_vias
 from .points import Plan, PlanPoint, Skipped, nest_point_id
 
 
-WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
+WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6 on a 6-axis arm; the
+                           # alignments of robocal.chains on other chains) are not planned
 
 
 def tool_rotation(direction, down=(0.0, 0.0, -1.0)) -> np.ndarray:
@@ -97,10 +99,13 @@ def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets
     q_all, ok = solve_on_branch(kin, p, R, q_ref)
     bad = np.flatnonzero(~ok)
     skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in zip(bad, _skip_reasons(kin, p[bad], R, q_ref))]
-    wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p), 90.0)
+    margin, which = alignment_margin_rad(kin, q_all)
+    wrist = np.degrees(margin)
     near = ok & (wrist < WRIST_MARGIN_DEG)
-    skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
-                        f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
+    words = ["wrist singularity (J4 || J6" if kin.n == 6 else f"{alignment_label(a)} alignment (a singularity or "
+             "branch boundary" for a in alignments(kin)]
+    skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the {words[which[i]]}; margin "
+                        f"{WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
     ok &= ~near
     if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
         why = guard.pose_reasons(np.degrees(q_all[ok]))

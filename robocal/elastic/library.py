@@ -13,6 +13,7 @@ from typing import Mapping
 import numpy as np
 
 from ..effects import GravityModel, gravity_torques
+from ..chains import wrist_joints
 from ..kinematics import Kinematics
 from .model import EffectChoice
 
@@ -53,14 +54,22 @@ class LibraryOptions:
     max_drift_rad: float = 5e-4           # ... and rotation
 
 
+def main_axes(n: int) -> int:
+    """How many joints carry the arm before its wrist: the first n - 3 of an arm of six or more joints (J1-J3 of a
+    6-axis arm, J1-J4 of a 7-axis arm), all but the last of a shorter one."""
+    return n - 3 if n >= 6 else n - 1
+
+
 def loaded_joints(kin: Kinematics, q_rad: np.ndarray, gravity: GravityModel, payload) -> tuple[int, ...]:
-    """Main-axis joints (J1-J3) whose gravity torque varies over the data (> 5 % of the largest spread)."""
+    """Main-axis joints (``main_axes``: J1-J3 of a 6-axis arm) whose gravity torque varies over the data (> 5 % of
+    the largest spread)."""
+    gravity = gravity.sized(kin.n)
     tau = gravity_torques(kin, q_rad, gravity.link_masses_kg, payload, gravity.payload_cog_flange_mm,
                           gravity.gravity_base)
     spread = tau.std(axis=0)
     if spread.max() <= 0:
         return ()
-    return tuple(int(j) + 1 for j in np.flatnonzero(spread > 0.05 * spread.max()) if j < 3)
+    return tuple(int(j) + 1 for j in np.flatnonzero(spread > 0.05 * spread.max()) if j < main_axes(kin.n))
 
 
 def _payload(meta: Mapping, n: int) -> np.ndarray:
@@ -80,6 +89,7 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
     {"effect", "joints", "reason"}."""
     q = np.atleast_2d(q_rad)
     N, n = q.shape
+    gravity = gravity.sized(n)
     g = gravity.options()
     out, cannot = [], []
     pay = _payload(meta, N)
@@ -107,12 +117,26 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
     out += _backlash(meta, N, n, opt, cannot)
     out += _lag(meta, n, opt, cannot)
     out += _time(meta, N, opt, cannot)
-    if n >= 6 and np.ptp(q[:, 3]) > 0 and np.ptp(q[:, 4]) > 0:
-        out.append(EffectChoice("axis_coupling"))
-    else:
-        cannot.append({"effect": "axis_coupling", "joints": [4, 5, 6], "reason": "needs a 6-axis wrist whose J4 and J5 "
-                       "move" if n >= 6 else "needs a 6-axis wrist"})
+    out += _coupling(kin, q, cannot)
     return out, cannot
+
+
+def _coupling(kin: Kinematics, q: np.ndarray, cannot: list) -> list[EffectChoice]:
+    """Wrist coupling where the chain has a spherical wrist whose first two joints move (J4-J6 of a 6-axis arm:
+    the options of the 6-axis candidate as they always were; J5-J7 of a 7-axis one)."""
+    n = kin.n
+    wrist = wrist_joints(kin)
+    if not wrist:
+        cannot.append({"effect": "axis_coupling", "joints": list(range(max(1, n - 2), n + 1)),
+                       "reason": "no spherical wrist (the last three axes do not meet in a point): wrist coupling "
+                                 "skipped"})
+        return []
+    a, b, _ = wrist
+    if np.ptp(q[:, a - 1]) > 0 and np.ptp(q[:, b - 1]) > 0:
+        return [EffectChoice("axis_coupling", () if n == 6 else (("joints", wrist),))]
+    cannot.append({"effect": "axis_coupling", "joints": list(wrist),
+                   "reason": f"needs a spherical wrist whose J{a} and J{b} move"})
+    return []
 
 
 def scan_orders(span_deg: float, n_values: int, opt: LibraryOptions = LibraryOptions()) -> tuple[int, ...]:
