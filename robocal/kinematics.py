@@ -76,11 +76,14 @@ class Kinematics:
     @classmethod
     def from_table(cls, convention: str, alpha_deg, a_mm, d_mm, theta_deg, q_min_deg, q_max_deg,
                    hayati_joints=(), T_tracker_base=None, p_flange_smr_mm=(0, 0, 0)) -> "Kinematics":
-        """Build from a DH table in degrees/mm (the form of configs and papers). hayati_joints are 1-based."""
+        """Build from a DH table in degrees/mm (the form of configs and papers). ``hayati_joints``: 1-based joints
+        whose axis is parallel to the next one; beta goes on the row of the transform between the two axes,
+        ``hayati_row``."""
         n = len(a_mm)
+        rows = {hayati_row(convention, j) for j in hayati_joints}
         return cls(convention, np.radians(alpha_deg), a_mm, d_mm, np.radians(theta_deg), np.zeros(n),
                    np.radians(q_min_deg), np.radians(q_max_deg),
-                   tuple((i + 1) in set(hayati_joints) for i in range(n)),
+                   tuple(i in rows for i in range(n)),
                    np.eye(4) if T_tracker_base is None else T_tracker_base, p_flange_smr_mm)
 
     def to_dict(self) -> dict:
@@ -100,6 +103,13 @@ class Kinematics:
         return cls(d["convention"], np.radians(d["alpha_deg"]), d["a_mm"], d["d_mm"], np.radians(d["theta_deg"]),
                    np.radians(d["beta_deg"]), np.radians(d["q_min_deg"]), np.radians(d["q_max_deg"]),
                    tuple(bool(h) for h in d["hayati"]), np.array(d["T_tracker_base"]), d["p_flange_smr_mm"])
+
+
+def hayati_row(convention: str, joint: int) -> int:
+    """0-based row that holds Hayati's beta for the parallel pair (joint, joint + 1) (1-based joint): the row of
+    the transform from axis ``joint`` to axis ``joint + 1``, row ``joint`` in standard DH (``Rz Tz Tx Rx Ry``),
+    row ``joint + 1`` in modified DH (``Rx Ry Tx Rz Tz``, where alpha_i and a_i of that pair live)."""
+    return joint - 1 if convention == "dh" else joint
 
 
 class Chain(NamedTuple):

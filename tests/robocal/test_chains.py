@@ -113,3 +113,23 @@ def test_effect_candidates_are_named_per_joint_and_coupling_needs_a_spherical_wr
     _, cannot = candidates(ur, rng.uniform(-2, 2, (80, 6)), meta, GravityModel.of_robot(6))
     skip = next(c for c in cannot if c["effect"] == "axis_coupling")
     assert "no spherical wrist" in skip["reason"]
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("convention", ["dh", "mdh"])
+def test_hayati_beta_tilts_the_parallel_pair_in_either_convention(convention):
+    """``hayati_joints: [2]`` (J2 || J3): a beta of 1 mrad on the row it flags tilts axis 3 against axis 2 by
+    1 mrad and leaves the angle between axes 1 and 2 alone, in standard and modified DH alike."""
+    al, a = [-90, 0, -90, 90, 90, 0], [150, 700, 115, 0, 0, 0]
+    if convention == "mdh":
+        al, a = [0] + al[:-1], [0] + a[:-1]
+    kin = Kinematics.from_table(convention, al, a, [445, 0, 0, 795, 0, 85], [0, -90, 0, 0, 180, 0],
+                                [-180] * 6, [180] * 6, hayati_joints=[2])
+    assert kin.hayati == ((False, True) if convention == "dh" else (False, False, True)) + (False,) * (
+        4 if convention == "dh" else 3)
+    tilted = kin.with_(beta_rad=np.where(kin.hayati, 1e-3, 0.0))
+    q = np.random.default_rng(5).uniform(-1, 1, (4, 6))
+    angle = lambda k, i, j: np.arccos(np.clip(np.sum(chain(k, q).axis[:, i] * chain(k, q).axis[:, j], axis=1),  # noqa
+                                              -1, 1))
+    np.testing.assert_allclose(angle(tilted, 1, 2) - angle(kin, 1, 2), 1e-3, atol=1e-9)
+    np.testing.assert_allclose(angle(tilted, 0, 1), angle(kin, 0, 1), atol=1e-12)
