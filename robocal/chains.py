@@ -37,8 +37,16 @@ def _off_line(p, o, a) -> float:
     return float(np.linalg.norm(v - (v @ a) * a))
 
 
+def redundant(kin: Kinematics) -> bool:
+    """A seven-axis arm (on a track or not): one degree of freedom more than a pose needs."""
+    return kin.n - kin.n_track == 7
+
+
 def spherical_joints(kin: Kinematics, tol_mm: float = MEET_TOL_MM) -> tuple[int, ...]:
-    """0-based joints j (1 <= j <= n - 2) whose axes j-1 and j+1 both meet axis j in the same point."""
+    """0-based joints j (1 <= j <= n - 2) whose axes j-1 and j+1 both meet axis j in the same point (the arm's
+    joints only: a track translates, it has no axis to meet)."""
+    if kin.track is not None:
+        return tuple(j + 1 for j in spherical_joints(kin.arm(), tol_mm))
     c = chain(kin, np.zeros((1, kin.n)), full=False)
     A, O = c.axis[0], c.origin[0]
     out = []
@@ -60,8 +68,9 @@ def wrist_joints(kin: Kinematics) -> tuple[int, ...]:
 
 def alignments(kin: Kinematics) -> tuple[tuple[int, int], ...]:
     """0-based axis pairs (i, k) whose parallelism is a singularity or a branch boundary of the chain."""
-    if kin.n == 6:
-        return ((3, 5),)
+    t = kin.n_track
+    if kin.n - t == 6:
+        return ((3 + t, 5 + t),)
     return tuple((j - 1, j + 1) for j in spherical_joints(kin))
 
 
@@ -95,10 +104,11 @@ def arm_angle_rad(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     the points of axes 2, 4 and 6 the chain places (the centres of a spherical shoulder, elbow and wrist). 0: the
     elbow in the reference plane, on the side the first axis points to. Undefined (an algorithmic singularity) when
     the shoulder-wrist line is along the first axis or the arm is stretched."""
-    if kin.n != 7:
-        raise ValueError(f"the arm angle is defined for seven-axis arms, this chain has {kin.n} joints")
+    if not redundant(kin):
+        raise ValueError(f"the arm angle is defined for seven-axis arms, this arm has {kin.n - kin.n_track} joints")
+    t = kin.n_track
     c = chain(kin, np.atleast_2d(q_rad), full=False)
-    S, E, W, r = c.origin[:, 1], c.origin[:, 3], c.origin[:, 5], c.axis[:, 0]
+    S, E, W, r = c.origin[:, 1 + t], c.origin[:, 3 + t], c.origin[:, 5 + t], c.axis[:, t]
     u = W - S
     u = u / np.linalg.norm(u, axis=1, keepdims=True)
     rp = r - np.einsum("ni,ni->n", r, u)[:, None] * u

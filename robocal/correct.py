@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .chains import arm_angle_rad
+from .chains import arm_angle_rad, redundant
 from .frames import inv_T, make_T, matrix_to_rotvec
 from .ik import solve_ik
 from .kinematics import Kinematics, fk, within_limits
@@ -143,7 +143,7 @@ class Correction:
 def held_redundancy(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray | None:
     """The arm angle (N,) rad a seven-axis arm's corrected joints keep (that of the commanded joints q_rad), None
     for a chain without redundancy: corrections never move the arm along its self-motion."""
-    return arm_angle_rad(kin, q_rad) if kin.n == 7 else None
+    return arm_angle_rad(kin, q_rad) if redundant(kin) else None
 
 
 def _held(psi: np.ndarray | None, idx) -> dict:

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .chains import arm_angle_jacobian, branch_signs, wrap_rad
+from .chains import arm_angle_jacobian, branch_signs, redundant, wrap_rad
 from .frames import matrix_to_rotvec, transform_points
-from .kinematics import Kinematics, chain, within_limits
+from .kinematics import Kinematics, chain, motion_columns, within_limits
 
 NULL_STEP_RAD = 0.2       # largest self-motion step of one round towards the rest pose
 NULL_ROUNDS = 12
@@ -46,8 +46,8 @@ def _evaluate(kin, q, p_t, R_t, point, rows, w, psi_t=None):
     e_p = p_t - p
     e_r = np.zeros_like(e_p) if R_t is None else matrix_to_rotvec(R_t @ np.swapaxes(T[:, :3, :3], 1, 2))
     e = np.concatenate([e_p, e_r], axis=1)[:, rows] * w
-    v = np.cross(c.axis, p[:, None, :] - c.origin)
-    J = np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(c.axis, 1, 2)], axis=1)[:, rows] * w[None, :, None]
+    J = motion_columns(kin, c, p)[:, rows] * w[None, :, None]
+    J[:, :, :kin.n_track] = 0.0                            # the carriage stays where the seed puts it
     if psi_t is None:
         return e, J
     psi, J_psi = arm_angle_jacobian(kin, q)
@@ -103,7 +103,7 @@ def solve_ik(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base: np.nd
     if psi_t is not None:
         ok &= np.abs(wrap_rad(psi_t - arm_angle_jacobian(kin, q)[0])) < max(tol_rad * 10, 1e-8)
     res = IKResult(q, ok, pos, rot, it)
-    if q_rest_rad is not None and psi_t is None and R_t is not None and kin.n > 6:
+    if q_rest_rad is not None and psi_t is None and R_t is not None and redundant(kin):
         return _nearest_rest(kin, res, p_t, R_t, np.asarray(q_rest_rad, float), point_mm=point, tol_mm=tol_mm,
                              tol_rad=tol_rad, max_iter=max_iter, length_mm=length_mm, w_bar=w_bar)
     return res
@@ -115,10 +115,11 @@ def _nearest_rest(kin: Kinematics, res: IKResult, p_t, R_t, q_rest, **kw) -> IKR
     for _ in range(NULL_ROUNDS):
         q = res.q_rad
         c = chain(kin, q, full=False)
-        p = transform_points(c.T_base_flange, kw["point_mm"])
-        v = np.cross(c.axis, p[:, None, :] - c.origin)
-        J = np.concatenate([np.swapaxes(v, 1, 2) / kw["length_mm"], np.swapaxes(c.axis, 1, 2)], axis=1)
+        J = motion_columns(kin, c, transform_points(c.T_base_flange, kw["point_mm"]))
+        J[:, :3] /= kw["length_mm"]
+        J[:, :, :kin.n_track] = 0.0
         null = np.eye(kin.n) - np.linalg.pinv(J) @ J                          # (N, n, n) projector
+        null[:, :kin.n_track] = 0.0
         step = np.einsum("nij,nj->ni", null, q_rest - q)
         size = np.linalg.norm(step, axis=1)
         step *= np.minimum(1.0, NULL_STEP_RAD / np.maximum(size, 1e-300))[:, None]
@@ -142,7 +143,9 @@ def _converged(e, w, tol_mm, tol_rad):
 def branch_signature(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """(N, 3) signs (shoulder, elbow, wrist) of a 6R arm's IK branch, computed geometrically:
     wrist centre in front of/behind J2, forearm turning +/- about J2, and the sign of J5 bending. Another chain:
-    ``robocal.chains.branch_signs`` (the side of each alignment of its spherical joints)."""
+    ``robocal.chains.branch_signs`` (the side of each alignment of its spherical joints). On a track: the arm's."""
+    if kin.track is not None:
+        return branch_signature(kin.arm(), np.atleast_2d(q_rad)[:, 1:])
     if kin.n != 6:
         return branch_signs(kin, q_rad)
     c = chain(kin, q_rad)
@@ -155,10 +158,11 @@ def branch_signature(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
 
 
 def same_branch(kin: Kinematics, q_rad: np.ndarray, q_ref_rad: np.ndarray) -> np.ndarray:
-    """(N,) bool: same branch signature as q_ref and joints within +/-180 deg of q_ref (same turn)."""
+    """(N,) bool: same branch signature as q_ref and joints within +/-180 deg of q_ref (same turn; a track's
+    travel is no turn)."""
     sig = branch_signature(kin, q_rad)
     ref = branch_signature(kin, np.atleast_2d(q_ref_rad))
-    turns = np.all(np.abs(np.atleast_2d(q_rad) - q_ref_rad) < np.pi, axis=1)
+    turns = np.all(np.abs(np.atleast_2d(q_rad) - q_ref_rad)[:, kin.n_track:] < np.pi, axis=1)
     return np.all(sig == ref, axis=1) & turns
 
 
@@ -176,10 +180,11 @@ def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base
     takes, along its self-motion, the solution nearest q_ref (unless ``arm_angle_rad`` is given)."""
     p_t = np.atleast_2d(np.asarray(p_target_base_mm, float))
     R_t = None if R_target_base is None else np.broadcast_to(R_target_base, (len(p_t), 3, 3))
-    if kin.n > 6 and "arm_angle_rad" not in kw:
-        kw = {**kw, "q_rest_rad": q_ref_rad}
-    res = solve_ik(kin, p_t, R_t, q_ref_rad, **kw)
-    q, ok = res.q_rad.copy(), reachable(kin, res, q_ref_rad)
+    q_ref = np.broadcast_to(np.asarray(q_ref_rad, float), (len(p_t), kin.n))     # per target (a track's travel)
+    if redundant(kin) and "arm_angle_rad" not in kw:
+        kw = {**kw, "q_rest_rad": q_ref}
+    res = solve_ik(kin, p_t, R_t, q_ref, **kw)
+    q, ok = res.q_rad.copy(), reachable(kin, res, q_ref)
     for _ in range(rounds):
         bad = np.flatnonzero(~ok)
         if len(bad) == 0 or not ok.any():
@@ -187,12 +192,18 @@ def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base
         good = np.flatnonzero(ok)
         d = np.linalg.norm(p_t[bad, None, :] - p_t[None, good, :], axis=2)
         seeds = q[good[np.argmin(d, axis=1)]]
-        retry = solve_ik(kin, p_t[bad], None if R_t is None else R_t[bad], seeds, **kw)
-        fixed = reachable(kin, retry, q_ref_rad)
+        seeds[:, :kin.n_track] = q_ref[bad, :kin.n_track]              # the carriage stays at the target's
+        retry = solve_ik(kin, p_t[bad], None if R_t is None else R_t[bad], seeds, **_rows(kw, bad, len(p_t)))
+        fixed = reachable(kin, retry, q_ref[bad])
         if not fixed.any():
             break
         q[bad[fixed]], ok[bad[fixed]] = retry.q_rad[fixed], True
     return q, ok
+
+
+def _rows(kw: dict, idx: np.ndarray, N: int) -> dict:
+    """The keyword options with every per-target array (leading dimension N) taken at rows idx."""
+    return {k: (v[idx] if isinstance(v, np.ndarray) and v.ndim and len(v) == N else v) for k, v in kw.items()}
 
 
 def wrist_angle_rad(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:

@@ -50,16 +50,22 @@ def check_numerics(cell: CellModel) -> None:
 
 
 def _check_joint_count(cfg, file: str) -> None:
-    check_joint_count(cfg.robot.n_joints, file)
+    check_joint_count(cfg.robot.joints, file)
 
 
-def check_joint_count(n: int, file: str) -> None:
-    """The campaign commands support arms of 4 to 7 joints (ConfigError at robot.joints otherwise)."""
+def check_joint_count(joints, file: str) -> None:
+    """The campaign commands support arms of 4 to 7 revolute joints, on a fixed base or carried by a linear track
+    (a prismatic first joint); ConfigError at robot.joints otherwise."""
+    for k, j in enumerate(joints):
+        if j.type == "prismatic" and k > 0:
+            raise ConfigError(file, f"robot.joints[{k}].type", "a prismatic joint is supported as the first joint "
+                                                               "only: a linear track carrying the arm")
+    n = len(joints) - (1 if joints and joints[0].type == "prismatic" else 0)
     lo, hi = SUPPORTED_JOINTS
     if not lo <= n <= hi:
         raise ConfigError(file, "robot.joints", f"the campaign supports arms of {lo} to {hi} joints (fewer cannot "
                                                 f"place and orient an SMR; more have no IK redundancy rule here), "
-                                                f"got {n} joints")
+                                                f"got {n} revolute joints")
 
 
 def grid_counts(cfg) -> tuple[int, int, int]:
@@ -116,6 +122,9 @@ def _magnitudes(cfg) -> list[tuple[str, float, float]]:
     """(key path, value, largest plausible |value|) of every physical number that feeds a computation."""
     out: list[tuple[str, float, float]] = []
     for i, j in enumerate(cfg.robot.joints):
+        if j.type == "prismatic":
+            out += [(f"robot.joints[{i}].q_{e}_mm", getattr(j, f"q_{e}_deg"), MAX_LENGTH_MM) for e in ("min", "max")]
+            continue
         for key in ("a_mm", "d_mm"):
             out.append((f"robot.joints[{i}].{key}", getattr(j, key), MAX_LENGTH_MM))
         for key in ("alpha_deg", "theta_deg", "q_min_deg", "q_max_deg"):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.chains import arm_angle_rad, spherical_joints, wrap_rad
+from robocal.chains import arm_angle_rad, redundant, spherical_joints, wrap_rad
 from robocal.ik import branch_signature
 from robocal.kinematics import Kinematics
 
@@ -15,7 +15,9 @@ BRANCH_JOINTS_6R = ("J1 (shoulder)", "J3 (elbow)", "J5 (wrist)")   # the joints 
 
 def branch_joint_names(kin: Kinematics) -> tuple[str, ...]:
     """The joint that flips each column of ``branch_signature``."""
-    return BRANCH_JOINTS_6R if kin.n == 6 else tuple(f"J{j + 1}" for j in spherical_joints(kin))
+    if kin.n - kin.n_track == 6:
+        return tuple(f"J{int(name[1]) + kin.n_track}{name[2:]}" for name in BRANCH_JOINTS_6R)
+    return tuple(f"J{j + 1}" for j in spherical_joints(kin))
 
 
 def configuration_reasons(kin: Kinematics, q_rad: np.ndarray, q_cmd_rad: np.ndarray) -> list[str | None]:
@@ -24,7 +26,7 @@ def configuration_reasons(kin: Kinematics, q_rad: np.ndarray, q_cmd_rad: np.ndar
     q, q0 = np.atleast_2d(q_rad), np.atleast_2d(q_cmd_rad)
     flips = branch_signature(kin, q) != branch_signature(kin, q0)
     names = branch_joint_names(kin)
-    moved = np.degrees(np.abs(wrap_rad(arm_angle_rad(kin, q) - arm_angle_rad(kin, q0)))) if kin.n == 7 else \
+    moved = np.degrees(np.abs(wrap_rad(arm_angle_rad(kin, q) - arm_angle_rad(kin, q0)))) if redundant(kin) else \
         np.zeros(len(q))
     out: list[str | None] = []
     for i in range(len(q)):

@@ -31,15 +31,18 @@ ENSEMBLE = ("multiply", "quaternion")
 
 @dataclass(frozen=True)
 class Targets:
-    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3)."""
+    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3); a robot on a
+    track: the carriage position of each (N,) mm, None when the file gives none."""
     ids: tuple[str, ...]
     p_base_mm: np.ndarray
     R_base: np.ndarray
+    track_mm: np.ndarray | None = None
 
 
 def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
-    """``target_id,x,y,z[,qw,qx,qy,qz]`` (mm, base frame; unit quaternion w-first). Without a quaternion
-    the plan's fixed SMR orientation is used. Errors name the file, line and column."""
+    """``target_id,x,y,z[,qw,qx,qy,qz][,track_mm]`` (mm, base frame; unit quaternion w-first; a robot on a track:
+    the carriage position). Without a quaternion the plan's fixed SMR orientation is used. Errors name the file,
+    line and column."""
     src = str(path)
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -53,8 +56,10 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
         raise DataError(src, "empty file")
     header = [h.strip().lower() for h in rows[0][1]]
     need, quat = ["target_id", "x", "y", "z"], ["qw", "qx", "qy", "qz"]
-    if header[:4] != need or header[4:] not in ([], quat):
-        raise DataError(src, f"header must be {','.join(need)}[,{','.join(quat)}], got {','.join(header)}", line=rows[0][0])
+    track = bool(header) and header[-1] == "track_mm"
+    if header[:4] != need or header[4:len(header) - track] not in ([], quat):
+        raise DataError(src, f"header must be {','.join(need)}[,{','.join(quat)}][,track_mm], got {','.join(header)}",
+                        line=rows[0][0])
     ids, values = [], []
     for line, r in rows[1:]:
         if len(r) != len(header):
@@ -73,6 +78,8 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
     if not ids:
         raise DataError(src, "no targets")
     v = np.array(values)
+    travel = v[:, -1] if track else None
+    v = v[:, :-1] if track else v
     if v.shape[1] == 7:
         q = v[:, 3:]
         norm = np.linalg.norm(q, axis=1)
@@ -83,7 +90,7 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
         R = quat_to_matrix(q)
     else:
         R = np.broadcast_to(default_R, (len(ids), 3, 3)).copy()
-    return Targets(tuple(ids), v[:, :3], R)
+    return Targets(tuple(ids), v[:, :3], R, travel)
 
 
 def _is_float(x: str) -> bool:
@@ -195,7 +202,7 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
     cfg, kin = cell.config, cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
     R_flange = targets.R_base @ T_tool[:3, :3].T
-    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, np.radians(cfg.plan.q_ref_deg),
+    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, target_seeds(cfg, kin, targets),
                                 point_mm=T_tool[:3, 3])
     rejected = [Rejected(targets.ids[i], "unreachable on the plan's robot configuration with the nominal model")
                 for i in np.flatnonzero(~ok)]
@@ -223,6 +230,21 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
     return ok_targets, rejected + bad
+
+
+def target_seeds(cfg: CampaignConfig, kin, targets: Targets) -> np.ndarray:
+    """(N, n) rad: ``plan.q_ref_deg`` per target; a robot on a track with the carriage at the target's
+    ``track_mm``, else where the target sits in front of the arm as the plan's grid centre does (within the
+    travel). The corrected target keeps that carriage position."""
+    q = np.tile(np.radians(cfg.plan.q_ref_deg), (len(targets.ids), 1))
+    if kin.track is None:
+        return q
+    tr = cfg.robot.track
+    u = kin.track / np.linalg.norm(kin.track)
+    s = targets.track_mm if targets.track_mm is not None else \
+        (targets.p_base_mm - np.asarray(cfg.plan.grid.center_mm)) @ u
+    q[:, 0] = np.radians(np.clip(s, tr.q_min_deg, tr.q_max_deg))
+    return q
 
 
 def _kept(idx: np.ndarray, c: Correction, keep) -> tuple[np.ndarray, Correction]:

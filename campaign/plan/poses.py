@@ -91,19 +91,21 @@ def test_targets(cfg: CampaignConfig) -> tuple[np.ndarray, list[str]]:
     return rng.uniform(c - s / 2, c + s / 2, (t.count, 3)), [f"T{i + 1:03d}" for i in range(t.count)]
 
 
-def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets, R, guard: PathGuard | None
-                  ) -> tuple[np.ndarray, np.ndarray, list[Skipped]]:
+def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets, R, guard: PathGuard | None,
+                  q_seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list[Skipped]]:
     """Joints (N, n) rad of the targets p (N, 3) with the flange orientation R on ``q_ref_deg``'s branch, which are
-    plannable (N,) bool (reachable, off the wrist singularity, outside keep-out boxes), and the skipped ones."""
-    q_ref = np.radians(cfg.plan.q_ref_deg)
+    plannable (N,) bool (reachable, off the wrist singularity, outside keep-out boxes), and the skipped ones.
+    ``q_seed`` (N, n) rad: per-target references (a track's carriage position: kept by the IK)."""
+    q_ref = np.radians(cfg.plan.q_ref_deg) if q_seed is None else q_seed
     q_all, ok = solve_on_branch(kin, p, R, q_ref)
     bad = np.flatnonzero(~ok)
-    skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in zip(bad, _skip_reasons(kin, p[bad], R, q_ref))]
+    skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in
+               zip(bad, _skip_reasons(kin, p[bad], R, q_ref if q_seed is None else q_seed[bad]))]
     margin, which = alignment_margin_rad(kin, q_all)
     wrist = np.degrees(margin)
     near = ok & (wrist < WRIST_MARGIN_DEG)
-    words = ["wrist singularity (J4 || J6" if kin.n == 6 else f"{alignment_label(a)} alignment (a singularity or "
-             "branch boundary" for a in alignments(kin)]
+    words = [f"wrist singularity ({alignment_label(a)}" if kin.n - kin.n_track == 6 else
+             f"{alignment_label(a)} alignment (a singularity or branch boundary" for a in alignments(kin)]
     skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the {words[which[i]]}; margin "
                         f"{WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
     ok &= ~near

@@ -106,7 +106,7 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
                        "reason": "one payload only: a payload-dependent deflection cannot be told from the link "
                                  "masses' compliance and the geometry" if meta.get("payload_kg") is not None
                        else "no payload logged: a payload-dependent deflection cannot be told from geometry"})
-    for j in range(1, n + 1):
+    for j in range(1 + kin.n_track, n + 1):          # a track has no turn for a cyclic error
         span = math.degrees(float(np.ptp(q[:, j - 1])))
         if span >= opt.gear_min_span_deg:
             k = int(np.clip(span // opt.degrees_per_harmonic, 1, len(opt.harmonics)))
@@ -116,10 +116,24 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
                            "reason": f"J{j} covers only {span:.0f} deg: a cyclic error cannot be told from its zero"})
     out += _backlash(meta, N, n, opt, cannot)
     out += _lag(meta, n, opt, cannot)
-    out += _time(meta, N, opt, cannot)
+    out += _time(meta, N, opt, cannot, tuple(j + kin.n_track for j in (1, 2, 3)))
     out += _coupling(kin, q, cannot)
+    out += _track(kin, q, cannot)
     return out, cannot
 
+
+def _track(kin: Kinematics, q: np.ndarray, cannot: list, degrees=(2, 3)) -> list[EffectChoice]:
+    """Straightness/flatness of a track's rails, of each degree the spread of carriage positions can show (at least
+    degree + 2 distinct positions, so that a polynomial of that degree leaves some freedom); none without a track."""
+    if kin.track is None:
+        return []
+    distinct = len(np.unique(np.round(np.degrees(q[:, 0]), 1)))
+    out = [EffectChoice("track_straightness", (("degree", d),)) for d in degrees if distinct >= d + 2]
+    if not out:
+        cannot.append({"effect": "track_straightness", "joints": [1],
+                       "reason": f"the carriage stood at {distinct} positions only: a straightness error cannot be "
+                                 "told from the track's direction"})
+    return out
 
 def _coupling(kin: Kinematics, q: np.ndarray, cannot: list) -> list[EffectChoice]:
     """Wrist coupling where the chain has a spherical wrist whose first two joints move (J4-J6 of a 6-axis arm:
@@ -201,7 +215,7 @@ def _lag(meta, n, opt, cannot) -> list[EffectChoice]:
     return [EffectChoice("readback_lag", (("joints", joints), ("memory_joints", joints)))]
 
 
-def _time(meta, N, opt, cannot) -> list[EffectChoice]:
+def _time(meta, N, opt, cannot, main=(1, 2, 3)) -> list[EffectChoice]:
     """Warm-up (timestamps or temperatures) and drift of the registration (in time, else in measurement order)."""
     out = []
     t, temp, order = meta.get("t_s"), meta.get("temp_c"), meta.get("order")
@@ -209,9 +223,9 @@ def _time(meta, N, opt, cannot) -> list[EffectChoice]:
     warm = temp is not None and np.ptp(np.asarray(temp, float)) >= opt.temp_min_span_c
     if timed or warm:
         taus = opt.warmup_tau_s if (timed and not warm) else opt.warmup_tau_s[:1]
-        out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", (1, 2, 3)))) for tau in taus]
+        out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", main))) for tau in taus]
     else:
-        cannot.append({"effect": "thermal_drift", "joints": [1, 2, 3],
+        cannot.append({"effect": "thermal_drift", "joints": list(main),
                        "reason": "no timestamps or temperatures in the data" if t is None and temp is None
                        else "the data span too short a time to reveal a warm-up"})
     if timed:
