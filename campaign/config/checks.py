@@ -201,7 +201,9 @@ def _check_drivers(cfg, file: str) -> None:
     tracker_options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}  # as the run does
     for section, kind, url, options in (("robot", "robot", cfg.robot.url, cfg.robot.options),
                                         ("tracker", "tracker", cfg.tracker.url, tracker_options)):
-        problem = check_options(kind, url, options, n_joints=cfg.robot.n_joints)
+        track = cfg.robot.track.mechanical_unit if cfg.robot.track is not None else None
+        problem = check_options(kind, url, options, n_joints=cfg.robot.n_joints,
+                                **({"track_unit": track} if track and kind == "robot" else {}))
         if problem is not None:
             where, _, message = problem.partition(": ")
             raise ConfigError(file, f"{section}.{where}", message)

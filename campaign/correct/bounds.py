@@ -40,6 +40,7 @@ class CorrectedTarget:
     (mm); ``predicted_rot_err_deg``: predicted orientation error (deg), nan when
     not applicable; ``predicted_std_mm``: 3-D predictive standard deviation of the
     residual layer at the corrected joints (GPR), nan when the model has none.
+    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.chains), nan otherwise.
     """
 
     target_id: str
@@ -51,6 +52,7 @@ class CorrectedTarget:
     predicted_residual_mm: float
     predicted_rot_err_deg: float = math.nan
     predicted_std_mm: float = math.nan
+    arm_angle_deg: float = math.nan          # a seven-axis arm: the arm angle of the corrected joints (deg)
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
+from robocal.chains import arm_angle_rad, branch_signs, redundant
 from robocal.ik import branch_signature, solve_on_branch
 from robocal.kinematics import fk
 from robocal.model import CalibratedModel
@@ -147,8 +148,19 @@ def ensemble_generators(error: str) -> tuple[str, ...]:
 
 def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     """(N, 4) ABB confdata [cf1, cf4, cf6, cfx]: quadrants of axes 1, 4, 6 and cfx from the branch
-    (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table."""
-    quad = np.floor(np.degrees(q_rad[:, [0, 3, 5]]) / 90.0).astype(int)
+    (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table. On a track: the
+    arm's. A seven-axis arm (ABB numbers a YuMi's joints 1, 2, 7, 3, 4, 5, 6: its axes 1, 4, 6 are joints 1, 5, 7):
+    cfx from the chain's branch signs (``robocal.chains.branch_signs``). Fewer than six joints: the axes it has."""
+    q_rad = np.atleast_2d(q_rad)
+    if kin.track is not None:
+        return abb_confdata(kin.arm(), q_rad[:, kin.n_track:])
+    axes = [0, 4, 6] if kin.n == 7 else [j for j in (0, 3, 5) if j < kin.n]
+    quad = np.zeros((len(q_rad), 3), int)
+    quad[:, :len(axes)] = np.floor(np.degrees(q_rad[:, axes]) / 90.0).astype(int)
+    if kin.n != 6:
+        sig = branch_signs(kin, q_rad)
+        cfx = sum((2 ** (sig.shape[1] - 1 - i)) * (sig[:, i] < 0) for i in range(sig.shape[1])) if sig.shape[1] else 0
+        return np.column_stack([quad, np.zeros(len(q_rad), int) + cfx]).astype(int)
     sig = branch_signature(kin, q_rad)
     cfx = 4 * (sig[:, 0] < 0) + 2 * (sig[:, 1] < 0) + (q_rad[:, 4] < 0)
     return np.column_stack([quad, cfx]).astype(int)
@@ -224,7 +236,8 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                 q_corrected_deg=tuple(np.degrees(c.q_rad[j])), p_command_base_mm=tuple(cmd[j, :3, 3]),
                 quat_command_wxyz=tuple(matrix_to_quat(cmd[j:j + 1, :3, :3])[0]), confdata=tuple(int(v) for v in conf[j]),
                 predicted_residual_mm=float(c.pos_err_mm[j]),
-                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j])), predicted_std_mm=float(std[j])))
+                predicted_rot_err_deg=float(np.degrees(c.rot_err_rad[j])), predicted_std_mm=float(std[j]),
+                arm_angle_deg=float(np.degrees(arm_angle_rad(kin, c.q_rad[j:j + 1])[0])) if redundant(kin) else np.nan))
     lim = _limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
