@@ -150,6 +150,12 @@ def _held(psi: np.ndarray | None, idx) -> dict:
     return {} if psi is None else {"arm_angle_rad": psi[idx]}
 
 
+def _oriented(kin: Kinematics, R: np.ndarray) -> np.ndarray | None:
+    """The target orientation the IK holds: none for an arm of fewer than six axes (its tool's direction follows
+    from where it reaches; holding it too over-constrains the correction)."""
+    return R if kin.n - kin.n_track >= 6 else None
+
+
 def correct(T_target: np.ndarray, q_start_rad: np.ndarray, actual_pose: PoseFn, ik_kin: Kinematics,
             T_flange_tool: np.ndarray, *, generator: str = "multiply", error: str = "position",
             threshold: float = 1e-4, max_iter: int = 20, length_mm: float = 100.0, ik_max_iter: int = 30) -> Correction:
@@ -179,7 +185,7 @@ def correct(T_target: np.ndarray, q_start_rad: np.ndarray, actual_pose: PoseFn, 
             break
         Tp[active] = next_pseudo_target(generator, Tp[active], Ta, Td[active])
         R_flange = project_so3(Tp[active, :3, :3]) @ R_tool.T
-        q[active] = solve_ik(ik_kin, Tp[active, :3, 3], R_flange, q[active], point_mm=point,
+        q[active] = solve_ik(ik_kin, Tp[active, :3, 3], _oriented(ik_kin, R_flange), q[active], point_mm=point,
                              tol_mm=threshold / 100, max_iter=ik_max_iter, **_held(psi, active)).q_rad
     dp, dr = pose_errors(actual_pose(q_best), Td)
     return Correction(q_best, dp, dr, E_best, iters, np.full(N, generator, dtype=object))
@@ -209,6 +215,6 @@ def closed_loop_step(ik_kin: Kinematics, T_flange_tool: np.ndarray, q_rad: np.nd
     sig = np.asarray(significant, bool)[:, None]
     p_cmd = (fk(ik_kin, q_rad) @ T_flange_tool)[:, :3, 3]     # nominal position of what was commanded
     p_pseudo = np.where(sig, p_cmd - err_base_mm, p_pseudo_mm)
-    q_new = solve_ik(ik_kin, p_pseudo, R_flange, q_rad, point_mm=T_flange_tool[:3, 3],
+    q_new = solve_ik(ik_kin, p_pseudo, _oriented(ik_kin, R_flange), q_rad, point_mm=T_flange_tool[:3, 3],
                      **_held(held_redundancy(ik_kin, q_rad), slice(None))).q_rad
     return np.where(sig, q_new, q_rad), p_pseudo

@@ -29,12 +29,35 @@ class IKResult:
 
 
 def pose_error(kin: Kinematics, q_rad, p_target_base_mm, R_target_base, point_mm) -> tuple[np.ndarray, np.ndarray]:
-    """(e_pos (N, 3) mm, e_rot (N, 3) rad) from current to target; point_mm is fixed in the flange frame."""
+    """(e_pos (N, 3) mm, e_rot (N, 3) rad) from current to target; point_mm is fixed in the flange frame. An arm
+    of fewer than six joints: the rotation error about the target's z axis (the tool's roll) is not an error."""
     T = chain(kin, q_rad, full=False).T_base_flange
     e_p = p_target_base_mm - transform_points(T, point_mm)
     if R_target_base is None:
         return e_p, np.zeros_like(e_p)
-    return e_p, matrix_to_rotvec(R_target_base @ np.swapaxes(T[:, :3, :3], 1, 2))
+    return e_p, _rotation_error(kin, R_target_base, T)
+
+
+def _rotation_error(kin: Kinematics, R_t: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(N, 3) rad: the rotation from the flange frames T to the targets R_t; for an arm of fewer than six axes the
+    rotation that turns its tool direction (flange z) onto the target's (the roll is not an error)."""
+    if kin.n - kin.n_track >= 6:
+        return matrix_to_rotvec(R_t @ np.swapaxes(T[:, :3, :3], 1, 2))
+    z_t = np.broadcast_to(R_t, (len(T), 3, 3))[:, :, 2]
+    c = np.cross(T[:, :3, 2], z_t)
+    s = np.linalg.norm(c, axis=1, keepdims=True)
+    angle = np.arctan2(s, np.einsum("ni,ni->n", T[:, :3, 2], z_t)[:, None])
+    return np.where(s > 1e-15, c * angle / np.maximum(s, 1e-300), 0.0)
+
+
+def _off_roll(kin: Kinematics, R_t: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotation vectors (N, 3) or Jacobian rows (N, 3, n) without their component about the target's z axis when
+    the arm has fewer than six joints (it holds the tool's direction, not its roll); unchanged otherwise."""
+    if kin.n - kin.n_track >= 6:
+        return v
+    z = np.broadcast_to(R_t, (len(v), 3, 3))[:, :, 2]
+    P = np.eye(3) - z[:, :, None] * z[:, None, :]
+    return np.einsum("nij,nj...->ni...", P, v)
 
 
 def _evaluate(kin, q, p_t, R_t, point, rows, w, psi_t=None):
@@ -44,9 +67,12 @@ def _evaluate(kin, q, p_t, R_t, point, rows, w, psi_t=None):
     T = c.T_base_flange
     p = transform_points(T, point)
     e_p = p_t - p
-    e_r = np.zeros_like(e_p) if R_t is None else matrix_to_rotvec(R_t @ np.swapaxes(T[:, :3, :3], 1, 2))
+    e_r = np.zeros_like(e_p) if R_t is None else _rotation_error(kin, R_t, T)
     e = np.concatenate([e_p, e_r], axis=1)[:, rows] * w
-    J = motion_columns(kin, c, p)[:, rows] * w[None, :, None]
+    J = motion_columns(kin, c, p)
+    if R_t is not None:
+        J[:, 3:] = _off_roll(kin, R_t, J[:, 3:])
+    J = J[:, rows] * w[None, :, None]
     J[:, :, :kin.n_track] = 0.0                            # the carriage stays where the seed puts it
     if psi_t is None:
         return e, J

@@ -140,7 +140,7 @@ class VerifyPasses:
             return None
         sigma = np.sqrt(np.trace(self.cell.covariance(p_meas), axis1=1, axis2=2))
         significant = np.linalg.norm(err, axis=1) > self.cfg.correction.significance * sigma
-        R_flange = np.broadcast_to(self.R_d[0] @ self.T_tool[:3, :3].T, (len(self.ids), 3, 3))
+        R_flange = self.R_d @ self.T_tool[:3, :3].T                       # each point's planned orientation
         self.q, self.p_pseudo = closed_loop_step(self.kin, self.T_tool, self.q, self.p_pseudo,
                                                  err @ self.T_tb[:3, :3], significant, R_flange)   # err in base
         self.k += 1
@@ -177,7 +177,9 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     floor = float(np.sqrt(np.mean(np.trace(cell.covariance(target_tracker), axis1=1, axis2=2))))
     rows = {UNCORRECTED: _figures(before)}
     passes = [VerifyPass(UNCORRECTED, 0, len(ids), {}, rows[UNCORRECTED], None)]
-    R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
+    R_d = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]        # an arm of < 6 axes turns its tool with it (the plan)
+    if kin.n - kin.n_track >= 6:                          # the plan's one fixed orientation
+        R_d = np.broadcast_to(R_d[0], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
     c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q0, T_tool)

@@ -35,6 +35,8 @@ def build_plan(cell: CellModel) -> Plan:
         p_all = p_all + travel[:, None] * kin.track
         q_seed = np.tile(np.radians(pl.q_ref_deg), (len(p_all), 1))
         q_seed[:, 0] = np.radians(travel)
+    if kin.n - kin.n_track < 6:                         # fewer than 6 axes: the direction turns with the arm
+        R = arm_plane_rotations(R, p_all - (0.0 if q_seed is None else np.degrees(q_seed[:, :1]) * kin.track))
     q_all, ok, skipped = solve_targets(cfg, kin, p_all, ids, sets, R, guard, q_seed)
     grid_ok = np.flatnonzero(ok[: len(p_grid)])
     test_ok = len(p_grid) + np.flatnonzero(ok[len(p_grid):])
@@ -55,3 +57,14 @@ def track_positions(cfg, n_grid: int, n_test: int) -> np.ndarray:
     rng = np.random.default_rng([cfg.plan.test.seed, 1])
     return np.concatenate([stations[np.arange(n_grid) % len(stations)],
                            rng.uniform(tr.q_min_deg, tr.q_max_deg, n_test)])
+
+
+def arm_plane_rotations(R: np.ndarray, p_arm_mm: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) the fixed tool orientation R turned about the base z axis to each target's azimuth (positions
+    p_arm_mm (N, 3) relative to the arm's base): an arm of fewer than six axes points its tool in its own vertical
+    plane, so ``plan.tool_direction`` is read as seen along +x of that plane."""
+    a = np.arctan2(p_arm_mm[:, 1], p_arm_mm[:, 0])
+    c, s = np.cos(a), np.sin(a)
+    Rz = np.zeros((len(a), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    return Rz @ R

@@ -100,7 +100,8 @@ def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets
     q_all, ok = solve_on_branch(kin, p, R, q_ref)
     bad = np.flatnonzero(~ok)
     skipped = [Skipped(ids[i], sets[i], tuple(p[i]), why) for i, why in
-               zip(bad, _skip_reasons(kin, p[bad], R, q_ref if q_seed is None else q_seed[bad]))]
+               zip(bad, _skip_reasons(kin, p[bad], R if np.ndim(R) == 2 else R[bad],
+                                      q_ref if q_seed is None else q_seed[bad]))]
     margin, which = alignment_margin_rad(kin, q_all)
     wrist = np.degrees(margin)
     near = ok & (wrist < WRIST_MARGIN_DEG)

@@ -132,3 +132,37 @@ def test_track_cell_identifies_the_rails_straightness(tmp_path):
     travel = [rec.q_cmd_deg[0] for rec in read_log(tmp_path / "run" / "log.jsonl").records()
               if getattr(rec, "q_cmd_deg", None) is not None]
     assert min(travel) < 500 and max(travel) > 5500 and len(set(np.round(travel))) > 5
+
+
+SHORT_ARMS = {   # an IRB 2600-sized arm without its wrist roll (5 axes), and without roll or flange turn (4 axes)
+    5: [{"alpha_deg": -90, "a_mm": 150, "d_mm": 445, "theta_deg": 0, "q_min_deg": -180, "q_max_deg": 180},
+        {"alpha_deg": 0, "a_mm": 700, "d_mm": 0, "theta_deg": -90, "q_min_deg": -95, "q_max_deg": 155},
+        {"alpha_deg": 0, "a_mm": 795, "d_mm": 0, "theta_deg": 0, "q_min_deg": -180, "q_max_deg": 75},
+        {"alpha_deg": 90, "a_mm": 0, "d_mm": 0, "theta_deg": 90, "q_min_deg": -120, "q_max_deg": 120},
+        {"alpha_deg": 0, "a_mm": 0, "d_mm": 85, "theta_deg": 0, "q_min_deg": -400, "q_max_deg": 400}],
+    4: [{"alpha_deg": -90, "a_mm": 150, "d_mm": 445, "theta_deg": 0, "q_min_deg": -180, "q_max_deg": 180},
+        {"alpha_deg": 0, "a_mm": 700, "d_mm": 0, "theta_deg": -90, "q_min_deg": -95, "q_max_deg": 155},
+        {"alpha_deg": 0, "a_mm": 795, "d_mm": 0, "theta_deg": 0, "q_min_deg": -180, "q_max_deg": 75},
+        {"alpha_deg": -90, "a_mm": 0, "d_mm": 0, "theta_deg": 0, "q_min_deg": -170, "q_max_deg": 170}]}
+
+
+@pytest.mark.system
+@pytest.mark.parametrize("n", [4, 5])
+def test_arms_of_four_and_five_axes_run_and_verify_within_the_floor(tmp_path, n):
+    """Fewer than six axes: the plan turns the tool direction with the arm's vertical plane and holds only the
+    tool's direction (its roll is not the arm's to choose); run and verify reach the floor."""
+    from tests.campaign.helpers import small_config
+    smr = [0.0, 0.0, 124.4] if n == 4 else [0.0, 0.0, 39.4]
+    cfg = small_config(tmp_path, "irb2600", **{"robot.joints": SHORT_ARMS[n], "robot.hayati_joints": [2, 3],
+                                               "plan.q_ref_deg": [0, 0, 30, -30, 0][:n], "plan.grid.step_mm": 200,
+                                               "plan.test.count": 80,
+                                               "tool.p_flange_smr_mm": smr, "simulation.p_flange_smr_mm":
+                                               [0.36, 0.28, smr[2] + 0.03], "simulation.readback_lag_deg_per_deg":
+                                               [0.0] * n, "simulation.tracker_drift_mm_per_h": [0, 0, 0]})
+    run_within_floor(tmp_path, cfg)
+    assert main(["verify", str(tmp_path / "run")]) == 0
+    v = read_verify(next((tmp_path / "run").glob("verify-*")) / "verify.json")
+    pooled = v.passes[-1]
+    print(f"{n} axes: verify pooled {pooled.corrected.rms_mm / v.noise_floor_mm:.3f} x floor, "
+          f"{pooled.n_held} held")
+    assert pooled.corrected.rms_mm <= 1.3 * v.noise_floor_mm and pooled.n_held == 0
