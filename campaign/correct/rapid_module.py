@@ -68,6 +68,9 @@ def _rapid_header(module_name: str, n: int, persistent: bool) -> list[str]:
 def _chain_axes(t: CorrectedTarget, axes: AbbAxes) -> tuple[list[float], list[float], list[float]]:
     """(robax, jointtarget extax, robtarget extax) of a target: a track's carriage in both (mm); a seven-axis arm's
     axis 7 in the jointtarget, its arm angle in the robtarget (deg)."""
+    if axes.layout == "arm" and axes.n < 6:
+        raise ValueError(f"RAPID write-back of a {axes.n}-axis arm: the jointtarget layout of ABB's arms with fewer "
+                         "than six axes is not known here (use the CSV)")
     rob, ext = axes.split(t.q_corrected_deg)
     if axes.layout != "seven":
         return rob, ext, ext

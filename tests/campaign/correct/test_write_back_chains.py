@@ -66,3 +66,9 @@ def test_a_configuration_change_is_refused_naming_the_joint():
     assert why[0] is None and "J6" in why[1] and "arm angle" in why[2]
     moved = np.degrees(abs(arm_angle_rad(kin, q[2:]) - arm_angle_rad(kin, q0[2:])))[0]
     assert f"{moved:.3f}" in why[2]
+
+
+def test_rapid_refuses_fewer_than_six_axes_in_one_line():
+    with pytest.raises(ValueError) as err:
+        render_rapid_module([_target((0.0,) * 5)], q_min_deg=LO[:5], q_max_deg=HI[:5], axes=abb_axes(5))
+    assert "5-axis" in str(err.value) and "\n" not in str(err.value)
