@@ -28,9 +28,8 @@ sys.path.insert(0, str(ROOT))
 
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
-from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
-from campaign.plan.build import build_plan  # noqa: E402
+from tests.campaign.helpers import simulated_campaign  # noqa: E402  (the plan measured once on the simulated cell)
 
 
 def other_form(doc: dict) -> dict:
@@ -49,20 +48,6 @@ def other_form(doc: dict) -> dict:
     for r, x, y in zip(out["robot"]["joints"], al, a):
         r["alpha_deg"], r["a_mm"] = x, y
     return out
-
-
-def campaign(cell, seed: int) -> Dataset:
-    """The cell's plan measured on its simulated cell: calibration then test rows."""
-    plan = build_plan(cell)
-    cal = [p for p in plan.points if p.set == "calib"]
-    test = [p for p in plan.points if p.set == "test"]
-    sim = simulated_cell(cell)
-    q_cal, q_test = np.radians([p.q_deg for p in cal]), np.radians([p.q_deg for p in test])
-    p_cal, _ = sim.measure(q_cal, np.random.default_rng(seed))
-    p_test, _ = sim.measure(q_test, np.random.default_rng(10_000 + seed))
-    return Dataset(tuple(f"C{i}" for i in range(len(q_cal))) + tuple(f"T{i}" for i in range(len(q_test))),
-                   ("calib",) * len(q_cal) + ("test",) * len(q_test), np.degrees(np.vstack([q_cal, q_test])),
-                   np.vstack([p_cal, p_test]), source="simulated")
 
 
 def held_out(ds: Dataset, cell) -> tuple[float, float]:
@@ -96,7 +81,7 @@ def main() -> None:
             for seed in args.seeds:
                 sim_cell = replace(source, config=replace(source.config, simulation=replace(
                     source.config.simulation, seed=seed)))
-                ds = campaign(sim_cell, seed)
+                ds = simulated_campaign(sim_cell, seed)
                 r = {form: held_out(ds, c) for form, c in cells.items()}
                 floor = r["dh"][1]
                 line = ", ".join(f"{form} {rms:.4f} mm ({rms / floor:.2f} x floor)" for form, (rms, _) in r.items())
