@@ -21,6 +21,7 @@ from urllib.parse import urlsplit
 
 import httpx
 
+from .abb_axes import abb_axes
 from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
 from .rws_client import Credentials, Routes, RwsError, RwsSession, first
 from .rapid import calserver_text
@@ -51,6 +52,10 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
         if parts.scheme != "abb-rws" or not parts.hostname:
             raise DriverError(f"{url}: expected abb-rws://host[:port]")
         self.url, self.opts, self.n_joints = url, options, options.n_joints
+        try:
+            self.axes = abb_axes(options.n_joints, options.track_unit is not None)
+        except ValueError as exc:
+            raise DriverError(f"{url}: {exc}") from None
         self._sleep = sleep
         self.session = RwsSession(url, parts.netloc, credentials, version=options.rws_version,
                                   scheme=options.scheme, verify=_verify(options.verify), timeouts=options.timeouts,
@@ -91,22 +96,29 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
         q = [float(v) for v in q_deg]
         if len(q) != self.n_joints or not all(math.isfinite(v) for v in q):
             raise MotionError(f"{self.url}: expected {self.n_joints} finite joint values (deg), got {list(q_deg)}")
-        self._command(KIND_MOVEABSJ, {"cal_target": fmt_jointtarget(q)}, f"MoveAbsJ {_fmt_q(q)}")
+        self._command(KIND_MOVEABSJ, {"cal_target": fmt_jointtarget(*self.axes.split(q))}, f"MoveAbsJ {_fmt_q(q)}")
 
     def move_linear(self, trans_mm: Sequence[float], quat_wxyz: Sequence[float],
-                    conf: Sequence[int] = (0, 0, 0, 0)) -> None:
-        """MoveL (tool0, wobj0) to the pose (mm, w-first quaternion, confdata) with a fine stop and settle dwell."""
+                    conf: Sequence[int] = (0, 0, 0, 0), ext: Sequence[float] = ()) -> None:
+        """MoveL (tool0, wobj0) to the pose (mm, w-first quaternion, confdata) with a fine stop and settle dwell;
+        ``ext``: its external axes (a track's carriage in mm, a seven-axis arm's arm angle in deg: ``eax_a``)."""
         try:
-            literal = fmt_robtarget(trans_mm, quat_wxyz, conf)
+            literal = fmt_robtarget(trans_mm, quat_wxyz, conf, ext)
         except ValueError as exc:
             raise MotionError(f"{self.url}: {exc}") from None
         self._command(KIND_MOVEL, {"cal_ptarget": literal}, f"MoveL {literal}")
 
     def read_joints(self) -> tuple[float, ...]:
-        """Actual joints of the mechanical unit (deg), ``rax_1..rax_n``."""
+        """Actual joints (deg) of the mechanical unit, ``rax_1..rax_n``; a seven-axis arm's axis 7 is its ``eax_a``,
+        a track's carriage (mm) the ``eax_a`` of the track's own unit (``abb_axes``)."""
         path, params = self._routes.jointtarget(self.opts.mechunit)
         items = self.session.get(path, params)
-        return tuple(parse_num(first(items, f"rax_{i + 1}", "jointtarget")) for i in range(self.n_joints))
+        rob = [parse_num(first(items, f"rax_{i + 1}", "jointtarget")) for i in range(min(6, self.n_joints))]
+        if self.axes.external == 0:
+            return tuple(rob)
+        if self.opts.track_unit is not None:
+            items = self.session.get(*self._routes.jointtarget(self.opts.track_unit))
+        return self.axes.join(rob, [parse_num(first(items, "eax_a", "jointtarget"))])
 
     def stop(self) -> None:
         """Request RAPID stop (best effort, never raises)."""
@@ -436,9 +448,7 @@ def open_robot(url: str, options: Mapping[str, Any], **context: Any) -> AbbRwsRo
 
     ``context`` may carry ``n_joints`` (from the robot config), ``transport`` (an httpx transport, for tests)
     and ``environ`` (a mapping replacing ``os.environ`` for the credential lookup)."""
-    opts = RwsOptions.from_mapping(options or {})
-    if "n_joints" in context and "n_joints" not in (options or {}):
-        opts = replace(opts, n_joints=int(context["n_joints"]))
+    opts = _with_context(RwsOptions.from_mapping(options or {}), options, context)
     credentials = load_credentials(opts.credentials, context.get("environ"))
     return AbbRwsRobot(url, opts, credentials, transport=context.get("transport"))
 
@@ -452,8 +462,18 @@ def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> No
         raise DriverError(f"{url}: {exc}") from None
     if parts.scheme != "abb-rws" or not parts.hostname:
         raise DriverError(f"{url}: expected abb-rws://host[:port]")
-    opts = RwsOptions.from_mapping(options or {})
-    n = context.get("n_joints")
-    if n is not None and "n_joints" not in (options or {}) and not 1 <= int(n) <= 6:
-        raise DriverError(f"{url}: an ABB robot has 1 to 6 robot axes, the config has {n} joints")
-    del opts
+    opts = _with_context(RwsOptions.from_mapping(options or {}), options, context)
+    try:
+        abb_axes(opts.n_joints, opts.track_unit is not None)
+    except ValueError as exc:
+        raise DriverError(f"{url}: {exc}") from None
+
+
+def _with_context(opts: RwsOptions, options, context: Mapping[str, Any]) -> RwsOptions:
+    """The options with the config's joint count and track unit where the options do not set them."""
+    given = options or {}
+    if "n_joints" in context and "n_joints" not in given:
+        opts = replace(opts, n_joints=int(context["n_joints"]))
+    if context.get("track_unit") and "track_unit" not in given:
+        opts = replace(opts, track_unit=str(context["track_unit"]))
+    return opts

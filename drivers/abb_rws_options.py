@@ -52,7 +52,8 @@ class RwsOptions:
     task: str = "T_ROB1"
     module: str = "CalServer"
     mechunit: str = "ROB_1"
-    n_joints: int = 6
+    n_joints: int = 6                         # 7: a seven-axis arm (YuMi), or a 6-axis arm on ``track_unit``
+    track_unit: str | None = None             # the track's mechanical unit (eax_a of the robot's targets)
     upload_module: bool = False
     module_file: str | None = None            # default: the packaged drivers/rapid/CalServer.mod
     remote_dir: str = "$HOME"
@@ -77,7 +78,7 @@ class RwsOptions:
 class _OptionReader:
     """Reads one mapping level with key-path errors."""
 
-    _SCALARS = {"task": str, "module": str, "mechunit": str, "remote_dir": str, "module_file": str,
+    _SCALARS = {"task": str, "module": str, "mechunit": str, "remote_dir": str, "module_file": str, "track_unit": str,
                 "upload_module": bool, "start_rapid": bool, "motors_on": bool, "entry": str}
     _POSITIVE = {"settle_s": True, "poll_s": False, "health_s": False, "max_poll_rate_hz": False}
     _NESTED = {"timeouts", "retry", "credentials"}
@@ -97,7 +98,7 @@ class _OptionReader:
             raise self._err("entry", "expected routine or main")
         kw.update(self._transport_keys())
         if "n_joints" in self.data:
-            kw["n_joints"] = self._int("n_joints", 1, 6)
+            kw["n_joints"] = self._int("n_joints", 1, 7)
         if "speed" in self.data:
             kw["speed"] = self._speed()
         kw["timeouts"] = self._dataclass("timeouts", Timeouts)

@@ -51,6 +51,7 @@ class PreflightMixin:
         """AUTO, motors on, no foreign mastership, CalServer present/loaded, RAPID running, CalServer answering."""
         self._check_opmode()
         self._check_motors()
+        self._check_track_unit()
         self._check_mastership()
         self._elog_mark = self._newest_elog()
         ident = self.identity()
@@ -74,6 +75,17 @@ class PreflightMixin:
         mode = self._opmode()
         if mode != "AUTO":
             raise RobotNotReady(f"{self.url}: controller is in {mode} mode, not AUTO (turn the mode key to AUTO)")
+
+    def _check_track_unit(self) -> None:
+        """A track's mechanical unit (``options.track_unit``) must exist and be activated before it is moved."""
+        unit = self.opts.track_unit
+        if unit is None:
+            return
+        units = {str(i.get("_title", "")).upper(): i for i in self.session.get(*self._routes.mechunits())}
+        mode = str(units.get(unit.upper(), {}).get("mode", "missing"))
+        if mode.lower() not in ("activated", "active"):
+            raise RobotNotReady(f"{self.url}: mechanical unit {unit} (the track) is {mode.lower()}, not activated "
+                                f"(ActUnit {unit} in RAPID or on the FlexPendant)")
 
     def _check_motors(self) -> None:
         state = self._ctrlstate()

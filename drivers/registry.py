@@ -42,6 +42,7 @@ class CellContext:
     n_joints: int | None = None
     simulation: Callable[[], Any] | None = None
     robot: Robot | None = None
+    track_unit: str | None = None          # a track's mechanical unit (robot config), for controllers that move one
 
 
 def _with_cell(factory, cell: CellContext, used: dict, context: dict) -> dict:
@@ -56,6 +57,8 @@ def open_robot(url: str, options: Mapping[str, Any] | None = None, cell: CellCon
     cell = cell or CellContext()
     factory = _factory(ROBOT_DRIVERS, url, "robot")
     used = {} if cell.n_joints is None else {"n_joints": cell.n_joints}
+    if cell.track_unit is not None:
+        used["track_unit"] = cell.track_unit
     return factory(url, dict(options or {}), **_with_cell(factory, cell, used, context))
 
 

@@ -185,6 +185,9 @@ class Routes:
     def jointtarget(self, mechunit: str) -> tuple[str, dict]:
         return f"/rw/motionsystem/mechunits/{mechunit}/jointtarget", {}
 
+    def mechunits(self) -> tuple[str, dict]:
+        return "/rw/motionsystem/mechunits", {}
+
     def modules(self, task: str) -> tuple[str, dict]:
         if self.version == 1:
             return "/rw/rapid/modules", {"task": task}

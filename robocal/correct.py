@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .chains import arm_angle_rad, redundant
 from .frames import inv_T, make_T, matrix_to_rotvec
 from .ik import solve_ik
 from .kinematics import Kinematics, fk, within_limits
@@ -139,15 +140,33 @@ class Correction:
     generator: np.ndarray
 
 
+def held_redundancy(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray | None:
+    """The arm angle (N,) rad a seven-axis arm's corrected joints keep (that of the commanded joints q_rad), None
+    for a chain without redundancy: corrections never move the arm along its self-motion."""
+    return arm_angle_rad(kin, q_rad) if redundant(kin) else None
+
+
+def _held(psi: np.ndarray | None, idx) -> dict:
+    return {} if psi is None else {"arm_angle_rad": psi[idx]}
+
+
+def _oriented(kin: Kinematics, R: np.ndarray) -> np.ndarray | None:
+    """The target orientation the IK holds: none for an arm of fewer than six axes (its tool's direction follows
+    from where it reaches; holding it too over-constrains the correction)."""
+    return R if kin.n - kin.n_track >= 6 else None
+
+
 def correct(T_target: np.ndarray, q_start_rad: np.ndarray, actual_pose: PoseFn, ik_kin: Kinematics,
             T_flange_tool: np.ndarray, *, generator: str = "multiply", error: str = "position",
             threshold: float = 1e-4, max_iter: int = 20, length_mm: float = 100.0, ik_max_iter: int = 30) -> Correction:
-    """Seed 001 §1 for a batch of targets with one generator. ``threshold`` in the error function's unit (mm)."""
+    """Seed 001 §1 for a batch of targets with one generator. ``threshold`` in the error function's unit (mm).
+    A seven-axis arm keeps the arm angle of ``q_start_rad`` (``held_redundancy``)."""
     Td = np.asarray(T_target, float)
     N = len(Td)
     err_fn = error_function(error, length_mm)
     q = np.broadcast_to(np.asarray(q_start_rad, float), (N, ik_kin.n)).copy()
     Tp = fk(ik_kin, q) @ T_flange_tool          # the pseudo-target q_start reaches (= T_d when q_start = IK(T_d))
+    psi = held_redundancy(ik_kin, q)
     E_best = np.full(N, np.inf)
     q_best = q.copy()
     iters = np.zeros(N, int)
@@ -166,8 +185,8 @@ def correct(T_target: np.ndarray, q_start_rad: np.ndarray, actual_pose: PoseFn, 
             break
         Tp[active] = next_pseudo_target(generator, Tp[active], Ta, Td[active])
         R_flange = project_so3(Tp[active, :3, :3]) @ R_tool.T
-        q[active] = solve_ik(ik_kin, Tp[active, :3, 3], R_flange, q[active], point_mm=point,
-                             tol_mm=threshold / 100, max_iter=ik_max_iter).q_rad
+        q[active] = solve_ik(ik_kin, Tp[active, :3, 3], _oriented(ik_kin, R_flange), q[active], point_mm=point,
+                             tol_mm=threshold / 100, max_iter=ik_max_iter, **_held(psi, active)).q_rad
     dp, dr = pose_errors(actual_pose(q_best), Td)
     return Correction(q_best, dp, dr, E_best, iters, np.full(N, generator, dtype=object))
 
@@ -191,9 +210,11 @@ def closed_loop_step(ik_kin: Kinematics, T_flange_tool: np.ndarray, q_rad: np.nd
     """One closed-loop correction with the measured error: where ``significant`` (N,) the pseudo-target becomes
     the nominal tool position of the commanded joints ``q_rad`` (N, n) minus the measured error ``err_base_mm``
     (N, 3, base frame), and the joints are re-solved by nominal IK (flange orientation ``R_flange`` (N, 3, 3), warm
-    start ``q_rad``); elsewhere both stay. Returns (q_rad (N, n), p_pseudo_mm (N, 3))."""
+    start ``q_rad``, a seven-axis arm at the arm angle of ``q_rad``); elsewhere both stay. Returns (q_rad (N, n),
+    p_pseudo_mm (N, 3))."""
     sig = np.asarray(significant, bool)[:, None]
     p_cmd = (fk(ik_kin, q_rad) @ T_flange_tool)[:, :3, 3]     # nominal position of what was commanded
     p_pseudo = np.where(sig, p_cmd - err_base_mm, p_pseudo_mm)
-    q_new = solve_ik(ik_kin, p_pseudo, R_flange, q_rad, point_mm=T_flange_tool[:3, 3]).q_rad
+    q_new = solve_ik(ik_kin, p_pseudo, _oriented(ik_kin, R_flange), q_rad, point_mm=T_flange_tool[:3, 3],
+                     **_held(held_redundancy(ik_kin, q_rad), slice(None))).q_rad
     return np.where(sig, q_new, q_rad), p_pseudo

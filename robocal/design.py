@@ -24,9 +24,9 @@ import numpy as np
 from .effects import GravityModel, effect_regressor
 from .elastic import EffectChoice, candidates
 from .identify import analyse_identifiability, priority_order
-from .kinematics import Kinematics, ParamLayout, identification_jacobian
+from .kinematics import Kinematics, ParamLayout, identification_jacobian, joint_motion_columns
 
-GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3}     # prior std of a geometric parameter by unit (1 mm, 1 mrad)
+GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3, "mm/mm": 1.0e-3}   # prior std by unit (1 mm, 1 mrad, a track 1 mm/m)
 
 
 def whiten_rows(J: np.ndarray, cov_mm2: np.ndarray | None) -> np.ndarray:
@@ -273,7 +273,7 @@ def criterion_effects(kin: Kinematics, q_rad: np.ndarray, payload_kg: float) -> 
     the loaded joints, gear harmonics of every joint, wrist coupling): those a choice of poses must reveal.
     Backlash and thermal terms depend on the order and time of the measurements, not on the poses."""
     meta = {"payload_kg": np.full(len(np.atleast_2d(q_rad)), float(payload_kg))}
-    out = [c for c in candidates(kin, q_rad, meta, GravityModel())[0] if not c.build(kin.n).needs]
+    out = [c for c in candidates(kin, q_rad, meta, GravityModel.of_robot(kin.n))[0] if not c.build(kin.n).needs]
     return [c.with_options(harmonics=(1, 2)) if c.name == "gear_cyclic" else c
             for c in out]                    # the first two harmonics: what a pose set must reveal of a gear error
 
@@ -402,11 +402,11 @@ def criterion(kin: Kinematics, q_rad: np.ndarray, cov_mm2: np.ndarray, payload_k
     J, names, prior = design_columns(kin, q, {"payload_kg": np.full(len(q), float(payload_kg))}, effects)
     A = information_rows(J, cov_mm2, prior)
     layout = ParamLayout.of(kin)
-    theta = [c for c, _, k in layout.joint_cols if k == 0]
+    Jq = joint_motion_columns(kin, J)
     order = priority_order(layout)
     P = identifiable_count(A, names, layout.size, order)
     P_geo = identifiable_count(A[:, :, :layout.size], names[:layout.size], layout.size, order)
-    return Criterion(A, names, q[:, spread_joints(J[:, :, theta])], P, P_geo, joint_levers(J[:, :, theta]))
+    return Criterion(A, names, q[:, spread_joints(Jq)], P, P_geo, joint_levers(Jq))
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,15 +22,16 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .kinematics import CHAIN_ROWS, Kinematics, ParamLayout, chain, identification_jacobian
 from .frames import skew, transform_points
-
-G_MM_S2 = 9.80665
+from .gravity import (DEFAULT_LINK_MASSES_KG, G_MM_S2, MOVING_SHARE, GravityModel, default_link_masses,  # noqa: F401
+                      gravity_torques, lever_torques, link_masses)
+from .kinematics import Kinematics, ParamLayout, chain, identification_jacobian, joint_motion_columns
 EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
                 "axis_coupling", "registration_drift")     # every effect of the library, in report order
+TRACK_EFFECTS = ("track_straightness",)   # effects of a linear track (chains with one)
 # what the mock robot can simulate (a read-back lag is an artefact of the controller's report, simulated apart)
-SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag")
-MODEL_EFFECTS = EFFECT_NAMES          # every library effect can be a parameter of the calibrated model
+SIMULATED_EFFECTS = tuple(name for name in EFFECT_NAMES if name != "readback_lag") + TRACK_EFFECTS
+MODEL_EFFECTS = EFFECT_NAMES + TRACK_EFFECTS   # every library effect can be a parameter of the calibrated model
 
 
 @dataclass(frozen=True)
@@ -71,106 +72,8 @@ def _meta(meta, key, n, default=0.0):
     return np.full(n, default, float) if v is None else np.asarray(v, float)
 
 
-# ---------------------------------------------------------------- gravity torques: the one torque model
-def gravity_torques(kin: Kinematics, q_rad: np.ndarray, link_masses_kg, payload_kg, payload_cog_flange_mm=None,
-                    gravity_base=(0.0, 0.0, -1.0)) -> np.ndarray:
-    """Gravity torque about each joint axis (N, n) in N·m from lumped masses at the midpoint of each
-    link (joint origin i -> joint origin i+1, the last one -> flange) and a payload at its centre of gravity
-    ``payload_cog_flange_mm`` in the flange frame (None: at the SMR). ``gravity_base``: direction of gravity in
-    the base frame (floor mount -z; a wall or ceiling mount another unit vector)."""
-    q = np.atleast_2d(q_rad)
-    N, n = q.shape
-    pay = np.broadcast_to(np.asarray(payload_kg, float), (N,))
-    masses = np.broadcast_to(np.asarray(link_masses_kg, float), (N, n))
-    if N > CHAIN_ROWS:                   # row blocks: the frames and the torques of one block in cache
-        tau = np.empty((N, n))
-        for s in range(0, N, CHAIN_ROWS):
-            b = slice(s, s + CHAIN_ROWS)
-            tau[b] = gravity_torques(kin, q[b], masses[b], pay[b], payload_cog_flange_mm, gravity_base)
-        return tau
-    c = chain(kin, q, full=False)
-    o_next = np.concatenate([c.origin[:, 1:], c.T_base_flange[:, None, :3, 3]], axis=1)    # (N, n, 3)
-    cog = kin.p_flange_smr_mm if payload_cog_flange_mm is None else np.asarray(payload_cog_flange_mm, float)
-    p_pay = transform_points(c.T_base_flange, cog)
-    g = np.asarray(gravity_base, float)
-    force = G_MM_S2 * g / np.linalg.norm(g)                                      # per kg, N
-    # everything hanging on joint j (links j..n-1 at their midpoints, the payload): its mass M_j and first moment
-    # S_j (kg mm); tau_j = ((S_j - M_j o_j) x F) . axis_j = (S_j - M_j o_j) . (F x axis_j)
-    moment = masses[:, :, None] * (0.5 * (c.origin + o_next))
-    S = np.cumsum(moment[:, ::-1], axis=1)[:, ::-1] + (pay[:, None] * p_pay)[:, None, :]
-    M = np.cumsum(masses[:, ::-1], axis=1)[:, ::-1] + pay[:, None]
-    arm = S - M[:, :, None] * c.origin                                           # (N, n, 3) kg mm
-    return np.einsum("njk,njk->nj", arm, np.cross(force, c.axis)) / 1000.0      # N·mm -> N·m
-
-
-def lever_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0, 0.0, -1.0)
-                  ) -> dict[int, tuple[np.ndarray, tuple[str, ...]]]:
-    """{joint: (torque per kg (N, m) N·m/kg, point names)} about each of ``joints`` (1-based) of a mass at every
-    downstream joint origin, the flange and a point beside the next link: any lumped mass fixed on those links
-    loads the joint by a combination of them (the mass distribution of ``joint_compliance(form="levers")``)."""
-    q = np.atleast_2d(q_rad)
-    c = chain(kin, q, full=False)
-    flange = c.T_base_flange[:, :3, 3]
-    g = np.asarray(gravity_base, float)
-    force = G_MM_S2 * g / np.linalg.norm(g)
-    out = {}
-    for joint in joints:
-        j = joint - 1
-        nxt = c.origin[:, j + 1] if j + 1 < kin.n else flange
-        pts = [(f"o{i + 1}", c.origin[:, i]) for i in range(j + 1, kin.n)] + [("flange", flange)]
-        pts.append(("beside", c.origin[:, j] + np.cross(c.axis[:, j], nxt - c.origin[:, j])))
-        P = np.stack([pt for _, pt in pts], axis=1) - c.origin[:, j:j + 1]               # (N, m, 3)
-        tau = np.einsum("nmk,nk->nm", np.cross(P, force), c.axis[:, j]) / 1000.0
-        out[joint] = (tau, tuple(name for name, _ in pts))
-    return out
-
-
-DEFAULT_LINK_MASSES_KG = (0.0, 35.0, 40.0, 12.0, 4.0, 1.0)
-MOVING_SHARE = 0.7      # the moving links carry ~70 % of a 6-axis arm's datasheet mass (base and J1 column the rest)
-
-
-@dataclass(frozen=True)
-class GravityModel:
-    """The one gravity-torque model of the calibration: lumped link masses (kg, one per joint's link), the
-    payload's centre of gravity in the flange frame (mm) and the direction of gravity in the base frame.
-    ``source``: "config" (``robot.link_masses_kg``), "mass class" (``robot.mass_kg`` x ``MOVING_SHARE`` shared
-    over the links as ``DEFAULT_LINK_MASSES_KG``) or "default" (``DEFAULT_LINK_MASSES_KG``, a ~130 kg arm: the
-    shape of the torques is right for a typical 6-axis arm, stiffnesses scale with the true moving mass)."""
-    link_masses_kg: tuple[float, ...] = DEFAULT_LINK_MASSES_KG
-    payload_cog_flange_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gravity_base: tuple[float, float, float] = (0.0, 0.0, -1.0)
-    source: str = "default"
-
-    @classmethod
-    def of_robot(cls, n: int, link_masses_kg=None, mass_kg: float | None = None,
-                 payload_cog_flange_mm=(0.0, 0.0, 0.0), gravity_base=(0.0, 0.0, -1.0)) -> "GravityModel":
-        """From the config: explicit link masses, else the size law of the robot's mass class, else the default."""
-        shares = _link_masses(n, DEFAULT_LINK_MASSES_KG)
-        if link_masses_kg is not None:
-            masses, source = _link_masses(n, link_masses_kg), "config"
-        elif mass_kg is not None:
-            masses, source = MOVING_SHARE * float(mass_kg) * shares / max(shares.sum(), 1e-12), "mass class"
-        else:
-            masses, source = shares, "default"
-        g = np.asarray(gravity_base, float)
-        return cls(tuple(float(m) for m in masses), tuple(float(v) for v in payload_cog_flange_mm),
-                   tuple(float(v) for v in g / np.linalg.norm(g)), source)
-
-    def options(self) -> tuple[tuple[str, object], ...]:
-        """Keyword options of the elastic effect factories (stored with a fitted effect in model.json)."""
-        return (("link_masses_kg", self.link_masses_kg), ("payload_cog_flange_mm", self.payload_cog_flange_mm),
-                ("gravity_base", self.gravity_base))
-
-
-def _link_masses(n, masses):
-    m = np.zeros(n)
-    src = np.asarray(masses, float)
-    m[: min(n, len(src))] = src[: min(n, len(src))]
-    return m
-
-
-# ---------------------------------------------------------------- effect factories
-def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAULT_LINK_MASSES_KG,
+# ---------------------------------------------------------------- effect factories (gravity: robocal.gravity)
+def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=None,
                      payload_cog_flange_mm=None, gravity_base=(0.0, 0.0, -1.0), n_joints: int = 6) -> Effect:
     """Joint compliance under gravity.
 
@@ -195,7 +98,8 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=DEFAUL
         raise ValueError(f"unknown compliance form {form!r} (expected gravity, levers or trig)")
 
     def basis(kin, q, meta):
-        tau = gravity_torques(kin, q, _link_masses(kin.n, link_masses_kg), _meta(meta, "payload_kg", len(q)),
+        masses = default_link_masses(kin.n) if link_masses_kg is None else link_masses_kg
+        tau = gravity_torques(kin, q, link_masses(kin.n, masses), _meta(meta, "payload_kg", len(q)),
                               payload_cog_flange_mm, gravity_base)
         dq = _zeros_dq(q, len(joints))
         for k, j in enumerate(joints):
@@ -306,13 +210,21 @@ def thermal_drift(tau_s: float = 2700.0, joints=(2, 3)) -> Effect:
                   basis, typical=(1.2e-4,) + tuple(8.7e-5 for _ in joints), needs=("t_s",))
 
 
-def axis_coupling() -> Effect:
-    """Wrist coupling / ratio error: dq6 = e56 q5 + e46 q4, dq5 = e45 q4 (dimensionless)."""
+def axis_coupling(joints=(4, 5, 6)) -> Effect:
+    """Wrist coupling / ratio error of the wrist joints (a, b, c) (1-based; J4-J6 of a 6-axis arm, J5-J7 of a
+    7-axis one): dq_c = e_bc q_b + e_ac q_a, dq_b = e_ab q_a (dimensionless)."""
+    js = tuple(int(j) for j in joints)
+    if len(js) != 3 or js[1] != js[0] + 1 or js[2] != js[1] + 1 or js[0] < 1:
+        raise ValueError(f"axis_coupling joints: the three consecutive joints of a spherical wrist (e.g. [5, 6, 7]), "
+                         f"got {list(js)}")
+    a, b, c = js
+
     def basis(kin, q, meta):
         dq = _zeros_dq(q, 3)
-        dq[:, 5, 0], dq[:, 5, 1], dq[:, 4, 2] = q[:, 4], q[:, 3], q[:, 3]
+        dq[:, c - 1, 0], dq[:, c - 1, 1], dq[:, b - 1, 2] = q[:, b - 1], q[:, a - 1], q[:, a - 1]
         return Basis(dq=dq)
-    return Effect("axis_coupling", (4, 5, 6), ("e56", "e46", "e45"), "1", basis, typical=(4e-3, 2e-3, 2e-3))
+    return Effect("axis_coupling", (a, b, c), (f"e{b}{c}", f"e{a}{c}", f"e{a}{b}"), "1", basis,
+                  typical=(4e-3, 2e-3, 2e-3))
 
 
 def registration_drift(clock: str = "t_s", degree: int = 1, span: float = 3600.0) -> Effect:
@@ -338,6 +250,42 @@ def registration_drift(clock: str = "t_s", degree: int = 1, span: float = 3600.0
     names = tuple(f"{c}{k + 1}" for k in range(degree) for c in ("vx", "vy", "vz", "wx", "wy", "wz"))
     typical = tuple(v for _ in range(degree) for v in (0.02, 0.015, 0.01, 7e-6, 5e-6, 5e-6))
     return Effect("registration_drift", (), names, "mm or rad per span^k", basis, typical=typical, needs=(clock,))
+
+
+def track_straightness(degree: int = 2) -> Effect:
+    """Straightness and flatness of a linear track's rails: the carriage leaves the line by
+    sum_k (h_k e_h + v_k e_v) P_k(x), k = 2..``degree`` (Legendre polynomials of the travel x, -1..1 over the
+    joint's limits; degrees 0 and 1 are the registration and the track's direction), e_h the horizontal and e_v the
+    third direction across the track (vertical for a floor track); h_k, v_k in mm."""
+    if int(degree) < 2:
+        raise ValueError(f"track_straightness degree: 2 or more (1 is the track's direction), got {degree}")
+    ks = tuple(range(2, int(degree) + 1))
+
+    def basis(kin, q, meta):
+        if kin.track is None:
+            raise ValueError("track_straightness needs a chain with a linear track")
+        lo, hi = np.degrees(kin.q_min_rad[0]), np.degrees(kin.q_max_rad[0])
+        x = 2.0 * (np.degrees(q[:, 0]) - lo) / max(hi - lo, 1e-9) - 1.0
+        across = track_across(kin.track)
+        dp = np.zeros((len(q), 3, 2 * len(ks)))
+        for m, k in enumerate(ks):
+            P = np.polynomial.legendre.legval(x, np.eye(k + 1)[k])
+            for a in range(2):
+                dp[:, :, 2 * m + a] = P[:, None] * (kin.T_tracker_base[:3, :3] @ across[a])
+        return Basis(dp=dp)
+    names = tuple(f"{c}{k}" for k in ks for c in ("h", "v"))
+    return Effect("track_straightness", (1,), names, "mm", basis, typical=tuple(0.05 for _ in names))
+
+
+def track_across(track: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two unit directions across a track (base frame): horizontal (perpendicular to the track and to base z)
+    and the third one (vertical for a horizontal track); base x instead of z for a vertical track."""
+    u = np.asarray(track, float) / np.linalg.norm(track)
+    h = np.cross([0.0, 0.0, 1.0], u)
+    if np.linalg.norm(h) < 1e-6:
+        h = np.cross([1.0, 0.0, 0.0], u)
+    h /= np.linalg.norm(h)
+    return h, np.cross(u, h)
 
 
 # ---------------------------------------------------------------- use of the bases
@@ -384,9 +332,8 @@ def effect_regressor(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effect: 
     layout = ParamLayout.of(kin)
     b = effect.basis(kin, q, meta) if basis is None else basis
     out = np.zeros((len(q), 3, effect.k))
-    theta_cols = [c for c, i, k in layout.joint_cols if k == 0]
     if b.dq is not None:
-        out += np.einsum("nij,njk->nik", J[:, :, theta_cols], b.dq)
+        out += np.einsum("nij,njk->nik", joint_motion_columns(kin, J), b.dq)
     if b.scale is not None:
         grow = sum(J[:, :, c] * (kin.d_mm[i] if k == 1 else kin.a_mm[i])
                    for c, i, k in layout.joint_cols if k in (1, 2))
@@ -411,7 +358,8 @@ FACTORY_KEYS = {"joint_compliance": {"joints", "form", "link_masses_kg", "payloa
                 "payload_deflection": {"joints", "payload_cog_flange_mm", "gravity_base"},
                 "gear_cyclic": {"joint", "harmonics"}, "backlash": {"joints"},
                 "readback_lag": {"joints", "memory_joints"}, "thermal_drift": {"tau_s", "joints"},
-                "axis_coupling": set(), "registration_drift": {"clock", "degree", "span"}}
+                "axis_coupling": {"joints"}, "registration_drift": {"clock", "degree", "span"},
+                "track_straightness": {"degree"}}
 
 
 def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:
@@ -421,9 +369,10 @@ def by_name(name: str, n_joints: int = 6, **kwargs) -> Effect:
                  "payload_deflection": payload_deflection,
                  "gear_cyclic": lambda **kw: gear_cyclic(kw.pop("joint", 1), **kw),
                  "backlash": backlash, "readback_lag": readback_lag, "thermal_drift": thermal_drift,
-                 "axis_coupling": axis_coupling, "registration_drift": registration_drift}
+                 "axis_coupling": axis_coupling, "registration_drift": registration_drift,
+                 "track_straightness": track_straightness}
     if name not in factories:
-        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(EFFECT_NAMES)})")
+        raise ValueError(f"unknown effect {name!r} (expected one of: {', '.join(MODEL_EFFECTS)})")
     unknown = sorted(set(kwargs) - FACTORY_KEYS[name])
     if unknown:
         raise ValueError(f"effect {name!r} has no option {unknown[0]!r} (expected one of: "

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg import cho_solve, solve_triangular
 from scipy.optimize import minimize
 
-from .kinematics import Kinematics, ParamLayout, identification_jacobian
+from .kinematics import Kinematics, identification_jacobian, joint_motion_columns
 
 BOUNDARY = 1.5              # the basis lives on the calibrated range of each joint widened 1.5 x about its centre
 MAX_ORDER = 40              # the basis resolves cyclic errors up to 40 periods per revolution ...
@@ -41,10 +41,8 @@ BLOCK_ROWS = 4096
 def joint_directions(kin: Kinematics, q_rad: np.ndarray, joints: np.ndarray) -> np.ndarray:
     """dp_smr_base / dtheta_j (N, 3, len(joints)) mm/rad."""
     _, J = identification_jacobian(kin, q_rad)
-    layout = ParamLayout.of(kin)
-    theta = np.array([c for c, _, k in layout.joint_cols if k == 0])
     R = kin.T_tracker_base[:3, :3]
-    return np.einsum("ai,naj->nij", R, J[:, :, theta[joints]])
+    return np.einsum("ai,naj->nij", R, joint_motion_columns(kin, J)[:, :, joints])
 
 
 @dataclass(frozen=True, eq=False)

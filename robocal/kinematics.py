@@ -9,6 +9,13 @@ Per joint i (``theta_DH = q_i + theta_i``), the link transform is
 identified only on joints flagged ``hayati``. The chain gives ``T_base_flange``; the SMR sits at
 ``p_flange_smr_mm`` and the base is registered in the tracker frame by ``T_tracker_base``.
 All functions are batched over poses: joint angles ``(N, n)`` rad, no Python loop over poses.
+
+A robot on a linear track (``track`` not None): joint 1 is the carriage, a prismatic joint that moves the arm's
+base by ``s * track`` (``track``: the displacement per mm of travel in the base frame, the unit axis nominally;
+its direction and length are identified, parameters ``track_x, track_y, track_z``). Its DH row is unused (zeros).
+The base frame is the arm's base at travel 0. The carriage position is carried in the joint vectors like an angle
+so that every degree/radian conversion at the edges stays exact: ``q_deg`` holds it in mm, ``q_rad`` in
+``mm * pi / 180`` (``track_mm``).
 """
 from __future__ import annotations
 
@@ -21,6 +28,7 @@ from .frames import exp_se3_left, inv_T, matrix_to_rotvec, transform_points
 
 JOINT_PARAMS = ("theta", "d", "a", "alpha", "beta")
 BASE_PARAMS = ("base_tx", "base_ty", "base_tz", "base_rx", "base_ry", "base_rz")
+TRACK_PARAMS = ("track_x", "track_y", "track_z")
 TOOL_PARAMS = ("tool_x", "tool_y", "tool_z")
 JACOBIAN_ROWS = 8192          # poses per block of the identification Jacobian (bounded memory at any N)
 CHAIN_ROWS = 4096             # poses per block of the frames-only chain (cache-sized blocks: faster at 10^5 poses)
@@ -52,6 +60,7 @@ class Kinematics:
     hayati: tuple[bool, ...]
     T_tracker_base: np.ndarray = field(default_factory=lambda: np.eye(4))
     p_flange_smr_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    track: np.ndarray | None = None
 
     def __post_init__(self):
         if self.convention not in ("dh", "mdh"):
@@ -59,6 +68,10 @@ class Kinematics:
         for name in ("alpha_rad", "a_mm", "d_mm", "theta_rad", "beta_rad", "q_min_rad", "q_max_rad",
                      "T_tracker_base", "p_flange_smr_mm"):
             object.__setattr__(self, name, _arr(getattr(self, name)))
+        if self.track is not None:
+            object.__setattr__(self, "track", _arr(self.track))
+            if self.track.shape != (3,) or not np.linalg.norm(self.track) > 0:
+                raise ValueError("track: the carriage displacement per mm of travel, 3 numbers, not zero")
         n = len(self.a_mm)
         if any(len(getattr(self, k)) != n for k in ("alpha_rad", "d_mm", "theta_rad", "beta_rad")):
             raise ValueError("DH arrays must all have the number of joints")
@@ -69,19 +82,39 @@ class Kinematics:
     def n(self) -> int:
         return len(self.a_mm)
 
+    @property
+    def n_track(self) -> int:
+        """1 when joint 1 is a linear track, else 0 (the index of the arm's first joint)."""
+        return 0 if self.track is None else 1
+
+    def arm(self) -> "Kinematics":
+        """The arm without its track (the carriage at travel 0); the chain itself when it has none."""
+        if self.track is None:
+            return self
+        cut = lambda a: a[1:]                                           # noqa: E731
+        return replace(self, alpha_rad=cut(self.alpha_rad), a_mm=cut(self.a_mm), d_mm=cut(self.d_mm),
+                       theta_rad=cut(self.theta_rad), beta_rad=cut(self.beta_rad), q_min_rad=cut(self.q_min_rad),
+                       q_max_rad=cut(self.q_max_rad), hayati=self.hayati[1:], track=None)
+
     def with_(self, **changes) -> "Kinematics":
         """Copy with fields replaced."""
         return replace(self, **changes)
 
     @classmethod
     def from_table(cls, convention: str, alpha_deg, a_mm, d_mm, theta_deg, q_min_deg, q_max_deg,
-                   hayati_joints=(), T_tracker_base=None, p_flange_smr_mm=(0, 0, 0)) -> "Kinematics":
-        """Build from a DH table in degrees/mm (the form of configs and papers). hayati_joints are 1-based."""
+                   hayati_joints=(), T_tracker_base=None, p_flange_smr_mm=(0, 0, 0), track_axis=None) -> "Kinematics":
+        """Build from a DH table in degrees/mm (the form of configs and papers). ``hayati_joints``: 1-based joints
+        whose axis is parallel to the next one; beta goes on the row of the transform between the two axes,
+        ``hayati_row``. ``track_axis`` (3,): joint 1 is a linear track along it (its row's DH values are ignored;
+        its limits in mm)."""
         n = len(a_mm)
-        return cls(convention, np.radians(alpha_deg), a_mm, d_mm, np.radians(theta_deg), np.zeros(n),
-                   np.radians(q_min_deg), np.radians(q_max_deg),
-                   tuple((i + 1) in set(hayati_joints) for i in range(n)),
-                   np.eye(4) if T_tracker_base is None else T_tracker_base, p_flange_smr_mm)
+        rows = {hayati_row(convention, j) for j in hayati_joints}
+        track = None if track_axis is None else np.asarray(track_axis, float) / np.linalg.norm(track_axis)
+        zero = lambda v: np.r_[0.0, np.asarray(v, float)[1:]] if track is not None else v      # noqa: E731
+        return cls(convention, np.radians(zero(alpha_deg)), zero(a_mm), zero(d_mm), np.radians(zero(theta_deg)),
+                   np.zeros(n), np.radians(q_min_deg), np.radians(q_max_deg),
+                   tuple(i in rows for i in range(n)),
+                   np.eye(4) if T_tracker_base is None else T_tracker_base, p_flange_smr_mm, track)
 
     def to_dict(self) -> dict:
         """Plain dict with units in the keys (angles in degrees for readability)."""
@@ -93,13 +126,21 @@ class Kinematics:
             "q_min_deg": np.degrees(self.q_min_rad).tolist(), "q_max_deg": np.degrees(self.q_max_rad).tolist(),
             "hayati": list(self.hayati), "T_tracker_base": self.T_tracker_base.tolist(),
             "p_flange_smr_mm": self.p_flange_smr_mm.tolist(),
-        }
+        } | ({} if self.track is None else {"track": self.track.tolist()})
 
     @classmethod
     def from_dict(cls, d: dict) -> "Kinematics":
         return cls(d["convention"], np.radians(d["alpha_deg"]), d["a_mm"], d["d_mm"], np.radians(d["theta_deg"]),
                    np.radians(d["beta_deg"]), np.radians(d["q_min_deg"]), np.radians(d["q_max_deg"]),
-                   tuple(bool(h) for h in d["hayati"]), np.array(d["T_tracker_base"]), d["p_flange_smr_mm"])
+                   tuple(bool(h) for h in d["hayati"]), np.array(d["T_tracker_base"]), d["p_flange_smr_mm"],
+                   None if d.get("track") is None else np.array(d["track"], float))
+
+
+def hayati_row(convention: str, joint: int) -> int:
+    """0-based row that holds Hayati's beta for the parallel pair (joint, joint + 1) (1-based joint): the row of
+    the transform from axis ``joint`` to axis ``joint + 1``, row ``joint`` in standard DH (``Rz Tz Tx Rx Ry``),
+    row ``joint + 1`` in modified DH (``Rx Ry Tx Rz Tz``, where alpha_i and a_i of that pair live)."""
+    return joint - 1 if convention == "dh" else joint
 
 
 class Chain(NamedTuple):
@@ -150,7 +191,13 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
     x, y, z = list(np.broadcast_to(np.eye(3), (N, 3, 3)).transpose(1, 0, 2))
     axis = np.empty((N, n, 3)); origin = np.empty((N, n, 3))
     dirs, pts = [[] for _ in range(5)], [[] for _ in range(5)]
-    for i in range(n):
+    if kin.track is not None:                              # the carriage: a translation along the track
+        o = track_mm(q[:, 0])[:, None] * kin.track
+        axis[:, 0], origin[:, 0] = kin.track / np.linalg.norm(kin.track), 0.0
+        if full:
+            _append(dirs, (np.zeros((N, 3)),) * 5)
+            _append(pts, (np.zeros((N, 3)),) * 5)
+    for i in range(kin.n_track, n):
         th = q[:, i] + _per_pose(theta, i)
         ct, st = np.cos(th)[:, None], np.sin(th)[:, None]
         ca, sa = np.cos(_col(_per_pose(alpha, i))), np.sin(_col(_per_pose(alpha, i)))
@@ -182,6 +229,11 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
     if not full:
         return Chain(T, axis, origin, None, None)
     return Chain(T, axis, origin, tuple(map(tuple, dirs)), tuple(map(tuple, pts)))
+
+
+def track_mm(q_rad_track: np.ndarray) -> np.ndarray:
+    """The carriage position (mm) of a track joint's value as robocal carries it (mm * pi / 180)."""
+    return np.degrees(q_rad_track)
 
 
 def _chain_blocks(kin: Kinematics, q: np.ndarray, dh: dict) -> Chain:
@@ -225,8 +277,17 @@ def joint_jacobian(kin: Kinematics, q_rad: np.ndarray, p_flange_point_mm=None) -
     c = chain(kin, q_rad, full=False)
     pf = kin.p_flange_smr_mm if p_flange_point_mm is None else np.asarray(p_flange_point_mm, float)
     p = transform_points(c.T_base_flange, pf)
-    v = np.cross(c.axis, p[:, None, :] - c.origin)
-    return c.T_base_flange, np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(c.axis, 1, 2)], axis=1)
+    return c.T_base_flange, motion_columns(kin, c, p)
+
+
+def motion_columns(kin: Kinematics, c: Chain, p_base_mm: np.ndarray) -> np.ndarray:
+    """(N, 6, n) velocity of the point p_base_mm (N, 3) (mm per unit joint value) and angular velocity of the
+    flange per joint: a revolute joint turns about its axis, a track translates the arm (per mm * pi / 180)."""
+    v = np.cross(c.axis, p_base_mm[:, None, :] - c.origin)
+    w = c.axis.copy()
+    if kin.track is not None:
+        v[:, 0], w[:, 0] = np.degrees(kin.track), 0.0
+    return np.concatenate([np.swapaxes(v, 1, 2), np.swapaxes(w, 1, 2)], axis=1)
 
 
 # ---------------------------------------------------------------- parameters
@@ -234,8 +295,9 @@ def joint_jacobian(kin: Kinematics, q_rad: np.ndarray, p_flange_point_mm=None) -
 class ParamLayout:
     """Names of the full candidate parameter vector of a model, in Jacobian column order.
 
-    Per joint: theta, d, a, alpha (+ beta on Hayati joints); then base (6, left perturbation in the
-    tracker frame: translation mm, rotation rad) and tool (3, mm in the flange frame).
+    Per joint: theta, d, a, alpha (+ beta on Hayati joints); a track instead: its displacement per mm of travel
+    (``TRACK_PARAMS``, base frame, mm/mm); then base (6, left perturbation in the tracker frame: translation mm,
+    rotation rad) and tool (3, mm in the flange frame).
     """
     names: tuple[str, ...]
     joint_cols: tuple[tuple[int, int, int], ...]  # (column, joint index, JOINT_PARAMS index)
@@ -243,13 +305,19 @@ class ParamLayout:
     @classmethod
     def of(cls, kin: Kinematics) -> "ParamLayout":
         names, cols = [], []
-        for i in range(kin.n):
+        for i in range(kin.n_track, kin.n):
             for k, kind in enumerate(JOINT_PARAMS):
                 if kind == "beta" and not kin.hayati[i]:
                     continue
                 cols.append((len(names), i, k))
                 names.append(f"{kind}{i + 1}")
-        return cls(tuple(names + list(BASE_PARAMS) + list(TOOL_PARAMS)), tuple(cols))
+        track = list(TRACK_PARAMS) if kin.track is not None else []
+        return cls(tuple(names + track + list(BASE_PARAMS) + list(TOOL_PARAMS)), tuple(cols))
+
+    @property
+    def n_joint(self) -> int:
+        """Columns before the base: the joints' parameters and the track's."""
+        return self.size - len(BASE_PARAMS) - len(TOOL_PARAMS)
 
     @property
     def size(self) -> int:
@@ -263,6 +331,8 @@ class ParamLayout:
             return UNITS["base_t"] if name[5] == "t" else UNITS["base_r"]
         if name.startswith("tool_"):
             return UNITS["tool"]
+        if name.startswith("track_"):
+            return "mm/mm"
         return UNITS[name.rstrip("0123456789")]
 
 
@@ -311,13 +381,27 @@ def _jacobian_block(kin: Kinematics, layout: ParamLayout, q_rad: np.ndarray) -> 
     for col, i, k in layout.joint_cols:                          # base-frame motion, rotated into the tracker frame
         u = c.dirs[k][i] if k in prismatic else _cross(c.dirs[k][i], p_base - c.pts[k][i], w)
         np.matmul(u, R_tb.T, out=Jt[col])
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
+    if kin.track is not None:                                     # s * track: the travel along each base axis
+        s = track_mm(np.atleast_2d(q_rad)[:, 0])
+        Jt[nj - 3:nj] = s[None, :, None] * R_tb.T[:, None, :]
     Jt[nj:nj + 3] = 0.0
     for a in range(3):
         Jt[nj + a, :, a] = 1.0                                        # base translation
         _cross(np.eye(3)[a][None, :], p_tracker, Jt[nj + 3 + a])      # base rotation about tracker axis a
         Jt[nj + 6 + a] = c.T_base_flange[:, :3, a] @ R_tb.T           # tool offset along flange axis a
     return p_tracker, Jt
+
+
+def joint_motion_columns(kin: Kinematics, J: np.ndarray) -> np.ndarray:
+    """(N, 3, n) d p_tracker / d q_j (mm per unit joint value) from the identification Jacobian J (N, 3, P): each
+    revolute joint's theta column; a track's travel (its direction, per mm * pi / 180)."""
+    theta = [c for c, _, k in ParamLayout.of(kin).joint_cols if k == 0]
+    cols = J[:, :, theta]
+    if kin.track is None:
+        return cols
+    move = np.degrees(kin.T_tracker_base[:3, :3] @ kin.track)
+    return np.concatenate([np.broadcast_to(move[None, :, None], (len(J), 3, 1)), cols], axis=2)
 
 
 def _cross(u: np.ndarray, v: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -336,10 +420,11 @@ def apply_update(kin: Kinematics, delta: np.ndarray) -> Kinematics:
     arrays = [kin.theta_rad.copy(), kin.d_mm.copy(), kin.a_mm.copy(), kin.alpha_rad.copy(), kin.beta_rad.copy()]
     for col, i, k in layout.joint_cols:
         arrays[k][i] += delta[col]
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
+    track = None if kin.track is None else kin.track + delta[nj - 3:nj]
     return kin.with_(theta_rad=arrays[0], d_mm=arrays[1], a_mm=arrays[2], alpha_rad=arrays[3], beta_rad=arrays[4],
                      T_tracker_base=exp_se3_left(delta[nj:nj + 6], kin.T_tracker_base),
-                     p_flange_smr_mm=kin.p_flange_smr_mm + delta[nj + 6:nj + 9])
+                     p_flange_smr_mm=kin.p_flange_smr_mm + delta[nj + 6:nj + 9], track=track)
 
 
 def parameter_difference(kin: Kinematics, ref: Kinematics) -> np.ndarray:
@@ -350,7 +435,9 @@ def parameter_difference(kin: Kinematics, ref: Kinematics) -> np.ndarray:
              (kin.alpha_rad, ref.alpha_rad), (kin.beta_rad, ref.beta_rad)]
     for col, i, k in layout.joint_cols:
         out[col] = pairs[k][0][i] - pairs[k][1][i]
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
+    if kin.track is not None:
+        out[nj - 3:nj] = kin.track - ref.track
     D = kin.T_tracker_base @ inv_T(ref.T_tracker_base)
     out[nj:nj + 3] = D[:3, 3]
     out[nj + 3:nj + 6] = matrix_to_rotvec(D[:3, :3])

@@ -51,14 +51,14 @@ def predict_multi(kin: Kinematics, offsets_mm: np.ndarray, q_rad: np.ndarray) ->
 
 
 def _names(layout: ParamLayout, S: int) -> tuple[str, ...]:
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
     return layout.names[: nj + 6] + tuple(f"smr{s + 1}_{a}" for s in range(S) for a in "xyz")
 
 
 def _stacked(kin, offsets, q, W):
     """(p (S*N, 3), J (S*N, 3, P_ext)) of the stacked SMRs; W whitening of the stacked rows or None."""
     layout = ParamLayout.of(kin)
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
     S, N = len(offsets), len(q)
     J = np.zeros((S * N, 3, nj + 6 + 3 * S))
     p = np.empty((S * N, 3))
@@ -88,7 +88,7 @@ def calibrate_multi_smr(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.nd
     p_meas = P.reshape(-1, 3)
     W = whitening(None if cov_mm2 is None else np.asarray(cov_mm2, float).reshape(-1, 3, 3), S * N)
     layout = ParamLayout.of(kin)
-    nj = len(layout.joint_cols)
+    nj = layout.n_joint
     names = _names(layout, S)
     base_order = priority_order(layout)                       # base, tool, joints last -> first
     order = list(range(nj, nj + 6)) + list(range(nj + 6, nj + 6 + 3 * S)) + [c for c in base_order if c < nj]

@@ -22,7 +22,8 @@ def nominal_kinematics(cfg: CampaignConfig) -> Kinematics:
     return Kinematics.from_table(cfg.robot.convention, [x.alpha_deg for x in j], [x.a_mm for x in j],
                                  [x.d_mm for x in j], [x.theta_deg for x in j], [x.q_min_deg for x in j],
                                  [x.q_max_deg for x in j], cfg.robot.hayati_joints,
-                                 p_flange_smr_mm=cfg.tool.p_flange_smr_mm)
+                                 p_flange_smr_mm=cfg.tool.p_flange_smr_mm,
+                                 track_axis=None if cfg.robot.track is None else cfg.robot.track.axis)
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,7 +17,7 @@ from campaign.errors import ConfigError
 from .cell_model import CellModel
 from .simulation import simulated_effects
 
-SUPPORTED_JOINTS = 6            # plan (wrist singularity), IK branch, ABB confdata and UR write-back are 6R
+SUPPORTED_JOINTS = (4, 7)       # revolute arms of 4 to 7 joints (docs/chains.md: what else is refused and why)
 MAX_PLAN_POINTS = 20_000        # grid + test + check repeats: a real campaign has a few hundred
 MAX_GRID_POINTS = 10_000
 MAX_POOL_CELLS = 20_000         # candidate positions of an optimal plan (x orientations x branches)
@@ -50,14 +50,22 @@ def check_numerics(cell: CellModel) -> None:
 
 
 def _check_joint_count(cfg, file: str) -> None:
-    check_joint_count(cfg.robot.n_joints, file)
+    check_joint_count(cfg.robot.joints, file)
 
 
-def check_joint_count(n: int, file: str) -> None:
-    """The campaign commands support 6-joint arms only (ConfigError at robot.joints otherwise)."""
-    if n != SUPPORTED_JOINTS:
-        raise ConfigError(file, "robot.joints", f"the campaign supports 6-joint arms (plan, IK branch and "
-                                                f"controller write-back are 6R), got {n} joints")
+def check_joint_count(joints, file: str) -> None:
+    """The campaign commands support arms of 4 to 7 revolute joints, on a fixed base or carried by a linear track
+    (a prismatic first joint); ConfigError at robot.joints otherwise."""
+    for k, j in enumerate(joints):
+        if j.type == "prismatic" and k > 0:
+            raise ConfigError(file, f"robot.joints[{k}].type", "a prismatic joint is supported as the first joint "
+                                                               "only: a linear track carrying the arm")
+    n = len(joints) - (1 if joints and joints[0].type == "prismatic" else 0)
+    lo, hi = SUPPORTED_JOINTS
+    if not lo <= n <= hi:
+        raise ConfigError(file, "robot.joints", f"the campaign supports arms of {lo} to {hi} joints (fewer cannot "
+                                                f"place and orient an SMR; more have no IK redundancy rule here), "
+                                                f"got {n} revolute joints")
 
 
 def grid_counts(cfg) -> tuple[int, int, int]:
@@ -114,6 +122,9 @@ def _magnitudes(cfg) -> list[tuple[str, float, float]]:
     """(key path, value, largest plausible |value|) of every physical number that feeds a computation."""
     out: list[tuple[str, float, float]] = []
     for i, j in enumerate(cfg.robot.joints):
+        if j.type == "prismatic":
+            out += [(f"robot.joints[{i}].q_{e}_mm", getattr(j, f"q_{e}_deg"), MAX_LENGTH_MM) for e in ("min", "max")]
+            continue
         for key in ("a_mm", "d_mm"):
             out.append((f"robot.joints[{i}].{key}", getattr(j, key), MAX_LENGTH_MM))
         for key in ("alpha_deg", "theta_deg", "q_min_deg", "q_max_deg"):
@@ -190,7 +201,9 @@ def _check_drivers(cfg, file: str) -> None:
     tracker_options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}  # as the run does
     for section, kind, url, options in (("robot", "robot", cfg.robot.url, cfg.robot.options),
                                         ("tracker", "tracker", cfg.tracker.url, tracker_options)):
-        problem = check_options(kind, url, options, n_joints=cfg.robot.n_joints)
+        track = cfg.robot.track.mechanical_unit if cfg.robot.track is not None else None
+        problem = check_options(kind, url, options, n_joints=cfg.robot.n_joints,
+                                **({"track_unit": track} if track and kind == "robot" else {}))
         if problem is not None:
             where, _, message = problem.partition(": ")
             raise ConfigError(file, f"{section}.{where}", message)

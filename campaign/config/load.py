@@ -159,8 +159,9 @@ def _robot(r: _Reader) -> RobotConfig:
     convention = r.choice("convention", CONVENTIONS)
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
-    joints = tuple(_joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
-    check_joint_count(len(joints), r.file)              # before the plan's checks use the joints
+    joints = tuple(_joint(_Reader(row, r.file, where.key_path(i), TRACK_KEYS)) if _prismatic(row)
+                   else _joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
+    check_joint_count(joints, r.file)                   # before the plan's checks use the joints
     return RobotConfig(
         model=model,
         url=url,
@@ -203,11 +204,27 @@ def _motion_caps(r: _Reader) -> dict[str, Any]:
                                                                         hi=100.0)}
 
 
+TRACK_KEYS = ("type", "axis", "q_min_mm", "q_max_mm", "mechanical_unit")
+
+
+def _prismatic(row: Any) -> bool:
+    return isinstance(row, dict) and row.get("type") == "prismatic"
+
+
 def _joint(r: _Reader) -> JointConfig:
-    q_min = r.number("q_min_deg")
-    q_max = r.number("q_max_deg")
+    kind = r.choice("type", ("revolute", "prismatic"), "revolute")
+    unit = "mm" if kind == "prismatic" else "deg"
+    q_min = r.number(f"q_min_{unit}")
+    q_max = r.number(f"q_max_{unit}")
     if q_min >= q_max:
-        raise r.error("q_max_deg", f"expected a number > q_min_deg = {_fmt(q_min)}, got {_fmt(q_max)}")
+        raise r.error(f"q_max_{unit}", f"expected a number > q_min_{unit} = {_fmt(q_min)}, got {_fmt(q_max)}")
+    if kind == "prismatic":
+        axis = r.vector("axis", 3)
+        if math.hypot(*axis) < 1e-9:
+            raise r.error("axis", "expected a non-zero direction")
+        unit_name = r.data.get("mechanical_unit")
+        return JointConfig(0.0, 0.0, 0.0, 0.0, q_min, q_max, "prismatic", tuple(axis),
+                           None if unit_name is None else r.string("mechanical_unit"))
     return JointConfig(
         alpha_deg=r.number("alpha_deg"),
         a_mm=r.number("a_mm"),

@@ -111,6 +111,9 @@ class PlanConfig:
     ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS
     would improve by less than ``stop_gain_pct`` % of the noise floor (default 2) with the next block, or at
     ``max_points`` (default ``points``) or ``max_minutes`` (default none); then the test set is measured.
+    ``track_stations`` (a robot on a track, grid plans; default 5): the grid, relative to the carriage, is measured
+    with the carriage at this many stations evenly over the travel (grid points dealt to them in turn); test
+    points at seeded random carriage positions anywhere on the travel.
     """
 
     grid: GridConfig
@@ -133,6 +136,7 @@ class PlanConfig:
     max_minutes: float | None = None
     block_points: int = 20
     stop_gain_pct: float = 2.0
+    track_stations: int | None = None           # a robot on a track: 5 unless given
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,6 +24,10 @@ class JointConfig:
 
     ``theta_deg`` is the offset added to the controller's joint value
     (YAML default 0). ``q_min_deg < q_max_deg`` are the controller's axis limits.
+    A linear track (``type: prismatic``, the first joint only; docs/chains.md): YAML keys ``axis`` (its direction in
+    the robot base frame), ``q_min_mm``/``q_max_mm`` (travel) and ``mechanical_unit`` (the controller's name of the
+    unit, e.g. an ABB ``TRACK_1``); its travel limits are held in ``q_min_deg``/``q_max_deg`` in mm (joint vectors
+    carry the carriage position in mm where they carry angles in degrees) and its DH values are zero.
     """
 
     alpha_deg: float
@@ -32,6 +36,16 @@ class JointConfig:
     theta_deg: float
     q_min_deg: float
     q_max_deg: float
+    type: str = "revolute"
+    axis: Vec3 | None = None
+    mechanical_unit: str | None = None
+
+    def plain(self) -> dict[str, Any]:
+        """The row as a config file writes it (a track with its own keys)."""
+        if self.type == "prismatic":
+            return {"type": "prismatic", "axis": list(self.axis or ()), "q_min_mm": self.q_min_deg,
+                    "q_max_mm": self.q_max_deg, "mechanical_unit": self.mechanical_unit}
+        return {k: getattr(self, k) for k in ("alpha_deg", "a_mm", "d_mm", "theta_deg", "q_min_deg", "q_max_deg")}
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +90,11 @@ class RobotConfig:
     def n_joints(self) -> int:
         """Number of joints in the kinematic table."""
         return len(self.joints)
+
+    @property
+    def track(self) -> JointConfig | None:
+        """The linear track (joint 1, ``type: prismatic``), None for an arm on a fixed base."""
+        return self.joints[0] if self.joints and self.joints[0].type == "prismatic" else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -338,6 +357,8 @@ class CampaignConfig:
 
 def _to_plain(value: Any) -> Any:
     """Recursively convert dataclasses, tuples and mappings to dicts/lists."""
+    if isinstance(value, JointConfig):
+        return value.plain()
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, Mapping):

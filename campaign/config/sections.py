@@ -40,7 +40,20 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
         clearance_mm=r.number("clearance_mm", 25.0, lo=0.0),
         iso9283=_iso9283(r.section("iso9283", Iso9283Config, required=False)),
         **optimal_keys(r),
+        **_track_keys(r, robot),
     )
+
+
+def _track_keys(r: _Reader, robot: RobotConfig) -> dict:
+    """``plan.track_stations`` of a robot on a track (grid plans only)."""
+    if robot.track is None:
+        if r.data.get("track_stations") is not None:                   # (None: written by to_dict)
+            raise r.error("track_stations", "the robot has no track (robot.joints[0] with type: prismatic)")
+        return {}
+    if r.data.get("kind", "grid") != "grid":
+        raise r.error("kind", "a robot on a track is planned as a grid (the carriage at track_stations stations); "
+                              "optimal and iso9283 plans keep the carriage still")
+    return {"track_stations": r.integer("track_stations", 5, lo=2, hi=1000)}
 
 
 def _keep_out(r: _Reader) -> tuple[BoxConfig, ...]:
@@ -104,13 +117,14 @@ def _check_reach(grid: GridConfig, robot: RobotConfig, tool: ToolConfig, plan: _
 
 
 def _check_q_ref(q_ref: Sequence[float], joints: Sequence[JointConfig], where: _ListPath) -> None:
-    """Each reference joint value must lie inside its joint's limits (deg)."""
+    """Each reference joint value must lie inside its joint's limits (deg; a track's in mm)."""
     for i, (q, joint) in enumerate(zip(q_ref, joints)):
         if not joint.q_min_deg <= q <= joint.q_max_deg:
+            u = "mm" if joint.type == "prismatic" else "deg"
             raise where.error(
                 i,
-                f"{_fmt(q)} deg is outside joint {i + 1} limits "
-                f"[{_fmt(joint.q_min_deg)}, {_fmt(joint.q_max_deg)}] deg",
+                f"{_fmt(q)} {u} is outside joint {i + 1} limits "
+                f"[{_fmt(joint.q_min_deg)}, {_fmt(joint.q_max_deg)}] {u}",
             )
 
 

@@ -12,7 +12,7 @@ from .cell_model import CellModel
 from .schema import CampaignConfig
 
 
-EFFECT_FACTORY_KEYS = {"joints", "form", "joint", "harmonics", "tau_s", "link_masses_kg"}
+EFFECT_FACTORY_KEYS = {"joints", "form", "joint", "harmonics", "tau_s", "link_masses_kg", "degree"}
 
 
 def simulated_effects(cfg: CampaignConfig, n_joints: int) -> tuple:

@@ -46,6 +46,7 @@ class CorrectedTarget:
     unless orientation was measured (three SMRs); ``predicted_std_mm``: 3-D
     predictive standard deviation of the residual layer at the corrected joints
     (GPR), nan when the model has none.
+    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.chains), nan otherwise.
     """
 
     target_id: str
@@ -58,6 +59,7 @@ class CorrectedTarget:
     predicted_error_mm: float = math.nan
     predicted_rot_err_deg: float = math.nan
     predicted_std_mm: float = math.nan
+    arm_angle_deg: float = math.nan          # a seven-axis arm: the arm angle of the corrected joints (deg)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
+from drivers.abb_axes import AbbAxes, abb_axes
 from drivers.rapid import check_rapid_syntax
 from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggregate, fixed_literal, rapid_array_lines,
                                     rapid_ident_problem, rapid_string)
@@ -72,28 +73,59 @@ def _rapid_header(module_name: str, n: int, persistent: bool, with_error: bool) 
     ]
 
 
+def _chain_axes(t: CorrectedTarget, axes: AbbAxes) -> tuple[list[float], list[float], list[float]]:
+    """(robax, jointtarget extax, robtarget extax) of a target: a track's carriage in both (mm); a seven-axis arm's
+    axis 7 in the jointtarget, its arm angle in the robtarget (deg)."""
+    if axes.layout == "arm" and axes.n < 6:
+        raise ValueError(f"RAPID write-back of a {axes.n}-axis arm: the jointtarget layout of ABB's arms with fewer "
+                         "than six axes is not known here (use the CSV)")
+    rob, ext = axes.split(t.q_corrected_deg)
+    if axes.layout != "seven":
+        return rob, ext, ext
+    if not math.isfinite(t.arm_angle_deg):
+        raise ValueError(f"target {t.target_id!r}: a seven-axis robtarget needs the arm angle")
+    return rob, ext, [t.arm_angle_deg]
+
+
+def _axes_note(axes: AbbAxes) -> list[str]:
+    """Header lines saying what eax_a holds for a chain that uses it."""
+    if axes.layout == "track":
+        return ["    ! eax_a: the track's carriage position (mm), the same in jt_cal and rt_cal."]
+    if axes.layout == "seven":
+        return ["    ! Seven-axis arm: jt_cal eax_a = axis 7 (deg); rt_cal eax_a = the arm angle (deg),",
+                "    ! as docs/chains.md defines it (check it against the controller's before a MoveL)."]
+    return []
+
+
 def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str = "CalTargets",
                         persistent: bool = False, q_min_deg: Sequence[float], q_max_deg: Sequence[float],
-                        external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None) -> str:
+                        external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
+                        axes: AbbAxes | None = None) -> str:
     """Text of the RAPID module for ``targets`` (see :func:`write_rapid_module`)."""
-    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=6, allow_empty=False)
+    axes = abb_axes(6) if axes is None else axes
+    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=axes.n, allow_empty=False)
+    if axes.external and external_axes is not None:
+        raise ValueError("external_axes: this chain's own external axis is eax_a (a track or axis 7)")
     problem = rapid_ident_problem(module_name)
     if problem:
         raise ValueError(f"module_name: {problem}")
     storage = "PERS" if persistent else "CONST"
     jt, rt, ids, err = [], [], [], []
     for t in items:
-        ext = rapid_aggregate(_rapid_extax(external_axes, t.target_id))
-        joints = rapid_aggregate(fixed_literal(q, JOINT_DECIMALS) for q in t.q_corrected_deg)
+        rob, jext, rext = _chain_axes(t, axes)
+        ext = rapid_aggregate(_rapid_extax(external_axes if not axes.external else jext, t.target_id))
+        joints = rapid_aggregate(fixed_literal(q, JOINT_DECIMALS) for q in rob)
         jt.append(rapid_aggregate([joints, ext]))
         pos = rapid_aggregate(fixed_literal(p, POSITION_DECIMALS) for p in t.p_command_base_mm)
         conf = rapid_aggregate(str(int(c)) for c in t.confdata)
-        rt.append(rapid_aggregate([pos, rapid_aggregate(_rapid_quat(t.quat_command_wxyz)), conf, ext]))
+        rext = ext if not axes.external else rapid_aggregate(_rapid_extax(rext, t.target_id))
+        rt.append(rapid_aggregate([pos, rapid_aggregate(_rapid_quat(t.quat_command_wxyz)), conf, rext]))
         ids.append(rapid_string(t.target_id))
         e = float(t.predicted_error_mm)
         err.append(fixed_literal(e, ERROR_DECIMALS) if math.isfinite(e) else None)
     with_error = all(e is not None for e in err)
-    lines = [f"MODULE {module_name}", *_rapid_header(module_name, len(items), persistent, with_error), "",
+    lines = [f"MODULE {module_name}", *_rapid_header(module_name, len(items), persistent, with_error),
+             *_axes_note(axes), "",
              "    ! Number of targets.", f"    CONST num n_cal:={len(items)};",
              "    ! Source target ids.", *rapid_array_lines(storage, "string", "id_cal", ids),
              "    ! Corrected joints (deg).", *rapid_array_lines(storage, "jointtarget", "jt_cal", jt),
@@ -112,8 +144,10 @@ def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str 
 def write_rapid_module(path: str | os.PathLike, targets: Iterable[CorrectedTarget], *,
                        module_name: str = "CalTargets", persistent: bool = False,
                        q_min_deg: Sequence[float], q_max_deg: Sequence[float],
-                       external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None) -> Path:
-    """Write an ABB RAPID module of the accepted targets (6 joints) atomically; return the path.
+                       external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
+                       axes: AbbAxes | None = None) -> Path:
+    """Write an ABB RAPID module of the accepted targets atomically; return the path. ``axes``
+    (``drivers.abb_axes``, default a 6-axis arm): how the chain's joints map onto robax/extax.
 
     Arrays ``id_cal{N}`` (string), ``jt_cal{N}`` (jointtarget, deg, 6 decimals),
     ``rt_cal{N}`` (robtarget: mm 4 decimals, quaternion 9 decimals, confdata),
@@ -125,5 +159,5 @@ def write_rapid_module(path: str | os.PathLike, targets: Iterable[CorrectedTarge
     ``[q_min_deg, q_max_deg]``, ids over 80 characters or not ISO 8859-1.
     """
     text = render_rapid_module(targets, module_name=module_name, persistent=persistent,
-                               q_min_deg=q_min_deg, q_max_deg=q_max_deg, external_axes=external_axes)
+                               q_min_deg=q_min_deg, q_max_deg=q_max_deg, external_axes=external_axes, axes=axes)
     return atomic_write(path, text.encode("ascii"))

@@ -19,12 +19,14 @@ from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
 from campaign.plan.poses import unreachable_reasons
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
+from robocal.chains import arm_angle_rad, branch_signs, redundant
 from robocal.ik import branch_signature, solve_on_branch
 from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 
 from .accuracy import HeldOut, predicted_errors_mm, rotation_errors_deg
 from .bounds import CorrectedTarget, Rejected, check_targets
+from .configuration import configuration_reasons
 
 
 ENSEMBLE = ("multiply", "quaternion")
@@ -32,17 +34,20 @@ ENSEMBLE = ("multiply", "quaternion")
 
 @dataclass(frozen=True)
 class Targets:
-    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3), and what the
-    orientations are (named in the reason of an unreachable target)."""
+    """Cartesian targets in the robot base frame: ids, positions (N, 3) mm, orientations (N, 3, 3), what the
+    orientations are (named in the reason of an unreachable target); a robot on a track: the carriage position of
+    each (N,) mm, None when the file gives none."""
     ids: tuple[str, ...]
     p_base_mm: np.ndarray
     R_base: np.ndarray
     orientation: str = "the plan's fixed SMR orientation"
+    track_mm: np.ndarray | None = None
 
 
 def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
-    """``target_id,x,y,z[,qw,qx,qy,qz]`` (mm, base frame; unit quaternion w-first). Without a quaternion
-    the plan's fixed SMR orientation is used. Errors name the file, line and column."""
+    """``target_id,x,y,z[,qw,qx,qy,qz][,track_mm]`` (mm, base frame; unit quaternion w-first; a robot on a track:
+    the carriage position). Without a quaternion the plan's fixed SMR orientation is used. Errors name the file,
+    line and column."""
     src = str(path)
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -56,8 +61,10 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
         raise DataError(src, "empty file")
     header = [h.strip().lower() for h in rows[0][1]]
     need, quat = ["target_id", "x", "y", "z"], ["qw", "qx", "qy", "qz"]
-    if header[:4] != need or header[4:] not in ([], quat):
-        raise DataError(src, f"header must be {','.join(need)}[,{','.join(quat)}], got {','.join(header)}", line=rows[0][0])
+    track = bool(header) and header[-1] == "track_mm"
+    if header[:4] != need or header[4:len(header) - track] not in ([], quat):
+        raise DataError(src, f"header must be {','.join(need)}[,{','.join(quat)}][,track_mm], got {','.join(header)}",
+                        line=rows[0][0])
     ids, values = [], []
     for line, r in rows[1:]:
         if len(r) != len(header):
@@ -76,6 +83,8 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
     if not ids:
         raise DataError(src, "no targets")
     v = np.array(values)
+    travel = v[:, -1] if track else None
+    v = v[:, :-1] if track else v
     if v.shape[1] == 7:
         q = v[:, 3:]
         norm = np.linalg.norm(q, axis=1)
@@ -83,8 +92,10 @@ def read_targets_csv(path: str | Path, default_R: np.ndarray) -> Targets:
             bad = int(np.argmax(np.abs(norm - 1)))
             raise DataError(src, f"quaternion of {ids[bad]!r} is not unit (norm {norm[bad]:.4f})")
         from robocal.correct import quat_to_matrix
-        return Targets(tuple(ids), v[:, :3], quat_to_matrix(q), "the orientation given in the targets file")
-    return Targets(tuple(ids), v[:, :3], np.broadcast_to(default_R, (len(ids), 3, 3)).copy())
+        R, how = quat_to_matrix(q), "the orientation given in the targets file"
+    else:
+        R, how = np.broadcast_to(default_R, (len(ids), 3, 3)).copy(), "the plan's fixed SMR orientation"
+    return Targets(tuple(ids), v[:, :3], R, how, travel)
 
 
 def _is_float(x: str) -> bool:
@@ -141,8 +152,19 @@ def ensemble_generators(error: str) -> tuple[str, ...]:
 
 def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     """(N, 4) ABB confdata [cf1, cf4, cf6, cfx]: quadrants of axes 1, 4, 6 and cfx from the branch
-    (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table."""
-    quad = np.floor(np.degrees(q_rad[:, [0, 3, 5]]) / 90.0).astype(int)
+    (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table. On a track: the
+    arm's. A seven-axis arm (ABB numbers a YuMi's joints 1, 2, 7, 3, 4, 5, 6: its axes 1, 4, 6 are joints 1, 5, 7):
+    cfx from the chain's branch signs (``robocal.chains.branch_signs``). Fewer than six joints: the axes it has."""
+    q_rad = np.atleast_2d(q_rad)
+    if kin.track is not None:
+        return abb_confdata(kin.arm(), q_rad[:, kin.n_track:])
+    axes = [0, 4, 6] if kin.n == 7 else [j for j in (0, 3, 5) if j < kin.n]
+    quad = np.zeros((len(q_rad), 3), int)
+    quad[:, :len(axes)] = np.floor(np.degrees(q_rad[:, axes]) / 90.0).astype(int)
+    if kin.n != 6:
+        sig = branch_signs(kin, q_rad)
+        cfx = sum((2 ** (sig.shape[1] - 1 - i)) * (sig[:, i] < 0) for i in range(sig.shape[1])) if sig.shape[1] else 0
+        return np.column_stack([quad, np.zeros(len(q_rad), int) + cfx]).astype(int)
     sig = branch_signature(kin, q_rad)
     cfx = 4 * (sig[:, 0] < 0) + 2 * (sig[:, 1] < 0) + (q_rad[:, 4] < 0)
     return np.column_stack([quad, cfx]).astype(int)
@@ -199,10 +221,11 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
     cfg, kin = cell.config, cell.kinematics
     T_tool = tool_transform(model.kinematics.p_flange_smr_mm) if T_tool is None else T_tool   # the identified SMR
     R_flange = targets.R_base @ T_tool[:3, :3].T
-    q_ref = np.radians(cfg.plan.q_ref_deg)
-    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, q_ref, point_mm=T_tool[:3, 3])
+    q_seed = target_seeds(cfg, kin, targets)
+    q_nom, ok = solve_on_branch(kin, targets.p_base_mm, R_flange, q_seed, point_mm=T_tool[:3, 3])
     unreachable = np.flatnonzero(~ok)
-    why = unreachable_reasons(kin, targets.p_base_mm[unreachable], R_flange[unreachable], q_ref,
+    why = unreachable_reasons(kin, targets.p_base_mm[unreachable], R_flange[unreachable],
+                              q_seed[unreachable] if np.ndim(q_seed) == 2 else q_seed,
                               orientation=targets.orientation, point_mm=T_tool[:3, 3])
     rejected = [Rejected(targets.ids[i], w) for i, w in zip(unreachable, why)]
     idx = np.flatnonzero(ok)
@@ -211,6 +234,9 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
         T_d = np.zeros((len(idx), 4, 4))
         T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = targets.R_base[idx], targets.p_base_mm[idx], 1.0
         c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q_nom[idx], T_tool)
+        changed = configuration_reasons(kin, c.q_rad, q_nom[idx])
+        rejected += [Rejected(targets.ids[i], why) for i, why in zip(idx, changed) if why]
+        idx, c = _kept(idx, c, [why is None for why in changed])
         cmd = fk(kin, c.q_rad) @ T_tool
         conf = abb_confdata(kin, c.q_rad)
         std = predictive_std_mm(model, c.q_rad)
@@ -222,12 +248,35 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                 q_corrected_deg=tuple(np.degrees(c.q_rad[j])), p_command_base_mm=tuple(cmd[j, :3, 3]),
                 quat_command_wxyz=tuple(matrix_to_quat(cmd[j:j + 1, :3, :3])[0]), confdata=tuple(int(v) for v in conf[j]),
                 solver_tolerance_mm=float(c.pos_err_mm[j]), predicted_error_mm=float(err[j]),
-                predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j])))
+                predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j]),
+                arm_angle_deg=float(np.degrees(arm_angle_rad(kin, c.q_rad[j:j + 1])[0])) if redundant(kin) else np.nan))
     lim = _limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
     return ok_targets, rejected + bad
+
+
+def target_seeds(cfg: CampaignConfig, kin, targets: Targets) -> np.ndarray:
+    """(N, n) rad: ``plan.q_ref_deg`` per target; a robot on a track with the carriage at the target's
+    ``track_mm``, else where the target sits in front of the arm as the plan's grid centre does (within the
+    travel). The corrected target keeps that carriage position."""
+    q = np.tile(np.radians(cfg.plan.q_ref_deg), (len(targets.ids), 1))
+    if kin.track is None:
+        return q
+    tr = cfg.robot.track
+    u = kin.track / np.linalg.norm(kin.track)
+    s = targets.track_mm if targets.track_mm is not None else \
+        (targets.p_base_mm - np.asarray(cfg.plan.grid.center_mm)) @ u
+    q[:, 0] = np.radians(np.clip(s, tr.q_min_deg, tr.q_max_deg))
+    return q
+
+
+def _kept(idx: np.ndarray, c: Correction, keep) -> tuple[np.ndarray, Correction]:
+    """The targets ``idx`` and their correction where ``keep``."""
+    k = np.asarray(keep, bool)
+    return idx[k], Correction(c.q_rad[k], c.pos_err_mm[k], c.rot_err_rad[k], c.error[k], c.iterations[k],
+                              c.generator[k])
 
 
 def predictive_std_mm(model: CalibratedModel, q_rad: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from robocal.kinematics import fk
 from robocal.model import CalibratedModel
 from robocal.stats import error_stats
 
+from .configuration import configuration_reasons
 from .targets import _limits_deg, model_pose_fn, run_correction
 from .verify_drift import VerifyDrift
 from .verify_report import VERIFY_FORMAT, VerifyReport
@@ -119,6 +120,7 @@ class VerifyPasses:
         self.held = held_reasons(self.q, self.q0, self.limit, self.lo, self.hi,
                                  self.cfg.correction.max_joint_correction_deg, moved,
                                  self.cfg.correction.max_position_correction_mm)
+        self.held = [h or c for h, c in zip(self.held, configuration_reasons(self.kin, self.q, self.q0))]
         self.safe = np.array([h is None for h in self.held])
         self.q = np.where(self.safe[:, None], self.q, self.q0)    # an unsafe correction is never commanded
         return [PlanPoint(f"{i}.v{self.k}", "verify", tuple(np.degrees(qq)), tuple(pd))
@@ -138,7 +140,7 @@ class VerifyPasses:
             return None
         sigma = np.sqrt(np.trace(self.cell.covariance(p_meas), axis1=1, axis2=2))
         significant = np.linalg.norm(err, axis=1) > self.cfg.correction.significance * sigma
-        R_flange = np.broadcast_to(self.R_d[0] @ self.T_tool[:3, :3].T, (len(self.ids), 3, 3))
+        R_flange = self.R_d @ self.T_tool[:3, :3].T                       # each point's planned orientation
         self.q, self.p_pseudo = closed_loop_step(self.kin, self.T_tool, self.q, self.p_pseudo,
                                                  err @ self.T_tb[:3, :3], significant, R_flange)   # err in base
         self.k += 1
@@ -175,7 +177,9 @@ def verify_run(run_dir: Path, execute_passes, cell: CellModel, model: Calibrated
     floor = float(np.sqrt(np.mean(np.trace(cell.covariance(target_tracker), axis1=1, axis2=2))))
     rows = {UNCORRECTED: _figures(before)}
     passes = [VerifyPass(UNCORRECTED, 0, len(ids), {}, rows[UNCORRECTED], None)]
-    R_d = np.broadcast_to(fk(kin, q0[:1])[0, :3, :3] @ T_tool[:3, :3], (len(ids), 3, 3))
+    R_d = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]        # an arm of < 6 axes turns its tool with it (the plan)
+    if kin.n - kin.n_track >= 6:                          # the plan's one fixed orientation
+        R_d = np.broadcast_to(R_d[0], (len(ids), 3, 3))
     T_d = np.zeros((len(ids), 4, 4))
     T_d[:, :3, :3], T_d[:, :3, 3], T_d[:, 3, 3] = R_d, p_d, 1.0
     c = run_correction(cell, model_pose_fn(model, T_tool), T_d, q0, T_tool)

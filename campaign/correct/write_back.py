@@ -75,11 +75,19 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
     for fmt in formats:
         for name in FORMATS[fmt]:
             try:
-                texts[name] = renderers[name](accepted, **limits)
+                extra = {"axes": _abb_axes(cfg)} if fmt == "rapid" else {}
+                texts[name] = renderers[name](accepted, **limits, **extra)
             except ValueError as exc:
                 raise CampaignError(f"{out / name}: not written: {' '.join(str(exc).split())}") from None
     paths = [atomic_write(out / name, text.encode("utf-8")) for name, text in texts.items()]
     return paths + [rejected_path]
+
+
+def _abb_axes(cfg: CampaignConfig):
+    """How the config's joints map onto an ABB controller's axes (ValueError: no ABB layout, one line)."""
+    from drivers.abb_axes import abb_axes
+
+    return abb_axes(cfg.robot.n_joints, cfg.robot.track is not None)
 
 
 def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:

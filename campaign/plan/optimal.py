@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.design import Criterion, Forecast, criterion, d_optimal, forecast, short_tour
-from robocal.ik import wrist_angle_rad
+from robocal.chains import alignment_margin_rad
 from robocal.kinematics import Kinematics
 from robocal.pool import candidate_poses, incidence_rad, smr_base_and_axis, tilted_rotations
 
@@ -65,7 +65,7 @@ def candidate_pool(cell: CellModel, guard: PathGuard | None) -> Pool:
     rotations = tilted_rotations(R0, math.radians(pl.pool.tilt_deg), tilts)
     q, at, ori, branch = candidate_poses(kin, cells, rotations, np.radians(pl.q_ref_deg), pl.pool.wrist_flip)
     n_solved = len(q)
-    keep = np.degrees(wrist_angle_rad(kin, q)) >= WRIST_MARGIN_DEG
+    keep = np.degrees(alignment_margin_rad(kin, q)[0]) >= WRIST_MARGIN_DEG
     if tr.position_in_base_mm is not None:
         p_smr, R = smr_base_and_axis(kin, q)
         seen = incidence_rad(R, p_smr, tr.position_in_base_mm)

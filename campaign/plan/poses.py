@@ -16,14 +16,16 @@ import json
 import numpy as np
 
 from campaign.config.schema import CampaignConfig
-from robocal.ik import solve_ik, solve_on_branch, wrist_angle_rad
+from robocal.chains import alignment_label, alignment_margin_rad, alignments
+from robocal.ik import solve_ik, solve_on_branch
 from robocal.kinematics import Kinematics
 
 from .motion_safety import PathGuard, with_vias
 from .points import Plan, PlanPoint, Skipped, nest_point_id
 
 
-WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6) are not planned
+WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6 on a 6-axis arm; the
+                           # alignments of robocal.chains on other chains) are not planned
 
 
 def tool_rotation(direction, down=(0.0, 0.0, -1.0)) -> np.ndarray:
@@ -92,19 +94,24 @@ def test_targets(cfg: CampaignConfig) -> tuple[np.ndarray, list[str]]:
     return rng.uniform(c - s / 2, c + s / 2, (t.count, 3)), [f"T{i + 1:03d}" for i in range(t.count)]
 
 
-def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets, R, guard: PathGuard | None
-                  ) -> tuple[np.ndarray, np.ndarray, list[Skipped]]:
+def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets, R, guard: PathGuard | None,
+                  q_seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list[Skipped]]:
     """Joints (N, n) rad of the targets p (N, 3) with the flange orientation R on ``q_ref_deg``'s branch, which are
-    plannable (N,) bool (reachable, off the wrist singularity, outside keep-out boxes), and the skipped ones."""
-    q_ref = np.radians(cfg.plan.q_ref_deg)
+    plannable (N,) bool (reachable, off the wrist singularity, outside keep-out boxes), and the skipped ones.
+    ``q_seed`` (N, n) rad: per-target references (a track's carriage position: kept by the IK)."""
+    q_ref = np.radians(cfg.plan.q_ref_deg) if q_seed is None else q_seed
     q_all, ok = solve_on_branch(kin, p, R, q_ref)
     bad = np.flatnonzero(~ok)
-    reasons = unreachable_reasons(kin, p[bad], R, q_ref)
+    reasons = unreachable_reasons(kin, p[bad], R if np.ndim(R) == 2 else R[bad],
+                                  q_ref if q_seed is None else q_seed[bad])
     skipped = [Skipped(ids[i], sets[i], tuple(p[i]), w) for i, w in zip(bad, reasons)]
-    wrist = np.degrees(wrist_angle_rad(kin, q_all)) if kin.n >= 6 else np.full(len(p), 90.0)
+    margin, which = alignment_margin_rad(kin, q_all)
+    wrist = np.degrees(margin)
     near = ok & (wrist < WRIST_MARGIN_DEG)
-    skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the wrist singularity "
-                        f"(J4 || J6; margin {WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
+    words = [f"wrist singularity ({alignment_label(a)}" if kin.n - kin.n_track == 6 else
+             f"{alignment_label(a)} alignment (a singularity or branch boundary" for a in alignments(kin)]
+    skipped += [Skipped(ids[i], sets[i], tuple(p[i]), f"{wrist[i]:.1f} deg from the {words[which[i]]}; margin "
+                        f"{WRIST_MARGIN_DEG:.0f} deg)") for i in np.flatnonzero(near)]
     ok &= ~near
     if guard is not None:                                   # stops inside keep-out boxes / outside the envelope
         why = guard.pose_reasons(np.degrees(q_all[ok]))

@@ -56,8 +56,10 @@ class UrdfLimits:
                 raise DataError("--effort-nm", f"expected one positive torque (N*m) or {n}, got {len(effort_nm)}")
             effort_nm = tuple(float(e) for e in effort_nm) * (n if len(effort_nm) == 1 else 1)
         speed = float(np.radians(cfg.robot.max_joint_speed_deg_s))
-        return cls(tuple(float(np.radians(j.q_min_deg)) for j in joints),
-                   tuple(float(np.radians(j.q_max_deg)) for j in joints), (speed,) * n, effort_nm,
+        si = lambda j, v: v / 1000.0 if j.type == "prismatic" else float(np.radians(v))   # noqa: E731  (m, rad)
+        return cls(tuple(si(j, j.q_min_deg) for j in joints), tuple(si(j, j.q_max_deg) for j in joints),
+                   tuple(cfg.robot.max_tcp_speed_mm_s / 1000.0 if j.type == "prismatic" else speed for j in joints),
+                   effort_nm,
                    f"config {cfg.name}: robot.joints limits, robot.max_joint_speed_deg_s "
                    f"{cfg.robot.max_joint_speed_deg_s:g} deg/s")
 
@@ -85,14 +87,14 @@ def _trans(axis: str, length_mm: float) -> np.ndarray:
 def joint_origins(kin: Kinematics) -> tuple[list[np.ndarray], np.ndarray]:
     """Fixed transforms (4, 4) mm: the origin of each joint (n of them) and of the flange, such that
     ``T_base_flange(q) = O_1 Rz(q_1) O_2 Rz(q_2) ... O_n Rz(q_n) O_flange``."""
-    n = kin.n
+    n, t = kin.n, kin.n_track                  # a track's row is unused: the carriage only translates
     if kin.convention == "dh":
-        S = [_rot("z", kin.theta_rad[i]) @ _trans("z", kin.d_mm[i]) @ _trans("x", kin.a_mm[i])
+        S = [np.eye(4) if i < t else _rot("z", kin.theta_rad[i]) @ _trans("z", kin.d_mm[i]) @ _trans("x", kin.a_mm[i])
              @ _rot("x", kin.alpha_rad[i]) @ _rot("y", kin.beta_rad[i]) for i in range(n)]
         return [np.eye(4)] + S[:-1], S[-1]
-    A = [_rot("x", kin.alpha_rad[i]) @ _rot("y", kin.beta_rad[i]) @ _trans("x", kin.a_mm[i])
+    A = [np.eye(4) if i < t else _rot("x", kin.alpha_rad[i]) @ _rot("y", kin.beta_rad[i]) @ _trans("x", kin.a_mm[i])
          @ _rot("z", kin.theta_rad[i]) for i in range(n)]
-    B = [_trans("z", kin.d_mm[i]) for i in range(n)]
+    B = [np.eye(4) if i < t else _trans("z", kin.d_mm[i]) for i in range(n)]
     return [A[0]] + [B[i - 1] @ A[i] for i in range(1, n)], B[-1]
 
 
@@ -101,6 +103,12 @@ def _origin_xml(T_mm: np.ndarray) -> str:
     rpy = Rotation.from_matrix(T_mm[:3, :3]).as_euler("xyz")          # extrinsic x-y-z = URDF roll, pitch, yaw
     fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731  (full precision)
     return f'<origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>'
+
+
+def _track_axis_xyz(kin: Kinematics) -> str:
+    """The track's unit direction (base frame) for a URDF prismatic joint (its length, the scale, is in a comment)."""
+    u = kin.track / np.linalg.norm(kin.track)
+    return " ".join(repr(float(v)) for v in u)
 
 
 def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -> str:
@@ -120,6 +128,10 @@ def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -
              + ("effort in N*m (datasheet)" if limits.effort_nm is not None else
                 "effort omitted (no datasheet torque given: add effort=\"N*m\" where a tool requires it, e.g. "
                 "urdfdom)")]
+    if kin.track is not None:
+        notes.append(f"j1 is the linear track (prismatic, metres); the carriage travels "
+                     f"{np.linalg.norm(kin.track):.9f} x the controller's position (identified scale): command "
+                     "j1 = that product")
     if getattr(model, "effects", ()):
         names = ", ".join(getattr(fe.choice, "label", type(fe).__name__) for fe in model.effects)
         notes.append(f"NOT exported: the physical effects of the model ({names}: joint-angle dependent, not a fixed "
@@ -134,8 +146,9 @@ def urdf_text(model: CalibratedModel, limits: UrdfLimits, name: str = "robot") -
     links = ["base_link"] + [f"link{i + 1}" for i in range(kin.n)] + ["flange", "tool"]
     lines += [f'  <link name="{ln}"/>' for ln in links]
     for i in range(kin.n):
-        lines += [f'  <joint name="j{i + 1}" type="revolute">', f'    <parent link="{links[i]}"/>',
-                  f'    <child link="{links[i + 1]}"/>', f"    {_origin_xml(origins[i])}", '    <axis xyz="0 0 1"/>',
+        kind, axis = ("prismatic", _track_axis_xyz(kin)) if i < kin.n_track else ("revolute", "0 0 1")
+        lines += [f'  <joint name="j{i + 1}" type="{kind}">', f'    <parent link="{links[i]}"/>',
+                  f'    <child link="{links[i + 1]}"/>', f"    {_origin_xml(origins[i])}", f'    <axis xyz="{axis}"/>',
                   f"    {_limit_xml(limits, i)}", "  </joint>"]
     tool = np.eye(4)
     tool[:3, 3] = kin.p_flange_smr_mm
@@ -199,6 +212,11 @@ def write_dh_csv(model: CalibratedModel, path: str | Path) -> Path:
              + [cell(parameter_std(model, f"{kind}{r['joint']}")) for kind in JOINT_PARAMS] for r in rows]
     table.append(["tool", "p_flange_smr_mm", f"{p[0]:.9g}", f"{p[1]:.9g}", f"{p[2]:.9g}", "", "", "", ""]
                  + [cell(parameter_std(model, f"tool_{a}")) for a in "xyz"] + ["", ""])
+    track = model.kinematics.track
+    if track is not None:           # joint 1's row: travel limits in mm; its displacement per mm of travel here
+        table[0][1] = "prismatic"
+        table.append(["track", "displacement_per_mm", f"{track[0]:.9g}", f"{track[1]:.9g}", f"{track[2]:.9g}", "", "",
+                      "", ""] + [cell(parameter_std(model, f"track_{a}")) for a in "xyz"] + ["", ""])
     return atomic_write(path, render_rows(list(rows[0]) + list(DH_STD_COLUMNS), table,
                                           text_columns=(0, 1)).encode("utf-8"))
 
@@ -219,8 +237,12 @@ def _robodk_header(cols: tuple[str, ...]) -> str:
 
 def robodk_text(model: CalibratedModel) -> str:
     """The calibrated table as RoboDK users type it by hand (DHM columns alpha, a, theta, d; mm and deg), each value's
-    std beside it (from the model's record; ``-``: not identified)."""
+    std beside it (from the model's record; ``-``: not identified). A robot on a track is refused (DataError): the
+    table has no prismatic joint."""
     kin = model.kinematics
+    if kin.track is not None:
+        raise DataError("--robodk", "the robot is on a linear track: RoboDK's DH(M) robot table has no prismatic "
+                                    "joint (use --urdf or --dh-csv, which carry the track)")
     p = kin.p_flange_smr_mm
     std = lambda name: _std_text(model, name)  # noqa: E731
     out = ["# Calibrated kinematics for manual entry (robot panel, DHM table). mm and deg.",

@@ -32,7 +32,9 @@ def open_devices(cell: CellModel) -> Iterator[Devices]:
     """Open and connect the config's robot and tracker; both are closed on exit whatever happens."""
     cfg = cell.config
     with ExitStack() as stack:
-        context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cell))
+        track = cfg.robot.track
+        context = CellContext(n_joints=len(cfg.robot.joints), simulation=lambda: mock_world(cell),
+                              track_unit=None if track is None else track.mechanical_unit)
         robot = open_robot(cfg.robot.url, cfg.robot.options, context)
         stack.callback(robot.close)
         options = {"timeout_s": cfg.tracker.measurement.timeout_s, **cfg.tracker.options}   # config timeout unless set

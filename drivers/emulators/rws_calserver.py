@@ -94,9 +94,10 @@ class CalServerMixin:
         if kind == 0:
             return self._set_done(seq)
         if kind == 1:
-            reached = self._move_joints(tuple(target[0][:6]), limits["override"] / 100.0)
+            reached = self._move_joints(tuple(target[0][:6]), limits["override"] / 100.0, tuple(target[1]))
         elif kind == 2:
-            reached = self._move_linear(tuple(ptarget[0]), tuple(ptarget[1]), tuple(int(c) for c in ptarget[2]))
+            reached = self._move_linear(tuple(ptarget[0]), tuple(ptarget[1]), tuple(int(c) for c in ptarget[2]),
+                                        tuple(ptarget[3]))
         else:
             return self._reject(seq, -1, f"CalServer: unknown request kind {kind}")
         if reached is None or not self._dwell(settle_s):
@@ -130,13 +131,14 @@ class CalServerMixin:
     def _set_done(self, seq: float) -> None:
         with self._lock:
             syms = self.modules["calserver"].symbols
-            syms["cal_reached"].value = render([list(map(float, self.joints)), [UNUSED] * 6])
+            syms["cal_reached"].value = render([list(map(float, self.joints)), list(map(float, self.ext))])
             syms["cal_done_seq"].value = render(seq)
             self._publish()
 
-    def _move_joints(self, q: tuple[float, ...], override: float = 1.0) -> tuple[float, ...] | None:
-        """Interpolate to ``q`` (deg) at ``joint_speed_deg_s`` times the VelSet override; None if limits, a hook
-        fault or a stop intervene."""
+    def _move_joints(self, q: tuple[float, ...], override: float = 1.0,
+                     ext: tuple[float, ...] = ()) -> tuple[float, ...] | None:
+        """Interpolate to ``q`` (deg) at ``joint_speed_deg_s`` times the VelSet override, the external axes ``ext``
+        (9E9: unused, left alone) with them; None if limits, a hook fault or a stop intervene."""
         for i, (v, (lo, hi)) in enumerate(zip(q, self.joint_limits)):
             if not lo <= v <= hi:
                 with self._lock:
@@ -159,11 +161,14 @@ class CalServerMixin:
             return None
         with self._lock:
             self.joints = [float(v) for v in (actual if actual is not None else q)]
+            self.ext = [float(e) if abs(float(e)) < UNUSED / 10 else old for e, old in zip(tuple(ext) + (UNUSED,) * 6,
+                                                                                          self.ext)]
             self.moves.append(("MoveAbsJ", tuple(q)))
             return tuple(self.joints)
 
-    def _move_linear(self, trans: tuple, quat: tuple, conf: tuple) -> tuple[float, ...] | None:
-        """MoveL: the robtarget hook may return joints; by default only the Cartesian state changes."""
+    def _move_linear(self, trans: tuple, quat: tuple, conf: tuple, ext: tuple = ()) -> tuple[float, ...] | None:
+        """MoveL: the robtarget hook may return joints; by default only the Cartesian state (and its external axes)
+        changes."""
         try:
             actual = self.robtarget_hook(trans, quat, conf) if self.robtarget_hook else None
         except EmulatedMotionFault as fault:
@@ -172,6 +177,7 @@ class CalServerMixin:
             return None
         with self._lock:
             self.robtarget = (list(trans), list(quat), list(conf))
+            self.robtarget_ext = [float(e) for e in tuple(ext) + (UNUSED,) * (6 - len(ext))]
             if actual is not None:
                 self.joints = [float(v) for v in actual]
             self.moves.append(("MoveL", tuple(trans) + tuple(quat)))

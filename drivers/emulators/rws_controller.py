@@ -11,7 +11,7 @@ from drivers.rapid.values import (SHAPES, Module, RapidSyntaxError, Symbol, matc
 from .rws_http import (DIR_NOT_EXIST, EXEC_STATE, E_FAIL, FILE_NOT_FOUND, ILLEGAL_ENTRYPOINT, INVALIDARG,
                        INVALID_PATH, INVALID_PROGRAMFILE, INVALID_STATE, MASTER_REJECT, MODE_REJECT, MOD_AMBNAME,
                        NO_PP, NO_SUCH_SYMBOL, RAPID_SEMANTIC_ERROR, RESOURCE_HELD, Request, Response, TASK,
-                       UNRESOLVED_URL, VOLUMES, _Holder, _Reject, _Session, _domain_key)
+                       UNRESOLVED_URL, UNUSED, VOLUMES, _Holder, _Reject, _Session, _domain_key)
 
 
 class ControllerMixin:
@@ -149,7 +149,8 @@ class ControllerMixin:
         return self.version == 2 and req.q("mastership") == "implicit" and self.implicit_mastership
 
     def _get_mechunits(self, req: Request, s: _Session) -> Response:
-        return self._ok(req, [{"_type": "ms-mechunit-li", "_title": "ROB_1", "mode": "Activated"}], collection=True)
+        return self._ok(req, [{"_type": "ms-mechunit-li", "_title": u, "mode": m}
+                              for u, m in {"ROB_1": "Activated", **self.units}.items()], collection=True)
 
     def _get_pcp(self, req: Request, s: _Session, task: str) -> Response:
         module, routine = self.pp or ("", "")
@@ -374,9 +375,10 @@ class ControllerMixin:
 
     def _get_jointtarget(self, req: Request, s: _Session, mechunit: str) -> Response:
         self._check_mechunit(mechunit)
-        item = {"_type": "ms-jointtarget", "_title": mechunit}
-        item.update({f"rax_{i + 1}": render(float(v)) for i, v in enumerate(self.joints)})
-        item.update({f"eax_{c}": "9E+09" for c in "abcdef"})
+        item = {"_type": "ms-jointtarget", "_title": mechunit}        # a unit of its own: its axis in eax_a
+        rob, ext = (self.joints, self.ext) if mechunit == "ROB_1" else ([UNUSED] * 6, self.ext[:1] + [UNUSED] * 5)
+        item.update({f"rax_{i + 1}": render(float(v)) for i, v in enumerate(rob)})
+        item.update({f"eax_{c}": render(float(v)) for c, v in zip("abcdef", ext)})
         return self._ok(req, [item])
 
     def _get_robtarget(self, req: Request, s: _Session, mechunit: str) -> Response:
@@ -385,12 +387,12 @@ class ControllerMixin:
         item = {"_type": "ms-robtargets", "_title": mechunit, "x": render(x), "y": render(y), "z": render(z)}
         item.update({f"q{i + 1}": render(float(q)) for i, q in enumerate(quat)})
         item.update(dict(zip(("cf1", "cf4", "cf6", "cfx"), (str(int(c)) for c in conf))))
-        item.update({f"eax_{c}": "9E+09" for c in "abcdef"})
-        item.update({f"eax{c}": "9E+09" for c in "abcdef"})
+        item.update({f"eax_{c}": render(float(v)) for c, v in zip("abcdef", self.robtarget_ext)})
+        item.update({f"eax{c}": render(float(v)) for c, v in zip("abcdef", self.robtarget_ext)})   # [arc] reads these
         return self._ok(req, [item])
 
     def _check_mechunit(self, mechunit: str) -> None:
-        if mechunit != "ROB_1":
+        if mechunit != "ROB_1" and mechunit not in self.units:
             raise _Reject(400 if self.version == 1 else 404, -1073436668, f"no mechunit {mechunit}")
 
     def _get_elog(self, req: Request, s: _Session, domain: str) -> Response:

@@ -72,7 +72,7 @@ from .rws_auth import AuthMixin
 from .rws_calserver import CalServerMixin
 from .rws_controller import ControllerMixin
 from .rws_faults import FaultsMixin
-from .rws_http import (CUSTOMER_PROGRAMS, DEFAULT_LIMITS_DEG, ENTRY, UNRESOLVED_URL, EmulatedMotionFault,  # noqa: F401
+from .rws_http import (CUSTOMER_PROGRAMS, DEFAULT_LIMITS_DEG, ENTRY, UNRESOLVED_URL, UNUSED, EmulatedMotionFault,  # noqa: F401
                        Request, Response, _Fault, _Holder, _Reject, _Session)
 
 log = logging.getLogger(__name__)
@@ -90,7 +90,8 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
                  robtarget_hook: Callable[[tuple[float, ...], tuple[float, ...], tuple[int, ...]],
                                           Sequence[float] | None] | None = None,
                  customer_program: str | None = "auto", implicit_mastership: bool = True,
-                 serial: str = "2600-104512", robot_type: str = "IRB 2600-12/1.65", absacc: bool = False) -> None:
+                 serial: str = "2600-104512", robot_type: str = "IRB 2600-12/1.65", absacc: bool = False,
+                 ext_q0: Sequence[float] = (), units: Sequence[str] = ()) -> None:
         if version not in (1, 2):
             raise ValueError("version must be 1 or 2")
         if not ipaddress.ip_address(host).is_loopback:
@@ -127,7 +128,10 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
         self.elog: list[dict] = []
         self._elog_seq = 100
         self.joints = [float(v) for v in q0_deg] + [0.0] * (6 - len(q0_deg))
+        self.ext = [float(v) for v in ext_q0] + [UNUSED] * (6 - len(ext_q0))    # eax_a.. (a track, YuMi's axis 7)
+        self.units = {str(u): "Activated" for u in units}     # extra mechanical units (a track: its axis is eax_a)
         self.robtarget = ([600.0, 0.0, 800.0], [0.0, 0.0, 1.0, 0.0], [0, 0, 0, 0])
+        self.robtarget_ext = [UNUSED] * 6             # its external axes (a YuMi's arm angle, a track: eax_a)
         self.moves: list[tuple[str, tuple[float, ...]]] = []
         self.requests: list[tuple[str, str, str, int]] = []   # method, path, query, status
         self.counts = {"logouts": 0, "sessions": 0, "auth_failures": 0}

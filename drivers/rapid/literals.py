@@ -157,14 +157,17 @@ def fmt_jointtarget(q_deg: Sequence[float], ext: Sequence[float] = ()) -> str:
     return f"[[{','.join(fmt_num(v) for v in rob)}],[{','.join(fmt_num(v) for v in eax)}]]"
 
 
-def fmt_robtarget(trans_mm: Sequence[float], quat_wxyz: Sequence[float], conf: Sequence[int] = (0, 0, 0, 0)) -> str:
-    """``[[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[9E9 x6]]`` with the quaternion normalised (w first)."""
+def fmt_robtarget(trans_mm: Sequence[float], quat_wxyz: Sequence[float], conf: Sequence[int] = (0, 0, 0, 0),
+                  ext: Sequence[float] = ()) -> str:
+    """``[[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[e1..e6]]`` with the quaternion normalised (w first); external axes
+    ``ext`` (a track in mm, a seven-axis arm's arm angle in deg), the others 9E9."""
     norm = math.sqrt(sum(float(q) ** 2 for q in quat_wxyz))
     if len(trans_mm) != 3 or len(quat_wxyz) != 4 or len(conf) != 4 or not norm > 0:
         raise ValueError("robtarget needs xyz (3), a non-zero quaternion (4) and confdata (4)")
     quat = [float(q) / norm for q in quat_wxyz]
+    eax = list(ext) + [RAPID_UNUSED_AXIS] * (6 - len(ext))
     parts = [",".join(fmt_num(v) for v in trans_mm), ",".join(fmt_num(v) for v in quat),
-             ",".join(str(int(c)) for c in conf), ",".join("9E9" for _ in range(6))]
+             ",".join(str(int(c)) for c in conf), ",".join(fmt_num(v) for v in eax)]
     return "[" + ",".join(f"[{p}]" for p in parts) + "]"
 
 

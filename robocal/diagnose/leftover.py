@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..kinematics import ParamLayout, identification_jacobian
+from ..kinematics import identification_jacobian, joint_motion_columns
 from ..joint_gp import joint_directions
 from ..layers import fit_layer
 from .records import DiagnosisInput
@@ -41,10 +41,10 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
         inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit))
         cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
         p_model, J = identification_jacobian(kin, inp.q_rad[rows])
-        jc = [c for c, i, k in ParamLayout.of(kin).joint_cols if k == 0]
+        Jq = joint_motion_columns(kin, J)
         sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
         regs, mp = where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base,
-                                  sub("t_s"), sub("approach"), sub("payload_kg"), J[:, :, jc], opt)
+                                  sub("t_s"), sub("approach"), sub("payload_kg"), Jq, opt)
         maps[name] = mp
         if name == "geometric":
             out += regs

@@ -12,8 +12,9 @@ REMEDY = {
     "readback_lag": "keep the rows in measurement order and vary the size of the moves; log the commanded joints "
                     "(qc1..qcn) next to the read-back ones",
     "thermal_drift": "log timestamps (and temperatures) from a cold start, poses in random order over >= 2 h",
-    "axis_coupling": "mount the SMR >= 50 mm off the J6 axis and cover J4/J5 widely",
+    "axis_coupling": "mount the SMR >= 50 mm off the last axis and cover the wrist's first two joints widely",
     "registration_drift": "log timestamps and re-measure 3-4 floor nests every 10-15 min",
+    "track_straightness": "measure at more carriage stations spread over the whole travel",
 }
 
 DRIFT_EXPERIMENT = ("measure the poses in random order and repeat a few reference poses throughout the run (a drift "

@@ -13,6 +13,7 @@ from typing import Mapping
 import numpy as np
 
 from ..effects import GravityModel, gravity_torques
+from ..chains import wrist_joints
 from ..kinematics import Kinematics
 from .model import EffectChoice
 
@@ -53,14 +54,22 @@ class LibraryOptions:
     max_drift_rad: float = 5e-4           # ... and rotation
 
 
+def main_axes(n: int) -> int:
+    """How many joints carry the arm before its wrist: the first n - 3 of an arm of six or more joints (J1-J3 of a
+    6-axis arm, J1-J4 of a 7-axis arm), all but the last of a shorter one."""
+    return n - 3 if n >= 6 else n - 1
+
+
 def loaded_joints(kin: Kinematics, q_rad: np.ndarray, gravity: GravityModel, payload) -> tuple[int, ...]:
-    """Main-axis joints (J1-J3) whose gravity torque varies over the data (> 5 % of the largest spread)."""
+    """Main-axis joints (``main_axes``: J1-J3 of a 6-axis arm) whose gravity torque varies over the data (> 5 % of
+    the largest spread)."""
+    gravity = gravity.sized(kin.n)
     tau = gravity_torques(kin, q_rad, gravity.link_masses_kg, payload, gravity.payload_cog_flange_mm,
                           gravity.gravity_base)
     spread = tau.std(axis=0)
     if spread.max() <= 0:
         return ()
-    return tuple(int(j) + 1 for j in np.flatnonzero(spread > 0.05 * spread.max()) if j < 3)
+    return tuple(int(j) + 1 for j in np.flatnonzero(spread > 0.05 * spread.max()) if j < main_axes(kin.n))
 
 
 def _payload(meta: Mapping, n: int) -> np.ndarray:
@@ -80,6 +89,7 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
     {"effect", "joints", "reason"}."""
     q = np.atleast_2d(q_rad)
     N, n = q.shape
+    gravity = gravity.sized(n)
     g = gravity.options()
     out, cannot = [], []
     pay = _payload(meta, N)
@@ -96,7 +106,7 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
                        "reason": "one payload only: a payload-dependent deflection cannot be told from the link "
                                  "masses' compliance and the geometry" if meta.get("payload_kg") is not None
                        else "no payload logged: a payload-dependent deflection cannot be told from geometry"})
-    for j in range(1, n + 1):
+    for j in range(1 + kin.n_track, n + 1):          # a track has no turn for a cyclic error
         span = math.degrees(float(np.ptp(q[:, j - 1])))
         if span >= opt.gear_min_span_deg:
             k = int(np.clip(span // opt.degrees_per_harmonic, 1, len(opt.harmonics)))
@@ -106,13 +116,41 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
                            "reason": f"J{j} covers only {span:.0f} deg: a cyclic error cannot be told from its zero"})
     out += _backlash(meta, N, n, opt, cannot)
     out += _lag(meta, n, opt, cannot)
-    out += _time(meta, N, opt, cannot)
-    if n >= 6 and np.ptp(q[:, 3]) > 0 and np.ptp(q[:, 4]) > 0:
-        out.append(EffectChoice("axis_coupling"))
-    else:
-        cannot.append({"effect": "axis_coupling", "joints": [4, 5, 6], "reason": "needs a 6-axis wrist whose J4 and J5 "
-                       "move" if n >= 6 else "needs a 6-axis wrist"})
+    out += _time(meta, N, opt, cannot, tuple(j + kin.n_track for j in (1, 2, 3)))
+    out += _coupling(kin, q, cannot)
+    out += _track(kin, q, cannot)
     return out, cannot
+
+
+def _track(kin: Kinematics, q: np.ndarray, cannot: list, degrees=(2, 3)) -> list[EffectChoice]:
+    """Straightness/flatness of a track's rails, of each degree the spread of carriage positions can show (at least
+    degree + 2 distinct positions, so that a polynomial of that degree leaves some freedom); none without a track."""
+    if kin.track is None:
+        return []
+    distinct = len(np.unique(np.round(np.degrees(q[:, 0]), 1)))
+    out = [EffectChoice("track_straightness", (("degree", d),)) for d in degrees if distinct >= d + 2]
+    if not out:
+        cannot.append({"effect": "track_straightness", "joints": [1],
+                       "reason": f"the carriage stood at {distinct} positions only: a straightness error cannot be "
+                                 "told from the track's direction"})
+    return out
+
+def _coupling(kin: Kinematics, q: np.ndarray, cannot: list) -> list[EffectChoice]:
+    """Wrist coupling where the chain has a spherical wrist whose first two joints move (J4-J6 of a 6-axis arm:
+    the options of the 6-axis candidate as they always were; J5-J7 of a 7-axis one)."""
+    n = kin.n
+    wrist = wrist_joints(kin)
+    if not wrist:
+        cannot.append({"effect": "axis_coupling", "joints": list(range(max(1, n - 2), n + 1)),
+                       "reason": "no spherical wrist (the last three axes do not meet in a point): wrist coupling "
+                                 "skipped"})
+        return []
+    a, b, _ = wrist
+    if np.ptp(q[:, a - 1]) > 0 and np.ptp(q[:, b - 1]) > 0:
+        return [EffectChoice("axis_coupling", () if n == 6 else (("joints", wrist),))]
+    cannot.append({"effect": "axis_coupling", "joints": list(wrist),
+                   "reason": f"needs a spherical wrist whose J{a} and J{b} move"})
+    return []
 
 
 def scan_orders(span_deg: float, n_values: int, opt: LibraryOptions = LibraryOptions()) -> tuple[int, ...]:
@@ -177,7 +215,7 @@ def _lag(meta, n, opt, cannot) -> list[EffectChoice]:
     return [EffectChoice("readback_lag", (("joints", joints), ("memory_joints", joints)))]
 
 
-def _time(meta, N, opt, cannot) -> list[EffectChoice]:
+def _time(meta, N, opt, cannot, main=(1, 2, 3)) -> list[EffectChoice]:
     """Warm-up (timestamps or temperatures) and drift of the registration (in time, else in measurement order)."""
     out = []
     t, temp, order = meta.get("t_s"), meta.get("temp_c"), meta.get("order")
@@ -185,9 +223,9 @@ def _time(meta, N, opt, cannot) -> list[EffectChoice]:
     warm = temp is not None and np.ptp(np.asarray(temp, float)) >= opt.temp_min_span_c
     if timed or warm:
         taus = opt.warmup_tau_s if (timed and not warm) else opt.warmup_tau_s[:1]
-        out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", (1, 2, 3)))) for tau in taus]
+        out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", main))) for tau in taus]
     else:
-        cannot.append({"effect": "thermal_drift", "joints": [1, 2, 3],
+        cannot.append({"effect": "thermal_drift", "joints": list(main),
                        "reason": "no timestamps or temperatures in the data" if t is None and temp is None
                        else "the data span too short a time to reveal a warm-up"})
     if timed:

@@ -34,10 +34,16 @@ def random_geometric_errors(nominal: Kinematics, rng: np.random.Generator, scale
     mag = np.abs(SEED000_TABLE2[np.arange(n) % 6])
     mag = np.maximum(mag, [0.005, 0.05, 0.05, 0.005])
     err = scale * mag * rng.uniform(0.5, 1.5, (n, 4)) * rng.choice([-1.0, 1.0], (n, 4))
+    err[:nominal.n_track] = 0.0                               # a track's DH row is unused
     beta = np.where(nominal.hayati, scale * np.radians(beta_deg) * rng.uniform(-1.5, 1.5, n), 0.0)
-    return nominal.with_(alpha_rad=nominal.alpha_rad + np.radians(err[:, 0]), a_mm=nominal.a_mm + err[:, 1],
-                         d_mm=nominal.d_mm + err[:, 2], theta_rad=nominal.theta_rad + np.radians(err[:, 3]),
-                         beta_rad=nominal.beta_rad + beta)
+    truth = nominal.with_(alpha_rad=nominal.alpha_rad + np.radians(err[:, 0]), a_mm=nominal.a_mm + err[:, 1],
+                          d_mm=nominal.d_mm + err[:, 2], theta_rad=nominal.theta_rad + np.radians(err[:, 3]),
+                          beta_rad=nominal.beta_rad + beta)
+    if nominal.track is None:
+        return truth
+    # a track: its direction off by ~0.1 mrad (0.6 mm over 6 m), its scale by ~50 ppm (rack and pinion, encoder)
+    return truth.with_(track=nominal.track * (1 + scale * 5e-5 * rng.uniform(-1.5, 1.5))
+                       + scale * 1e-4 * rng.uniform(-1.5, 1.5, 3))
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from robocal import effects
+from robocal import gravity
 from robocal.effects import apply_effects, effect_regressor, gravity_torques, library
 from robocal.ik import branch_signature, solve_ik, solve_on_branch
 from robocal.kinematics import fk, smr_base
@@ -108,7 +108,7 @@ def test_gravity_torques_equal_an_independent_reference_in_one_block_and_in_row_
     tau = gravity_torques(kin, q, masses, pay, cog, g_base)
     np.testing.assert_allclose(tau, _gravity_torques_reference(kin, q, masses, pay, cog, g_base), rtol=1e-10,
                                atol=1e-9)
-    monkeypatch.setattr(effects, "CHAIN_ROWS", 7)
+    monkeypatch.setattr(gravity, "CHAIN_ROWS", 7)      # the torque model lives in robocal.gravity
     np.testing.assert_array_equal(gravity_torques(kin, q, masses, pay, cog, g_base), tau)
 
 

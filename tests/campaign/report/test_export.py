@@ -30,9 +30,12 @@ def _max_error_um(kin: Kinematics, tmp_path: Path, n: int = 1000, seed: int = 0)
     T_ours = fk(kin, q)
     p_ours = smr_base(kin, q, T_ours)
     names = [f"j{i + 1}" for i in range(kin.n)]
+    q_urdf = q.copy()
+    if kin.track is not None:                 # the URDF's track joint: the actual travel in metres
+        q_urdf[:, 0] = np.degrees(q[:, 0]) * np.linalg.norm(kin.track) / 1000.0
     worst = 0.0
     for k in range(n):
-        robot.update_cfg(dict(zip(names, q[k])))
+        robot.update_cfg(dict(zip(names, q_urdf[k])))
         T_flange = robot.get_transform("flange", "base_link")
         T_tool = robot.get_transform("tool", "base_link")
         worst = max(worst, np.max(np.abs(T_flange[:3, 3] * 1000 - T_ours[k, :3, 3])),
@@ -57,6 +60,24 @@ def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
     err = _max_error_um(truth, tmp_path, seed=1)
     print(f"calibrated {convention}: URDF vs FK max {err:.2e} um on 1000 poses")
     assert err <= 1.0
+
+
+def test_urdf_of_a_calibrated_track_model_matches_fk(tmp_path):
+    """A robot on a track: the URDF's prismatic joint along the identified direction, travel scaled, reproduces the
+    chain (the simulated truth has the track's direction and scale off)."""
+    truth = simulated_cell(load_cell(ROOT / "configs" / "irb2600_track.yaml")).truth
+    assert abs(np.linalg.norm(truth.track) - 1) > 1e-6 and abs(truth.track[0]) > 1e-6
+    err = _max_error_um(truth, tmp_path, n=300, seed=2)
+    print(f"calibrated track: URDF vs FK max {err:.2e} um on 300 poses")
+    assert err <= 1.0
+    assert 'type="prismatic"' in (tmp_path / "robot.urdf").read_text()
+
+
+def test_robodk_refuses_a_track_in_one_line():
+    from campaign.errors import DataError
+    with pytest.raises(DataError) as err:
+        robodk_text(CalibratedModel(load_cell(ROOT / "configs" / "irb2600_track.yaml").kinematics))
+    assert "prismatic" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_wrong_origin_would_be_caught(tmp_path):

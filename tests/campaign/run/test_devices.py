@@ -70,7 +70,7 @@ def test_open_devices_closes_both_devices_on_error(monkeypatch):
 
     class Cfg:                                              # the config fields open_devices reads
         class robot:
-            joints, url, options = [None] * 6, "x://", {}
+            joints, url, options, track = [None] * 6, "x://", {}, None
 
         class tracker:
             url, options = "y://", {}
