@@ -227,9 +227,14 @@ def solve_on_branch(kin: Kinematics, p_target_base_mm: np.ndarray, R_target_base
     return q, ok
 
 
+PER_TARGET = ("arm_angle_rad", "q_rest_rad")     # solve_ik options that may hold one row per target
+
+
 def _rows(kw: dict, idx: np.ndarray, N: int) -> dict:
-    """The keyword options with every per-target array (leading dimension N) taken at rows idx."""
-    return {k: (v[idx] if isinstance(v, np.ndarray) and v.ndim and len(v) == N else v) for k, v in kw.items()}
+    """The keyword options with every per-target array (``PER_TARGET``, leading dimension N) taken at rows idx (the
+    flange point ``point_mm`` (3,) is one for all targets, also when there are three of them)."""
+    return {k: (v[idx] if k in PER_TARGET and isinstance(v, np.ndarray) and v.ndim and len(v) == N else v)
+            for k, v in kw.items()}
 
 
 def wrist_angle_rad(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:

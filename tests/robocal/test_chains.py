@@ -133,3 +133,15 @@ def test_hayati_beta_tilts_the_parallel_pair_in_either_convention(convention):
                                               -1, 1))
     np.testing.assert_allclose(angle(tilted, 1, 2) - angle(kin, 1, 2), 1e-3, atol=1e-9)
     np.testing.assert_allclose(angle(tilted, 0, 1), angle(kin, 0, 1), atol=1e-12)
+
+
+@pytest.mark.unit
+def test_the_retry_rows_keep_the_flange_point_with_three_targets():
+    """solve_on_branch re-seeds failed targets with their rows of the per-target options; the flange point (3,) is
+    one for all, also when there are exactly three targets (it was sliced like a row: a crash of correct)."""
+    from robocal.ik import _rows
+
+    kw = {"point_mm": np.array([0.0, 0.0, 150.0]), "q_rest_rad": np.zeros((3, 7)), "arm_angle_rad": np.arange(3.0)}
+    rows = _rows(kw, np.array([0, 2]), 3)
+    assert rows["point_mm"].shape == (3,) and rows["q_rest_rad"].shape == (2, 7)
+    assert list(rows["arm_angle_rad"]) == [0.0, 2.0]
