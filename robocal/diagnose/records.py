@@ -10,6 +10,8 @@ from ..approach import approach_signs, moves_from_order
 from ..effects import GravityModel
 from ..elastic import EngineOptions
 from ..kinematics import Kinematics
+from .budget import ErrorBudget
+from .remainder import Remainder
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,10 @@ class DiagnosisOptions:
     floor_f_alpha: float = 1e-3       # ... and, with a floor from repeats, significantly so (F test at this level)
     cv_param_inflation: float = 1.25  # floor inflation per parameter share (held-out prediction with p parameters)
     layer_max_points: int = 2000      # the GPR layer that measures the structure left over: at most this many rows
+    nonphysical_gear_arcsec: float = 300.0   # a gear harmonic beyond this is beyond any gearbox: not physical ...
+    nonphysical_split: float = 1.0    # ... and so are parameters that differ between near/far reach or the halves
+    nonphysical_split_z: float = 3.0  #     of the run by more than the effect itself, and by this x their noise
+    budget_boot: int = 400            # bootstrap resamples of the error budget's intervals
     seed: int = 0
 
 
@@ -46,7 +52,8 @@ class DiagnosisInput:
     ``payload_kg`` (N,); ``approach`` (N, n) signs and ``move_rad``/``prev_move_rad`` (N, n) when computed over more
     rows than these (else from ``order``). ``noise_floor_dof``: points behind a floor measured from repeats.
     ``gravity``: the one gravity-torque model; ``baseline``/``baseline_identified``: the geometric fit to start
-    from (reprocess's kinematic stage)."""
+    from (reprocess's kinematic stage); ``nominal`` the model of the budget's nominal stage (base registered
+    on the calibration rows); ``q_cmd_rad`` commanded joints when ``q_rad`` are read-back ones."""
     kin: Kinematics
     q_rad: np.ndarray
     p_mm: np.ndarray
@@ -66,6 +73,8 @@ class DiagnosisInput:
     gravity: GravityModel = GravityModel()
     baseline: Kinematics | None = None
     baseline_identified: tuple[str, ...] | None = None
+    nominal: Kinematics | None = None       # the nominal stage's model (registered here); None: ``kin``
+    q_cmd_rad: np.ndarray | None = None      # commanded joints (N, n) beside read-back ``q_rad``, when both exist
 
     def meta(self) -> dict:
         """Per-row metadata of the effects (``robocal.effects``): approach and moves from the measurement order."""
@@ -149,6 +158,10 @@ class Diagnosis:
     effects: tuple                  # FittedEffect of the final model
     stages: tuple[dict, ...]        # test/CV RMS after each accepted step (step 0 = geometric)
     selection: dict                 # the engine's selection (robocal.elastic.EffectSelection.to_dict)
+    budget: ErrorBudget | None = None
+    remainder: Remainder | None = None
+    layer: dict = field(default_factory=dict)          # what the residual layer removes (``layer_terms``)
+    next_steps: tuple[dict, ...] = ()                   # per undecided class: experiment, predicted shrinkage
 
     @property
     def accepted_effects(self) -> tuple[str, ...]:
@@ -167,6 +180,9 @@ class Diagnosis:
             "structure": _plain(self.structure), "stages": _plain(list(self.stages)), "notes": list(self.notes),
             "effects": [fe.to_dict() for fe in self.effects], "selection": _plain(self.selection),
             "maps": _plain(self.maps),
+            "budget": None if self.budget is None else self.budget.to_dict(),
+            "remainder": None if self.remainder is None else self.remainder.to_dict(),
+            "layer": _plain(self.layer), "next_steps": _plain(list(self.next_steps)),
         }
 
 
