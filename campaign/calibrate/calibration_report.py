@@ -8,6 +8,7 @@ from typing import Any
 
 from campaign.io.json_fields import (RecordError, get_field, json_value, list_field, number_field, object_field,
                                      record_field, record_map_field, records_field, text_field)
+from robocal.diagnose.budget import ErrorBudget
 from robocal.identify import Unidentifiable
 
 from .plausibility import Plausibility
@@ -51,7 +52,7 @@ class CalibrationReport:
     ``report_points``, for the HTML figures); the hardware ``identification`` of the run log (robot/tracker
     identity, driver and software versions, config and plan hashes, start and end, simulated devices) when
     processed from a log; the ``summary`` (verdict, one-line model: ``campaign.calibrate.summary``) of a report
-    a command wrote.
+    a command wrote; the error ``budget`` on the test rows (``campaign.calibrate.budget_stage``).
     """
 
     format: str
@@ -86,6 +87,7 @@ class CalibrationReport:
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
     summary: Summary | None = None
+    budget: ErrorBudget | None = None
 
     @property
     def final(self) -> StageResult | None:
@@ -103,6 +105,8 @@ class CalibrationReport:
         out.update(self.identification)
         if self.summary is not None:
             out["summary"] = self.summary.to_dict()
+        if self.budget is not None:
+            out["budget"] = self.budget.to_dict()
         return out
 
     def with_identification(self, ident: Mapping) -> "CalibrationReport":
@@ -133,7 +137,15 @@ class CalibrationReport:
             record_field(data, "multi_smr", MultiSmrReport.from_dict, True),
             record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
-            record_field(data, "summary", Summary.from_dict, True))
+            record_field(data, "summary", Summary.from_dict, True), record_field(data, "budget", _budget, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
+
+
+def _budget(d: Mapping) -> ErrorBudget:
+    """The error budget of report.json (``robocal.diagnose.budget``); a malformed one is a RecordError."""
+    try:
+        return ErrorBudget.from_dict(d)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecordError("budget", f"malformed error budget ({type(exc).__name__}: {exc})") from None
