@@ -182,5 +182,5 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
                      unexplained["unexplained"], tuple(findings + others), tuple(where), tuple(cannot), evaluation,
                      unexplained, structure, maps, tuple(notes), int(inp.calib.sum()), len(test), outliers,
                      models[-1].kinematics, tuple(effects), tuple(stages), stage.engine.selection.to_dict(),
-                     gap.budget, rem, gap.layer, tuple(next_steps(gap.budget, rem, findings, unexplained, gap.layer,
-                                                                  cannot)))
+                     gap.budget, gap.remainder, gap.layer,
+                     tuple(next_steps(gap.budget, gap.remainder, findings, unexplained, gap.layer, cannot)))

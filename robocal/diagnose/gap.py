@@ -5,7 +5,8 @@ remainder they hold) and what the residual layer carries (``layer_terms``).
 Non-physical (``nonphysical``): a negative stiffness, a gear harmonic beyond any gearbox
 (``DiagnosisOptions.nonphysical_gear_arcsec``), or parameters that differ between near and far reach or between
 the halves of the run by more than the effect itself (``nonphysical_split`` x the effect's visible displacement,
-and by more than ``nonphysical_split_z`` x what noise alone would give).
+and by more than ``nonphysical_split_z`` x what noise alone would give). Structure is unexplained too when a named
+term outside the model (``layer_terms``) predicts held-out points (``term_t``).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..identify import register
 from ..kinematics import smr_tracker
+from ..stats import SIGNIFICANT_GAIN
 from .budget import BudgetTerms, ErrorBudget, SubsetErrors, error_budget, linear_design, shapley
 from .layer_terms import describe_layer
 from .leftover import best_layer, floor_scale, where_stages_of
@@ -29,6 +31,7 @@ class Gap:
     verdict_text: str
     ranked: list[Region]
     layer: dict = field(default_factory=dict)
+    remainder: object = None
 
 
 def nonphysical(findings, opt) -> list[dict]:
@@ -54,8 +57,8 @@ def nonphysical(findings, opt) -> list[dict]:
 
 def budget_and_verdict(inp, opt, data, models, resid, cv, eff_cols, effects, findings, held_err, rem, unexplained,
                        stages) -> Gap:
-    """The budget, the verdict on non-physical findings (updates ``unexplained`` and the findings' evidence), the
-    regions ranked by the remainder and the layer's description."""
+    """The budget, the layer's description, the verdict (updates ``unexplained`` and the findings' evidence; the
+    remainder is structure when a named term predicts held-out points), the regions ranked by the remainder."""
     kin_geo, cols, fit, test, meta = data
     q, p = np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float)
     ev_rows = test if len(test) else fit
@@ -78,6 +81,8 @@ def budget_and_verdict(inp, opt, data, models, resid, cv, eff_cols, effects, fin
     terms = BudgetTerms(e_nom, first, phi, tuple(fe.choice.label for fe in effects), last, np.sum(lay**2, axis=1),
                         layer_name, floor2, noise_share, q[ev_rows], "test" if len(test) else "cv")
     budget = error_budget(terms, opt.budget_boot, seed=opt.seed)
+    layer = describe_layer(inp, opt, data, models[-1], effects, cv.blockings[0].fold, held_err)
+    rem = _term_structure(rem, layer, unexplained, opt)
     bad = nonphysical(findings, opt)
     text, ranked = "", []
     if bad:
@@ -98,8 +103,26 @@ def budget_and_verdict(inp, opt, data, models, resid, cv, eff_cols, effects, fin
     if ranked:
         unexplained["where_remainder"] = [{"region": r.region, "share": r.extra["share"], "points": r.extra["points"]}
                                           for r in ranked[:5]]
-    layer = describe_layer(inp, opt, data, models[-1], effects, cv.blockings[0].fold, held_err)
-    return Gap(budget, tuple(bad), text, ranked, layer)
+    return Gap(budget, tuple(bad), text, ranked, layer, rem)
+
+
+def _term_structure(rem, layer: dict, unexplained: dict, opt):
+    """The remainder is structure, and unexplained, when the best named term outside the model (``layer_terms``)
+    predicts held-out points by the standard of a claim (paired t > ``opt.term_t`` and a gain > 2 %, as an
+    effect the engine takes)."""
+    best = (layer.get("terms") or [None])[0]
+    if best is None or best["t"] <= opt.term_t or \
+            best["rms_after_mm"] >= (1.0 - SIGNIFICANT_GAIN) * best["rms_before_mm"]:
+        return rem
+    why = (f"a term the model lacks predicts held-out points: {best['term']} ({best['rms_before_mm']:.3f} -> "
+           f"{best['rms_after_mm']:.3f} mm cross-validated, t = {best['t']:.1f})")
+    unexplained.update(unexplained=True, predicted_by_term=best["term"],
+                       text=f"unexplained structure: {why}; " + unexplained["detail"].removeprefix(
+                           "unexplained structure: "))
+    if rem.kind == "structure":
+        return rem
+    return replace(rem, kind="structure", source=None, text=f"{rem.rms_mm:.3f} mm RMS over the floor that something "
+                                                             f"predicts ({why}; {rem.text})")
 
 
 def _errors_without(sub: SubsetErrors, physical, cv, test) -> np.ndarray:

@@ -39,6 +39,8 @@ class DiagnosisOptions:
     nonphysical_gear_arcsec: float = 300.0   # a gear harmonic beyond this is beyond any gearbox: not physical ...
     nonphysical_split: float = 1.0    # ... and so are parameters that differ between near/far reach or the halves
     nonphysical_split_z: float = 3.0  #     of the run by more than the effect itself, and by this x their noise
+    term_t: float = 3.0               # a named term outside the model predicting held-out points at this paired t
+    #                                   (and > 2 %: the claim standard of robocal.stats): unexplained structure
     budget_boot: int = 400            # bootstrap resamples of the error budget's intervals
     seed: int = 0
 
