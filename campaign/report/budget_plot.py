@@ -24,8 +24,8 @@ def waterfall(plt, budget: dict):
         before = np.sqrt(max(left, 0.0))
         left -= v**2
         rows.append((c, before, np.sqrt(max(left, 0.0))))
-    positive = [r[2] for r in rows if r[2] > 0] + [float(c["rms_mm"]) for c in comps if c["rms_mm"]]
-    lo = max(min(positive + [nominal]) / 3.0, nominal * 1e-4)
+    shown = [float(c["rms_mm"]) for c in comps if c["rms_mm"] and c["rms_mm"] > 1e-3 * nominal]
+    lo = max(min(shown + [nominal]) / 3.0, nominal * 1e-4)
     fig, ax = plt.subplots(figsize=(9.5, 0.42 * (len(rows) + 1) + 1.2))
     fig.subplots_adjust(left=0.34, right=0.97, bottom=0.16, top=0.9)
     y = np.arange(len(rows) + 1)[::-1]
