@@ -33,6 +33,7 @@ import numpy as np
 from ..effects import effect_regressor
 from ..elastic import design_array, pose_clusters
 from ..kinematics import identification_jacobian
+from .records import json_float
 
 EXACT_MAX = 8            # exact Shapley values up to this many effects (2^K subset fits), sampled orders above
 ORDERS = 48              # sampled orders of entry above EXACT_MAX
@@ -51,8 +52,8 @@ class BudgetComponent:
     high_mm: float
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "kind": self.kind, "rms_mm": _f(self.rms_mm), "low_mm": _f(self.low_mm),
-                "high_mm": _f(self.high_mm)}
+        return {"name": self.name, "kind": self.kind, "rms_mm": json_float(self.rms_mm), "low_mm": json_float(self.low_mm),
+                "high_mm": json_float(self.high_mm)}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "BudgetComponent":
@@ -80,8 +81,8 @@ class ErrorBudget:
         return tuple(c for c in self.components if c.kind == kind)
 
     def to_dict(self) -> dict:
-        return {"components": [c.to_dict() for c in self.components], "nominal_rms_mm": _f(self.nominal_rms_mm),
-                "sum_rms_mm": _f(self.sum_rms_mm), "closure": _f(self.closure), "evaluation": self.evaluation,
+        return {"components": [c.to_dict() for c in self.components], "nominal_rms_mm": json_float(self.nominal_rms_mm),
+                "sum_rms_mm": json_float(self.sum_rms_mm), "closure": json_float(self.closure), "evaluation": self.evaluation,
                 "n_points": int(self.n_points), "attribution": self.attribution, "interval": self.interval}
 
     @classmethod
@@ -89,10 +90,6 @@ class ErrorBudget:
         return cls(tuple(BudgetComponent.from_dict(c) for c in d["components"]), _n(d["nominal_rms_mm"]),
                    _n(d.get("sum_rms_mm")), _n(d["closure"]), str(d.get("evaluation", "")), int(d.get("n_points", 0)),
                    str(d.get("attribution", "")), str(d.get("interval", "")))
-
-
-def _f(x):
-    return None if x is None or not math.isfinite(x) else float(x)
 
 
 def _n(x) -> float:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -10,8 +11,10 @@ from ..approach import approach_signs, moves_from_order
 from ..effects import GravityModel
 from ..elastic import EngineOptions
 from ..kinematics import Kinematics
-from .budget import ErrorBudget
-from .remainder import Remainder
+
+if TYPE_CHECKING:
+    from .budget import ErrorBudget
+    from .remainder import Remainder
 
 
 @dataclass(frozen=True)
@@ -107,8 +110,8 @@ class Finding:
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "joints": [int(j) for j in self.joints], "accepted": bool(self.accepted),
-                "test_rms_before_mm": _f(self.test_rms_before_mm), "test_rms_after_mm": _f(self.test_rms_after_mm),
-                "evidence": _plain(self.evidence)}
+                "test_rms_before_mm": json_float(self.test_rms_before_mm), "test_rms_after_mm": json_float(self.test_rms_after_mm),
+                "evidence": plain(self.evidence)}
 
 
 @dataclass(frozen=True)
@@ -128,10 +131,10 @@ class Region:
         return self.extra.get("region", self.description)
 
     def to_dict(self) -> dict:
-        d = {"description": self.description, "rms_mm": _f(self.rms_mm), "floor_mm": _f(self.floor_mm),
-             "ratio": _f(self.rms_mm / self.floor_mm) if self.floor_mm > 0 else None, "n": int(self.n),
-             "kind": self.kind, "stage": self.stage, "p_value": _f(self.p_value)}
-        d.update(_plain(self.extra))
+        d = {"description": self.description, "rms_mm": json_float(self.rms_mm), "floor_mm": json_float(self.floor_mm),
+             "ratio": json_float(self.rms_mm / self.floor_mm) if self.floor_mm > 0 else None, "n": int(self.n),
+             "kind": self.kind, "stage": self.stage, "p_value": json_float(self.p_value)}
+        d.update(plain(self.extra))
         return d
 
 
@@ -171,39 +174,39 @@ class Diagnosis:
 
     def to_dict(self) -> dict:
         return {
-            "noise_floor_mm": _f(self.noise_floor_mm), "noise_floor_source": self.noise_floor_source,
-            "baseline_test_rms_mm": _f(self.baseline_test_rms_mm), "final_test_rms_mm": _f(self.final_test_rms_mm),
+            "noise_floor_mm": json_float(self.noise_floor_mm), "noise_floor_source": self.noise_floor_source,
+            "baseline_test_rms_mm": json_float(self.baseline_test_rms_mm), "final_test_rms_mm": json_float(self.final_test_rms_mm),
             "unexplained": bool(self.unexplained),
             "findings": [f.to_dict() for f in self.findings],
             "where": [r.to_dict() for r in self.where],
-            "unexplained_structure": _plain(self.unexplained_structure),
+            "unexplained_structure": plain(self.unexplained_structure),
             "evaluation": self.evaluation, "n_calib": self.n_calib, "n_test": self.n_test,
-            "outliers": len(self.outliers), "undiagnosable": _plain(list(self.undiagnosable)),
-            "structure": _plain(self.structure), "stages": _plain(list(self.stages)), "notes": list(self.notes),
-            "effects": [fe.to_dict() for fe in self.effects], "selection": _plain(self.selection),
-            "maps": _plain(self.maps),
+            "outliers": len(self.outliers), "undiagnosable": plain(list(self.undiagnosable)),
+            "structure": plain(self.structure), "stages": plain(list(self.stages)), "notes": list(self.notes),
+            "effects": [fe.to_dict() for fe in self.effects], "selection": plain(self.selection),
+            "maps": plain(self.maps),
             "budget": None if self.budget is None else self.budget.to_dict(),
             "remainder": None if self.remainder is None else self.remainder.to_dict(),
-            "layer": _plain(self.layer), "next_steps": _plain(list(self.next_steps)),
+            "layer": plain(self.layer), "next_steps": plain(list(self.next_steps)),
         }
 
 
-def _f(x):
+def json_float(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
 
-def _plain(x):
+def plain(x):
     """JSON-ready copy: numpy scalars/arrays to Python, NaN/inf to None."""
     if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
+        return {str(k): plain(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
+        return [plain(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
+        return plain(x.tolist())
     if isinstance(x, (np.bool_, bool)):
         return bool(x)
     if isinstance(x, (np.integer, int)):
         return int(x)
     if isinstance(x, (np.floating, float)):
-        return _f(float(x))
+        return json_float(float(x))
     return x

@@ -27,6 +27,8 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import cKDTree
 
+from .records import json_float, plain
+
 KINDS = ("structure", "noise", "none")
 
 
@@ -43,31 +45,15 @@ class Remainder:
     evidence: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        return {"kind": self.kind, "rms_mm": _f(self.rms_mm), "heldout_rms_mm": _f(self.heldout_rms_mm),
-                "floor_mm": _f(self.floor_mm), "source": self.source, "text": self.text,
-                "evidence": _plain(self.evidence)}
+        return {"kind": self.kind, "rms_mm": json_float(self.rms_mm), "heldout_rms_mm": json_float(self.heldout_rms_mm),
+                "floor_mm": json_float(self.floor_mm), "source": self.source, "text": self.text,
+                "evidence": plain(self.evidence)}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Remainder":
         f = lambda k: float("nan") if d.get(k) is None else float(d[k])  # noqa: E731
         return cls(str(d["kind"]), f("rms_mm"), f("heldout_rms_mm"), f("floor_mm"), d.get("source"),
                    str(d.get("text", "")), dict(d.get("evidence") or {}))
-
-
-def _f(x):
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def _plain(x):
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return _f(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def nugget(r_mm: np.ndarray, q_rad: np.ndarray, k: int = 6, dof_share: float = 0.0) -> dict:
