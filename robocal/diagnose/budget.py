@@ -33,7 +33,7 @@ import numpy as np
 from ..effects import effect_regressor
 from ..elastic import design_array, pose_clusters
 from ..kinematics import identification_jacobian
-from .records import json_float
+from .jsonable import json_float
 
 EXACT_MAX = 8            # exact Shapley values up to this many effects (2^K subset fits), sampled orders above
 ORDERS = 48              # sampled orders of entry above EXACT_MAX

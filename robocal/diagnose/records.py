@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -11,10 +10,9 @@ from ..approach import approach_signs, moves_from_order
 from ..effects import GravityModel
 from ..elastic import EngineOptions
 from ..kinematics import Kinematics
-
-if TYPE_CHECKING:
-    from .budget import ErrorBudget
-    from .remainder import Remainder
+from .budget import ErrorBudget
+from .jsonable import json_float, plain
+from .remainder import Remainder
 
 
 @dataclass(frozen=True)
@@ -189,24 +187,3 @@ class Diagnosis:
             "remainder": None if self.remainder is None else self.remainder.to_dict(),
             "layer": plain(self.layer), "next_steps": plain(list(self.next_steps)),
         }
-
-
-def json_float(x):
-    return None if x is None or not np.isfinite(x) else float(x)
-
-
-def plain(x):
-    """JSON-ready copy: numpy scalars/arrays to Python, NaN/inf to None."""
-    if isinstance(x, dict):
-        return {str(k): plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return plain(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        return json_float(float(x))
-    return x

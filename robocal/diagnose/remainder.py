@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import cKDTree
 
-from .records import json_float, plain
+from .jsonable import json_float, plain
 
 KINDS = ("structure", "noise", "none")
 
