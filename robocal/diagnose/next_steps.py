@@ -11,9 +11,38 @@ that decides it and how much of the held-out error it bears on.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Mapping
 
 from .budget import ErrorBudget
+from .jsonable import json_float
 from .prose import DRIFT_EXPERIMENT
+
+@dataclass(frozen=True)
+class NextStep:
+    """One undecided class: the experiment, ``kind`` ("shrinks" | "decides"), the predicted shrinkage of the
+    held-out RMS (mm), the final RMS after it, what the class carries (``at_stake_mm``) and the budget components
+    the number comes from (``basis``)."""
+    undecided: str
+    experiment: str
+    kind: str
+    predicted_shrinkage_mm: float
+    final_rms_after_mm: float
+    at_stake_mm: float
+    basis: str
+
+    def to_dict(self) -> dict:
+        return {"class": self.undecided, "experiment": self.experiment, "kind": self.kind,
+                "predicted_shrinkage_mm": json_float(self.predicted_shrinkage_mm),
+                "final_rms_after_mm": json_float(self.final_rms_after_mm), "at_stake_mm": json_float(self.at_stake_mm),
+                "basis": self.basis}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "NextStep":
+        num = lambda k: float("nan") if d.get(k) is None else float(d[k])  # noqa: E731
+        return cls(str(d["class"]), str(d["experiment"]), str(d["kind"]), num("predicted_shrinkage_mm"),
+                   num("final_rms_after_mm"), num("at_stake_mm"), str(d.get("basis", "")))
+
 
 COMMANDED = "log the commanded joints (qc1..qcn) next to the read-back ones and calibrate on the commanded ones"
 REPEATS = "measure 10 poses x 5 repeats in random order during the run (the floor from repeats)"
@@ -23,9 +52,9 @@ def _after(R: float, shrink: float) -> float:
     return math.sqrt(max(R**2 - shrink**2, 0.0))
 
 
-def next_steps(budget: ErrorBudget, remainder, findings, unexplained: dict, layer: dict, cannot=()) -> list[dict]:
-    """[{class, experiment, kind ("shrinks" | "decides"), predicted_shrinkage_mm, final_rms_after_mm,
-    at_stake_mm, basis}] largest number first."""
+def next_steps(budget: ErrorBudget, remainder, findings, unexplained: dict, layer: dict, cannot=()
+               ) -> list[NextStep]:
+    """The next steps, largest number (predicted shrinkage or what is at stake) first."""
     R = math.sqrt(sum(c.rms_mm**2 for c in budget.components if c.kind in ("layer", "floor", "structure", "noise")))
     comp = {c.name: c.rms_mm for c in budget.components}
     noise, structure = comp.get("excess noise", 0.0), comp.get("unexplained structure", 0.0)
@@ -67,4 +96,4 @@ def next_steps(budget: ErrorBudget, remainder, findings, unexplained: dict, laye
                     "kind": "decides", "predicted_shrinkage_mm": 0.0, "final_rms_after_mm": R,
                     "at_stake_mm": structure, "basis": "budget component 'unexplained structure' (an upper bound)"})
     out.sort(key=lambda s: -max(s["predicted_shrinkage_mm"], s["at_stake_mm"]))
-    return out
+    return [NextStep.from_dict(s) for s in out]

@@ -12,6 +12,7 @@ from ..elastic import EngineOptions
 from ..kinematics import Kinematics
 from .budget import ErrorBudget
 from .jsonable import json_float, plain
+from .next_steps import NextStep
 from .remainder import Remainder
 
 
@@ -164,7 +165,7 @@ class Diagnosis:
     budget: ErrorBudget | None = None
     remainder: Remainder | None = None
     layer: dict = field(default_factory=dict)          # what the residual layer removes (``layer_terms``)
-    next_steps: tuple[dict, ...] = ()                   # per undecided class: experiment, predicted shrinkage
+    next_steps: tuple[NextStep, ...] = ()               # per undecided class: experiment, predicted shrinkage
 
     @property
     def accepted_effects(self) -> tuple[str, ...]:
@@ -185,5 +186,5 @@ class Diagnosis:
             "maps": plain(self.maps),
             "budget": None if self.budget is None else self.budget.to_dict(),
             "remainder": None if self.remainder is None else self.remainder.to_dict(),
-            "layer": plain(self.layer), "next_steps": plain(list(self.next_steps)),
+            "layer": plain(self.layer), "next_steps": [s.to_dict() for s in self.next_steps],
         }
