@@ -8,6 +8,7 @@ from typing import Any
 
 from campaign.io.json_fields import (RecordError, get_field, json_value, list_field, number_field, object_field,
                                      record_field, record_map_field, records_field, text_field)
+from robocal.diagnose.budget import ErrorBudget
 from robocal.identify import Unidentifiable
 
 from .plausibility import Plausibility
@@ -53,7 +54,7 @@ class CalibrationReport:
     ``report_points``, for the HTML figures); the hardware ``identification`` of the run log (robot/tracker
     identity, driver and software versions, config and plan hashes, start and end, simulated devices) when
     processed from a log; the ``summary`` (verdict, one-line model: ``campaign.calibrate.summary``) of a report
-    a command wrote.
+    a command wrote; the error ``budget`` on the test rows (``campaign.calibrate.budget_stage``).
     """
 
     format: str
@@ -91,6 +92,7 @@ class CalibrationReport:
     parameters_fit: str | None = None
     parameters_geometry_only: tuple[ParameterRow, ...] | None = None
     parameters_sigma0: float | None = None          # the unit-weight error of the fit the parameters come from
+    budget: ErrorBudget | None = None
 
     @property
     def final(self) -> StageResult | None:
@@ -112,6 +114,8 @@ class CalibrationReport:
         out.update(self.identification)
         if self.summary is not None:
             out["summary"] = self.summary.to_dict()
+        if self.budget is not None:
+            out["budget"] = self.budget.to_dict()
         return out
 
     def with_identification(self, ident: Mapping) -> "CalibrationReport":
@@ -152,8 +156,16 @@ class CalibrationReport:
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
             record_field(data, "summary", Summary.from_dict, True), text_field(data, "parameters_fit", True),
             records_field(data, "parameters_geometry_only", ParameterRow.from_dict, True),
-            opt("parameters_sigma0"))
+            opt("parameters_sigma0"), record_field(data, "budget", _budget, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
 PARAMETER_KEYS = ("parameters_fit", "parameters_sigma0", "parameters_geometry_only")     # written after ``parameters`` when present
+
+
+def _budget(d: Mapping) -> ErrorBudget:
+    """The error budget of report.json (``robocal.diagnose.budget``); a malformed one is a RecordError."""
+    try:
+        return ErrorBudget.from_dict(d)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecordError("budget", f"malformed error budget ({type(exc).__name__}: {exc})") from None

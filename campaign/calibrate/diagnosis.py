@@ -36,7 +36,7 @@ from robocal.kinematics import ParamLayout
 from robocal.repeats import noise_floor_from_repeats, repeat_dof
 
 from .effects_stage import subset
-from .plausibility import check_dataset
+from .plausibility import check_dataset, registered_kinematics
 from .stages import fit_stages
 
 
@@ -57,10 +57,13 @@ def _check(ds: Dataset, cfg: CampaignConfig) -> None:
         raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
 
 
-def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline) -> tuple[DiagnosisInput, FittedStage, dict]:
+def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline, nominal=None, q_cmd_deg=None
+                    ) -> tuple[DiagnosisInput, FittedStage, dict]:
     """The robocal input (calib + test rows of the prepared dataset ``ds``, in measurement order), the engine's
     answer of reprocess's elastic stage ``stage`` mapped to those rows, and a dict describing the floor and the
-    metadata. ``baseline``: the geometric fit (reprocess's kinematic stage)."""
+    metadata. ``baseline``: the geometric fit (reprocess's kinematic stage); ``nominal``: the model of reprocess's
+    nominal stage (None: the cell's); ``q_cmd_deg`` (N, n): commanded joints of ``ds``'s rows when ``q_deg`` are
+    the read-back ones."""
     cfg = cell.config
     _check(ds, cfg)
     check = ds.mask("check")
@@ -76,7 +79,8 @@ def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline) -> tuple[Diag
                          t_s=meta["t_s"], temp_c=meta["temp_c"], payload_kg=meta["payload_kg"], order=meta["order"],
                          approach=meta["approach"], move_rad=meta["move"], prev_move_rad=meta["prev_move"],
                          gravity=cell.gravity, baseline=baseline.kinematics,
-                         baseline_identified=tuple(baseline.identified))
+                         baseline_identified=tuple(baseline.identified), nominal=nominal,
+                         q_cmd_rad=None if q_cmd_deg is None else np.radians(np.asarray(q_cmd_deg, float)[use]))
     position = np.full(len(ds), -1)
     position[use] = np.arange(len(use))
     engine, elastic, kept = stage.engine, stage.elastic, stage.kept_rows
@@ -98,6 +102,14 @@ def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline) -> tuple[Diag
     return inp, fitted, info
 
 
+def _commanded(ds: Dataset, fitted) -> np.ndarray | None:
+    """Commanded joints (deg) of the fitted dataset's rows when the fits use the read-back ones, else None."""
+    if ds.qc_deg is None or fitted.prep.joints != "readback":
+        return None
+    row = {pid: i for i, pid in enumerate(ds.point_id)}
+    return ds.qc_deg[[row[pid] for pid in fitted.dataset.point_id]]
+
+
 def _identified(result) -> np.ndarray:
     layout = ParamLayout.of(result.kinematics)
     return np.array([layout.index(n) for n in result.identified], int)
@@ -112,7 +124,8 @@ def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | N
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
         fitted = fit_stages(ds, cell, plaus)   # the same preparation, fits and effect engine as reprocess
-        inp, stage, info = diagnosis_input(fitted.dataset, cell, fitted.stage, fitted.geo.result)
+        inp, stage, info = diagnosis_input(fitted.dataset, cell, fitted.stage, fitted.geo.result,
+                                           registered_kinematics(cell, plaus), _commanded(ds, fitted))
         info["plausibility"] = plaus.to_dict()
         info["preparation"] = fitted.prep.report
         d = diagnose(inp, options, stage)

@@ -32,6 +32,7 @@ from robocal.repeats import noise_floor_from_repeats, repeat_groups
 from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
 from robocal.stats import error_stats
 
+from .budget_stage import calibration_budget
 from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, CalibrationReport
 from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
@@ -291,6 +292,9 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
                          for name, m in stage_models}, used, ds.t_s, pred_std)
     points = report_points_value(table)
     stages[COMPENSATED] = _final_stage(stages[COMPENSATED], choice, spread, points)
+    budget = calibration_budget(lambda m, r: _predict(m, q[r], rows(r), sub(meta_all, r)), stage_models, geo,
+                                elastic, choice.kind, q, p, cell.weights(ds)[0], cell.covariance(p), meta_all,
+                                kept_rows, test, floor, sub, c.cv_folds)
     report = CalibrationReport(
         format=REPORT_FORMAT, config=cfg.name, source=ds.source,
         n=RowCounts(int(cal.sum()), int(test.sum()), int(check.sum()), len(rejected_ids)),
@@ -308,7 +312,7 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
         residual_cv=_residual_cv_summary(choice), preparation=prep.report, multi_smr=multi,
         cell=cell_summary(cfg), points=points, parameters_fit=model.parameters.fit,
         parameters_sigma0=model.parameters.sigma0,
-        parameters_geometry_only=None if elastic is None else parameter_rows(result.table()))
+        parameters_geometry_only=None if elastic is None else parameter_rows(result.table()), budget=budget)
     return Calibrated(report, model, result, table)
 
 

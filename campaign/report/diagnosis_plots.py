@@ -34,6 +34,8 @@ def write_plots(report: dict, out_dir: str | os.PathLike | Claim) -> list[Path] 
         files.append(_plot_shrinkage(plt, report, out / "shrinkage.png"))
     if "time" in maps.get("geometric", {}):
         files.append(_plot_time(plt, maps, report, out / "where_time.png"))
+    if report.get("budget"):
+        files.append(_plot_budget(plt, report["budget"], out / "budget_waterfall.png"))
     return files
 
 
@@ -172,6 +174,15 @@ def _plot_shrinkage(plt, report, path):
     ax.set_ylabel(("test" if key == "test_rms_mm" else "cross-validated") + " RMS (mm)")
     ax.set_title("How far the error shrinks, step by step")
     ax.legend()
+    _save_png(fig, path)
+    plt.close(fig)
+    return path
+
+
+def _plot_budget(plt, budget, path):
+    from .budget_plot import waterfall
+
+    fig = waterfall(plt, budget)
     _save_png(fig, path)
     plt.close(fig)
     return path

@@ -6,6 +6,7 @@ from rich.table import Table
 from rich.text import Text
 
 from campaign.io.terminal_text import clean, keep_words, print_notes
+from campaign.report.budget_text import render_budget
 from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 from robocal.elastic import EffectChoice
@@ -103,9 +104,25 @@ def render(console: Console, report: dict) -> None:
     us = report.get("unexplained_structure", {})
     if us:
         console.print(clean(us["text"]), style="red" if report["unexplained"] else None)
+    render_budget(console, report.get("budget"))
+    render_gap(console, report)
     for note in report.get("notes", []):
-        if not note.startswith("unexplained structure"):
+        if not note.startswith("unexplained structure") and note != us.get("text"):
             console.print(f"note: {note}", highlight=False)
+
+
+def render_gap(console: Console, report: dict) -> None:
+    """The remainder's class, what the residual layer carries and the next steps, one line each."""
+    rem = report.get("remainder")
+    if rem:
+        console.print(clean(f"remainder: {rem['kind']}: {rem['text']}"), highlight=False)
+    layer = report.get("layer") or {}
+    if layer.get("text"):
+        console.print(clean(f"residual layer: {layer['text']}"), highlight=False)
+    for s in report.get("next_steps") or []:
+        num = (f"predicted shrinkage {s['predicted_shrinkage_mm']:.3f} mm (final -> {s['final_rms_after_mm']:.3f} mm)"
+               if s["kind"] == "shrinks" else f"decides {s['at_stake_mm']:.3f} mm")
+        console.print(clean(f"next: {s['class']}: {s['experiment']}; {num} ({s['basis']})"), highlight=False)
 
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:

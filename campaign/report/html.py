@@ -152,9 +152,11 @@ def build_figures(src: ReportSources) -> dict[str, list]:
     """Figures per section (lists of html_figures.Figure), drawn from the documents only."""
     from . import html_figures as hf
 
-    figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": []}
+    figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": [], "budget": []}
     if src.calibration:
         figs["calibration"] = hf.calibration_figures(src.calibration, src.points)
+        if src.calibration.budget is not None:
+            figs["budget"] = [hf.budget_figure(src.calibration.budget.to_dict())]
     for i, v in enumerate(src.verify):
         if v.stages:
             figs["verify"].append(hf.verify_figure(v, i))
@@ -169,18 +171,21 @@ def diagnosis_figures(report: dict) -> list:
     """The diagnose command's maps (workspace, joints, time, shrinkage) as report figures."""
     import tempfile
 
+    from .budget_plot import BUDGET_CAPTION, BUDGET_TITLE
     from .diagnosis_plots import write_plots
     from .html_figures import Figure
 
     titles = {"where_workspace": "Where the residual lies: workspace cells",
               "where_joints": "Where the residual lies: each joint's range",
               "where_time": "Where the residual lies: over time",
-              "shrinkage": "How far the error shrinks with each accepted effect"}
+              "shrinkage": "How far the error shrinks with each accepted effect",
+              "budget_waterfall": BUDGET_TITLE}
     with tempfile.TemporaryDirectory() as tmp:
         paths = write_plots(report, tmp)
         if isinstance(paths, str):
             return []
-        return [Figure(p.stem, titles.get(p.stem, p.stem), "From the diagnosis.", p.read_bytes()) for p in paths]
+        return [Figure(p.stem, titles.get(p.stem, p.stem), BUDGET_CAPTION if p.stem == "budget_waterfall" else
+                       "From the diagnosis.", p.read_bytes()) for p in paths]
 
 
 HTML_FORMATS = {**FORMATS, "mm": ".4f"}

@@ -264,6 +264,13 @@ def calibration_figures(report: CalibrationReport, points: PointTable | None) ->
     return [f for f in (g(report, points) for g in figs) if f is not None]
 
 
+def budget_figure(budget: dict) -> Figure:
+    """The error budget of report.json as a waterfall (``budget_plot``)."""
+    from .budget_plot import BUDGET_CAPTION, BUDGET_TITLE, waterfall
+
+    return Figure("budget_waterfall", BUDGET_TITLE, BUDGET_CAPTION, _png(waterfall(_plt(), budget)))
+
+
 # ============================================================================ verify
 def _verify_label(name: str, passes: dict) -> str:
     """A pass's tick label: its name and, from verify.json's passes, how many points were corrected and held."""

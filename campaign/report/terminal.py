@@ -15,6 +15,7 @@ from campaign.correct.verify_report import VerifyReport
 from campaign.io.terminal_text import keep_words
 from campaign.plan.points import Plan
 
+from .budget_text import render_budget
 from .glossary import UNCORRECTED_VS_NOMINAL
 from campaign.io.quantities import condition_meaning, condition_scale, floor_mm
 
@@ -42,6 +43,8 @@ def render_stages(console: Console, report: CalibrationReport) -> None:
     layer = None if report.final is None else report.final.layer
     if layer:
         console.print(layer_line(layer), markup=False)
+    if report.budget is not None:
+        render_budget(console, report.budget.to_dict())
     render_choices(console, report)
     cv = report.residual_cv
     if cv and report.residual_choice is None:

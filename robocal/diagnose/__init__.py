@@ -16,7 +16,12 @@ reprocess`` uses too. The diagnosis (``core.diagnose``) adds what only it does:
 4. **Where** (``regions``): held-out residuals of the geometric and the final model over workspace cells, joint
    ranges, base axes, time, approach direction and payload, against the noise floor.
 5. **Unexplained structure** (``leftover``): the excess of the final held-out RMS over the floor and how much a
-   non-parametric layer removes of it on held-out points, with the inputs it lies along.
+   non-parametric layer removes of it on held-out points, with the inputs it lies along; whether that remainder
+   is structure, excess noise (with its likely source) or nothing (``remainder``).
+6. **The gap as a budget** (``budget``, ``gap``): the nominal held-out error split by cause (geometry, each
+   effect by its Shapley value, the layer, the floor, structure, noise) with intervals and closure; one verdict
+   for a non-physical best description; what the layer carries (``layer_terms``); what to do next, with a
+   number (``next_steps``).
 
 Joint numbers are 1-based everywhere in the output.
 """

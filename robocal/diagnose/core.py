@@ -13,16 +13,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..effects import effect_regressor
-from ..elastic import (BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, design_array,
-                       order_blocks, pose_blocks)
+from ..elastic import BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, order_blocks, pose_blocks
 from ..elastic import run_engine
 from ..identify import CalibrationOptions, calibrate, whitening
-from ..kinematics import ParamLayout, identification_jacobian, smr_tracker
+from ..kinematics import ParamLayout, smr_tracker
 from ..model import CalibratedModel
 from .evidence import joints_following_order
 from .findings import accepted_findings, other_findings
 from .prose import DRIFT_EXPERIMENT
+from .budget import linear_design
+from .gap import budget_and_verdict
+from .next_steps import next_steps
 from .leftover import leftover, where_stages
 from .records import Diagnosis, DiagnosisInput, DiagnosisOptions
 
@@ -87,24 +88,14 @@ def _step_models(kin_geo, cols, q, p, cov, meta, effects, elastic) -> list[Calib
 def _linear_design(kin_geo, cols, q, p, cov, meta, effects, opt):
     """Blocked CV of the linearised design of the fit rows (geometry + the final effects) with the engine's
     blockings; the regressors (N, 3, K) per effect, the geometric Jacobian and the effects' column ranges."""
-    p0, J = identification_jacobian(kin_geo, q)
-    R = [effect_regressor(kin_geo, q, meta, fe.choice.build(kin_geo.n), jacobian=(p0, J)) for fe in effects]
+    p0, A, R, eff_cols = linear_design(kin_geo, cols, q, meta, effects)
     blockings = [Blocking("pose blocks", pose_blocks(q, opt.engine.folds, opt.engine.seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], opt.engine.folds)))
-    A = design_array(len(q), len(cols) + sum(r.shape[2] for r in R))
-    A[:, :, :len(cols)] = J[:, :, cols]
-    at = len(cols)
-    for r in R:
-        A[:, :, at:at + r.shape[2]] = r
-        at += r.shape[2]
+    J_geo = np.array(A[:, :, :len(cols)])
     cv = BlockedCV(A, p - p0, whitening(cov, len(q)), blockings, copy=False)     # a fresh array: whitened in place
     del A
-    at, eff_cols = len(cols), []
-    for fe in effects:
-        eff_cols.append(np.arange(at, at + fe.values.size))
-        at += fe.values.size
-    return cv, R, J[:, :, cols], p0, eff_cols
+    return cv, R, J_geo, p0, eff_cols
 
 
 def _stages(models, resid, cv, eff_cols, n_geo, fit, test, effects) -> list[dict]:
@@ -171,8 +162,8 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
     cv_vec = [cv.errors(np.concatenate([np.arange(len(cols))] + eff_cols[:k])) for k in (0, len(effects))]
     where, maps = where_stages(inp, opt, fit, test, (kin_geo, models[-1]), (resid[0], resid[-1]), cv_vec,
                                (stages[0], stages[-1]), meta)
-    unexplained, structure, notes = leftover(inp, opt, fit, test, models[-1], resid[-1], cv_vec[-1], stages[-1],
-                                             cv.blockings[0].fold, meta)
+    unexplained, structure, notes, rem, held_err = leftover(inp, opt, fit, test, models[-1], resid[-1], cv_vec[-1],
+                                                          stages[-1], cv.blockings[0].fold, meta)
     for f in findings:
         notes += [f"{f.evidence['label']}: {f.evidence[k]}" for k in ("description", "consistency_note")
                   if k in f.evidence]
@@ -180,10 +171,16 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
             notes.append(f"{f.evidence['order_confound']['text']}; to separate them: "
                          f"{f.evidence['order_confound']['experiment']}")
     final_regions = maps.pop("_final_regions")
+    gap = budget_and_verdict(inp, opt, (kin_geo, cols, fit, test, meta), (models[0], models[-1]), resid, cv,
+                             eff_cols, effects, findings, held_err, rem, unexplained, (stages[0], stages[-1]))
+    if gap.nonphysical:
+        notes.append(gap.verdict_text)
     if unexplained["unexplained"]:
-        where += [r for r in final_regions if r.kind != "all"]
+        where += gap.ranked or [r for r in final_regions if r.kind != "all"]
     outliers = tuple(int(i) for i in np.setdiff1d(np.flatnonzero(inp.calib), fit))
     return Diagnosis(float(inp.noise_floor_mm), inp.noise_floor_source, stages[0][key], stages[-1][key],
                      unexplained["unexplained"], tuple(findings + others), tuple(where), tuple(cannot), evaluation,
                      unexplained, structure, maps, tuple(notes), int(inp.calib.sum()), len(test), outliers,
-                     models[-1].kinematics, tuple(effects), tuple(stages), stage.engine.selection.to_dict())
+                     models[-1].kinematics, tuple(effects), tuple(stages), stage.engine.selection.to_dict(),
+                     gap.budget, gap.remainder, gap.layer,
+                     tuple(next_steps(gap.budget, gap.remainder, findings, unexplained, gap.layer, cannot)))

@@ -84,28 +84,37 @@ def confound(name: str, label: str, signal: np.ndarray, q_rad, order, clock: str
 
 
 def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict[str, np.ndarray],
-                geo_cols: np.ndarray) -> dict:
+                geo_cols: np.ndarray) -> tuple[dict, dict]:
     """For each split {name: (M,) bool} of the fit rows: fit the linear model (A_w (M, 3, P) whitened, y_w (M, 3))
     on each half and compare the effect's parameters (``cols``) by the visible displacement of their difference,
-    as a share of the effect's own visible displacement (a physical effect has one set of parameters)."""
+    as a share of the effect's own visible displacement (a physical effect has one set of parameters). Returns
+    (those shares, the difference in units of what noise alone would give: the residual scatter of the whole
+    fit propagated through both halves' fits)."""
     M, _, P = A_w.shape
     nrm = np.sqrt(np.einsum("mip,mip->p", A_w, A_w))
     nrm[nrm == 0] = 1.0
     As = np.divide(A_w, nrm, order="C").reshape(3 * M, P)     # one copy, whatever the memory order of A_w
     full = np.linalg.lstsq(As, y_w.reshape(-1), rcond=1e-10)[0]
+    s2 = float(np.sum((y_w.reshape(-1) - As @ full) ** 2)) / max(3 * M - P, 1)
     Xv = _project_out(As[:, cols], As[:, geo_cols])
     own = float(np.linalg.norm(Xv @ full[cols]))
-    out = {}
+    XtX = Xv.T @ Xv
+    out, noise = {}, {}
     for name, mask in halves.items():
-        est = []
+        est, var = [], 0.0
         for half in (mask, ~mask):
             r3 = np.repeat(half, 3)
             if half.sum() < max(10, P // 3 + 1):
                 break
-            est.append(np.linalg.lstsq(As[r3], y_w.reshape(-1)[r3], rcond=1e-10)[0][cols])
+            Ah = As[r3]
+            est.append(np.linalg.lstsq(Ah, y_w.reshape(-1)[r3], rcond=1e-10)[0][cols])
+            C = np.linalg.pinv(Ah.T @ Ah, rcond=1e-10)[np.ix_(cols, cols)] * s2
+            var += float(np.sum(C * XtX))
         if len(est) == 2 and own > 0:
-            out[name] = float(np.linalg.norm(Xv @ (est[0] - est[1])) / own)
-    return out
+            diff = float(np.linalg.norm(Xv @ (est[0] - est[1])))
+            out[name] = diff / own
+            noise[name] = diff / math.sqrt(var) if var > 0 else math.inf
+    return out, noise
 
 
 def rival_class(step, later=()) -> list[dict]:

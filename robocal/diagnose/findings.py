@@ -43,8 +43,9 @@ def accepted_findings(engine: EngineResult, effects, stages, key, ctx, opt: Diag
             ev["confusable_with"] = conf
             ev["class"] = " / ".join([fe.choice.label] + [x["label"] for x in conf])
             ev["experiment"] = "; ".join(dict.fromkeys(x["experiment"] for x in conf))
-        split = consistency(ctx["A_w"], ctx["y_w"], ctx["cols"][k], ctx["halves"], ctx["geo_cols"])
+        split, split_noise = consistency(ctx["A_w"], ctx["y_w"], ctx["cols"][k], ctx["halves"], ctx["geo_cols"])
         ev["consistency"] = split
+        ev["consistency_noise"] = split_noise
         differ = [n for n, v in split.items() if v > opt.split_min_ratio]
         if differ:
             ev["consistency_note"] = (f"its parameters differ between {' and between '.join(differ)} by "

@@ -15,11 +15,13 @@ import numpy as np
 from ..kinematics import identification_jacobian, joint_motion_columns
 from ..joint_gp import joint_directions
 from ..layers import fit_layer
+from ..stats import paired_gain
 from .records import DiagnosisInput
 from .regions import structure_test, where_analysis
+from .remainder import RemainderEvidence, classify, noise_shape, nugget, readback_jitter
 
 
-def _floor_scale(inp: DiagnosisInput) -> float:
+def floor_scale(inp: DiagnosisInput) -> float:
     """Factor on the covariance so that its RMS equals the reported noise floor."""
     spec = math.sqrt(float(np.mean(np.trace(inp.cov_mm2, axis1=1, axis2=2))))
     return (inp.noise_floor_mm / spec) ** 2 if spec > 0 and inp.noise_floor_mm > 0 else 1.0
@@ -38,13 +40,7 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
     for name, model, r, cv, stage in zip(("geometric", "final"), models, resid, cv_vec, stages):
         kin = getattr(model, "kinematics", model)
         held = np.concatenate([cv, r[test]]) if len(test) else cv
-        inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit))
-        cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
-        p_model, J = identification_jacobian(kin, inp.q_rad[rows])
-        Jq = joint_motion_columns(kin, J)
-        sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
-        regs, mp = where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base,
-                                  sub("t_s"), sub("approach"), sub("payload_kg"), Jq, opt)
+        regs, mp = where_stages_of(inp, opt, rows, kin, held, stage["n_params"], len(fit), meta, name)
         maps[name] = mp
         if name == "geometric":
             out += regs
@@ -53,12 +49,23 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
     return out, maps
 
 
+def where_stages_of(inp, opt, rows, kin, held, n_params: int, n_fit: int, meta, name: str, every: bool = False):
+    """(regions, maps) of held-out residuals ``held`` (M, 3) mm at ``rows`` of a model with ``n_params``
+    parameters fitted on ``n_fit`` rows (``every``: all regions, not only those flagged above the floor)."""
+    inflate = 1.0 + opt.cv_param_inflation * n_params / (3.0 * n_fit)
+    cov = inp.cov_mm2[rows] * floor_scale(inp) * inflate
+    p_model, J = identification_jacobian(kin, inp.q_rad[rows])
+    sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
+    return where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base, sub("t_s"),
+                          sub("approach"), sub("payload_kg"), joint_motion_columns(kin, J), opt, every)
+
+
 def _layer_heldout(opt, model, q, p, fit, test, fold, meta, kind: str = "gpr", floor_mm: float | None = None
-                   ) -> tuple[np.ndarray, str]:
-    """Residual vectors (M, 3) mm left on held-out points once a non-parametric layer of the calibration (``kind``:
-    GPR over the joints, or the joint-error GP; ``robocal.layers.fit_layer``) is fitted on the final model's
-    calibration residuals (at most ``layer_max_points`` of them, a seeded subset): on the test rows, or over the fit
-    rows' pose blocks."""
+                   ) -> tuple[np.ndarray, str, object]:
+    """(residual vectors (M, 3) mm left on held-out points once a non-parametric layer of the calibration
+    (``kind``: GPR over the joints, or the joint-error GP; ``robocal.layers.fit_layer``) is fitted on the final
+    model's calibration residuals (at most ``layer_max_points`` of them, a seeded subset): on the test rows, or
+    over the fit rows' pose blocks; "test" | "cv"; the layer fitted on all fit rows, or None in cv)."""
     kin = model.kinematics
     rng = np.random.default_rng(opt.seed)
     sub = lambda rows: {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}  # noqa: E731
@@ -68,45 +75,49 @@ def _layer_heldout(opt, model, q, p, fit, test, fold, meta, kind: str = "gpr", f
             tr = np.sort(rng.choice(tr, opt.layer_max_points, replace=False))
         lay = fit_layer(kind, model, q[tr], p[tr], sub(tr), seed=opt.seed, noise_floor_mm=floor_mm)
         pm = model.kinematic_smr_base(q[te], sub(te))
-        return _base(kin, p[te]) - pm - lay.predict(q[te], pm)
+        return _base(kin, p[te]) - pm - (0.0 if lay is None else lay.predict(q[te], pm)), lay
     if len(test):
-        return layer_errors(fit, test), "test"
+        err, lay = layer_errors(fit, test)
+        return err, "test", lay
     out = np.empty((len(fit), 3))
     for f in np.unique(fold):
-        out[fold == f] = layer_errors(fit[fold != f], fit[fold == f])
-    return out, "cv"
+        out[fold == f] = layer_errors(fit[fold != f], fit[fold == f])[0]
+    return out, "cv", None
 
 
-def joint_curves(opt, model, q, p, fit, meta, floor_mm: float) -> list[dict]:
-    """Each joint's angle-error curve of the joint-error GP fitted on the final model's calibration residuals (at
-    most ``layer_max_points`` rows, a seeded subset), largest first: its RMS over the joint's range (arcsec) and
-    how far it moves the SMR at those rows (RMS, mm)."""
+def joint_curves(opt, model, q, p, fit, meta, floor_mm: float, lay=None) -> tuple[list[dict], object]:
+    """(each joint's angle-error curve of the joint-error GP fitted on the final model's calibration residuals
+    (at most ``layer_max_points`` rows, a seeded subset; ``lay``: that fit when already made), largest first: its
+    RMS over the joint's range (arcsec) and how far it moves the SMR at those rows (RMS, mm); the layer)."""
     rows = fit if len(fit) <= opt.layer_max_points else \
         np.sort(np.random.default_rng(opt.seed).choice(fit, opt.layer_max_points, replace=False))
     sub = {k: (None if v is None else np.asarray(v)[rows]) for k, v in meta.items()}
-    lay = fit_layer("joint_gp", model, q[rows], p[rows], sub, noise_floor_mm=floor_mm)
     if lay is None:
-        return []
+        lay = fit_layer("joint_gp", model, q[rows], p[rows], sub, noise_floor_mm=floor_mm)
+    if lay is None:
+        return [], None
     moved = joint_directions(lay.kinematics, q[rows], lay.joints) * lay.curves_rad(q[rows])[:, None, :]
     mm = np.sqrt(np.mean(np.sum(moved**2, axis=1), axis=0))
     arcsec = lay.curve_rms_rad()
     out = [{"joint": int(j) + 1, "rms_arcsec": float(np.degrees(arcsec[int(j) + 1]) * 3600), "rms_mm": float(v)}
            for j, v in zip(lay.joints, mm)]
-    return sorted(out, key=lambda c: -c["rms_mm"])
+    return sorted(out, key=lambda c: -c["rms_mm"]), lay
 
 
 def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
-    """(unexplained_structure dict, neighbour structure tests, notes) of the final model."""
+    """(unexplained_structure dict, neighbour structure tests, notes, the remainder's class, held-out error
+    vectors {"final", "gpr", "joint_gp"} (M, 3) mm of the final model alone and with each layer) of the final
+    model."""
     F = float(inp.noise_floor_mm)
     held = resid[test] if len(test) else cv_final
     R = float(np.sqrt(np.mean(np.sum(held**2, axis=1))))
-    lay, where = _layer_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit, test,
-                              fold, meta)
+    lay, where, _ = _layer_heldout(opt, model, np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float), fit,
+                                   test, fold, meta)
     R_lay = float(np.sqrt(np.mean(np.sum(lay**2, axis=1))))
     q_all, p_all = np.asarray(inp.q_rad, float), np.asarray(inp.p_mm, float)
-    lay_j, _ = _layer_heldout(opt, model, q_all, p_all, fit, test, fold, meta, "joint_gp", F)
+    lay_j, _, jgp = _layer_heldout(opt, model, q_all, p_all, fit, test, fold, meta, "joint_gp", F)
     R_joint = float(np.sqrt(np.mean(np.sum(lay_j**2, axis=1))))
-    curves = joint_curves(opt, model, q_all, p_all, fit, meta, F)
+    curves, _ = joint_curves(opt, model, q_all, p_all, fit, meta, F, jgp)
     inflate = math.sqrt(1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit)))
     excess = math.sqrt(max(R**2 - F**2, 0.0))
     removes = math.sqrt(max(R**2 - R_lay**2, 0.0))
@@ -119,7 +130,7 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     # ``structure_max_points`` of them, a seeded subset: the permutation test holds N x 3 x permutations numbers)
     rows = fit if len(fit) <= opt.structure_max_points else \
         np.sort(np.random.default_rng(opt.seed).choice(fit, opt.structure_max_points, replace=False))
-    cov = inp.cov_mm2[rows] * _floor_scale(inp)
+    cov = inp.cov_mm2[rows] * floor_scale(inp)
     w = np.linalg.solve(np.linalg.cholesky(cov), resid[rows][:, :, None])[:, :, 0]
     pb = _base(model.kinematics, inp.p_mm[rows] - resid[rows])
     q = np.asarray(inp.q_rad, float)[rows]
@@ -131,6 +142,8 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
             spaces[name] = np.asarray(v, float)[rows]
     tests = structure_test(w, spaces, np.random.default_rng(opt.seed), opt.neighbours, opt.permutations)
     along = sorted((s for s in tests if tests[s]["z"] >= opt.structure_z), key=lambda s: -tests[s]["z"])
+    held_err = {"final": held, "gpr": lay, "joint_gp": lay_j}
+    rem = _remainder(inp, opt, model, resid[rows], rows, cov, R, F, flagged, held_err, tests, along, stage, fit)
     evaluated = "held-out test points" if where == "test" else "cross-validated calibration points"
     text = (f"unexplained structure: {excess:.3f} mm RMS over the noise floor after the final model (held-out "
             f"{R:.3f} mm vs floor {F:.3f} mm, {evaluated}); a non-parametric layer (GPR over the joints) removes "
@@ -141,15 +154,53 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
                                          for c in curves[:3]) if curves else ""))
     if along:
         text += f"; strongest along {', '.join(along[:4])}"
-    out = {"unexplained": flagged, "heldout_rms_mm": R, "floor_mm": F, "excess_over_floor_mm": excess,
+    structure_left = flagged and rem.kind == "structure"
+    if structure_left:
+        summary = text
+    elif rem.kind == "noise":
+        summary = f"excess noise: {rem.text}"
+    else:
+        summary = (f"nothing unexplained: held-out {R:.3f} mm vs floor {F:.3f} mm (a non-parametric layer gives "
+                   f"{R_lay:.3f} mm)")
+    out = {"unexplained": structure_left, "heldout_rms_mm": R, "floor_mm": F, "excess_over_floor_mm": excess,
            "layer": "GPR over the joints (the residual layer of reprocess)",
            "layer_heldout_rms_mm": R_lay, "layer_removes_mm": removes, "evaluation": where, "along": along,
            "joint_layer_heldout_rms_mm": R_joint, "joint_layer_removes_mm": removes_j, "joint_curves": curves,
-           "text": text if flagged else f"nothing unexplained: held-out {R:.3f} mm vs floor {F:.3f} mm "
-                                          f"(a non-parametric layer gives {R_lay:.3f} mm)"}
-    notes = [text] if flagged else []
+           "above_floor": flagged, "remainder_kind": rem.kind, "text": summary, "detail": text}
+    notes = [summary] if flagged else []
     if inp.noise_floor_source == "repeats" and R < 0.8 * F:
         notes.append(f"the repeat scatter ({F:.3f} mm) exceeds the final held-out residual ({R:.3f} mm): the repeated "
                      "poses probably include approach-direction or drift effects, so the floor is overestimated")
     structure = {"tests": tests, "structure_along": along}
-    return out, structure, notes
+    return out, structure, notes, rem, held_err
+
+
+def best_layer(held_err: dict) -> tuple[str, np.ndarray]:
+    """(name, held-out error vectors) of the layer (GPR or joint GP) with the lower held-out RMS."""
+    names = {"gpr": "GPR over the joints", "joint_gp": "joint GP"}
+    k = min(("gpr", "joint_gp"), key=lambda k: float(np.mean(np.sum(held_err[k] ** 2, axis=1))))
+    return names[k], held_err[k]
+
+
+def _remainder(inp, opt, model, r_rows, rows, cov_rows, R, F, flagged, held_err, tests, along, stage, fit):
+    """The remainder's class from its evidence (``robocal.diagnose.remainder``)."""
+    name, lay = best_layer(held_err)
+    gain = paired_gain(np.sum(held_err["final"] ** 2, axis=1), np.sum(lay**2, axis=1))
+    q = np.asarray(inp.q_rad, float)[rows]
+    kin = model.kinematics
+    _, J = identification_jacobian(kin, q)
+    Jq = joint_motion_columns(kin, J)
+    dof = stage["n_params"] / (3.0 * len(fit))
+    S = max([tests[s]["S"] for s in along] or [0.0])
+    jitter = None
+    if inp.q_cmd_rad is not None:
+        m = inp.meta()
+        cal = np.flatnonzero(inp.calib)
+        sub = lambda k: None if m.get(k) is None else np.asarray(m[k])[cal]  # noqa: E731
+        jitter = readback_jitter(np.asarray(inp.q_rad)[cal], np.asarray(inp.q_cmd_rad)[cal], sub("move"),
+                                 sub("prev_move"))
+    ev = RemainderEvidence(R, F, flagged, name, gain.rms_cand_mm, gain.t, S * F**2 / 3.0,
+                           along[0] if along else None, nugget(r_rows, q, dof_share=dof),
+                           noise_shape(r_rows, cov_rows, Jq), jitter,
+                           np.sqrt(np.mean(np.sum(Jq**2, axis=1), axis=0)), inp.noise_floor_source)
+    return classify(ev)

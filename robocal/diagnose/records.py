@@ -10,6 +10,10 @@ from ..approach import approach_signs, moves_from_order
 from ..effects import GravityModel
 from ..elastic import EngineOptions
 from ..kinematics import Kinematics
+from .budget import ErrorBudget
+from .jsonable import json_float, plain
+from .next_steps import NextStep
+from .remainder import Remainder
 
 
 @dataclass(frozen=True)
@@ -34,6 +38,12 @@ class DiagnosisOptions:
     floor_f_alpha: float = 1e-3       # ... and, with a floor from repeats, significantly so (F test at this level)
     cv_param_inflation: float = 1.25  # floor inflation per parameter share (held-out prediction with p parameters)
     layer_max_points: int = 2000      # the GPR layer that measures the structure left over: at most this many rows
+    nonphysical_gear_arcsec: float = 300.0   # a gear harmonic beyond this is beyond any gearbox: not physical ...
+    nonphysical_split: float = 1.0    # ... and so are parameters that differ between near/far reach or the halves
+    nonphysical_split_z: float = 3.0  #     of the run by more than the effect itself, and by this x their noise
+    term_t: float = 3.0               # a named term outside the model predicting held-out points at this paired t
+    #                                   (and > 2 %: the claim standard of robocal.stats): unexplained structure
+    budget_boot: int = 400            # bootstrap resamples of the error budget's intervals
     seed: int = 0
 
 
@@ -46,7 +56,8 @@ class DiagnosisInput:
     ``payload_kg`` (N,); ``approach`` (N, n) signs and ``move_rad``/``prev_move_rad`` (N, n) when computed over more
     rows than these (else from ``order``). ``noise_floor_dof``: points behind a floor measured from repeats.
     ``gravity``: the one gravity-torque model; ``baseline``/``baseline_identified``: the geometric fit to start
-    from (reprocess's kinematic stage)."""
+    from (reprocess's kinematic stage); ``nominal`` the model of the budget's nominal stage (base registered
+    on the calibration rows); ``q_cmd_rad`` commanded joints when ``q_rad`` are read-back ones."""
     kin: Kinematics
     q_rad: np.ndarray
     p_mm: np.ndarray
@@ -66,6 +77,8 @@ class DiagnosisInput:
     gravity: GravityModel = GravityModel()
     baseline: Kinematics | None = None
     baseline_identified: tuple[str, ...] | None = None
+    nominal: Kinematics | None = None       # the nominal stage's model (registered here); None: ``kin``
+    q_cmd_rad: np.ndarray | None = None      # commanded joints (N, n) beside read-back ``q_rad``, when both exist
 
     def meta(self) -> dict:
         """Per-row metadata of the effects (``robocal.effects``): approach and moves from the measurement order."""
@@ -96,8 +109,8 @@ class Finding:
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "joints": [int(j) for j in self.joints], "accepted": bool(self.accepted),
-                "test_rms_before_mm": _f(self.test_rms_before_mm), "test_rms_after_mm": _f(self.test_rms_after_mm),
-                "evidence": _plain(self.evidence)}
+                "test_rms_before_mm": json_float(self.test_rms_before_mm), "test_rms_after_mm": json_float(self.test_rms_after_mm),
+                "evidence": plain(self.evidence)}
 
 
 @dataclass(frozen=True)
@@ -117,10 +130,10 @@ class Region:
         return self.extra.get("region", self.description)
 
     def to_dict(self) -> dict:
-        d = {"description": self.description, "rms_mm": _f(self.rms_mm), "floor_mm": _f(self.floor_mm),
-             "ratio": _f(self.rms_mm / self.floor_mm) if self.floor_mm > 0 else None, "n": int(self.n),
-             "kind": self.kind, "stage": self.stage, "p_value": _f(self.p_value)}
-        d.update(_plain(self.extra))
+        d = {"description": self.description, "rms_mm": json_float(self.rms_mm), "floor_mm": json_float(self.floor_mm),
+             "ratio": json_float(self.rms_mm / self.floor_mm) if self.floor_mm > 0 else None, "n": int(self.n),
+             "kind": self.kind, "stage": self.stage, "p_value": json_float(self.p_value)}
+        d.update(plain(self.extra))
         return d
 
 
@@ -149,6 +162,10 @@ class Diagnosis:
     effects: tuple                  # FittedEffect of the final model
     stages: tuple[dict, ...]        # test/CV RMS after each accepted step (step 0 = geometric)
     selection: dict                 # the engine's selection (robocal.elastic.EffectSelection.to_dict)
+    budget: ErrorBudget | None = None
+    remainder: Remainder | None = None
+    layer: dict = field(default_factory=dict)          # what the residual layer removes (``layer_terms``)
+    next_steps: tuple[NextStep, ...] = ()               # per undecided class: experiment, predicted shrinkage
 
     @property
     def accepted_effects(self) -> tuple[str, ...]:
@@ -156,36 +173,18 @@ class Diagnosis:
 
     def to_dict(self) -> dict:
         return {
-            "noise_floor_mm": _f(self.noise_floor_mm), "noise_floor_source": self.noise_floor_source,
-            "baseline_test_rms_mm": _f(self.baseline_test_rms_mm), "final_test_rms_mm": _f(self.final_test_rms_mm),
+            "noise_floor_mm": json_float(self.noise_floor_mm), "noise_floor_source": self.noise_floor_source,
+            "baseline_test_rms_mm": json_float(self.baseline_test_rms_mm), "final_test_rms_mm": json_float(self.final_test_rms_mm),
             "unexplained": bool(self.unexplained),
             "findings": [f.to_dict() for f in self.findings],
             "where": [r.to_dict() for r in self.where],
-            "unexplained_structure": _plain(self.unexplained_structure),
+            "unexplained_structure": plain(self.unexplained_structure),
             "evaluation": self.evaluation, "n_calib": self.n_calib, "n_test": self.n_test,
-            "outliers": len(self.outliers), "undiagnosable": _plain(list(self.undiagnosable)),
-            "structure": _plain(self.structure), "stages": _plain(list(self.stages)), "notes": list(self.notes),
-            "effects": [fe.to_dict() for fe in self.effects], "selection": _plain(self.selection),
-            "maps": _plain(self.maps),
+            "outliers": len(self.outliers), "undiagnosable": plain(list(self.undiagnosable)),
+            "structure": plain(self.structure), "stages": plain(list(self.stages)), "notes": list(self.notes),
+            "effects": [fe.to_dict() for fe in self.effects], "selection": plain(self.selection),
+            "maps": plain(self.maps),
+            "budget": None if self.budget is None else self.budget.to_dict(),
+            "remainder": None if self.remainder is None else self.remainder.to_dict(),
+            "layer": plain(self.layer), "next_steps": [s.to_dict() for s in self.next_steps],
         }
-
-
-def _f(x):
-    return None if x is None or not np.isfinite(x) else float(x)
-
-
-def _plain(x):
-    """JSON-ready copy: numpy scalars/arrays to Python, NaN/inf to None."""
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        return _f(float(x))
-    return x

@@ -37,10 +37,11 @@ def _words_band(name, unit, lo, hi, labels, i, k):
 
 def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np.ndarray, q_rad: np.ndarray,
                    R_tracker_base: np.ndarray, t_s=None, approach=None, payload=None, Jq=None,
-                   options: DiagnosisOptions = DiagnosisOptions()) -> tuple[list[Region], dict]:
+                   options: DiagnosisOptions = DiagnosisOptions(), every: bool = False) -> tuple[list[Region], dict]:
     """Map residuals r_mm (m, 3, tracker frame) with their expected covariance cov_eff (m, 3, 3) over the
     workspace, joint ranges, base axes, time, approach direction and payload. Returns (flagged regions sorted by
-    RMS/floor, full maps for plots)."""
+    RMS/floor, full maps for plots; ``every``: every region, flagged or not); a region's ``share`` is the part
+    of the squared error over the floor it holds."""
     m = len(r_mm)
     R = np.asarray(R_tracker_base)[:3, :3]
     r_b = r_mm @ R                                    # base frame (R^T r)
@@ -96,10 +97,14 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     m_tests = len(cands) + 3 + (q_rad.shape[1] if approach is not None else 0)
     alpha = options.region_alpha / max(m_tests, 1)
     chi_all = float(np.sum(w**2))
+    excess = np.sum(r_b**2, axis=1) - floor_pt**2          # each point's share of the squared error over the floor
+    total = float(np.sum(excess))
     for desc, kind, idx, extra in cands:
         if len(idx) < options.region_min_points:
             continue
         rms, floor, p = _region_stats(r_b, w, floor_pt, idx)
+        if total > 0:
+            extra = dict(extra, share=float(np.sum(excess[idx])) / total)
         rest = m - len(idx)
         if rest >= options.region_min_points:
             chi = float(np.sum(w[idx] ** 2))
@@ -129,11 +134,11 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
             if reg is not None:
                 regions.append(reg)
                 maps["approach"].append({"joint": j + 1, **reg.extra, "rms_mm": reg.rms_mm})
-    flagged = [g for g in regions if g.p_value < alpha and (g.kind == "approach" or
-                                                            g.rms_mm >= options.region_min_ratio * g.floor_mm)]
+    flagged = [g for g in regions if every or (g.p_value < alpha and (
+        g.kind == "approach" or g.rms_mm >= options.region_min_ratio * g.floor_mm))]
     flagged.sort(key=lambda g: (g.kind != "all", not (g.kind == "approach" or g.extra.get("stands_out", False)),
                                 -g.rms_mm / max(g.floor_mm, 1e-12)))
-    return flagged[:options.max_regions], maps
+    return (flagged if every else flagged[:options.max_regions]), maps
 
 
 def _approach_region(j, s, r_mm, cov, jq, stage, min_points: int = 5) -> Region | None:

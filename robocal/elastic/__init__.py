@@ -14,7 +14,7 @@ parameters. Here they are
 
 ``engine.run_engine`` runs them in that order; ``campaign reprocess`` and ``campaign diagnose`` both call it.
 """
-from .cv import BlockedCV, Blocking, design_array, kfold, order_blocks, pose_blocks
+from .cv import BlockedCV, Blocking, design_array, kfold, order_blocks, pose_blocks, pose_clusters
 from .engine import EngineOptions, EngineResult, run_engine, select
 from .fit import ElasticResult, calibrate_elastic
 from .library import LibraryOptions, candidates, parts, refinements
@@ -25,4 +25,4 @@ from .select import EffectSelection, Step, Trial, select_effects
 __all__ = ["BlockedCV", "Blocking", "EffectChoice", "EffectSelection", "ElasticResult", "EngineOptions",
            "EngineResult", "FittedEffect", "LibraryOptions", "Step", "Trial", "calibrate_elastic", "candidates",
            "design_array", "elastic_flange", "elastic_smr_tracker", "kfold", "order_blocks", "parts", "pose_blocks",
-           "reading", "refinements", "run_engine", "select", "select_effects"]
+           "pose_clusters", "reading", "refinements", "run_engine", "select", "select_effects"]

@@ -24,12 +24,28 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
                 ) -> np.ndarray:
     """Fold number (N,) by pose blocks: k-means clusters of about ``block_points`` poses in joint space (joints
     scaled by their spread), each cluster held out as a whole, the clusters dealt to the folds at random."""
+    n = len(q_rad)
+    rng = np.random.default_rng(seed)
+    label, k = _clusters(q_rad, int(np.clip(n // block_points, folds, 200)), rng, iterations)
+    deal = rng.permutation(k) % folds
+    return deal[label]
+
+
+def pose_clusters(q_rad: np.ndarray, block_points: int = 12, seed: int = 0, max_clusters: int = 200) -> np.ndarray:
+    """Cluster number (N,) of each pose: the k-means pose blocks of ``pose_blocks`` (about ``block_points`` poses
+    each, at most ``max_clusters``) before they are dealt to folds (the units of a block bootstrap)."""
+    n = len(q_rad)
+    return _clusters(q_rad, int(np.clip(n // max(block_points, 1), 1, max_clusters)), np.random.default_rng(seed),
+                     8)[0]
+
+
+def _clusters(q_rad: np.ndarray, k: int, rng: np.random.Generator, iterations: int) -> tuple[np.ndarray, int]:
+    """(label (N,), number of centres) of k-means in joint space (joints scaled by their spread) from a
+    farthest-point start."""
     q = np.asarray(q_rad, float)
     n = len(q)
-    k = int(np.clip(n // block_points, folds, 200))
     sd = q.std(axis=0)
     x = q[:, sd > 0] / sd[sd > 0] if np.any(sd > 0) else np.zeros((n, 1))
-    rng = np.random.default_rng(seed)
     first = int(rng.integers(n))
     idx, dist = [first], ((x - x[first]) ** 2).sum(axis=1)
     for _ in range(min(k, n) - 1):                  # farthest-point start: every separate group gets a centre
@@ -44,8 +60,7 @@ def pose_blocks(q_rad: np.ndarray, folds: int, seed: int = 0, block_points: int 
         first, last = np.searchsorted(label[order], ids), np.searchsorted(label[order], ids, side="right")
         for c in np.flatnonzero(last > first):
             centres[c] = xs[first[c]:last[c]].mean(axis=0)
-    deal = rng.permutation(len(centres)) % folds
-    return deal[label]
+    return label, len(centres)
 
 
 def _nearest(x: np.ndarray, centres: np.ndarray) -> np.ndarray:

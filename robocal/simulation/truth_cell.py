@@ -26,6 +26,10 @@ Physics (lengths mm, angles rad, torques N*m, time s):
 * **wrist coupling**: the J6 (J5) output turns with J5 (J4) through the wrist gears: q6 += e * q5.
 * **thermal warm-up**: all link lengths grow by alpha_T * dT * (1 - exp(-t/tau)), encoder zeros of J2/J3 drift
   with the same curve (exact FK per point with the grown lengths).
+* **reach-dependent J2 sag** (not in the library): J2 turns down (the TCP lowers) by an angle growing with the
+  square of the horizontal reach (a stiffness that softens with the load's lever).
+* **joint jitter** (not in the library): the read-back joints J1-J3 carry random noise above the encoder
+  resolution (0.004 deg RMS, x scale): nothing in the pose predicts it.
 * **registration drift**: the tracker stand creeps: a rigid screw (translation mm, rotation rad) growing
   linearly in time or settling exponentially.
 * **measurement order**: poses are measured in random order (calibration and test interleaved), payload
@@ -46,8 +50,9 @@ from robocal.noise import TrackerUncertainty, repeatability_sigma_mm
 G_M_S2 = 9.80665
 ARCMIN = np.pi / 180.0 / 60.0
 TRUTH_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag",
-               "thermal_drift", "axis_coupling", "registration_drift", "reach_deflection")
-LIBRARY_TRUTHS = TRUTH_NAMES[:-1]          # reach_deflection is deliberately outside the diagnosis library
+               "thermal_drift", "axis_coupling", "registration_drift", "reach_deflection", "joint_jitter",
+               "reach_sag_j2")
+LIBRARY_TRUTHS = TRUTH_NAMES[:8]           # reach_deflection, joint_jitter and reach_sag_j2: outside the library
 
 
 def irb2600_nominal() -> Kinematics:
@@ -290,13 +295,21 @@ def draw_effect(name: str, rng: np.random.Generator, kin: Kinematics, scale: flo
     if name == "reach_deflection":
         return TruthEffect(name, (), "sag growing with the square of the horizontal reach (not in the library)",
                            {"sag_mm_at_1m": 0.15 * scale * u(0.8, 1.25)})
+    if name == "reach_sag_j2":
+        return TruthEffect(name, (2,), "J2 turns down by an angle growing with the square of the reach (not in the "
+                           "library)", {"sag_rad_at_1m": 8e-5 * scale * u(0.8, 1.25)})
+    if name == "joint_jitter":
+        return TruthEffect(name, (1, 2, 3), "random noise on the read-back joints (not in the library)",
+                           {"sigma_rad": np.radians(0.004) * scale})
     raise ValueError(f"unknown truth effect {name!r}")
 
 
 # ============================================================================ the campaign
 def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthProtocol(),
-             scale: float | None = None, nominal: Kinematics | None = None) -> TruthCampaign:
-    """One simulated campaign with the named physical effects (``scale`` None: U(0.6, 1.4) per effect)."""
+             scale: float | None = None, nominal: Kinematics | None = None, off: Sequence[str] = ()) -> TruthCampaign:
+    """One simulated campaign with the named physical effects (``scale`` None: U(0.6, 1.4) per effect).
+    ``off``: effects drawn (the same random numbers) but not applied: the same campaign without them, so the
+    difference of two calls is what those effects do to the measurements."""
     rng = np.random.default_rng(seed)
     nominal = irb2600_nominal() if nominal is None else nominal
     phi = rng.uniform(-np.pi, np.pi)
@@ -339,6 +352,12 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     sag_mm_per_m2 = 0.0
     for te in truths:
         v = te.values
+        if te.name == "joint_jitter":                 # drawn whether applied or not: the same campaign otherwise
+            jitter = rng.normal(0.0, v["sigma_rad"], (N, len(te.joints)))
+            if te.name not in off:
+                q_read[:, np.array(te.joints) - 1] += jitter
+        if te.name in off:
+            continue
         if te.name in ("joint_compliance", "payload_deflection"):
             tau = gravity_torque_nm(truth, q_cmd, mass, payload, te.name == "joint_compliance", pr.gravity_base)
             for j, k in v["stiffness_nm_per_rad"].items():
@@ -369,6 +388,8 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
             dp_tracker += s[:, None] * (v["v_mm"] + np.cross(v["w_rad"], p0 - T_tb[:3, 3]))
         elif te.name == "reach_deflection":
             sag_mm_per_m2 = v["sag_mm_at_1m"]
+        elif te.name == "reach_sag_j2":
+            q_link[:, 1] += _j2_sag(truth, q_cmd, v["sag_rad_at_1m"])
     p_true = _smr_tracker(truth, q_link, a_mm, d_mm, theta)
     if sag_mm_per_m2:
         c = chain(truth, q_link, full=False)
@@ -383,10 +404,19 @@ def simulate(effects: Sequence[str], seed: int, protocol: TruthProtocol = TruthP
     p_meas = p_rep + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal((N, 3)))
     cov = cov + s_rep**2 * np.eye(3)
     # ---- reference nests on the floor, measured every nest_every poses (same drift of the tracker stand)
-    nest_p, nest_id, nest_t, nest_after = _nests(pr, rng, truth, truths, t, N)
+    nest_p, nest_id, nest_t, nest_after = _nests(pr, rng, truth, [te for te in truths if te.name not in off], t, N)
     return TruthCampaign(nominal, truth, q_read, q_cmd, p_meas, cov, tuple(sets), tuple(ids),
                          t if pr.timestamps else None, payload, tuple(truths), nest_p, nest_id,
                          nest_t if pr.timestamps else None, nest_after, pr)
+
+
+def _j2_sag(kin: Kinematics, q: np.ndarray, rad_at_1m: float) -> np.ndarray:
+    """J2 angle (N,) rad that lowers the flange by rad_at_1m x (horizontal reach / 1 m)^2 radians."""
+    p = chain(kin, q, full=False).T_base_flange[:, :3, 3]
+    dq = np.zeros_like(q)
+    dq[:, 1] = 1e-6
+    dz = chain(kin, q + dq, full=False).T_base_flange[:, 2, 3] - p[:, 2]
+    return -rad_at_1m * (np.hypot(p[:, 0], p[:, 1]) / 1000.0) ** 2 * np.sign(dz)
 
 
 def _smr_tracker(kin: Kinematics, q, a_mm, d_mm, theta) -> np.ndarray:

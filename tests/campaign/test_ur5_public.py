@@ -51,6 +51,9 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
             print(f"  {name:40s} mean {t.mean_mm:.4f}  RMS {t.rms_mm:.4f}  max {t.max_mm:.4f}")
         effects = [e["name"] + str(e["options"]) for e in report.effects.fitted]
         print(f"  noise floor (specs) {report.noise_floor_mm:.4f}; effects {effects}; layer {report.method.residual}")
+        print("  budget: " + "; ".join(f"{c.name} {c.rms_mm:.4f} [{c.low_mm:.4f}-{c.high_mm:.4f}]"
+                                       for c in report.budget.components)
+              + f"; closure {100 * report.budget.closure:.2f} % of {report.budget.nominal_rms_mm:.4f}")
     assert report.n == RowCounts(calib=1000, test=20, check=0, rejected=0)
     assert abs(raw - PUBLISHED_UNCALIBRATED_MM) < 0.01          # the published baseline is the raw |dif| mean
     final, kinematic = report.final.test.mean_mm, stages["kinematic"].test.mean_mm
@@ -72,6 +75,13 @@ def test_default_reprocess_beats_the_published_hybrid_result(tmp_path, capsys):
     assert sentence_joins(page.text) == [] and not any(empty_columns(rows) for rows in page.tables.values())
     cv = {row[0]: row[-1] for row in page.tables["table3-table"][1:]}
     assert cv["final model (+ residual layer, if any)"] == f"{report.final.layer.cv_predicted_rms_mm:.4f}"
+    # issue 34: the error budget of the held-out error closes, on the report's own stages
+    budget, rms = report.budget, {k: s.test.rms_mm for k, s in stages.items()}
+    assert budget.n_points == 20 and budget.closure < 0.05
+    assert budget.nominal_rms_mm == pytest.approx(rms["nominal"], rel=1e-9)
+    assert budget.of_kind("geometry")[0].rms_mm == pytest.approx((rms["nominal"] ** 2 - rms["kinematic"] ** 2) ** 0.5)
+    effects = sum(c.rms_mm**2 for c in budget.of_kind("effect"))
+    assert effects == pytest.approx(rms["kinematic"] ** 2 - rms.get("elastic", rms["kinematic"]) ** 2, rel=1e-6)
 
 
 def test_an_smr_offset_far_off_gives_the_same_held_out_result(tmp_path):
