@@ -184,7 +184,9 @@ def diagnosis_figures(report: dict) -> list:
         paths = write_plots(report, tmp)
         if isinstance(paths, str):
             return []
-        return [Figure(p.stem, titles.get(p.stem, p.stem), BUDGET_CAPTION if p.stem == "budget_waterfall" else
+        # the calibration's own budget figure is budget_waterfall.png in the same figures directory
+        return [Figure("diagnosis_budget_waterfall" if p.stem == "budget_waterfall" else p.stem,
+                       titles.get(p.stem, p.stem), BUDGET_CAPTION if p.stem == "budget_waterfall" else
                        "From the diagnosis.", p.read_bytes()) for p in paths]
 
 

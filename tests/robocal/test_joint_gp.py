@@ -150,7 +150,7 @@ def test_diagnosis_names_the_joint_whose_curve_is_left_over():
     e_base += rng.normal(0, NOISE_AXIS_MM, e_base.shape)
     model = CalibratedModel(kin)
     p_tracker = model.smr_tracker(q) + e_base @ kin.T_tracker_base[:3, :3].T
-    curves = joint_curves(DiagnosisOptions(), model, q, p_tracker, np.arange(len(q)), {}, np.sqrt(3) * NOISE_AXIS_MM)
+    curves, _ = joint_curves(DiagnosisOptions(), model, q, p_tracker, np.arange(len(q)), {}, np.sqrt(3) * NOISE_AXIS_MM)
     assert curves[0]["joint"] == 3
     assert curves[0]["rms_arcsec"] == pytest.approx(0.75e-4 / np.sqrt(2) * 206264.8, rel=0.25)
     assert curves[1]["rms_mm"] < 0.3 * curves[0]["rms_mm"]
