@@ -13,7 +13,7 @@ from robocal.identify import Unidentifiable
 from .plausibility import Plausibility
 from .summary import Summary
 from .report_sections import (EffectsReport, ExcludedPoint, MethodChoice, MultiSmrReport, ParameterRow,
-                              ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary,
+                              ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary, LearningCurve,
                               unidentifiable_from_dict)
 
 
@@ -86,6 +86,7 @@ class CalibrationReport:
     points: Any = None
     identification: tuple[tuple[str, Any], ...] = ()
     summary: Summary | None = None
+    learning: LearningCurve | None = None      # optimal and adaptive runs: forecast and measured learning curves
 
     @property
     def final(self) -> StageResult | None:
@@ -99,6 +100,8 @@ class CalibrationReport:
             out["multi_smr"] = self.multi_smr.to_dict()
         if self.stop is not None:
             out["stop"] = self.stop.to_dict()
+        if self.learning is not None:
+            out["learning"] = self.learning.to_dict()
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
         if self.summary is not None:
@@ -133,7 +136,8 @@ class CalibrationReport:
             record_field(data, "multi_smr", MultiSmrReport.from_dict, True),
             record_field(data, "stop", StopSummary.from_dict, True), data.get("cell"), data.get("points"),
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
-            record_field(data, "summary", Summary.from_dict, True))
+            record_field(data, "summary", Summary.from_dict, True),
+            record_field(data, "learning", LearningCurve.from_dict, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]
