@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.adaptive import KernelTerm, LinearTerm
+from robocal.adaptive import Batch, KernelTerm, LinearTerm
 from robocal.design import geometric_prior_sigma, whiten_rows
 from robocal.effects import effect_regressor
 from robocal.gp import MultiOutputGP
@@ -105,18 +105,27 @@ def task_sample(n: int, seed: int = 0) -> np.ndarray:
 def design_terms(cur: CurrentModel, q_cand: np.ndarray, meta_cand: dict, cov_cand: np.ndarray,
                  q_task: np.ndarray, meta_task: dict | None = None) -> list:
     """``robocal.adaptive`` terms of the current model over candidates q_cand (M, n) rad (their effect metadata
-    and covariances (M, 3, 3) mm^2), judged at the task poses q_task (T, n)."""
+    and covariances (M, 3, 3) mm^2), judged at the task poses q_task (T, n): [parametric, layer]. The parametric
+    variance is scaled by the noise the layer leaves (per axis, over the noise model's), between 1 and s0^2: the
+    structure the layer describes is not noise of the parametric fit."""
+    layer, noise2 = _layer_term(cur, q_cand, meta_cand, q_task, meta_task)
+    model2 = float(np.mean(np.trace(cur.cov_mm2, axis1=1, axis2=2))) / 3.0
+    scale = float(np.clip(noise2 / model2, 1.0, max(cur.s0**2, 1.0)))
     prior = _prior_std(cur)
     A = lambda q, meta, cov: whiten_rows(parametric_columns(cur.kinematics, cur.cols, cur.effects, q, meta),  # noqa: E731
                                          cov) * prior
     B_task = parametric_columns(cur.kinematics, cur.cols, cur.effects, q_task, meta_task or {}) * prior
-    terms = [LinearTerm(A(q_cand, meta_cand, cov_cand), A(cur.q_rad, cur.meta, cur.cov_mm2), B_task, cur.s0**2)]
+    return [LinearTerm(A(q_cand, meta_cand, cov_cand), A(cur.q_rad, cur.meta, cur.cov_mm2), B_task, scale), layer]
+
+
+def _layer_term(cur: CurrentModel, q_cand, meta_cand, q_task, meta_task):
+    """(the layer's term, its noise variance per axis mm^2): the joint GP's features and prior, the GPR's kernel, or
+    without a GP layer a GP of the parametric residuals."""
     layer = cur.layer.layer
     if isinstance(layer, JointGPResidual):
-        w = layer.prior_std()
-        terms.append(LinearTerm(layer.features(q_cand) * (w / layer.noise_mm), layer.features(cur.q_rad) *
-                                (w / layer.noise_mm), layer.features(q_task) * w))
-        return terms
+        w = layer.prior_std() / layer.noise_mm
+        return LinearTerm(layer.features(q_cand) * w, layer.features(cur.q_rad) * w,
+                          layer.features(q_task) * layer.prior_std()), layer.noise_mm**2
     gp = layer.gp if isinstance(layer, GPRResidual) and isinstance(layer.gp, MultiOutputGP) else None
     pay = None
     if gp is None:                                         # no GP layer: a GP of the parametric residuals
@@ -126,6 +135,14 @@ def design_terms(cur: CurrentModel, q_cand: np.ndarray, meta_cand: dict, cov_can
     x = lambda q, meta: gp_inputs(q, None if pay is None else pay(meta, len(q))) / gp.models[0].length  # noqa: E731
     g0 = gp.models[0]
     signal = float(sum(g.sigma_f**2 for g in gp.models))
-    terms.append(KernelTerm(x(q_cand, meta_cand), g0.X / g0.length, x(q_task, meta_task), signal,
-                            (g0.sigma_n / g0.sigma_f) ** 2))
-    return terms
+    term = KernelTerm(x(q_cand, meta_cand), g0.X / g0.length, x(q_task, meta_task), signal, (g0.sigma_n / g0.sigma_f) ** 2)
+    return term, float(np.mean([g.sigma_n**2 for g in gp.models]))
+
+
+def predicted_curve(cur: CurrentModel, batch: Batch, n: int) -> tuple[tuple[int, float], ...]:
+    """((n + j, mm), ...) for j = 0 .. len(batch): the predicted held-out RMS now (the larger of the refit's CV
+    figure and the noise floor with the model's own prediction variance at the task poses) and after each pick of
+    the batch (that less the variance the picks remove), never below the floor."""
+    v = batch.task_variance_mm2
+    now2 = max(cur.cv_rms_mm**2, cur.floor_mm**2 + v[0])
+    return tuple((n + j, float(np.sqrt(max(now2 - (v[0] - x), cur.floor_mm**2)))) for j, x in enumerate(v))

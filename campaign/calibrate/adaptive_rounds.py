@@ -16,7 +16,6 @@ plan's swept-path guard (via poses; a candidate no route reaches is left out of 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -37,7 +36,7 @@ from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_reader import LogContents, read_log
 
-from .adaptive_model import design_terms, refit, task_sample
+from .adaptive_model import design_terms, predicted_curve, refit, task_sample
 from .adaptive_stop import ROUND_EVENT
 
 logger = logging.getLogger(__name__)
@@ -118,9 +117,7 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
                          meta(len(q_task)))
     b = choose_batch(terms, k, np.ones(len(q), bool), RULE)
     floor = cur.floor_mm
-    now2 = max(cur.cv_rms_mm**2, floor**2 + b.task_variance_mm2[0])
-    curve = tuple((n + j, math.sqrt(max(now2 - (b.task_variance_mm2[0] - v), floor**2)))
-                  for j, v in enumerate(b.task_variance_mm2))
+    curve = predicted_curve(cur, b, n)
     now, gain = curve[0][1], curve[0][1] - curve[-1][1]
     threshold = pl.stop_gain_pct / 100.0 * floor
     kw = dict(layer=cur.layer_kind, now=now, gain=gain, threshold=threshold if pl.stop == "auto" else 0.0,
@@ -148,7 +145,9 @@ class AdaptiveRounds:
         calib = [i for i, pt in enumerate(plan.points) if pt.set == "calib"]
         self.seed = list(plan.points[: calib[-1] + 1]) if calib else []
         self.tail = list(plan.points[len(self.seed):])
-        checks = round_checks(read_log(run_dir))
+        contents = read_log(run_dir)
+        self.done |= {r.point_id for r in contents.records()}      # a resumed run: the batches' points too
+        checks = round_checks(contents)
         self.batches = [c.added for c in checks if c.decision == "continue"]
         self.stopped = any(c.decision == "stop" for c in checks)
         self.excluded: set[str] = set()

@@ -18,15 +18,16 @@ import numpy as np
 
 from robocal.adaptive import choose_batch
 from robocal.design import criterion, d_optimal
-from robocal.identify import IdentificationError, register
-from robocal.kinematics import smr_base
+from robocal.identify import IdentificationError
+from robocal.kinematics import smr_base, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 from campaign.plan.adaptive import seed_size, task_poses
+from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
-from .adaptive_model import design_terms, refit, task_sample
+from .adaptive_model import design_terms, predicted_curve, refit, task_sample
 from .effects_stage import effect_meta
 from .plausibility import check_dataset
 
@@ -78,13 +79,9 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")
     ordered = ds.with_order_context()                     # a subset keeps how the robot reached each pose
     q = np.radians(ds.q_deg[cal])
-    cov = cell.weights(ds)[0][cal]
-    try:
-        kin = register(cell.kinematics, q, ds.p_tracker_mm[cal])
-    except IdentificationError as exc:
-        raise DataError(ds.source, f"cannot register the calibration rows: {exc}") from None
+    kin_t = tracker_kinematics(cell)                      # as a plan sees the poses: no measurement used
     payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
-    crit = criterion(kin, q, cov, payload)
+    crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), payload)
     need = math.ceil(1.1 * crit.identifiable_geometric)
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
@@ -104,10 +101,9 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         keep[cal[chosen]] = True
         try:
             cur = refit(ordered.subset(keep), cell)
+            cov = cell.covariance(smr_tracker(cur.kinematics, q))       # where the refit predicts the SMR
             b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule)
-            cv2 = cur.cv_rms_mm**2
-            after = math.sqrt(max(cv2 - (b.task_variance_mm2[0] - b.task_variance_mm2[-1]), cur.floor_mm**2))
-            rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, after,
+            rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, predicted_curve(cur, b, 0)[-1][1],
                                 tuple(ds.point_id[cal[i]] for i in b.chosen)))
             chosen += [int(i) for i in b.chosen]
         except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:

@@ -51,6 +51,7 @@ def adaptive_plan(cell: CellModel) -> Plan:
     if n_max < need:
         raise ConfigError(cfg.source_path, "plan.max_points", f"{n_max} calibration points cannot identify the {geo} "
                           f"geometric parameters the candidate poses determine: at least {need} (identifiable + 10 %)")
+    task_poses(cell, pool.q_rad, pool.p_base_mm)          # a task that gives no pose stops here, before anything moves
     n0 = seed_size(geo, n_max, cfg.calibration.cv_folds)
     seed = d_optimal(pool.criterion.A, n0, pool.criterion.spread).chosen
     seed = seed[short_tour(pool.q_rad[seed], np.radians(pl.q_ref_deg))]
