@@ -47,14 +47,18 @@ def forecast_curve(cell: CellModel, plan: Plan) -> tuple[tuple[int, float], ...]
     q = plan_order(cell, plan)
     if len(q) == 0:
         return ()
+    q_test = np.radians([p.q_deg for p in plan.points if p.set == "test"]).reshape(-1, q.shape[1])
+    sizes = sorted({s for s in SIZES if s < len(q)} | {len(q)})
+    return tuple(zip(sizes, forecast_rms(cell, q, q_test if len(q_test) else q, sizes)))
+
+
+def forecast_rms(cell: CellModel, q_order: np.ndarray, q_test: np.ndarray, sizes) -> list[float]:
+    """Predicted held-out RMS (mm) at the test poses q_test (T, n) rad of the model fitted on the first n of the
+    calibration poses q_order (N, n), for every n in ``sizes`` (ascending): the module docstring's forecast."""
     kin_t = tracker_kinematics(cell)
-    q_test = np.radians([p.q_deg for p in plan.points if p.set == "test"]).reshape(-1, kin_t.n)
-    q_test = q_test if len(q_test) else q
-    crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cell.payload_kg)
-    effects = criterion_effects(kin_t, q, cell.payload_kg)
+    crit = criterion(kin_t, q_order, pose_covariance(cell, kin_t, q_order), cell.payload_kg)
+    effects = criterion_effects(kin_t, q_order, cell.payload_kg)
     J, _, prior = design_columns(kin_t, q_test, {"payload_kg": np.full(len(q_test), cell.payload_kg)}, effects)
     cov_test = pose_covariance(cell, kin_t, q_test)
     floor = float(np.sqrt(np.mean(np.trace(cov_test, axis1=1, axis2=2))))
-    sizes = sorted({s for s in SIZES if s < len(q)} | {len(q)})
-    rms = learning_curve(crit.A, J * prior, floor, sizes)
-    return tuple((int(n), float(r)) for n, r in zip(sizes, rms))
+    return [float(r) for r in learning_curve(crit.A, J * prior, floor, sizes)]
