@@ -3,10 +3,10 @@
 After the seed and after every batch the calibration points measured so far (read back from the durable log,
 with the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
 (``adaptive_model.refit``), and the next ``plan.block_points`` poses are those of the plan's candidates (at most
-``MAX_CANDIDATES`` per round, a seeded sample of the pool) where that model's predicted error at the task poses
-falls most (``robocal.adaptive``). Predicted held-out RMS now: the larger of the refit's k-fold CV figure and the
-noise floor with the model's own prediction variance at the task poses; after the batch: that less the variance
-the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less than
+``MAX_CANDIDATES`` per round, a seeded sample of the pool) that tell the refitted model most about its parameters
+and its layer (``robocal.adaptive``, rule ``adaptive_model.RULE``, chosen by held-out prediction). Predicted
+held-out RMS now: the larger of the refit's k-fold CV figure and the noise floor with the model's own prediction
+variance at the task poses; after the batch: that less the variance the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less than
 ``plan.stop_gain_pct`` % of the noise floor, when the next batch would exceed ``plan.max_minutes`` of robot time, or
 at ``plan.max_points``; then the test set is measured. Every decision is an ``adaptive_round`` event in the log,
 written before its batch moves the robot (its poses by id, in measurement order), so a resumed run measures the
@@ -36,12 +36,11 @@ from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_reader import LogContents, read_log
 
-from .adaptive_model import design_terms, predicted_curve, refit, task_sample
+from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
 from .adaptive_stop import ROUND_EVENT
 
 logger = logging.getLogger(__name__)
 MAX_CANDIDATES = 3000           # candidates judged per round (a seeded sample of a larger pool)
-RULE = "i"                      # robocal.adaptive criterion (bench/bench_select.py --adaptive)
 
 
 @dataclass(frozen=True)

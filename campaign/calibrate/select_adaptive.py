@@ -4,9 +4,10 @@ The same loop as ``plan.kind: adaptive``, with the measured calibration rows as 
 (the plan's criterion, joints spread; the identifiable geometric parameters + 10 %, at least the rows the layer's
 cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
 nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
-where that model's predicted error at the task poses falls most (``robocal.adaptive``, criterion ``i``) or where it
-learns most about its parameters and layer (``d``). The task poses: the calibration rows (the measured box), or
-``task_q_rad``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
+where that model learns most about its parameters and its layer (``robocal.adaptive`` rule ``d``, the default:
+chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).
+The task poses (the calibration rows, i.e. the measured box, or ``task_q_rad``) weigh the predicted held-out RMS
+of every round, and the choice under rule ``i``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
 it.
 """
 from __future__ import annotations
@@ -27,7 +28,7 @@ from campaign.errors import DataError
 from campaign.plan.adaptive import seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
-from .adaptive_model import design_terms, predicted_curve, refit, task_sample
+from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
 from .effects_stage import effect_meta
 from .plausibility import check_dataset
 
@@ -69,7 +70,7 @@ def adaptive_selection(ds: Dataset, cell: CellModel, n: int) -> AdaptiveSelectio
     return adaptive_rows(ds, cell, n, task_q_rad=task_poses(cell, q, smr_base(cell.kinematics, q)))
 
 
-def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = "i",
+def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
                   task_q_rad: np.ndarray | None = None) -> AdaptiveSelection:
     """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring); DataError as for
     ``select_rows``."""
