@@ -5,8 +5,8 @@ The demo IRB 2600 cell of ``configs/irb2600.yaml`` (its simulated effects: gravi
 -back lag and tracker drift are in the simulation; the mock measurement here uses the pose-dependent ones) with
 ``plan.kind: adaptive``: 100 of the plan's candidates measured on the simulated cell (its D-optimal seed, then
 random candidates), 3000 other candidates (a seeded sample of the pool). One round = ``adaptive_model.refit`` (the
-default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` + ``choose_batch``;
-median of ``--repeats`` runs, wall and CPU time, with the split.
+default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` + ``choose_batch`` (the
+campaign's rule, ``adaptive_model.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_adaptive_speed.py [--repeats 5]
 """
@@ -24,7 +24,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.calibrate.adaptive_model import design_terms, refit, task_sample  # noqa: E402
+from campaign.calibrate.adaptive_model import RULE, design_terms, refit, task_sample  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
@@ -65,7 +65,7 @@ def one_round(cell, ds, q_cand):
     terms = design_terms(cur, q_cand, meta, cell.covariance(smr_tracker(cur.kinematics, q_cand)), task,
                          {"payload_kg": np.full(len(task), cell.payload_kg)})
     t2 = time.perf_counter()
-    b = choose_batch(terms, BATCH, np.ones(len(q_cand), bool), "i")
+    b = choose_batch(terms, BATCH, np.ones(len(q_cand), bool), RULE)
     t3 = time.perf_counter()
     return (t3 - t[0], time.process_time() - t[1], t1 - t[0], t2 - t1, t3 - t2), cur, b
 

@@ -5,7 +5,9 @@ run measured, and the minutes against the full grid's.
 grid's predicted minutes). ``forecast_event``: the same, logged when a run starts (``forecast`` event). With it,
 ``learning_summary`` gives ``report.json``'s ``learning`` of an optimal or adaptive run: the forecast, the held-out
 RMS measured after the first 25, 50, 100... calibration points (in measurement order: the order they were chosen;
-each prefix refitted by the default process, judged on the run's test set) and the robot minutes measured.
+each prefix refitted by the default process, judged on the run's test set) and the measuring time: the sequence
+measured timed like a plan (motion at the caps, settling, readings: ``campaign.run.eta``), comparable with the plan's
+and the full grid's, and the robot time the log's clock recorded.
 """
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 from campaign.plan.learning import SIZES, forecast_curve
-from campaign.plan.points import Plan
+from campaign.plan.points import Plan, PlanPoint
+from campaign.run.log_records import PointRecord
 from campaign.run.eta import budget_duration_s, estimate_duration_s, grid_duration_s
 
 from .report_sections import LearningCurve
@@ -69,9 +72,24 @@ def learning_summary(ds: Dataset, cell: CellModel, contents, final_rms_mm: float
     event = next((e for e in (getattr(contents, "events", None) or []) if e.get("type") == FORECAST_EVENT), None)
     if event is None:
         return None
-    minutes = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in contents.records()) / 60.0
+    records = contents.records()
+    logged = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in records) / 60.0
     measured = measured_curve(ds, cell)
     if final_rms_mm is not None:
         measured += ((int(ds.mask("calib").sum()), float(final_rms_mm)),)
     return LearningCurve(tuple((int(n), float(v)) for n, v in event.get("curve", ())), measured,
-                         minutes, event.get("minutes_planned"), event.get("minutes_grid"))
+                         estimate_duration_s(measured_sequence(records), cell) / 60.0, event.get("minutes_planned"),
+                         event.get("minutes_grid"), logged)
+
+
+def measured_sequence(records) -> list[PlanPoint]:
+    """The points a run measured, in order, as plan points (a nest reading where the robot stood): what
+    ``campaign.run.eta`` times like a plan, so that the run's minutes compare with the plan's and the grid's."""
+    out, q = [], None
+    for r in records:
+        if isinstance(r, PointRecord):
+            q = tuple(r.q_cmd_deg)
+            out.append(PlanPoint(r.point_id, r.set, q, tuple(r.p_target_base_mm or (0.0, 0.0, 0.0))))
+        elif q is not None:
+            out.append(PlanPoint(r.point_id, "nest", q, (0.0, 0.0, 0.0)))
+    return out

@@ -110,7 +110,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
-        render_forecast(_stdout(), plan_forecast(cell, plan), plan.blocks)
+        render_forecast(_stdout(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
         from campaign.calibrate.learning import plan_learning
         from campaign.report.adaptive_text import render_plan_learning
         render_plan_learning(_stdout(), *plan_learning(cell, plan))

@@ -61,9 +61,12 @@ def render_learning(console: Console, learning) -> None:
     for n in sorted(set(fc) | set(ms)):
         t.add_row(str(n), _mm(fc.get(n)), _mm(ms.get(n)))
     console.print(keep_words(t, console.width))
-    text = f"measuring time {learning.minutes_measured:.1f} min of robot time"
+    text = f"measuring time {learning.minutes_measured:.1f} min for the points measured"
     if learning.minutes_planned is not None:
         text += f" (planned {learning.minutes_planned:.1f} min)"
     if learning.minutes_grid is not None:
         text += f"; the full grid {learning.minutes_grid:.1f} min"
+    text += " (motion at the speed caps, settling and tracker readings)"
+    if learning.minutes_logged is not None:
+        text += f"; the log's clock: {learning.minutes_logged:.1f} min"
     console.print(text, markup=False)
