@@ -54,6 +54,6 @@ def test_adaptive_run_stops_itself_and_resumes_a_killed_round(tmp_path):
     report = read_report(run_dir)
     assert report.stop.n_calib_at_stop == len(calib)
     assert report.learning.measured[-1] == (len(calib), pytest.approx(report.final.test.rms_mm))
-    assert report.learning.minutes_measured < report.learning.minutes_grid
+    assert 0 < report.learning.minutes_measured < report.learning.minutes_planned   # stopped before the budget
     assert report.final.test.rms_mm < 1.25 * report.noise_floor_mm
     assert sum(e["type"] == "resume" for e in contents.events) == 1
