@@ -92,20 +92,34 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         logging_.to_file(run_dir)
         if resume is not None:
             continue_clock(clock, log.contents)
+        elif cfg.plan.kind in ("optimal", "adaptive"):       # the forecast learning curve and minutes, for the report
+            from campaign.calibrate.learning import forecast_event
+            log.append_event(forecast_event(cell, plan))
         for change in identity_changes(log.contents.start, identity) if resume else ():
             logger.warning("resuming on different hardware: %s", change)   # also in the devices event
         todo = pending(plan.points, completed_point_ids(log.contents) if resume else set())
         logger.info("run directory %s (%s), plan %s: %d of %d points to measure", run_dir,
                     "resumed" if resume else "new", plan.sha256[:12], len(todo), len(plan.points))
         left = np.isin([p.point_id for p in plan.points], [p.point_id for p in todo])
+        total, done = len(plan.points), len(plan.points) - len(todo)
+        if plan.candidates:                             # plan.kind: adaptive: up to max_points, chosen as it goes
+            extra = max(0, cfg.plan.max_points - plan.count("calib"))
+            times = tuple(np.concatenate([t, np.full(extra, t[: plan.count("calib")].mean())]) for t in times)
+            left = np.concatenate([left, np.ones(extra, bool)])
+            total, done = total + extra, len(log.contents.records()) if resume else 0
         eta = RunEta(times[0][left], times[1][left], simulated=not isinstance(clock, SystemClock))
         predictor = runner.predict_p_tracker_mm
         observe_points(predictor, log.contents.records() if log.contents else ())     # resumed: the points so far
-        with RunProgress(console, len(plan.points), len(plan.points) - len(todo), eta) as advance:
+        with RunProgress(console, total, done, eta) as advance:
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
                                                                                           record.p_tracker_mm),
                                                      advance(record))
-            if plan.blocks:                             # plan.stop: auto: block by block, refit after each
+            if plan.candidates:                         # plan.kind: adaptive: rounds chosen with the model refitted
+                from campaign.calibrate.adaptive_rounds import AdaptiveRounds
+                passes = AdaptiveRounds(cell, plan, run_dir, log, {p.point_id for p in plan.points} - {
+                    p.point_id for p in todo}, on_skip=advance.skip)
+                outcome = runner.execute_passes(passes, log)
+            elif plan.blocks:                           # plan.stop: auto: block by block, refit after each
                 from campaign.calibrate.adaptive_stop import AdaptivePasses
                 passes = AdaptivePasses(cell, plan, run_dir, log, {p.point_id for p in plan.points} - {
                     p.point_id for p in todo}, on_skip=advance.skip)
@@ -145,6 +159,10 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
         stop = stop_summary(contents, None if final is None else final.test.rms_mm)
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
+        from campaign.calibrate.learning import learning_summary
+        learning = learning_summary(dataset, cell, contents, None if final is None else final.test.rms_mm)
+        if learning is not None:
+            processed = replace(processed, report=replace(processed.report, learning=learning))
     else:                                       # an interchange CSV: where it came from, no device named
         processed = replace(processed, report=processed.report.without_devices(csv_provenance(dataset)))
     processed = replace(processed, report=replace(processed.report,

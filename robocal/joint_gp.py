@@ -197,6 +197,15 @@ class JointGPResidual:
         var = np.sum(Z**2, axis=0).reshape(len(q), 3)
         return np.sqrt(var + (self.noise_mm**2 if include_noise else 0.0))
 
+    def features(self, q_rad: np.ndarray) -> np.ndarray:
+        """The layer's feature rows (N, 3, K) at q_rad (N, n): residual = features @ weights (mm, base frame)."""
+        return _features(self.kinematics, np.atleast_2d(np.asarray(q_rad, float)), self.joints, self.basis)
+
+    def prior_std(self) -> np.ndarray:
+        """Prior standard deviation (K,) of every weight under the fitted amplitudes and length scales."""
+        theta = np.log(np.concatenate([self.sigma_rad, self.length_rad, [1.0]]))
+        return np.sqrt(_prior(theta, self.basis.omega(), self.basis.owner(), len(self.joints))[0])
+
     def curves_rad(self, q_rad: np.ndarray) -> np.ndarray:
         """Each used joint's fitted angle error f_j(q_j) (N, J) rad at q_rad (N, n)."""
         P = self.basis.phi(np.atleast_2d(q_rad)[:, self.joints]) * self.weights

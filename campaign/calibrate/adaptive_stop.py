@@ -36,6 +36,7 @@ from .report_sections import StopSummary
 
 logger = logging.getLogger(__name__)
 STOP_EVENT = "stop_check"
+ROUND_EVENT = "adaptive_round"          # plan.kind: adaptive (campaign.calibrate.adaptive_rounds)
 
 
 @dataclass(frozen=True)
@@ -62,8 +63,8 @@ class StopCheck:
 
 
 def stop_checks(contents: LogContents | None) -> list[dict]:
-    """The ``stop_check`` events of a log, in order."""
-    return [e for e in (getattr(contents, "events", None) or []) if e.get("type") == STOP_EVENT]
+    """The ``stop_check`` events of a log (``adaptive_round`` events of an adaptive run), in order."""
+    return [e for e in (getattr(contents, "events", None) or []) if e.get("type") in (STOP_EVENT, ROUND_EVENT)]
 
 
 def _rows(kin, q, meta, effects, p_J=None):
@@ -233,8 +234,10 @@ def stop_summary(contents: LogContents, measured_rms_mm: float | None) -> StopSu
     if not checks:
         return None
     last = checks[-1]
-    return StopSummary("refit after every block; stop when the next block is predicted to lower the held-out RMS by "
-                       "less than plan.stop_gain_pct % of the noise floor, or at plan.max_points / plan.max_minutes",
+    what = "round; choose the next batch with the refitted model" if last["type"] == ROUND_EVENT else "block"
+    return StopSummary(f"refit after every {what}; stop when the next "
+                       f"{'batch' if last['type'] == ROUND_EVENT else 'block'} is predicted to lower the held-out RMS "
+                       "by less than plan.stop_gain_pct % of the noise floor, or at plan.max_points / plan.max_minutes",
                        tuple(checks), last["n_calib"], last["predicted_rms_mm"], measured_rms_mm, last["reason"])
 
 

@@ -14,7 +14,7 @@ from robocal.identify import Unidentifiable
 from .plausibility import Plausibility
 from .summary import Summary
 from .report_sections import (EffectsReport, ExcludedPoint, MethodChoice, MultiSmrReport, ParameterRow,
-                              ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary,
+                              ResidualChoice, ResidualCV, RowCounts, StageResult, StopSummary, LearningCurve,
                               unidentifiable_from_dict)
 
 
@@ -93,6 +93,7 @@ class CalibrationReport:
     parameters_geometry_only: tuple[ParameterRow, ...] | None = None
     parameters_sigma0: float | None = None          # the unit-weight error of the fit the parameters come from
     budget: ErrorBudget | None = None
+    learning: LearningCurve | None = None      # optimal and adaptive runs: forecast and measured learning curves
 
     @property
     def final(self) -> StageResult | None:
@@ -110,6 +111,8 @@ class CalibrationReport:
             out["multi_smr"] = self.multi_smr.to_dict()
         if self.stop is not None:
             out["stop"] = self.stop.to_dict()
+        if self.learning is not None:
+            out["learning"] = self.learning.to_dict()
         out["cell"], out["points"] = self.cell, self.points
         out.update(self.identification)
         if self.summary is not None:
@@ -156,7 +159,8 @@ class CalibrationReport:
             tuple((k, data[k]) for k in IDENTIFICATION_KEYS if k in data),
             record_field(data, "summary", Summary.from_dict, True), text_field(data, "parameters_fit", True),
             records_field(data, "parameters_geometry_only", ParameterRow.from_dict, True),
-            opt("parameters_sigma0"), record_field(data, "budget", _budget, True))
+            opt("parameters_sigma0"), record_field(data, "budget", _budget, True),
+            record_field(data, "learning", LearningCurve.from_dict, True))
 
 
 REPORT_KEYS = tuple(f.name for f in fields(CalibrationReport))[:_N_REPORT_KEYS]

@@ -244,7 +244,9 @@ def _check_completeness(ds, state: Plausibility) -> Plausibility:
     notes = []
     from .adaptive_stop import stopped_after                 # plan.stop: auto runs skip blocks on purpose
     stopped = stopped_after(src.parent)
-    if stopped is not None:
+    if stopped is not None and "candidate" in planned:          # plan.kind: adaptive: calib rows are chosen as it goes
+        notes.append(f"plan.kind: adaptive stopped after {stopped} calibration points (report.json: stop)")
+    elif stopped is not None:
         notes.append(f"plan.stop: auto stopped after {stopped} of {planned.count('calib')} planned calibration "
                      "points (report.json: stop)")
     for name in ("test",) if stopped is not None else ("calib", "test", "check"):

@@ -337,6 +337,31 @@ class StopSummary:
 
 
 @dataclass(frozen=True)
+class LearningCurve:
+    """How the held-out RMS falls with the number of calibration poses (mm): ``forecast`` (logged when the run
+    started: noise model + parameter priors, ``campaign.plan.learning``) and ``measured`` (the first n calibration
+    points in measurement order refitted by the default process, judged on the run's test set), each ((n, mm), ...);
+    the measuring time in minutes: the sequence measured, the plan's and the full grid's, all timed alike from the
+    motion caps, settling and reading times (``campaign.run.eta``), and the robot time the log's clock recorded."""
+    forecast: tuple[tuple[int, float], ...]
+    measured: tuple[tuple[int, float], ...]
+    minutes_measured: float
+    minutes_planned: float | None
+    minutes_grid: float | None
+    minutes_logged: float | None = None
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "LearningCurve":
+        pairs = lambda name: tuple((int(n), float(v)) for n, v in list_field(d, name))  # noqa: E731
+        return cls(pairs("forecast"), pairs("measured"), figure_field(d, "minutes_measured"),
+                   figure_field(d, "minutes_planned"), figure_field(d, "minutes_grid"),
+                   figure_field(d, "minutes_logged") if "minutes_logged" in d else None)
+
+
+@dataclass(frozen=True)
 class AngleStats:
     """Orientation errors (arc seconds) over ``n`` poses, and how the poses were obtained when it matters."""
     mean: float

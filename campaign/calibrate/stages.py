@@ -210,6 +210,47 @@ def fit_stages(ds: Dataset, cell: CellModel, plaus) -> Fitted:
     return Fitted(prep, ds, smr_excluded, kin0, geo, stage)
 
 
+@dataclass(frozen=True, eq=False)
+class FinalLayer:
+    """The residual layer chosen on the fitted rows of a dataset (``calibration.residual``), with what it was
+    chosen with: per-row payloads when they vary (a GPR input; else None) and the noise floor (the check rows'
+    repeats, else the specs at the test rows, or at the calibration rows without test rows)."""
+    choice: LayerChoice
+    payload: np.ndarray | None
+    floor_mm: float
+    repeats_mm: float | None
+    specs_mm: float
+
+
+def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer:
+    """The layer of the final model on top of the elastic stage ``stage`` of the prepared dataset ``ds``."""
+    cfg, c = cell.config, cell.config.calibration
+    cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
+    q, p, kept = np.radians(ds.q_deg), ds.p_tracker_mm, stage.kept_rows
+    qk, pk = q[kept], p[kept]
+    payload = _varying_payload(ds, cal) if c.residual in ("gpr", "auto") else None
+    pay_k = None if payload is None else payload[kept]
+    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
+    specs = cell.noise_floor_mm(p[test if test.any() else cal])
+    floor = repeats if repeats is not None else specs
+    lay_kw = dict(meta=subset(stage.meta, kept), payload_kg=pay_k, idw_power=c.idw_power,
+                  idw_k_nearest=c.idw_k_nearest, noise_floor_mm=floor)
+    model_el = stage.model
+    if c.residual == "auto":
+        choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
+    elif c.residual == "none":
+        choice = LayerChoice("none", None, {}, c.cv_folds)
+    else:
+        choice = choose_layer(model_el, qk, pk, candidates=(c.residual,), folds=c.cv_folds, **lay_kw)
+        forced = fit_layer(c.residual, model_el, qk, pk, **lay_kw)
+        if forced is None:                                  # joint_gp: no joint moves enough to carry a curve
+            warnings.warn(f"{ds.source}: calibration.residual: {c.residual}: no joint moves "
+                          f"{np.degrees(MIN_SPAN_RAD):.0f} deg over the "
+                          "calibration rows; no residual layer", DataWarning, stacklevel=2)
+        choice = LayerChoice(c.residual if forced is not None else "none", forced, choice.cv, c.cv_folds)
+    return FinalLayer(choice, payload, floor, repeats, specs)
+
+
 def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
     """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
     cfg = cell.config
@@ -230,29 +271,10 @@ def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
     meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
     final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
     sub = subset
-    qk, pk, meta_k = q[kept_rows], p[kept_rows], sub(meta_all, kept_rows)
     payload_model = float(cfg.tool.payload_kg or 0.0)
-    payload = _varying_payload(ds, cal) if cfg.calibration.residual in ("gpr", "auto") else None
-    pay_k = None if payload is None else payload[kept_rows]
     c = cfg.calibration
-    repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
-    eval_rows = test if test.any() else cal
-    specs = cell.noise_floor_mm(p[eval_rows])
-    floor = repeats if repeats is not None else specs
-    lay_kw = dict(meta=meta_k, payload_kg=pay_k, idw_power=c.idw_power, idw_k_nearest=c.idw_k_nearest,
-                  noise_floor_mm=floor)
-    if c.residual == "auto":
-        choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
-    elif c.residual == "none":
-        choice = LayerChoice("none", None, {}, c.cv_folds)
-    else:
-        choice = choose_layer(model_el, qk, pk, candidates=(c.residual,), folds=c.cv_folds, **lay_kw)
-        forced = fit_layer(c.residual, model_el, qk, pk, **lay_kw)
-        if forced is None:                                  # joint_gp: no joint moves enough to carry a curve
-            warnings.warn(f"{ds.source}: calibration.residual: {c.residual}: no joint moves "
-                          f"{np.degrees(MIN_SPAN_RAD):.0f} deg over the "
-                          "calibration rows; no residual layer", DataWarning, stacklevel=2)
-        choice = LayerChoice(c.residual if forced is not None else "none", forced, choice.cv, c.cv_folds)
+    fl = final_layer(ds, cell, stage)
+    payload, floor, repeats, specs, choice = fl.payload, fl.floor_mm, fl.repeats_mm, fl.specs_mm, fl.choice
     layer = choice.layer
     if isinstance(layer, GPRResidual) and layer.uses_payload:
         layer = layer.with_payload(cfg.tool.payload_kg)

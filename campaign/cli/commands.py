@@ -93,6 +93,8 @@ def _print_calibration(out: Console, report) -> None:
     render_stages(out, report)
     render_parameters(out, report)
     render_stop(out, report)
+    from campaign.report.adaptive_text import render_learning
+    render_learning(out, report.learning)
     print_plausibility(out, report.plausibility)
 
 
@@ -121,7 +123,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
-        render_forecast(_stdout(), plan_forecast(cell, plan), plan.blocks)
+        render_forecast(_stdout(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
+        from campaign.calibrate.learning import plan_learning
+        from campaign.report.adaptive_text import render_plan_learning
+        render_plan_learning(_stdout(), *plan_learning(cell, plan))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -173,11 +178,15 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, help="campaign YAML of the cell (nominal model, noise)")
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
+    parser.add_argument("--adaptive", action="store_true",
+                        help="replay an adaptive campaign: a D-optimal seed, then batches chosen with the model "
+                             "refitted to the rows chosen so far (only their measurements)")
     overwrite_argument(parser)
     _force_argument(parser)
 
 
-@command("select", "choose N calibration rows of a measured campaign (space-filling, the geometry determined)",
+@command("select", "choose N calibration rows of a measured campaign (space-filling, the geometry determined; or "
+                   "--adaptive: replayed batch by batch with the model refitted)",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
     from campaign.data.interchange_csv import write_csv
@@ -195,11 +204,19 @@ def cmd_select(args: argparse.Namespace) -> int:
     check_file(args.out, args.overwrite)
     ds = load_source(args.data).dataset
     with forced(args.force):
-        sel = select_rows(ds, cell, args.points)
+        if args.adaptive:
+            from campaign.calibrate.select_adaptive import adaptive_selection
+            from campaign.report.adaptive_text import render_adaptive_selection
+            sel = adaptive_selection(ds, cell, args.points)
+        else:
+            sel = select_rows(ds, cell, args.points)
     subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
     origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
     write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
-    render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+    if args.adaptive:
+        render_adaptive_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+    else:
+        render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 
 

@@ -82,7 +82,7 @@ def _check_sizes(cfg, file: str) -> None:
     if n_grid > MAX_GRID_POINTS:
         raise ConfigError(file, "plan.grid.step_mm", f"{cfg.plan.grid.step_mm:g} mm makes {nx} x {ny} x {nz} = "
                                                       f"{n_grid} grid points (max {MAX_GRID_POINTS}): use a larger step")
-    if pl.kind == "optimal":
+    if pl.kind in ("optimal", "adaptive"):
         step = pl.pool.step_mm or pl.grid.step_mm / 2
         cells = math.prod(int(min(math.floor(s / step + 1e-9), 1e9)) + 1 for s in pl.grid.size_mm)
         if cells > MAX_POOL_CELLS:

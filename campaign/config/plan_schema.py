@@ -94,6 +94,18 @@ class PoolConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class TaskConfig:
+    """Where the robot will work: ``plan.kind: adaptive`` and ``campaign select --adaptive`` choose the poses that
+    lower the predicted error there. One of ``targets_csv`` (Cartesian targets: the CSV of ``campaign correct``,
+    ``target_id,x,y,z[,qw,qx,qy,qz]``, mm in the base frame; a path relative to the config file) or ``box_mm``
+    (two opposite corners ``[[x0, y0, z0], [x1, y1, z1]]``, base frame). Without it the grid box stands for the
+    task."""
+
+    targets_csv: str | None = None
+    box_mm: tuple[Vec3, Vec3] | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class PlanConfig:
     """What to measure.
 
@@ -107,7 +119,9 @@ class PlanConfig:
     ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
     (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     ``kind``: ``grid`` (default), ``optimal`` (``points`` calibration poses chosen from a candidate ``pool``
-    by a D-optimal criterion, measured in a short tour) or ``iso9283``. ``stop: auto`` (optimal plans; default
+    by a D-optimal criterion, measured in a short tour), ``adaptive`` (a D-optimal seed from the ``pool``, then
+    rounds of ``block_points`` poses (default 10) chosen with the model refitted to the points so far, up to
+    ``max_points``; ``stop`` defaults to ``auto``; ``task``: where the robot works) or ``iso9283``. ``stop: auto`` (optimal plans; default
     ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS
     would improve by less than ``stop_gain_pct`` % of the noise floor (default 2) with the next block, or at
     ``max_points`` (default ``points``) or ``max_minutes`` (default none); then the test set is measured.
@@ -137,6 +151,7 @@ class PlanConfig:
     block_points: int = 20
     stop_gain_pct: float = 2.0
     track_stations: int | None = None           # a robot on a track: 5 unless given
+    task: TaskConfig | None = None
 
 
 @dataclass(frozen=True, slots=True)

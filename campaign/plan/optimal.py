@@ -117,7 +117,7 @@ def block_ends(cfg: CampaignConfig, n: int, identifiable: int) -> tuple[int, ...
     return tuple(range(first, n, cfg.plan.block_points)) + (n,)
 
 
-def _test_set(cell: CellModel, R0: np.ndarray, guard: PathGuard | None):
+def test_set(cell: CellModel, R0: np.ndarray, guard: PathGuard | None):
     """The grid plan's test set exactly: its targets solved in one batch with the grid vertices (the IK re-seeds
     a failed target from its nearest solved neighbour). (p (T, 3) mm, ids, q (T, n) rad, plannable indices,
     skipped)."""
@@ -143,7 +143,7 @@ def optimal_plan(cell: CellModel) -> Plan:
     chosen = d_optimal(pool.criterion.A, n, pool.criterion.spread).chosen
     q_ref = np.radians(pl.q_ref_deg)
     R0 = tool_rotation(pl.tool_direction)
-    p_test, test_ids, q_test, test_ok, skipped = _test_set(cell, R0, guard)
+    p_test, test_ids, q_test, test_ok, skipped = test_set(cell, R0, guard)
     blocks = block_ends(cfg, n, pool.criterion.identifiable) if pl.stop == "auto" else (n,)
     order, start = [], q_ref
     for lo, hi in zip((0,) + blocks[:-1], blocks):        # each block a short tour from where the last ended

@@ -32,11 +32,17 @@ class Skipped:
 @dataclass(frozen=True)
 class Plan:
     """The measurement sequence, the targets that could not be planned, the hash of the sequence, and (``stop:
-    auto`` plans) the calibration-point counts at which the run may stop (``blocks``, ascending)."""
+    auto`` plans) the calibration-point counts at which the run may stop (``blocks``, ascending). An adaptive plan
+    also holds its ``candidates``: calibration poses, each checked like a planned one, that its rounds may add."""
     points: tuple[PlanPoint, ...]
     skipped: tuple[Skipped, ...]
     sha256: str
     blocks: tuple[int, ...] = ()
+    candidates: tuple[PlanPoint, ...] = ()
+
+    def known_points(self) -> dict[str, PlanPoint]:
+        """Every point a run of this plan may measure, by id: the sequence and the candidates."""
+        return {**{p.point_id: p for p in self.candidates}, **{p.point_id: p for p in self.points}}
 
     def count(self, set_name: str) -> int:
         return sum(p.set == set_name for p in self.points)
@@ -54,6 +60,9 @@ class Plan:
         return float(moves + len(self.points) * (settle_s + samples * sample_s))
 
 
+CANDIDATE = "candidate"          # plan.csv's set of an adaptive plan's candidate poses (measured as "calib")
+
+
 def nest_point_id(nest_id: str, round_no: int) -> str:
     """Plan/log id of round ``round_no`` (1-based) of nest ``nest_id``."""
     return f"{nest_id}@{round_no:03d}"
@@ -69,7 +78,8 @@ def write_plan_csv(plan: Plan, path: str | Path) -> None:
 def plan_csv_text(plan: Plan) -> str:
     """point_id,set,q1..qn (deg),x_base_mm,y_base_mm,z_base_mm in motion order; via poses as rows of set ``via``
     (id ``POINT.viaK``, no position) before the point they lead to; nest rows: where the
-    robot waits, the nest's approximate position."""
+    robot waits, the nest's approximate position; an adaptive plan's candidates last, as rows of set
+    ``candidate``."""
     from campaign.io.csv_cells import render_rows
 
     n = len(plan.points[0].q_deg) if plan.points else 0
@@ -79,6 +89,8 @@ def plan_csv_text(plan: Plan) -> str:
             for k, via in enumerate(p.via_deg):              # via poses (keep-out): passed through, not measured
                 yield [f"{p.point_id}.via{k + 1}", "via", *(f"{v:.6f}" for v in via), "", "", ""]
             yield [p.point_id, p.set, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)]
+        for p in plan.candidates:
+            yield [p.point_id, CANDIDATE, *(f"{v:.6f}" for v in p.q_deg), *(f"{v:.3f}" for v in p.p_base_mm)]
 
     header = ["point_id", "set"] + [f"q{i + 1}" for i in range(n)] + ["x_base_mm", "y_base_mm", "z_base_mm"]
     return render_rows(header, rows(), text_columns=(0, 1))

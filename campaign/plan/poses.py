@@ -123,16 +123,18 @@ def solve_targets(cfg: CampaignConfig, kin: Kinematics, p: np.ndarray, ids, sets
 
 def finish_plan(cfg: CampaignConfig, guard: PathGuard | None, points: list[PlanPoint], q_calib: np.ndarray,
                 p_calib: np.ndarray, calib_ids: list[str], skipped: list[Skipped],
-                blocks: tuple[int, ...] = ()) -> Plan:
+                blocks: tuple[int, ...] = (), candidates: tuple[PlanPoint, ...] = ()) -> Plan:
     """The measurement sequence ``points`` with check-pose repeats (chosen among the calibration points q_calib
-    rad, p_calib mm), nest rounds and via poses, hashed."""
+    rad, p_calib mm), nest rounds and via poses, hashed (with an adaptive plan's ``candidates``)."""
     points = _with_check_poses(points, q_calib, p_calib, calib_ids, cfg.plan.check_poses)
     points = with_nest_rounds(points, cfg.plan.nests)
     if guard is not None:
         points = with_vias(cfg, guard, points)
-    digest = hashlib.sha256(json.dumps([[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else [])
-                                        for p in points]).encode()).hexdigest()
-    return Plan(tuple(points), tuple(skipped), digest, blocks)
+    rows = [[p.point_id, p.set, p.q_deg] + ([p.via_deg] if p.via_deg else []) for p in points]
+    if candidates:
+        rows.append(["candidates", [[p.point_id, p.q_deg] for p in candidates]])
+    digest = hashlib.sha256(json.dumps(rows).encode()).hexdigest()
+    return Plan(tuple(points), tuple(skipped), digest, blocks, tuple(candidates))
 
 
 def interleave_tests(p, grid_ok, test_ok) -> list[int]:

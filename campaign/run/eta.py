@@ -103,3 +103,26 @@ class RunEta:
         """``ETA h:mm:ss``, labelled ``(simulated time)`` on a mock cell."""
         s = int(round(self.remaining_s()))
         return f"ETA {s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" + (" (simulated time)" if self.simulated else "")
+
+
+def grid_duration_s(cell: CellModel) -> float:
+    """Predicted duration (s) of the config's full grid plan (``plan.kind: grid``: its grid, test set, check poses and
+    nests), what an optimal or adaptive plan is compared with."""
+    from dataclasses import replace
+
+    from campaign.plan.build import build_plan
+
+    cfg = cell.config
+    grid = replace(cell, config=replace(cfg, plan=replace(cfg.plan, kind="grid", stop="off", points=None,
+                                                          max_points=None)))
+    return estimate_duration_s(build_plan(grid).points, grid)
+
+
+def budget_duration_s(points: Sequence[PlanPoint], cell: CellModel) -> float:
+    """Predicted duration (s) of an adaptive plan measured to its whole pose budget: its planned points, and every
+    calibration point up to ``plan.max_points`` beyond its seed at the seed points' mean time."""
+    move, fixed = point_times_s(points, cell)
+    seed = np.array([p.set == "calib" for p in points])
+    extra = max(0, (cell.config.plan.max_points or 0) - int(seed.sum()))
+    per = float(np.mean(move[seed] + fixed[seed])) if seed.any() else 0.0
+    return estimate_duration_s(points, cell) + extra * per

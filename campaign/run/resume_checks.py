@@ -69,15 +69,16 @@ def _plan_csv(run_dir: Path) -> list:
     """The plan as the run wrote it (RUN_DIR/plan.csv), for checks before the plan is rebuilt."""
     import csv
 
-    from campaign.plan.points import PlanPoint
+    from campaign.plan.points import CANDIDATE, PlanPoint
 
     path = run_dir / "plan.csv"
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
         n = sum(1 for h in rows[0] if h[:1] == "q" and h[1:].isdigit())
-        return [PlanPoint(restore(r[0]), restore(r[1]), tuple(float(v) for v in r[2:2 + n]),
-                          tuple(float(v) for v in r[2 + n:5 + n])) for r in rows[1:]]
+        return [PlanPoint(restore(r[0]), "calib" if restore(r[1]) == CANDIDATE else restore(r[1]),  # measured as calib
+                          tuple(float(v) for v in r[2:2 + n]), tuple(float(v) for v in r[2 + n:5 + n]))
+                for r in rows[1:]]
     except (OSError, UnicodeDecodeError, IndexError, ValueError, csv.Error):
         raise RunLogError(str(path), "missing or unreadable plan.csv: not a resumable run directory") from None
 
@@ -119,7 +120,7 @@ def check_resume(run_dir: str | Path, cfg, plan=None) -> None:
     except RunLogError as exc:
         raise RunLogError(exc.file, f"{exc.message}: the log cannot be resumed (nothing was moved)",
                           line=exc.line) from None
-    plan_points = {p.point_id: p for p in (plan.points if plan is not None else _plan_csv(Path(run_dir)))}
+    plan_points = plan.known_points() if plan is not None else {p.point_id: p for p in _plan_csv(Path(run_dir))}
     lo = [j.q_min_deg for j in cfg.robot.joints]
     hi = [j.q_max_deg for j in cfg.robot.joints]
     seen: set[str] = set()

@@ -1,0 +1,130 @@
+"""``campaign select --adaptive``: the adaptive campaign replayed on a campaign already measured.
+
+The same loop as ``plan.kind: adaptive``, with the measured calibration rows as the candidates: a D-optimal seed
+(the plan's criterion, joints spread; the identifiable geometric parameters + 10 %, at least the rows the layer's
+cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
+nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
+where that model learns most about its parameters and its layer (``robocal.adaptive`` rule ``d``, the default:
+chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).
+The task poses (the calibration rows, i.e. the measured box, or ``task_q_rad``) weigh the predicted held-out RMS
+of every round, and the choice under rule ``i``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
+it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from robocal.adaptive import choose_batch
+from robocal.design import criterion, d_optimal
+from robocal.identify import IdentificationError
+from robocal.kinematics import smr_base, smr_tracker
+
+from campaign.config.cell_model import CellModel
+from campaign.data.dataset import Dataset
+from campaign.errors import DataError
+from campaign.plan.adaptive import seed_size, task_poses
+from campaign.plan.optimal import pose_covariance, tracker_kinematics
+
+from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
+from .effects_stage import effect_meta
+from .plausibility import check_dataset
+
+BATCH = 10
+ADAPTIVE = "adaptive: the refitted model's predicted error at the task poses"
+
+
+@dataclass(frozen=True)
+class Round:
+    """One batch: calibration rows measured before it, the layer the refit chose, the held-out RMS its k-fold CV
+    gives (mm), the RMS predicted after the batch (mm; CV^2 less the variance the batch removes at the task poses),
+    the point ids added, and a note when the refit failed (the batch is then the farthest rows)."""
+    n_before: int
+    layer: str
+    cv_rms_mm: float | None
+    predicted_rms_mm: float | None
+    added: tuple[str, ...]
+    note: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class AdaptiveSelection:
+    """``keep`` (N,) bool: the chosen calibration rows and every other row; ``order`` the chosen rows (indices
+    into the dataset) in the order chosen (every prefix is the selection at that size); the seed size and rounds."""
+    keep: np.ndarray
+    order: np.ndarray
+    n_seed: int
+    rounds: tuple[Round, ...]
+    n_calib: int
+    criterion: str = ADAPTIVE
+
+
+def adaptive_selection(ds: Dataset, cell: CellModel, n: int) -> AdaptiveSelection:
+    """``campaign select --adaptive``: ``adaptive_rows`` judged at the config's ``plan.task`` when it has one."""
+    if cell.config.plan.task is None:
+        return adaptive_rows(ds, cell, n)
+    cal = ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1)
+    q = np.radians(ds.q_deg[cal])
+    return adaptive_rows(ds, cell, n, task_q_rad=task_poses(cell, q, smr_base(cell.kinematics, q)))
+
+
+def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
+                  task_q_rad: np.ndarray | None = None) -> AdaptiveSelection:
+    """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring); DataError as for
+    ``select_rows``."""
+    check_dataset(ds, cell)
+    cal = np.flatnonzero(ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1))
+    if len(cal) < n:
+        raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")
+    ordered = ds.with_order_context()                     # a subset keeps how the robot reached each pose
+    q = np.radians(ds.q_deg[cal])
+    kin_t = tracker_kinematics(cell)                      # as a plan sees the poses: no measurement used
+    payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
+    crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), payload)
+    need = math.ceil(1.1 * crit.identifiable_geometric)
+    if n < need:
+        raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
+                                   f"parameters these rows determine: at least {need} (identifiable + 10 %)")
+    n0 = seed_size(crit.identifiable_geometric, n, cell.config.calibration.cv_folds)
+    chosen = list(d_optimal(crit.A, n0, crit.spread).chosen)
+    meta = effect_meta(ordered, cell, cal)
+    task = q if task_q_rad is None else np.atleast_2d(task_q_rad)
+    q_task = task[task_sample(len(task))]
+    others = ~ds.mask("calib") & ~ds.mask("test")          # check and nest rows: measured in any campaign
+    rounds = []
+    while len(chosen) < n:
+        k = min(batch, n - len(chosen))
+        taken = np.zeros(len(cal), bool)
+        taken[chosen] = True
+        keep = others.copy()
+        keep[cal[chosen]] = True
+        try:
+            cur = refit(ordered.subset(keep), cell)
+            cov = cell.covariance(smr_tracker(cur.kinematics, q))       # where the refit predicts the SMR
+            b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule)
+            rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, predicted_curve(cur, b, 0)[-1][1],
+                                tuple(ds.point_id[cal[i]] for i in b.chosen)))
+            chosen += [int(i) for i in b.chosen]
+        except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
+            add = _farthest(q * crit.levers_mm_per_rad, taken, k)
+            rounds.append(Round(len(chosen), "none", None, None, tuple(ds.point_id[cal[i]] for i in add),
+                                f"refit failed ({' '.join(str(exc).split())[:120]}): the farthest rows instead"))
+            chosen += [int(i) for i in add]
+    keep = ~ds.mask("calib")
+    keep[cal[chosen]] = True
+    return AdaptiveSelection(keep, cal[np.array(chosen, int)], n0, tuple(rounds), len(cal))
+
+
+def _farthest(X: np.ndarray, taken: np.ndarray, k: int) -> list[int]:
+    """k rows of X (M, d) not yet ``taken`` (M,) bool, each the farthest from every row taken before it."""
+    d = np.min(np.linalg.norm(X[:, None] - X[taken][None], axis=2), axis=1) if taken.any() else np.ones(len(X))
+    out = []
+    for _ in range(k):
+        i = int(np.argmax(np.where(taken, -np.inf, d)))
+        out.append(i)
+        taken = taken.copy()
+        taken[i] = True
+        d = np.minimum(d, np.linalg.norm(X - X[i], axis=1))
+    return out

@@ -1,0 +1,118 @@
+"""``plan.kind: adaptive``: the keys and their one-line errors, the plan (seed, candidates, test set last), the task,
+the forecast ``campaign plan`` prints, and the motion safety of the poses the rounds add."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from campaign.config.load import load_cell
+from campaign.plan.adaptive import seed_size, task_poses
+from campaign.plan.build import build_plan
+from campaign.plan.motion_safety import PathGuard
+from robocal.kinematics import smr_base
+from robocal.sweep import flange_points_base, sample_segments
+from tests.campaign.helpers import small_config
+from tests.campaign.hostile import assert_one_line, cli, snapshot
+
+POOL = {"plan.pool": {"step_mm": 200, "tilts": 2}}
+WALL = {"name": "fixture", "min_mm": [1000, -300, 500], "max_mm": [1200, 300, 800]}   # inside the grid box
+
+
+def _config(tmp_path, **over):
+    return small_config(tmp_path, **{**POOL, "plan.kind": "adaptive", "plan.max_points": 60, **over})
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("over, needle", [
+    ({"plan.max_points": None}, "plan: plan.kind: adaptive needs its pose budget: plan.max_points"),
+    ({"plan.points": 40}, "plan.points: an adaptive plan chooses its points as it measures"),
+    ({"plan.order": "random"}, "plan.order: an adaptive plan is measured in a short tour"),
+    ({"plan.task": {}}, "plan.task: give one of targets_csv"),
+    ({"plan.task": {"targets_csv": "t.csv", "box_mm": [[0, 0, 0], [1, 1, 1]]}}, "plan.task: give one of"),
+    ({"plan.task": {"box_mm": [[0, 0, 0], [1, 1]]}}, "plan.task.box_mm[1]: expected a list of 3 numbers"),
+    ({"plan.task": {"box_mm": [[0, 0, 0], [1, 0, 1]]}}, "plan.task.box_mm: the two corners have the same y"),
+    ({"plan.task": {"box": [[0, 0, 0], [1, 1, 1]]}}, "plan.task.box: unknown key"),
+])
+def test_adaptive_keys_are_checked_by_validate(tmp_path, capsys, over, needle):
+    code, out, err = cli(capsys, "validate", _config(tmp_path, **over))
+    assert_one_line(code, out, err, 2, needle)
+
+
+@pytest.mark.system
+def test_the_plan_holds_the_seed_the_candidates_and_the_test_set_last(tmp_path, capsys):
+    path = _config(tmp_path, **{"plan.keep_out": [WALL]})
+    cell = load_cell(path)
+    plan = build_plan(cell)
+    calib = [p for p in plan.points if p.set == "calib"]
+    sets = [p.set for p in plan.points if p.set in ("calib", "test")]
+    assert sets == ["calib"] * len(calib) + ["test"] * sets.count("test") and sets.count("test") > 0
+    assert plan.blocks == (len(calib),) and len(calib) == seed_size(24, 60, 5) == 27   # IRB 2600: 24 geometric
+    ids = {p.point_id for p in plan.candidates}
+    assert {p.point_id for p in calib} <= ids and len(ids) == len(plan.candidates) > 300
+    guard = PathGuard.for_cell(cell)                      # every candidate is a stop a plan may use
+    q = np.array([p.q_deg for p in plan.candidates])
+    assert all(r is None for r in guard.pose_reasons(q))
+    kin = cell.kinematics
+    assert np.all((np.radians(q) >= kin.q_min_rad) & (np.radians(q) <= kin.q_max_rad))
+    code, out, err = cli(capsys, "plan", path, "--csv", tmp_path / "plan.csv")
+    assert code == 0, err
+    assert "Forecast learning curve" in out and "the full grid" in out and "whole pose budget" in out
+    rows = (tmp_path / "plan.csv").read_text().splitlines()
+    assert sum(",candidate," in r for r in rows) == len(plan.candidates)
+
+
+@pytest.mark.system
+def test_task_box_and_targets_give_the_task_poses(tmp_path):
+    box = {"box_mm": [[900, -400, 600], [1300, 400, 1000]]}
+    cell = load_cell(_config(tmp_path, **{"plan.task": box}))
+    plan = build_plan(cell)
+    q = np.radians([p.q_deg for p in plan.candidates])
+    p = np.array([c.p_base_mm for c in plan.candidates])
+    task = task_poses(cell, q, p)
+    inside = smr_base(cell.kinematics, task)
+    assert 0 < len(task) < len(q)
+    assert np.all((inside > np.array(box["box_mm"][0]) - 150) & (inside < np.array(box["box_mm"][1]) + 150))
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "targets.csv").write_text("target_id,x,y,z\nA,1100,0,800\nB,1100,200,900\nfar,9000,0,0\n")
+    cell = load_cell(small_config(tmp_path / "t", **{**POOL, "plan.kind": "adaptive", "plan.max_points": 60,
+                                                     "plan.task": {"targets_csv": "targets.csv"}}))
+    task = task_poses(cell, q, p)
+    assert len(task) == 2                                 # the unreachable target is left out
+    np.testing.assert_allclose(smr_base(cell.kinematics, task)[:, :3][0], [1100, 0, 800], atol=0.5)
+
+
+@pytest.mark.system
+def test_bad_budget_and_task_exit_2_before_anything_moves(tmp_path, capsys):
+    for over, needles in (({"plan.max_points": 12}, ("plan.max_points", "identifiable + 10 %")),
+                          ({"plan.max_points": 9999}, ("plan.max_points", "candidate pool holds only")),
+                          ({"plan.task": {"targets_csv": "missing.csv"}}, ("plan.task.targets_csv", "cannot read"))):
+        path = _config(tmp_path, **over)
+        before = snapshot(tmp_path)
+        code, out, err = cli(capsys, "run", path)
+        assert_one_line(code, out, err, 2, *needles)
+        assert snapshot(tmp_path) == before
+
+
+@pytest.mark.system
+def test_every_move_of_an_adaptive_run_stays_clear_of_the_keep_out_box(tmp_path, monkeypatch):
+    """The rounds' poses come from the checked candidates and every move goes through the guard: an independent
+    fine sampling of the commanded joint path (vias included) finds the flange and SMR clear of the box."""
+    from drivers.mock import MockRobot
+    from campaign.workflows import run_campaign
+
+    cell = load_cell(_config(tmp_path, **{"plan.keep_out": [WALL], "plan.max_points": 50}))
+    path = []
+    real = MockRobot.move_joints
+    monkeypatch.setattr(MockRobot, "move_joints", lambda self, q: (path.append(np.asarray(q, float)), real(self, q)))
+    result = run_campaign(cell, tmp_path / "run")
+    assert result.outcome.exit_status == "success"
+    rounds = [e for e in __import__("campaign.run.log_reader", fromlist=["read_log"]).read_log(tmp_path / "run").events
+              if e["type"] == "adaptive_round" and e["decision"] == "continue"]
+    assert rounds, "at least one round added poses"
+    q = np.radians(np.array(path))
+    fine, _ = sample_segments(q[:-1], q[1:], np.full(len(q) - 1, 200))
+    guard = PathGuard.for_cell(cell)
+    pts = flange_points_base(cell.kinematics, fine, guard.p_flange_points_mm).reshape(-1, 3)
+    box = guard.keep_out.grown(cell.config.plan.clearance_mm - 1e-6)
+    inside = np.all((pts[:, None] > box.lo) & (pts[:, None] < box.hi), axis=-1).any(axis=1)
+    assert not inside.any()
