@@ -21,6 +21,7 @@ else omitted (never ``0``: ROS tools take a zero limit literally).
 from __future__ import annotations
 
 from dataclasses import dataclass
+import warnings
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -100,7 +101,9 @@ def joint_origins(kin: Kinematics) -> tuple[list[np.ndarray], np.ndarray]:
 
 def _origin_xml(T_mm: np.ndarray) -> str:
     xyz = T_mm[:3, 3] / 1000.0
-    rpy = Rotation.from_matrix(T_mm[:3, :3]).as_euler("xyz")          # extrinsic x-y-z = URDF roll, pitch, yaw
+    with warnings.catch_warnings():     # at pitch +-90 deg scipy sets yaw to 0 and says so; the angles it returns
+        warnings.simplefilter("ignore", UserWarning)    # still give this rotation (the URDF test checks the chain)
+        rpy = Rotation.from_matrix(T_mm[:3, :3]).as_euler("xyz")      # extrinsic x-y-z = URDF roll, pitch, yaw
     fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731  (full precision)
     return f'<origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>'
 
