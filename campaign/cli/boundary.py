@@ -191,6 +191,11 @@ def run_process(main: Callable[[], int], line: Callable[[str], None]) -> None:
             signals.disarm()
     except KeyboardInterrupt:                   # while the CLI was loading or parsing its arguments
         pass
+    except BaseException:
+        if signals.received() is None:
+            raise
+        # The signal interrupted a library's import and the library re-raised it as its own error (numpy's C
+        # modules: "ImportError: numpy._core.multiarray failed to import"): the signal's exit, not a crash.
     signals.exit_process(code, None if stderr_prints() else lambda name: line(_signal_line(name)))
 
 

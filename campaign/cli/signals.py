@@ -8,6 +8,9 @@
   ("Exception ignored in ..."). The unraisable hook recognises it, prints nothing and has the signal delivered
   again 10 ms later, so that it is raised in ordinary code. Once a signal has arrived, any other exception dropped
   in a finaliser is silenced too: it comes from an object the signal left half-built (seen in a library import).
+  Likewise the exception hook: C code that prints an exception (numpy's ``import_array`` when the signal lands in
+  the import of one of its modules) prints nothing after a signal, and the console script turns the library's
+  own error that follows (an ``ImportError``) into the signal's exit 130.
 * The console script (``main()`` without arguments) installs the handlers before anything is imported or printed
   and never restores them: it ends in :func:`exit_process`, which blocks the signals, turns any signal received
   so far into exit 130 and leaves through ``os._exit`` so that no signal can land in interpreter teardown (where
@@ -37,6 +40,7 @@ class _State:
     received: str | None = None          # the first signal's name
     previous: dict = {}
     previous_hook = None
+    previous_excepthook = None
 
 
 _state = _State()
@@ -68,6 +72,14 @@ def _unraisable(args) -> None:
     (_state.previous_hook or sys.__unraisablehook__)(args)
 
 
+def _excepthook(exc_type, exc_value, exc_traceback) -> None:
+    """An exception printed by C code (``PyErr_Print``: numpy's ``import_array`` when a signal interrupts the
+    import of one of its modules): silent once a signal has arrived, the command ends with exit 130."""
+    if _state.installed and _state.received is not None:
+        return
+    (_state.previous_excepthook or sys.__excepthook__)(exc_type, exc_value, exc_traceback)
+
+
 def install() -> bool:
     """Install and arm the handlers (main thread only; False elsewhere, or when they already are)."""
     if _state.installed or threading.current_thread() is not threading.main_thread():
@@ -79,6 +91,7 @@ def install() -> bool:
         except (OSError, ValueError):
             pass
     _state.previous_hook, sys.unraisablehook = sys.unraisablehook, _unraisable
+    _state.previous_excepthook, sys.excepthook = sys.excepthook, _excepthook
     _state.installed = _state.armed = True
     return True
 
@@ -100,6 +113,7 @@ def restore() -> None:
         signal.signal(sig, old)
     if _state.installed:
         sys.unraisablehook = _state.previous_hook or sys.__unraisablehook__
+        sys.excepthook = _state.previous_excepthook or sys.__excepthook__
     _state.installed, _state.previous = False, {}
 
 
