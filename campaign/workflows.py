@@ -39,7 +39,7 @@ from campaign.run.traceability import (check_identity, device_identity, identifi
                                        software_version)
 from drivers.base import SystemClock
 from robocal.iso9283 import POSE_NAMES
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 
 from .errors import CampaignError, ConfigError
 

@@ -1,8 +1,11 @@
 """Structure guards over EVERY import statement of the product (module level, inside functions, under
 ``TYPE_CHECKING``): no import cycle, no upward arrow between the top packages (robocal imports nothing of
-campaign or drivers; drivers nothing of campaign), campaign's sub-packages import only the rooms below them, no
-private name imported from another package, no module over the line cap, the line bridge's import closure is
-the standard library only, and the cell model is built where a command starts (one nominal-model call site).
+campaign or drivers; drivers nothing of campaign), the rooms of campaign/ and of robocal/ import only the rooms
+before them, every room names what it offers (``__all__``) and a name crosses from one room to another only
+through that list, no private name (``_name``) imported from another module and no private module from another
+package, no module over the line cap, the line bridge's import closure is the standard library only, the cell
+model is built where a command starts (one nominal-model call site), an installed copy holds every package, and
+docs/architecture.md names every module and shows the rooms as the code has them.
 
 Known debt is listed with the reason it is still here; every list fails when an entry goes stale, so it cannot
 outlive the debt. ``test_checker_*`` run the same checks on small fake trees so that each check is shown to fail.
@@ -20,12 +23,15 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("campaign", "robocal", "drivers")
 RANK = {"robocal": 0, "drivers": 1, "campaign": 2}        # a package may import only packages of lower rank
 MAX_LINES = 500
-# campaign's rooms along the data flow, lowest first; a room imports only rooms listed before it. The shared
-# bottom (errors; io: durable files, JSON fields, safe CSV cells and terminal text) imports no room above it.
-# Checked once campaign/config/ is a package (issue 23).
+# The rooms of campaign/ and robocal/ along their data flow, lowest first; a room imports only rooms listed before
+# it. campaign's shared bottom (errors; io: durable files, JSON fields, safe CSV cells, terminal text, redaction)
+# imports no room above it.
 CAMPAIGN_LAYERS = ("errors", "io", "config", "plan", "run", "data", "calibrate", "correct", "report", "workflows",
                    "cli", "__main__")
-SHARED_LEAVES = {"errors", "io"}
+ROBOCAL_LAYERS = ("kinematics", "measure", "identify", "effects", "layers", "multi_smr", "correct", "design",
+                  "simulation", "diagnose", "iso9283")
+ROOMS = {"campaign": CAMPAIGN_LAYERS, "robocal": ROBOCAL_LAYERS}
+SHARED_LEAVES = {"campaign": {"errors", "io"}, "robocal": set()}
 BRIDGE = "drivers.bridge.line_bridge"
 
 # Known debt (issue 23 removes every entry). Each entry says why it is here.
@@ -34,6 +40,7 @@ KNOWN_CYCLES = {}
 KNOWN_UPWARD: dict[tuple[str, str], str] = {}   # (importer, imported): arrows from a lower package to a higher one
 KNOWN_DOWNWARD: dict[tuple[str, str], str] = {}  # (importer, imported): a campaign room importing a room above it
 KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}   # (importer, defining module, name)
+KNOWN_CLOSED_DOORS: dict[str, str] = {}   # a door rule broken (the message of door_violations) -> why
 # The numerics of a config are built once per command and passed down (campaign.config.cell_model.CellModel):
 # call (or import, for a function) -> the only files (a folder ends in /) that may make it.
 CELL_BUILDERS = {
@@ -160,31 +167,108 @@ def upward(edges: list[Edge]) -> set[tuple[str, str]]:
             if RANK.get(e.target.split(".")[0], -1) > RANK.get(e.source.split(".")[0], 99)}
 
 
-def layer_violations(mods: dict[str, Path], edges: list[Edge]) -> list[str]:
-    """campaign modules outside the layer table, and imports of a room at or above the importer's own room
-    (siblings inside one room are free; the shared bottom, errors and io, imports no other room)."""
-    def layer(module: str) -> int | None:
-        parts = module.split(".")
-        if parts[0] != "campaign" or len(parts) == 1:
-            return None
-        return CAMPAIGN_LAYERS.index(parts[1]) if parts[1] in CAMPAIGN_LAYERS else -1
+def layer_of(module: str) -> tuple[str, int] | None:
+    """(package, index of the module's room in ``ROOMS[package]``; -1 in none) for a module of a package with
+    rooms, None for anything else (a package's own ``__init__``, drivers)."""
+    parts = module.split(".")
+    if parts[0] not in ROOMS or len(parts) == 1:
+        return None
+    return parts[0], ROOMS[parts[0]].index(parts[1]) if parts[1] in ROOMS[parts[0]] else -1
 
-    out = [f"{m}: in no room of CAMPAIGN_LAYERS" for m in sorted(mods) if layer(m) == -1]
+
+def layer_violations(mods: dict[str, Path], edges: list[Edge]) -> list[str]:
+    """Modules of campaign/ and robocal/ outside their room tables, and imports of a room at or above the
+    importer's own room (siblings inside one room are free; a shared leaf imports no room but the leaves)."""
+    out = [f"{m}: in no room of ROOMS[{m.split('.')[0]!r}]" for m in sorted(mods) if (layer_of(m) or ("", 0))[1] == -1]
     for e in edges:
-        a, b = layer(e.source), layer(e.target)
-        if a is None or b is None or a < 0 or b < 0:
+        a, b = layer_of(e.source), layer_of(e.target)
+        if a is None or b is None or a[0] != b[0] or a[1] < 0 or b[1] < 0:
             continue
         src, dst = e.source.split(".")[1], e.target.split(".")[1]
-        if src != dst and (b > a or (src in SHARED_LEAVES and dst not in SHARED_LEAVES)):
+        leaves = SHARED_LEAVES[a[0]]
+        if src != dst and (b[1] > a[1] or (src in leaves and dst not in leaves)):
             out.append(f"{e.source}:{e.line} imports {e.target} (a room above it)")
     return out
 
 
 def private_imports(mods: dict[str, Path], edges: list[Edge]) -> set[tuple[str, str, str]]:
-    """(importer, defining module, name) of ``_private`` names imported from a module of another package."""
-    return {(e.source, e.target, e.name) for e in edges
-            if e.name and e.name.startswith("_") and not e.name.startswith("__")
-            and package_of(e.source, mods[e.source]) != package_of(e.target, mods[e.target])}
+    """(importer, defining module, name) of ``_private`` names imported from another module, and (importer,
+    module, "") of a private module (``_common.py``) imported from outside its package: a name shared between
+    modules is public; a room keeps its shared internals in a private module of its own."""
+    names = {(e.source, e.target, e.name) for e in edges if e.name and is_private(e.name)}
+    return names | {(e.source, e.target, "") for e in edges if is_private(e.target.rpartition(".")[2])
+                    and package_of(e.source, mods[e.source]) != package_of(e.target, mods[e.target])}
+
+
+def is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def room_of(module: str) -> str | None:
+    """The room a module belongs to: ``campaign.run``, ``robocal.kinematics``, ``drivers`` (drivers' own modules)
+    or ``drivers.rapid`` (a sub-package); None for the root ``__init__`` of campaign and robocal."""
+    parts = module.split(".")
+    if parts[0] == "drivers":
+        return ".".join(parts[:2]) if len(parts) > 2 or (len(parts) == 2 and parts[1] in DRIVER_ROOMS) else "drivers"
+    return ".".join(parts[:2]) if len(parts) > 1 else None
+
+
+DRIVER_ROOMS = ("bridge", "emulators", "rapid")        # drivers' sub-packages, each a room of its own
+
+
+def door(mods: dict[str, Path], room: str) -> dict[str, str] | None:
+    """What a room offers: public name -> the module that defines it, read from the room's ``__init__`` (the
+    ``_HOMES`` table, module -> names, and a literal ``__all__`` of names it defines itself) or, for a room that
+    is one module, its literal ``__all__``. None when the file has no ``__all__``."""
+    tree = ast.parse(mods[room].read_text(encoding="utf-8"))
+    found: dict[str, str] | None = None
+    for node in tree.body:
+        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
+        if not isinstance(target, ast.Name):
+            continue
+        if target.id == "_HOMES":
+            homes = ast.literal_eval(node.value)
+            found = (found or {}) | {n: f"{room}.{m}" for m, names in homes.items() for n in names}
+        elif target.id == "__all__":
+            found = found or {}
+            if isinstance(node.value, (ast.List, ast.Tuple)):
+                found |= {n: room for n in ast.literal_eval(node.value)}
+    return found
+
+
+def defines(path: Path, name: str) -> bool:
+    """The module binds ``name`` at its top level itself (a def, a class, an assignment), not by importing it."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == name:
+            return True
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) \
+            else []
+        if any(isinstance(n, ast.Name) and n.id == name for t in targets for n in ast.walk(t)):
+            return True
+    return False
+
+
+def door_violations(mods: dict[str, Path], edges: list[Edge]) -> list[str]:
+    """Every room has a door (``__all__``); each name on it is defined in the module the door names and is not
+    also a module of the room; a module imports another room's names only, and only names on its door."""
+    rooms = sorted({r for m in mods if (r := room_of(m)) is not None and r in mods})
+    doors = {r: door(mods, r) for r in rooms}
+    out = [f"{r}: no __all__ (what the room offers) in {mods[r].name}" for r in rooms if doors[r] is None]
+    for r, names in doors.items():
+        for name, home in sorted((names or {}).items()):
+            if home not in mods or not defines(mods[home], name):
+                out.append(f"{r}: {name} is not defined in {home}")
+            elif f"{r}.{name}" in mods:
+                out.append(f"{r}: {name} is both a public name and a module of the room")
+    for e in edges:
+        src, dst = room_of(e.source), room_of(e.target)
+        if src == dst or dst is None or src is None:
+            continue
+        if e.name is None:
+            out.append(f"{e.source}:{e.line} imports the module {e.target} of another room (import its names)")
+        elif e.name not in (doors.get(dst) or {}):
+            out.append(f"{e.source}:{e.line} imports {e.name} from {e.target}, not on the door of {dst}")
+    return out
 
 
 def third_party_closure(root: Path, start: str) -> dict[str, set[str]]:
@@ -260,11 +344,9 @@ def test_no_upward_import(product):
 
 
 @pytest.mark.unit
-def test_campaign_rooms_import_downward(product):
-    """Once campaign/ is in rooms (issue 23): every module is in a room and imports only rooms below it."""
+def test_rooms_import_downward(product):
+    """Every module of campaign/ and robocal/ is in a room and imports only the rooms before its own."""
     mods, edges = product
-    if not (ROOT / "campaign" / "config" / "__init__.py").is_file():
-        pytest.skip("campaign/ is not in sub-packages yet (issue 23, phase 2)")
     found = layer_violations(mods, edges)
     known = {v for v in found for a, b in KNOWN_DOWNWARD if v.startswith(f"{a}:") and f" imports {b} " in v}
     assert set(found) <= known, f"rooms importing upward: {sorted(set(found) - known)}"
@@ -273,12 +355,33 @@ def test_campaign_rooms_import_downward(product):
 
 
 @pytest.mark.unit
-def test_no_private_name_imported_from_another_package(product):
+def test_no_private_name_imported_from_another_module(product):
     mods, edges = product
     found = private_imports(mods, edges)
-    assert found <= set(KNOWN_PRIVATE), ("private names imported from another package (make them public or "
-                                         f"move them): {sorted(found - set(KNOWN_PRIVATE))}")
+    assert found <= set(KNOWN_PRIVATE), ("private names imported from another module, or private modules from "
+                                         "another package (make them public, join the modules, or share a "
+                                         f"_common module of the room): {sorted(found - set(KNOWN_PRIVATE))}")
     assert not set(KNOWN_PRIVATE) - found, f"gone, remove from KNOWN_PRIVATE: {sorted(set(KNOWN_PRIVATE) - found)}"
+
+
+@pytest.mark.unit
+def test_every_room_names_what_it_offers(product):
+    """Each room's door (``__all__`` in its ``__init__``, or in the module of a one-module room) lists the names it
+    offers; another room imports those names and nothing else of it."""
+    mods, edges = product
+    found = door_violations(mods, edges)
+    assert set(found) <= set(KNOWN_CLOSED_DOORS), "\n".join(sorted(set(found) - set(KNOWN_CLOSED_DOORS)))
+    assert not set(KNOWN_CLOSED_DOORS) - set(found), f"gone: {sorted(set(KNOWN_CLOSED_DOORS) - set(found))}"
+
+
+@pytest.mark.unit
+def test_an_installed_copy_holds_every_package():
+    """pyproject.toml's package list is the tree's packages (an installed, non-editable copy has every room)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"])
+    tree = {package_of(n, p) for n, p in modules(ROOT).items() if p.name == "__init__.py"}
+    assert listed == tree, f"missing from pyproject.toml: {sorted(tree - listed)}; not a package: {sorted(listed - tree)}"
 
 
 @pytest.mark.unit

@@ -4,7 +4,7 @@ After the seed and after every batch the calibration points measured so far (rea
 with the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
 (``adaptive_model.refit``), and the next ``plan.block_points`` poses are those of the plan's candidates (at most
 ``MAX_CANDIDATES`` per round, a seeded sample of the pool) that tell the refitted model most about its parameters
-and its layer (``robocal.adaptive``, rule ``adaptive_model.RULE``, chosen by held-out prediction). Predicted
+and its layer (``robocal.design.adaptive``, rule ``adaptive_model.RULE``, chosen by held-out prediction). Predicted
 held-out RMS now: the larger of the refit's k-fold CV figure and the noise floor with the model's own prediction
 variance at the task poses; after the batch: that less the variance the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less than
 ``plan.stop_gain_pct`` % of the noise floor, when the next batch would exceed ``plan.max_minutes`` of robot time, or
@@ -22,10 +22,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from robocal.adaptive import choose_batch
-from robocal.design import short_tour
-from robocal.identify import IdentificationError
-from robocal.kinematics import smr_tracker
+from robocal.design.adaptive import choose_batch
+from robocal.design.optimal import short_tour
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.log_dataset import dataset_from_log

@@ -2,7 +2,7 @@
 
 After every block (``Plan.blocks``) the calibration points measured so far (read back from the durable log) are
 refitted: geometry by Levenberg-Marquardt, the effects ``calibration.effects`` takes, linearised at that
-solution. ``robocal.design.prediction`` turns the fit into the held-out RMS expected of the model fitted on the
+solution. ``robocal.design.optimal.prediction`` turns the fit into the held-out RMS expected of the model fitted on the
 first n planned points, for every block end n: noise floor at the test poses + the part the model cannot fit
 (blocked cross-validation of the data so far) + the parameter uncertainty of exactly those planned poses. The run
 stops when the next block is predicted to lower it by less than ``plan.stop_gain_pct`` % of the floor, or when
@@ -19,11 +19,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from robocal.approach import approach_signs
-from robocal.design import prediction, whiten_rows
-from robocal.effects import effect_regressor
-from robocal.identify import IdentificationError, calibrate
-from robocal.kinematics import ParamLayout, identification_jacobian, smr_tracker
+from robocal.measure.approach import approach_signs
+from robocal.design.optimal import prediction, whiten_rows
+from robocal.effects.bases import effect_regressor
+from robocal.identify.identification import IdentificationError, calibrate
+from robocal.kinematics.models import ParamLayout, identification_jacobian, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig

@@ -29,11 +29,12 @@ from campaign.data.dataset import Dataset
 from campaign.data.source import load_source
 from campaign.errors import DataError
 from campaign.io.durable import write_json as _write_json
-from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, FittedStage, diagnose
-from robocal.elastic import EngineOptions, run_engine
-from robocal.identify import IdentificationError
-from robocal.kinematics import ParamLayout
-from robocal.repeats import noise_floor_from_repeats, repeat_dof
+from robocal.diagnose.records import Diagnosis, DiagnosisInput, DiagnosisOptions
+from robocal.diagnose.core import FittedStage, diagnose
+from robocal.effects.engine import EngineOptions, run_engine
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import ParamLayout
+from robocal.measure.repeats import noise_floor_from_repeats, repeat_dof
 
 from .effects_stage import subset
 from .plausibility import check_dataset, registered_kinematics

@@ -4,7 +4,7 @@
 * the xyz unit guessed from the scale (spread of the measured points / spread of the nominal model's points):
   mm is stated, m / cm / inch is an error naming the factor;
 * registration before plausibility: the base frame and the SMR offsets (one per SMR) are registration quantities,
-  not robot parameters; they are fitted together on the nominal geometry first (:func:`robocal.identify.register_tool`),
+  not robot parameters; they are fitted together on the nominal geometry first (:func:`robocal.identify.identification.register_tool`),
   and an SMR offset more than ``TOOL_NOTE_MM`` from the config is reported with the value to configure;
 * nominal RMS after that registration on the calibration rows must be below 1 % of the robot's reach (wrong robot,
   wrong DH table, wrong joint order or offsets all fail it: "does this data belong to this robot?");
@@ -262,7 +262,7 @@ def _spread(p: np.ndarray) -> float:
 
 def _check_unit(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Guess the xyz unit from the ratio of measured to nominal point spread (registration cannot fix scale)."""
-    from robocal.kinematics import smr_base
+    from robocal.kinematics.models import smr_base
 
     p_nom = smr_base(cell.kinematics, np.radians(ds.q_deg[cal]))
     s_nom, s_meas = _spread(p_nom), _spread(ds.p_tracker_mm[cal])
@@ -284,7 +284,7 @@ def _check_unit(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tu
 def _register_tool(ds, cell: CellModel, cal: np.ndarray) -> ToolCheck | None:
     """Base and SMR offsets registered together on the nominal geometry (every SMR the config and the data have,
     on the calibration rows where all of them were read), or None when the rows cannot be registered."""
-    from robocal.identify import IdentificationError, register_tool
+    from robocal.identify.identification import IdentificationError, register_tool
 
     cfg = cell.config
     clouds = [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
@@ -314,7 +314,7 @@ def start_kinematics(cell: CellModel, plaus: Plausibility | None = None):
     """The model every fit starts from: :func:`registered_kinematics`, with an SMR offset within ON_AXIS_START_MM
     of the flange axis put on the axis. From an on-axis start the calibration admits the wrist parameters that a
     small lateral lever makes only marginally identifiable when its solution identifies them strongly
-    (:func:`robocal.identify.calibrate`), so neither the configured lateral values nor a rough config decide which
+    (:func:`robocal.identify.identification.calibrate`), so neither the configured lateral values nor a rough config decide which
     parameters are fitted (the fit identifies the lateral offset itself)."""
     kin = registered_kinematics(cell, plaus)
     p = kin.p_flange_smr_mm
@@ -329,8 +329,8 @@ def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
 
 def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Nominal RMS after registering the base and the SMR offsets on the calibration rows < 1 % of the reach."""
-    from robocal.identify import IdentificationError, register
-    from robocal.kinematics import smr_tracker
+    from robocal.identify.identification import IdentificationError, register
+    from robocal.kinematics.models import smr_tracker
 
     cfg = cell.config
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]

@@ -4,7 +4,7 @@ The same loop as ``plan.kind: adaptive``, with the measured calibration rows as 
 (the plan's criterion, joints spread; the identifiable geometric parameters + 10 %, at least the rows the layer's
 cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
 nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
-where that model learns most about its parameters and its layer (``robocal.adaptive`` rule ``d``, the default:
+where that model learns most about its parameters and its layer (``robocal.design.adaptive`` rule ``d``, the default:
 chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).
 The task poses (the calibration rows, i.e. the measured box, or ``task_q_rad``) weigh the predicted held-out RMS
 of every round, and the choice under rule ``i``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.adaptive import choose_batch
-from robocal.design import criterion, d_optimal
-from robocal.identify import IdentificationError
-from robocal.kinematics import smr_base, smr_tracker
+from robocal.design.adaptive import choose_batch
+from robocal.design.optimal import criterion, d_optimal
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import smr_base, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset

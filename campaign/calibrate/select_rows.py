@@ -1,6 +1,6 @@
 """``campaign select``: which N calibration rows of a measured campaign would have done.
 
-A space-filling design (``robocal.design.space_filling``): rows chosen farthest-first in joint space, each joint
+A space-filling design (``robocal.design.optimal.space_filling``): rows chosen farthest-first in joint space, each joint
 scaled by its lever (how far its angle moves the SMR), provided they determine every geometric parameter all the
 rows determine; else the D-optimal criterion of ``plan.kind: optimal`` (the identification Jacobian of the geometry
 and the pose-dependent effects, whitened by the calibration weights, with the major joints spread). The default
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.design import Forecast, criterion, forecast, space_filling
-from robocal.identify import IdentificationError, register
+from robocal.design.optimal import Forecast, criterion, forecast, space_filling
+from robocal.identify.identification import IdentificationError, register
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
@@ -33,7 +33,7 @@ FORECAST_MAX_ROWS = 20_000      # the forecast of all rows (a Jacobian of every 
 @dataclass(frozen=True, eq=False)
 class Selection:
     """The rows of the subset (N,) bool, and what the parameter uncertainty predicts of the subset's and of all
-    calibration rows (``robocal.design.Forecast``, at the test rows; None for all rows beyond
+    calibration rows (``robocal.design.optimal.Forecast``, at the test rows; None for all rows beyond
     ``FORECAST_MAX_ROWS``)."""
     keep: np.ndarray
     n_chosen: int

@@ -21,16 +21,16 @@ from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, DataWarning
-from robocal.frames import transform_points
-from robocal.gp_layer import GPRResidual
-from robocal.joint_gp import MIN_SPAN_RAD, JointGPResidual
-from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import smr_tracker
-from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
-from robocal.model import CalibratedModel
-from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
-from robocal.stats import error_stats
+from robocal.kinematics.frames import transform_points
+from robocal.layers.gp_layer import GPRResidual
+from robocal.layers.joint_gp import MIN_SPAN_RAD, JointGPResidual
+from robocal.identify.identification import CalibrationResult, IdentificationError, calibrate, register
+from robocal.kinematics.models import smr_tracker
+from robocal.layers.choice import LayerChoice, choose_layer, fit_layer, layer_summary
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.measure.repeats import noise_floor_from_repeats, repeat_groups
+from robocal.identify.screening import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
+from robocal.measure.stats import error_stats
 
 from .budget_stage import calibration_budget
 from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, CalibrationReport

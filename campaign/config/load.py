@@ -32,7 +32,7 @@ from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, Campaig
 from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, _NAME_RE
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
-from robocal.noise import TrackerUncertainty
+from robocal.measure.noise import TrackerUncertainty
 
 from .cell_model import CellModel
 from .checks import check_config, check_joint_count, check_numerics

@@ -15,7 +15,7 @@ from campaign.config.values import (CALIBRATION_METHODS, CORRECTION_GENERATORS, 
                                     OUTLIER_SCREENS, PLAN_ORDERS, RESIDUAL_MODELS, Vec3, WEIGHT_FUNCTIONS, _NAME_RE,
                                     _ORTHONORMAL_TOL)
 from campaign.errors import ConfigError
-from robocal.effects import SIMULATED_EFFECTS, MODEL_EFFECTS
+from robocal.effects.bases import SIMULATED_EFFECTS, MODEL_EFFECTS
 
 
 def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
@@ -167,7 +167,7 @@ def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
         return r.choice("effects", ("auto", "none"), "auto")
     specs = _effects(r, MODEL_EFFECTS)
     where = r.child_list("effects")
-    from robocal.effects import FACTORY_KEYS
+    from robocal.effects.bases import FACTORY_KEYS
 
     for i, spec in enumerate(specs):
         for key in spec.params:

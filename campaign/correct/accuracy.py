@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 
 from .bounds import CorrectedTarget
 

@@ -46,7 +46,7 @@ class CorrectedTarget:
     unless orientation was measured (three SMRs); ``predicted_std_mm``: 3-D
     predictive standard deviation of the residual layer at the corrected joints
     (GPR), nan when the model has none.
-    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.chains), nan otherwise.
+    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.kinematics.chains), nan otherwise.
     """
 
     target_id: str

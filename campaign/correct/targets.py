@@ -19,10 +19,10 @@ from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
 from campaign.plan.poses import unreachable_reasons
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
-from robocal.chains import arm_angle_rad, branch_signs, redundant
-from robocal.ik import branch_signature, solve_on_branch
-from robocal.kinematics import fk
-from robocal.model import CalibratedModel
+from robocal.kinematics.chains import arm_angle_rad, branch_signs, redundant
+from robocal.kinematics.ik import branch_signature, solve_on_branch
+from robocal.kinematics.models import fk
+from robocal.layers.calibrated_model import CalibratedModel
 
 from .accuracy import HeldOut, predicted_errors_mm, rotation_errors_deg
 from .bounds import CorrectedTarget, Rejected, check_targets
@@ -154,7 +154,7 @@ def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     """(N, 4) ABB confdata [cf1, cf4, cf6, cfx]: quadrants of axes 1, 4, 6 and cfx from the branch
     (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table. On a track: the
     arm's. A seven-axis arm (ABB numbers a YuMi's joints 1, 2, 7, 3, 4, 5, 6: its axes 1, 4, 6 are joints 1, 5, 7):
-    cfx from the chain's branch signs (``robocal.chains.branch_signs``). Fewer than six joints: the axes it has."""
+    cfx from the chain's branch signs (``robocal.kinematics.chains.branch_signs``). Fewer than six joints: the axes it has."""
     q_rad = np.atleast_2d(q_rad)
     if kin.track is not None:
         return abb_confdata(kin.arm(), q_rad[:, kin.n_track:])

@@ -15,10 +15,10 @@ from campaign.io.durable import write_json
 from campaign.plan.points import PlanPoint
 from campaign.run.log_records import PointRecord
 from robocal.correct import closed_loop_step, tool_transform
-from robocal.frames import transform_points
-from robocal.kinematics import fk
-from robocal.model import CalibratedModel
-from robocal.stats import error_stats
+from robocal.kinematics.frames import transform_points
+from robocal.kinematics.models import fk
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.measure.stats import error_stats
 
 from .configuration import configuration_reasons
 from .targets import _limits_deg, model_pose_fn, run_correction

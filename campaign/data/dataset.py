@@ -8,7 +8,7 @@ import numpy as np
 
 from campaign.errors import DataError
 from campaign.run.log_records import SETS
-from robocal.approach import approach_signs, moves_from_order
+from robocal.measure.approach import approach_signs, moves_from_order
 
 _SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
 _ENV = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
@@ -36,7 +36,7 @@ class OrderContext:
 
     @classmethod
     def of(cls, q_deg: np.ndarray) -> "OrderContext":
-        """From all rows' joints (N, n) deg in measurement order (``robocal.approach``)."""
+        """From all rows' joints (N, n) deg in measurement order (``robocal.measure.approach``)."""
         q = np.radians(np.asarray(q_deg, float))
         move, prev = moves_from_order(q)
         return cls(approach_signs(q), move, prev, np.arange(len(q), dtype=float))

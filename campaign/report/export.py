@@ -28,8 +28,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robocal.kinematics import JOINT_PARAMS, Kinematics
-from robocal.model import CalibratedModel
+from robocal.kinematics.models import JOINT_PARAMS, Kinematics
+from robocal.layers.calibrated_model import CalibratedModel
 
 from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError

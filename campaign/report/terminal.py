@@ -6,7 +6,7 @@ import math
 from rich.console import Console
 from rich.table import Table
 
-from robocal.elastic import EffectChoice
+from robocal.effects.model import EffectChoice
 
 from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.calibrate.report_sections import LayerSummary

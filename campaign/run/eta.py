@@ -1,6 +1,6 @@
 """Campaign duration: predicted from the motion caps and the tracker's reading time, refined during the run.
 
-Per point: the moves (via poses included) at the capped speeds (``robocal.sweep.move_durations_s`` on the
+Per point: the moves (via poses included) at the capped speeds (``robocal.kinematics.sweep.move_durations_s`` on the
 nominal model, the same timing law the mock controller uses), the settle time and ``samples`` x
 ``reading_time_s`` per SMR. During a run, the ratio of measured to predicted point times (move + settle +
 readings, from the log records) scales the prediction of the remaining points.
@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.sweep import move_durations_s
+from robocal.kinematics.sweep import move_durations_s
 
 from campaign.config.cell_model import CellModel
 from campaign.plan.points import PlanPoint

@@ -26,7 +26,7 @@ from typing import Callable, Iterable, Iterator, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from robocal.approach import next_approach
+from robocal.measure.approach import next_approach
 
 from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
                           Unstable, average_samples)

@@ -44,7 +44,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from drivers import emscon_protocol as P
-from robocal.noise import TrackerUncertainty
+from robocal.measure.noise import TrackerUncertainty
 
 from .faults import FaultDeck
 from .tcp import TcpServer, wait_for_shutdown

@@ -6,12 +6,12 @@ import itertools
 import numpy as np
 import pytest
 
-from robocal.design import (_Design, blocked_cv, criterion, d_optimal, farthest_first, forecast, greedy_order,
+from robocal.design.optimal import (_Design, blocked_cv, criterion, d_optimal, farthest_first, forecast, greedy_order,
                             move_cost, predict_rms, short_tour, space_filling, whiten_rows)
-from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import ParamLayout, smr_tracker
-from robocal.pool import incidence_rad, tilted_rotations, wrist_flipped
-from robocal.kinematics import fk
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.kinematics.models import ParamLayout, smr_tracker
+from robocal.design.pool import incidence_rad, tilted_rotations, wrist_flipped
+from robocal.kinematics.models import fk
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 

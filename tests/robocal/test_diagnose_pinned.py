@@ -6,8 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from robocal.diagnose import DiagnosisOptions, diagnose
-from robocal.elastic import EngineOptions
+from robocal.diagnose.records import DiagnosisOptions
+from robocal.diagnose.core import diagnose
+from robocal.effects.engine import EngineOptions
 from robocal.diagnose.selfcheck import truth_input
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 

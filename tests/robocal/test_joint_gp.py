@@ -1,13 +1,13 @@
-"""The joint-error GP layer (robocal.joint_gp): per-joint angle-error curves through the Jacobian, reduced-rank GP,
+"""The joint-error GP layer (robocal.layers.joint_gp): per-joint angle-error curves through the Jacobian, reduced-rank GP,
 hyperparameters by marginal likelihood, CV from Gram differences. Independent references: finite differences of
 the likelihood, a direct fit on the training rows, a brute-force exact GP with the same kernel."""
 import numpy as np
 import pytest
 
-import robocal.joint_gp as jg
-from robocal.elastic import kfold
-from robocal.layers import choose_layer
-from robocal.model import CalibratedModel
+import robocal.layers.joint_gp as jg
+from robocal.effects.cv import kfold
+from robocal.layers.choice import choose_layer
+from robocal.layers.calibrated_model import CalibratedModel
 from tests.cells import irb2600
 
 LO, HI = np.radians([-60, -40, -60, -90, -60, -90]), np.radians([60, 60, 30, 90, 60, 90])

@@ -1,4 +1,4 @@
-"""Inducing-point GP (robocal/sparse_gp.py): equal to the exact GP when the inducing inputs are the training inputs,
+"""Inducing-point GP (robocal/layers/sparse_gp.py): equal to the exact GP when the inducing inputs are the training inputs,
 close to it with few inducing inputs, bounded memory on many points, JSON round trip."""
 import json
 import tracemalloc
@@ -6,11 +6,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from robocal.elastic import kfold
-from robocal.gp_layer import GPRResidual
-from robocal.gp import MultiOutputGP
-from robocal.layers import fit_gp, gp_cv_errors
-from robocal.sparse_gp import EXACT_MAX_POINTS, INDUCING_POINTS, SparseGP
+from robocal.effects.cv import kfold
+from robocal.layers.gp_layer import GPRResidual
+from robocal.layers.gp import MultiOutputGP
+from robocal.layers.choice import fit_gp, gp_cv_errors
+from robocal.layers.sparse_gp import EXACT_MAX_POINTS, INDUCING_POINTS, SparseGP
 
 LO, HI = np.radians([-100, -60, -100, -150, -100, -150]), np.radians([100, 90, 40, 150, 100, 150])
 

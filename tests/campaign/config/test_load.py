@@ -125,7 +125,7 @@ def minimal_dict() -> dict[str, Any]:
 @pytest.mark.unit
 def test_tracker_uncertainty_is_robocals_model_with_the_file_terms(tmp_path: Path) -> None:
     """One TrackerUncertainty: the config section is robocal's class, carrying the YAML terms (not its defaults)."""
-    from robocal.noise import TrackerUncertainty
+    from robocal.measure.noise import TrackerUncertainty
 
     terms = {"transverse_a_um": 20.0, "transverse_b_um_per_m": 8.0, "range_a_um": 12.0, "range_b_um_per_m": 0.5,
              "coverage_k": 3.0}

@@ -15,8 +15,8 @@ from campaign.correct.rapid_module import render_rapid_module
 from campaign.correct.ur_program import render_ur_json
 from drivers.abb_axes import abb_axes
 from drivers.emulators.rws_server import parse_literal, parse_module
-from robocal.chains import arm_angle_rad
-from robocal.kinematics import Kinematics
+from robocal.kinematics.chains import arm_angle_rad
+from robocal.kinematics.models import Kinematics
 
 pytestmark = pytest.mark.unit
 LO, HI = (-170.0,) * 7, (170.0,) * 7

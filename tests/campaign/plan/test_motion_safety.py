@@ -13,7 +13,7 @@ from campaign.run.log_reader import read_log
 from campaign.run.runner import Runner
 from drivers.base import MotionError, MotionLimits
 from drivers.mock import MockRobot, MockTracker
-from robocal.sweep import Boxes, check_segments, flange_points_base, sample_segments
+from robocal.kinematics.sweep import Boxes, check_segments, flange_points_base, sample_segments
 from tests.campaign.helpers import small_config
 
 

@@ -7,8 +7,8 @@ import pytest
 from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
 from campaign.report.export import UrdfLimits, export, robodk_text, urdf_text
-from robocal.kinematics import Kinematics, fk, smr_base
-from robocal.model import CalibratedModel
+from robocal.kinematics.models import Kinematics, fk, smr_base
+from robocal.layers.calibrated_model import CalibratedModel
 from robocal.simulation.mock_cell import random_geometric_errors
 
 yourdfpy = pytest.importorskip("yourdfpy")
@@ -94,7 +94,7 @@ def test_wrong_origin_would_be_caught(tmp_path):
 
 def test_export_files_and_residual_note(tmp_path):
     cell = load_cell(ROOT / "configs" / "irb2600.yaml")
-    from robocal.residual import IDWResidual
+    from robocal.layers.idw import IDWResidual
     layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
     model = CalibratedModel(simulated_cell(cell).truth, layer)
     files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
@@ -123,7 +123,7 @@ def test_robodk_dhm_conversion_is_exact():
 
 
 def test_physical_effects_are_noted_not_exported(tmp_path):
-    from robocal.elastic import EffectChoice
+    from robocal.effects.model import EffectChoice
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
     text = urdf_text(CalibratedModel(kin, None, None, (fake,)), _limits(kin))
@@ -184,8 +184,8 @@ def _recorded_model(tmp_path: Path, kin: Kinematics, record: bool = True) -> Pat
     joint's identified, std 0.001 * (1 + column)); ``record`` False: a model.json of an earlier version."""
     import json
 
-    from robocal.kinematics import ParamLayout
-    from robocal.parameters import GEOMETRY, ParameterTable
+    from robocal.kinematics.models import ParamLayout
+    from robocal.identify.parameters import GEOMETRY, ParameterTable
 
     layout = ParamLayout.of(kin)
     cal = kin.with_(a_mm=kin.a_mm + 0.3, alpha_rad=kin.alpha_rad + 1e-4, theta_rad=kin.theta_rad - 2e-4)

@@ -13,9 +13,9 @@ from campaign.io.terminal_text import SafeConsole
 from campaign.plan.iso9283 import iso_cube
 from campaign.report.iso9283 import NO_SPEC, UNDECIDED, iso_report, rp_verdict
 from campaign.report.terminal import render_iso
-from robocal.frames import transform_points
+from robocal.kinematics.frames import transform_points
 from robocal.iso9283 import CYCLE_ORDER, POSE_NAMES, RepeatabilitySplit, tracker_rp_mm
-from robocal.noise import repeatability_sigma_mm
+from robocal.measure.noise import repeatability_sigma_mm
 from tests.campaign.helpers import small_config
 
 IDENT = {"simulated_devices": ["robot", "tracker"], "config_sha256": "c" * 64, "plan_sha256": "p" * 64}
