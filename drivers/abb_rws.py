@@ -29,8 +29,8 @@ from .rapid.literals import fmt_jointtarget, fmt_num, fmt_robtarget, fmt_string,
 from .abb_rws_options import (DEFAULT_PASSWORD, DEFAULT_USER, CredentialOptions, OptionsError, RapidRejected,  # noqa: F401
                               RwsOptions, load_credentials)
 from .abb_rws_preflight import (CALSERVER_VERSION, KIND_MOVEABSJ, KIND_MOVEL, KIND_PING, PreflightMixin,  # noqa: F401
-                                _module_bytes)
-from .abb_rws_program import ENTRY_ROUTINE, Deadline, RapidProgramMixin, _MasterRejected  # noqa: F401
+                                module_bytes)
+from .abb_rws_program import ENTRY_ROUTINE, Deadline, RapidProgramMixin, MasterRejected  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -229,7 +229,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
     def write_module(self, name: str, text: str) -> None:
         """Upload ``text`` as ``<remote_dir>/<name>.mod``, read it back and compare, then load it into the task
         (RAPID is stopped for the load and restarted if it was running). Raises RobotError on any mismatch."""
-        data = _module_bytes(name, text, self.url)
+        data = module_bytes(name, text, self.url)
         remote = f"{self.opts.remote_dir}/{name}.mod"
         self.session.put_file(remote, data)
         back = self.session.get_file(remote)
@@ -330,7 +330,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
                 for name, literal in values.items():
                     self._write(name, literal, cache=name in _CACHED)
                 return
-            except _MasterRejected:
+            except MasterRejected:
                 self._explicit = True
                 log.warning("%s: implicit mastership refused (403 E_MASTER_REJECT); using explicit edit "
                             "mastership for writes", self.url)

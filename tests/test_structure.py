@@ -427,13 +427,13 @@ def _tree(root: Path, files: dict[str, str]) -> Path:
     return root
 
 
-CLEAN = {"robocal/__init__.py": "", "robocal/kin.py": "import numpy\n",
-         "drivers/__init__.py": "", "drivers/mock.py": "from robocal.kin import numpy\n",
+CLEAN = {"robocal/__init__.py": "", "robocal/kinematics/__init__.py": "", "robocal/kinematics/kin.py": "import numpy\n",
+         "drivers/__init__.py": "", "drivers/mock.py": "from robocal.kinematics.kin import numpy\n",
          "campaign/__init__.py": "", "campaign/config/__init__.py": "",
          "campaign/config/schema.py": "from campaign.errors import E\n", "campaign/errors.py": "E = 1\n",
          "campaign/run/__init__.py": "",
-         "campaign/run/runner.py": "from ..config.schema import E\nfrom .log import _x\n",
-         "campaign/run/log.py": "_x = 1\n"}
+         "campaign/run/runner.py": "from ..config.schema import E\nfrom .log import x\nfrom ._common import y\n",
+         "campaign/run/log.py": "x = 1\n_x = 2\n", "campaign/run/_common.py": "y = 1\n"}
 
 
 def _clean_plus(tmp_path: Path, extra: dict[str, str]):
@@ -449,7 +449,7 @@ def test_checker_passes_a_clean_tree(tmp_path):
     mods, edges = graph(_tree(tmp_path, CLEAN))
     assert not cycles(mods, edges) and not upward(edges) and not private_imports(mods, edges)
     assert not layer_violations(mods, edges)
-    assert ("campaign.run.runner", "campaign.run.log", "_x") not in private_imports(mods, edges)   # same package
+    assert any(e.target == "campaign.run._common" for e in edges)       # a room's own _common module is free
 
 
 @pytest.mark.unit
@@ -472,18 +472,23 @@ def test_checker_finds_a_cycle_under_type_checking_and_a_relative_one(tmp_path):
 @pytest.mark.unit
 def test_checker_finds_upward_arrows_private_names_and_closures(tmp_path):
     mods, edges = _clean_plus(tmp_path, {
-        "robocal/kin.py": "def f():\n    import campaign.errors\n",
-        "drivers/mock.py": "from campaign.run.log import _x\n",
+        "robocal/kinematics/kin.py": "def f():\n    import campaign.errors\n",
+        "drivers/mock.py": "from campaign.run.log import _x\nfrom campaign.run._common import y\n",
+        "campaign/run/runner.py": "from .log import _x\n",
         "campaign/cli/__init__.py": "", "campaign/cli/main.py": "from campaign.config.schema import E\n",
         "campaign/oddity.py": "", "campaign/io/__init__.py": "",
         "campaign/io/json_fields.py": "from campaign.errors import E\nfrom campaign.config.schema import E\n"})
-    assert upward(edges) == {("robocal.kin", "campaign.errors"), ("drivers.mock", "campaign.run.log")}
-    assert private_imports(mods, edges) == {("drivers.mock", "campaign.run.log", "_x")}
+    assert upward(edges) == {("robocal.kinematics.kin", "campaign.errors"), ("drivers.mock", "campaign.run.log"),
+                             ("drivers.mock", "campaign.run._common")}
+    assert private_imports(mods, edges) == {("drivers.mock", "campaign.run.log", "_x"),       # across packages,
+                                            ("campaign.run.runner", "campaign.run.log", "_x"),  # inside one,
+                                            ("drivers.mock", "campaign.run._common", "")}     # a room's _common
     assert layer_violations(mods, edges) == [              # io, the shared bottom, may import errors only
-        "campaign.oddity: in no room of CAMPAIGN_LAYERS",
+        "campaign.oddity: in no room of ROOMS['campaign']",
         "campaign.io.json_fields:2 imports campaign.config.schema (a room above it)"]
-    assert third_party_closure(tmp_path, "drivers.mock") == {"drivers.mock": set(), "robocal.kin": {"numpy"},
-                                                             "campaign.run.log": set(), "campaign.errors": set()}
+    assert third_party_closure(tmp_path, "drivers.mock") == {
+        "drivers.mock": set(), "robocal.kinematics.kin": {"numpy"}, "campaign.run.log": set(),
+        "campaign.run._common": set(), "campaign.errors": set()}
 
 
 @pytest.mark.unit

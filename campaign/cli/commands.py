@@ -12,8 +12,9 @@ from pathlib import Path
 
 from rich.console import Console
 
-from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout,
-                                 command, overwrite_argument, print_plausibility, width_argument)
+from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, command,
+                                 overwrite_argument, print_plausibility, stderr_console, stdout_console,
+                                 width_argument)
 from campaign.config.load import load_cell
 from campaign.errors import DataError
 from campaign.calibrate.plausibility import forced
@@ -30,7 +31,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     summary."""
     cell = load_cell(args.config)
     cfg = cell.config
-    _stdout().print(
+    stdout_console().print(
         f"OK {cfg.source_path}: {cfg.name}: {cfg.robot.model}, {cfg.robot.n_joints} joints, "
         f"robot {cfg.robot.url}, tracker {cfg.tracker.url}",
         style="green",
@@ -46,7 +47,7 @@ def _warn_acceptance(cell, plan=None) -> None:
     from campaign.plan.acceptance import acceptance_warnings
 
     for line in acceptance_warnings(cell, plan):
-        _stderr().print(f"warning: {line}", style="yellow", markup=False)
+        stderr_console().print(f"warning: {line}", style="yellow", markup=False)
 
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
@@ -65,13 +66,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     from campaign.workflows import run_campaign
 
     cell = load_cell(args.config)
-    out = _stdout()
+    out = stdout_console()
     with forced(args.force):
         result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
-        _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
+        stderr_console().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     if result.iso9283 is not None:                     # plan.kind: iso9283
         from campaign.report.terminal import render_iso
@@ -118,15 +119,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.csv:
         check_file(args.csv, args.overwrite, "--csv")
     plan = build_plan(cell)
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
+    render_plan(stdout_console(), plan, estimate_duration_s(plan.points, cell))
     _warn_acceptance(cell, plan)
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
-        render_forecast(_stdout(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
+        render_forecast(stdout_console(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
         from campaign.calibrate.learning import plan_learning
         from campaign.report.adaptive_text import render_plan_learning
-        render_plan_learning(_stdout(), *plan_learning(cell, plan))
+        render_plan_learning(stdout_console(), *plan_learning(cell, plan))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -153,7 +154,7 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
         raise DataError(str(args.source), "no such file or run directory")
     with forced(args.force):
         processed = reprocess(args.source, cell, args.out, args.overwrite)
-    out = _stdout()
+    out = stdout_console()
     _print_calibration(out, processed.report)
     out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
     return _verdict_exit(processed.report, args.out)
@@ -167,7 +168,7 @@ def _verdict_exit(report, out_dir: Path) -> int:
     v = None if report.summary is None else report.summary.verdict
     if v is None or v.result != FAIL:
         return EXIT_OK
-    _stderr().print(f"acceptance FAIL ({', '.join(v.failed)} exceeded on the held-out test set): every output is "
+    stderr_console().print(f"acceptance FAIL ({', '.join(v.failed)} exceeded on the held-out test set): every output is "
                     f"written in {out_dir}; exit {EXIT_ACCEPTANCE_FAIL}", style="red", markup=False)
     return EXIT_ACCEPTANCE_FAIL
 
@@ -214,9 +215,9 @@ def cmd_select(args: argparse.Namespace) -> int:
     origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
     write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
     if args.adaptive:
-        render_adaptive_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+        render_adaptive_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
     else:
-        render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+        render_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 
 
@@ -253,7 +254,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     held = held_out_of(model, args.model)
     accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model),
                                          held_out=held)
-    out = _stdout()
+    out = stdout_console()
     try:
         paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
     finally:
@@ -295,11 +296,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.report.terminal import render_verify
 
     with forced(args.force):
-        result = verify(args.run_dir, _stdout())
-    render_verify(_stdout(), result.report)
-    _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
+        result = verify(args.run_dir, stdout_console())
+    render_verify(stdout_console(), result.report)
+    stdout_console().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
-        _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
+        stderr_console().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK
 

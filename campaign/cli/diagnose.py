@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import (EXIT_FAILED, EXIT_OK, _stderr, _stdout, command, overwrite_argument,
+from campaign.cli.common import (EXIT_FAILED, EXIT_OK, stderr_console, stdout_console, command, overwrite_argument,
                                  width_argument)
 from campaign.errors import DataError
 
@@ -66,7 +66,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     plots = _check_outputs(args)                  # every output path refused or accepted before any work
     with forced(args.force):
         result = diagnose_source(args.source, cell)
-    out = _stdout()
+    out = stdout_console()
     render(out, result.report)
     plaus = result.report.get("plausibility")                 # the diagnosis document carries its JSON
     print_plausibility(out, None if plaus is None else Plausibility.from_dict(plaus))
@@ -124,7 +124,7 @@ def _self_check(args: argparse.Namespace) -> int:
     from campaign.calibrate.diagnosis import write_diagnosis_json
     from robocal.diagnose.selfcheck import run_self_check, trial_plan
 
-    out = _stdout()
+    out = stdout_console()
     total = len(trial_plan(args.seeds))
     out.print(f"self-check: {total} simulated campaigns from robocal/simulation/truth_cell.py ({args.seeds} seeds per effect, controls, "
               "two-effect cases, an effect outside the library)", markup=False)
@@ -137,7 +137,7 @@ def _self_check(args: argparse.Namespace) -> int:
         write_diagnosis_json(args.json, result.to_dict())
         out.print(f"wrote {args.json}", markup=False)
     if not result.passed():
-        _stderr().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
+        stderr_console().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
                         "effect accepted on a control, a confound class not named, or a lag called backlash",
                         style="red", markup=False)
         return EXIT_FAILED

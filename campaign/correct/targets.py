@@ -250,7 +250,7 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                 solver_tolerance_mm=float(c.pos_err_mm[j]), predicted_error_mm=float(err[j]),
                 predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j]),
                 arm_angle_deg=float(np.degrees(arm_angle_rad(kin, c.q_rad[j:j + 1])[0])) if redundant(kin) else np.nan))
-    lim = _limits_deg(cfg)
+    lim = limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
@@ -287,7 +287,7 @@ def predictive_std_mm(model: CalibratedModel, q_rad: np.ndarray) -> np.ndarray:
     return np.linalg.norm(fn(q_rad, None, include_noise=False), axis=1)
 
 
-def _limits_deg(cfg: CampaignConfig):
+def limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 

@@ -10,7 +10,7 @@ from campaign.io.csv_cells import restore
 
 from .bounds import Rejected
 from .target_csv import write_rejected_csv
-from .targets import _limits_deg
+from .targets import limits_deg
 
 
 FORMATS = {"rapid": ("CalTargets.mod",), "ur": ("targets_ur.json", "targets_ur.script"), "csv": ("targets.csv",)}
@@ -62,7 +62,7 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
     rejected = list(rejected) + unfit
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lo, hi = _limits_deg(cfg)
+    lo, hi = limits_deg(cfg)
     limits = dict(q_min_deg=lo, q_max_deg=hi)
     rejected_path = write_rejected_csv(out / "rejected.csv", rejected)
     if not accepted:
