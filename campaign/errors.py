@@ -6,6 +6,8 @@ the CLI prints ``str(error)`` and exits with a code chosen by the error class.
 
 from __future__ import annotations
 
+__all__ = ["CampaignError", "ConfigError", "DataError", "PlausibilityError", "DataWarning", "Terminated"]
+
 
 def _one_line(text: str) -> str:
     """Collapse whitespace runs (including newlines) to single spaces."""

@@ -48,6 +48,7 @@ if TYPE_CHECKING:
 
 
 logger = logging.getLogger(__name__)
+__all__ = ["RunResult", "run_campaign", "reprocess", "verify", "corrected_joints", "run_iso9283"]
 
 
 @dataclass(frozen=True)

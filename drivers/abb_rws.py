@@ -21,7 +21,7 @@ from urllib.parse import urlsplit
 
 import httpx
 
-from .abb_axes import abb_axes
+from .abb_axes import axes_layout
 from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
 from .rws_client import Credentials, Routes, RwsError, RwsSession, first
 from .rapid import calserver_text
@@ -53,7 +53,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
             raise DriverError(f"{url}: expected abb-rws://host[:port]")
         self.url, self.opts, self.n_joints = url, options, options.n_joints
         try:
-            self.axes = abb_axes(options.n_joints, options.track_unit is not None)
+            self.axes = axes_layout(options.n_joints, options.track_unit is not None)
         except ValueError as exc:
             raise DriverError(f"{url}: {exc}") from None
         self._sleep = sleep
@@ -464,7 +464,7 @@ def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> No
         raise DriverError(f"{url}: expected abb-rws://host[:port]")
     opts = _with_context(RwsOptions.from_mapping(options or {}), options, context)
     try:
-        abb_axes(opts.n_joints, opts.track_unit is not None)
+        axes_layout(opts.n_joints, opts.track_unit is not None)
     except ValueError as exc:
         raise DriverError(f"{url}: {exc}") from None
 

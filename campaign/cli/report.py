@@ -52,7 +52,7 @@ def _export_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("export", "export a calibrated model as URDF, a DH table (CSV) or a RoboDK DH(M) table", _export_arguments)
 def cmd_export(args: argparse.Namespace) -> int:
-    from campaign.report.export import export
+    from campaign.report.export import export_model
     from campaign.calibrate.outputs import load_model
 
     from campaign.run.output_dirs import check_file
@@ -65,7 +65,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     config = args.config or (_run_config(args.model) if args.urdf else None)
     limits = _urdf_limits(args, model, config) if args.urdf and config else None     # export: --urdf needs them
-    files = export(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
+    files = export_model(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
     if limits is not None and not args.config:
         stdout_console().print(f"URDF joint limits and speeds from {config} (the config of the run that wrote "
                         f"{args.model.name}; --config CONFIG to take another)", markup=False)

@@ -8,7 +8,7 @@ import textwrap
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-from drivers.abb_axes import AbbAxes, abb_axes
+from drivers.abb_axes import AbbAxes, axes_layout
 from drivers.rapid import check_rapid_syntax
 from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggregate, fixed_literal, rapid_array_lines,
                                     rapid_ident_problem, rapid_string)
@@ -102,7 +102,7 @@ def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str 
                         external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
                         axes: AbbAxes | None = None) -> str:
     """Text of the RAPID module for ``targets`` (see :func:`write_rapid_module`)."""
-    axes = abb_axes(6) if axes is None else axes
+    axes = axes_layout(6) if axes is None else axes
     items = require_writable(targets, q_min_deg, q_max_deg, n_joints=axes.n, allow_empty=False)
     if axes.external and external_axes is not None:
         raise ValueError("external_axes: this chain's own external axis is eax_a (a track or axis 7)")

@@ -85,9 +85,9 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
 
 def _abb_axes(cfg: CampaignConfig):
     """How the config's joints map onto an ABB controller's axes (ValueError: no ABB layout, one line)."""
-    from drivers.abb_axes import abb_axes
+    from drivers.abb_axes import axes_layout
 
-    return abb_axes(cfg.robot.n_joints, cfg.robot.track is not None)
+    return axes_layout(cfg.robot.n_joints, cfg.robot.track is not None)
 
 
 def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:

@@ -6,7 +6,7 @@ import pytest
 
 from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
-from campaign.report.export import UrdfLimits, export, robodk_text, urdf_text
+from campaign.report.export import UrdfLimits, export_model, robodk_text, urdf_text
 from robocal.kinematics.models import Kinematics, fk, smr_base
 from robocal.layers.calibrated_model import CalibratedModel
 from robocal.simulation.mock_cell import random_geometric_errors
@@ -97,8 +97,8 @@ def test_export_files_and_residual_note(tmp_path):
     from robocal.layers.idw import IDWResidual
     layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
     model = CalibratedModel(simulated_cell(cell).truth, layer)
-    files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
-                   limits=UrdfLimits.of_config(cell.config))
+    files = export_model(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
+                         limits=UrdfLimits.of_config(cell.config))
     assert [f.name for f in files] == ["r.urdf", "dh.csv", "robodk.txt"]
     assert "NOT exported: the non-kinematic residual layer" in (tmp_path / "r.urdf").read_text()
     rows = (tmp_path / "dh.csv").read_text().splitlines()
