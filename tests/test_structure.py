@@ -493,6 +493,14 @@ def test_checker_passes_a_clean_tree(tmp_path):
 
 
 @pytest.mark.unit
+def test_checker_finds_a_robocal_room_importing_a_later_one(tmp_path):
+    mods, edges = _clean_plus(tmp_path, {"robocal/identify/__init__.py": "", "robocal/identify/fit.py":
+                                         "from robocal.kinematics.kin import numpy\n",
+                                         "robocal/kinematics/kin.py": "def f():\n    from ..identify.fit import g\n"})
+    assert layer_violations(mods, edges) == ["robocal.kinematics.kin:3 imports robocal.identify.fit (a room above it)"]
+
+
+@pytest.mark.unit
 def test_checker_finds_a_cycle_through_an_import_inside_a_function(tmp_path):
     mods, edges = _clean_plus(tmp_path, {"campaign/config/schema.py":
                                          "def load():\n    from campaign.run.runner import E\n    return E\n"})
