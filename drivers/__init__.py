@@ -14,8 +14,9 @@ import importlib
 
 def lazy_exports(package: str, homes: dict[str, tuple[str, ...]]):
     """The ``__getattr__`` of a room's ``__init__``: each public name (``homes``: module -> its names) loads from
-    its module the first time it is asked for (the drivers' copy of ``robocal.lazy_exports``: the bridge runs
-    from a copy of ``drivers/`` without robocal)."""
+    its module the first time it is asked for. The doors of drivers' and campaign's rooms use it; robocal keeps
+    its own copy (``robocal.lazy_exports``: the bridge runs from a copy of ``drivers/`` without robocal, and
+    robocal imports nothing of drivers)."""
     where = {name: module for module, names in homes.items() for name in names}
 
     def load(name: str):

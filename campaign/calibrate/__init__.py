@@ -2,7 +2,7 @@
 plausibility checks, the calibration stages (geometry with the fault screen, physical effects, residual layer),
 multi-SMR, ``report.json`` as a typed record and its per-point table, model/report files (``outputs``), and the
 sim-to-real gap diagnosis (``diagnosis``). Imports data, run (records), plan, config and robocal."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "adaptive_rounds": ("AdaptiveRounds",),

@@ -42,7 +42,7 @@ from .stages import fit_stages
 
 
 REPORT_FORMAT = "campaign-diagnosis/1"
-MIN_CALIB_ROWS = 40
+MIN_DIAGNOSIS_ROWS = 40      # calib rows a diagnosis needs (a calibration alone needs prepare.MIN_CALIB_ROWS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,8 +54,8 @@ class DiagnosisReport:
 def _check(ds: Dataset, cfg: CampaignConfig) -> None:
     ds.require_joints(len(cfg.robot.joints))
     n_cal = int(ds.mask("calib").sum())
-    if n_cal < MIN_CALIB_ROWS:
-        raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
+    if n_cal < MIN_DIAGNOSIS_ROWS:
+        raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_DIAGNOSIS_ROWS}")
 
 
 def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline, nominal=None, q_cmd_deg=None

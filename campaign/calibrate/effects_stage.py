@@ -23,6 +23,8 @@ from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
 
+from .prepare import MIN_CALIB_ROWS
+
 
 def order_meta(ds: Dataset) -> dict:
     """What the measurement order gives each row of ``ds`` (rows in measurement order, as the interchange CSV
@@ -123,7 +125,7 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
         robust_rejected = ~geo.keep
         robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
         new_keep = final_screen.keep & ~robust_rejected
-        if new_keep.sum() < 10:
+        if new_keep.sum() < MIN_CALIB_ROWS:
             final_screen = geo.screen
         elif not np.array_equal(new_keep, geo.keep):
             kept = rc[new_keep]

@@ -134,13 +134,6 @@ def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
     return replace(state, overridden=state.overridden + (message,), forced=True)
 
 
-def reach_mm(cfg, p_flange_smr_mm=None) -> float:
-    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr| (the configured
-    offset unless one is given)."""
-    tool = cfg.tool.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm
-    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(tool))
-
-
 def row_locations(ds) -> list[str]:
     """Human location of every row: ``line L`` of a CSV (comments and blank lines counted), else
     ``point record k``; the point id is appended."""
@@ -330,6 +323,7 @@ def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
 def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Nominal RMS after registering the base and the SMR offsets on the calibration rows < 1 % of the reach."""
     from robocal.identify.identification import IdentificationError, register
+    from robocal.identify.screening import reach_mm
     from robocal.kinematics.models import smr_tracker
 
     cfg = cell.config
@@ -342,7 +336,7 @@ def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) ->
         return state, None                  # calibration reports it with its own message
     err = p - smr_tracker(kin, q)
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    reach = reach_mm(cfg, kin.p_flange_smr_mm)
+    reach = reach_mm(kin)
     bound = REACH_FRACTION * reach
     state = replace(state, nominal_rms_mm=rms, bound_mm=bound)
     if not np.isfinite(rms) or rms > bound:

@@ -31,6 +31,7 @@ class Prepared:
     report: dict
 
 
+MIN_CALIB_ROWS = 10         # the fewest calibration rows a calibration fits (a fault screen may not leave fewer)
 MAX_READBACK_RMS_DEG = 1.0   # read-back lags are hundredths of a degree; more means the two sets are not the same poses
 FIT_MARGIN = 0.9    # the read-back set overrides the statistics only when it fits >= 10 % better
 
@@ -50,7 +51,7 @@ def _confirm_by_fit(cell: CellModel | None, ds: Dataset, robot: np.ndarray) -> t
     The same geometric model is fitted to the calib rows with each set; the read-back set wins only when its
     RMS is clearly (>= 10 %) lower."""
     cal = ds.mask("calib")
-    if cell is None or cal.sum() < 10:
+    if cell is None or cal.sum() < MIN_CALIB_ROWS:
         return True, "", {}
     p = ds.p_tracker_mm[cal]
     rms_cmd, rms_read = _fit_rms(cell, ds.qc_deg[cal], p), _fit_rms(cell, ds.q_deg[cal], p)

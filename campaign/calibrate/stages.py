@@ -37,7 +37,7 @@ from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, Calibr
 from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
-from .prepare import prepare
+from .prepare import MIN_CALIB_ROWS, prepare
 from .report_points import PointTable, cell_summary, point_table, report_points_value
 from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, LayerSummary, MethodChoice,
                               PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult, parameter_rows)
@@ -57,8 +57,9 @@ class Calibrated:
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
     ds.require_joints(len(cfg.robot.joints))
-    if ds.mask("calib").sum() < 10:
-        raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
+    if ds.mask("calib").sum() < MIN_CALIB_ROWS:
+        raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least {MIN_CALIB_ROWS} are "
+                                   "needed")
 
 
 def _predict(kin_or_model, q, payload=None, meta=None) -> np.ndarray:
@@ -141,8 +142,8 @@ def _geometric(ds: Dataset, cell: CellModel, kin0, rescreen: _Screen) -> Geometr
             if np.array_equal(new_keep, keep):
                 break
             keep = new_keep
-            if keep.sum() < 10:
-                raise DataError(ds.source, "the fault screen left fewer than 10 calibration points")
+            if keep.sum() < MIN_CALIB_ROWS:
+                raise DataError(ds.source, f"the fault screen left fewer than {MIN_CALIB_ROWS} calibration points")
             result = _calibrate(kin0, q[keep], p[keep], cov[keep], options, ds.source)
     w = np.zeros(len(rows))
     w[keep] = result.point_weights

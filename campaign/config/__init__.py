@@ -3,7 +3,7 @@ file and the key path (``reader``, ``bounded_yaml``), loading and the whole-conf
 ``checks``), the numerics a config describes (``cell_model``: nominal kinematics, measurement covariance,
 calibration options; built once per command) and the simulation section as robocal objects (``simulation``).
 Imports robocal, ``drivers.registry`` (driver option checks) and the shared leaves only."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "cell_model": ("CellModel",),

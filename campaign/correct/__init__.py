@@ -2,7 +2,7 @@
 bounds of corrected targets (``bounds``), the write-back formats (``rapid_module``, ``ur_program``, ``target_csv``,
 ``write_back``), closed-loop verification and ``verify.json`` (``verify``, ``verify_report``). Imports calibrate
 (model files), run, plan, config, robocal and ``drivers.rapid``."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "accuracy": ("held_out_of", "summary_lines"),

@@ -2,7 +2,7 @@
 (``interchange_csv``: the format, ``read_csv``, ``write_csv``; their steps in ``interchange_reader`` and
 ``interchange_writer``), the durable log as a dataset (``log_dataset``), and ``load_source(path)`` for a run directory
 or a CSV. Imports run (log records), config and robocal."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "dataset": ("Dataset",),

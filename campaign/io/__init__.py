@@ -1,7 +1,7 @@
 """How every room touches files and the terminal safely: durable writes (``durable``: atomic replace, fsync), typed
 JSON record fields (``json_fields``), spreadsheet-safe CSV cells (``csv_cells``) and terminal-safe text
-(``terminal_text``). Imports ``campaign.errors`` only (and robocal's lazy loader for this door)."""
-from robocal import lazy_exports
+(``terminal_text``). Imports ``campaign.errors`` only (and the drivers' lazy loader for this door)."""
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "csv_cells": ("neutralise", "render_rows", "restore"),

@@ -3,7 +3,7 @@
 rounds, shared by every plan kind; ``optimal``: poses chosen from a candidate pool; ``iso9283``: the ISO 9283 cube
 and its cycles), with the motion safety of every move (``motion_safety``: keep-out boxes, envelope along the swept
 path, via poses, speed caps). Imports config, robocal and ``drivers.base``."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "acceptance": ("acceptance_warnings",),

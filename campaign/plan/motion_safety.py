@@ -143,14 +143,6 @@ class PathGuard:
         return c[keep]
 
 
-def plan_vias(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str]) -> list[tuple[tuple[float, ...], ...]]:
-    """Via poses before each of the planned poses (N, n) deg, in the given order (none before the first: the
-    runner routes the move from wherever the robot stands). Raises UnsafeMotion naming the pair of points when a
-    move cannot be made safe."""
-    order, vias = plan_route(guard, q_deg, ids, reorder=0)
-    return vias
-
-
 def plan_route(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str],
                reorder: int = REORDER_WINDOW) -> tuple[list[int], list[tuple[tuple[float, ...], ...]]]:
     """Visiting order and via poses of the planned poses (N, n) deg. A move that no via pose clears is avoided by

@@ -2,7 +2,7 @@
 HTML report and its figures (``html``, ``html_figures``, ``templates/``), diagnosis plots, the ISO 9283
 characteristics of an acceptance run (``iso9283``) and model export (``export``: URDF, DH tables). Imports
 calibrate, correct, data, run, plan, config and robocal."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "adaptive_text": ("render_adaptive_selection", "render_learning", "render_plan_learning"),

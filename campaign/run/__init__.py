@@ -4,7 +4,7 @@ before the next move (``runner``, ``tracker_quality``, ``traceability``), the du
 directory, log, safety set-up, progress), the output directories every command owns (``output_dirs``: a run
 directory is known by its log) and the emScon emulator on a config's simulated cell (``emscon_cell``). Imports
 plan, config, drivers and robocal."""
-from robocal import lazy_exports
+from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "devices": ("open_devices",),

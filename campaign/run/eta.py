@@ -18,13 +18,6 @@ from campaign.plan.points import PlanPoint
 from .log_records import NestRecord, PointRecord
 
 
-def point_durations_s(points: Sequence[PlanPoint], cell: CellModel,
-                      q_start_deg: Sequence[float] | None = None) -> np.ndarray:
-    """(N,) predicted seconds per point, in plan order, starting from ``q_start_deg`` (default ``plan.q_ref_deg``)."""
-    move, fixed = point_times_s(points, cell, q_start_deg)
-    return move + fixed
-
-
 def point_times_s(points: Sequence[PlanPoint], cell: CellModel,
                   q_start_deg: Sequence[float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Predicted (move + settle, readings) seconds per point (N,) each: moves of the nominal model at the capped
@@ -73,10 +66,6 @@ class RunEta:
         self.read = np.zeros_like(self.move) if predicted_read_s is None else np.asarray(predicted_read_s, float)
         self.done = 0
         self.sums = np.zeros(4)              # measured move, predicted move, measured reading, predicted reading
-
-    @classmethod
-    def for_plan(cls, points: Sequence[PlanPoint], cell: CellModel) -> "RunEta":
-        return cls(*point_times_s(points, cell))
 
     def observe(self, record: PointRecord | NestRecord) -> None:
         """A measured point record (``t_start_s`` before its move, ``t_measure_s`` settled, ``t_end_s`` after the
