@@ -13,6 +13,7 @@ outlive the debt. ``test_checker_*`` run the same checks on small fake trees so 
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,6 +68,23 @@ class Edge:
     line: int
 
 
+def parsed(path: Path) -> ast.Module:
+    """The syntax tree of a file (parsed and walked once per text: every check reads the same files)."""
+    return _walked(path.read_text(encoding="utf-8"))[0]
+
+
+def walked(path: Path) -> tuple[ast.AST, ...]:
+    """The import statements and the calls of the file, anywhere in it (``ast.walk`` order: inside functions,
+    classes and ``if`` blocks included)."""
+    return _walked(path.read_text(encoding="utf-8"))[1]
+
+
+@functools.lru_cache(maxsize=None)
+def _walked(text: str) -> tuple[ast.Module, tuple[ast.AST, ...]]:
+    tree = ast.parse(text)
+    return tree, tuple(n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom, ast.Call)))
+
+
 def modules(root: Path, packages=PACKAGES) -> dict[str, Path]:
     """Dotted module name -> file, for every .py file under the packages."""
     out = {}
@@ -87,7 +105,7 @@ def import_edges(name: str, path: Path, known: dict[str, Path]) -> list[Edge]:
     to project modules; ``from pkg import submodule`` names the submodule."""
     base = package_of(name, path).split(".")
     edges = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in walked(path):
         if isinstance(node, ast.Import):
             pairs = [(a.name, None) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -230,7 +248,7 @@ def door(mods: dict[str, Path], room: str) -> dict[str, str] | None:
     names, loaded on first use), a ``_LAZY`` table (name -> module) or a ``from .module import name`` of the
     ``__init__``; any other name is defined by the door's file itself. A computed ``__all__`` (not a literal list)
     is the names of ``_HOMES`` and the strings it spells out. None when the file has no ``__all__``."""
-    tree = ast.parse(mods[room].read_text(encoding="utf-8"))
+    tree = parsed(mods[room])
     homes: dict[str, str] = {}          # name -> module, from _HOMES, _LAZY and relative imports
     lazy: list[str] = []                # the names of _HOMES, in order
     listed: list[str] | None = None     # a literal __all__
@@ -260,7 +278,7 @@ def door(mods: dict[str, Path], room: str) -> dict[str, str] | None:
 
 def defines(path: Path, name: str) -> bool:
     """The module binds ``name`` at its top level itself (a def, a class, an assignment), not by importing it."""
-    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+    for node in parsed(path).body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == name:
             return True
         targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) \
@@ -276,7 +294,7 @@ def offers(mods: dict[str, Path], module: str, name: str, depth: int = 0) -> boo
     if defines(mods[module], name):
         return True
     base = package_of(module, mods[module])
-    for node in ast.parse(mods[module].read_text(encoding="utf-8")).body:
+    for node in parsed(mods[module]).body:
         if isinstance(node, ast.ImportFrom) and node.module and node.level <= 1 and depth < 3:
             source = f"{base}.{node.module}" if node.level else node.module
             if source.rpartition(".")[0] != base:
@@ -321,7 +339,7 @@ def third_party_closure(root: Path, start: str) -> dict[str, set[str]]:
         if name in seen:
             continue
         seen.add(name)
-        tree = ast.parse(mods[name].read_text(encoding="utf-8"))
+        tree = parsed(mods[name])
         tops = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         tops |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
                  and n.module and not n.level}
@@ -336,7 +354,7 @@ def builder_sites(root: Path, builders=CELL_BUILDERS, packages=PACKAGES) -> set[
     out = set()
     for path in modules(root, packages).values():
         rel = path.relative_to(root).as_posix()
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in walked(path):
             names = [a.name for a in node.names] if isinstance(node, ast.ImportFrom) else []
             if isinstance(node, ast.Call):
                 names = [dotted(node.func)]
@@ -359,9 +377,15 @@ def dotted(func: ast.expr) -> str:
 # ----------------------------------------------------------------------------------------------------------------
 # the product
 
+@functools.lru_cache(maxsize=1)
+def product_graph() -> tuple[dict[str, Path], list[Edge]]:
+    """The product's modules and import edges, drawn once per session (the structure and docs tests share it)."""
+    return graph(ROOT)
+
+
 @pytest.fixture(scope="module")
 def product():
-    return graph(ROOT)
+    return product_graph()
 
 
 @pytest.mark.unit

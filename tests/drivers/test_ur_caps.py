@@ -24,8 +24,9 @@ def _peak_speed(w: Worker, q0, q1, omega: float, radius_m: float) -> float:
     return peak
 
 
-@pytest.mark.unit
-@pytest.mark.parametrize("model", ["UR10", "UR5e", "UR16e"])
+@pytest.mark.parametrize("model", [pytest.param("UR10", marks=pytest.mark.system),      # one model in the unit tier
+                                   pytest.param("UR5e", marks=pytest.mark.unit),
+                                   pytest.param("UR16e", marks=pytest.mark.system)])
 def test_no_point_of_the_tool_exceeds_the_tcp_cap(model):
     rng = np.random.default_rng(13)
     w = _worker(model, (0.0, 0.02, 0.12), tool_radius_mm=150.0)

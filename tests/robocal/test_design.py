@@ -172,7 +172,7 @@ def _irb2600_criterion():
     return kin, qc, criterion(kin, qc, np.broadcast_to(np.eye(3) * 1e-3, (len(qc), 3, 3)))
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_criterion_counts_the_parameters_a_pose_set_identifies():
     kin, qc, c = _irb2600_criterion()
     layout = ParamLayout.of(kin)
@@ -193,7 +193,7 @@ def test_farthest_first_takes_the_farthest_point_at_every_step():
         assert d[chosen[t]] == pytest.approx(d.max())
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_space_filling_keeps_the_geometry_determined_or_falls_back_to_d_optimal():
     from dataclasses import replace
     kin, qc, c = _irb2600_criterion()

@@ -43,7 +43,7 @@ def test_pinned_diagnosis_of_a_seeded_campaign(inp):
                                                 "J2 approach direction (+ vs -), shift -0.415 mm"]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_options_reach_the_engine(inp):
     d = diagnose(replace(inp, t_s=None), DiagnosisOptions(engine=EngineOptions(max_effects=1)))
     assert len([f for f in d.findings if f.accepted]) == 1

@@ -280,7 +280,7 @@ def test_identifiability_reports_an_effect_parameter_the_poses_cannot_separate()
     assert el.effects[0].values[0] == pytest.approx(1e-6, rel=0.05)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_select_is_deterministic():
     camp = simulate(["backlash"], 61, TruthProtocol(n_calib=120, n_test=20, check_poses=4, check_repeats=3))
     inp, geo, cols, meta, eng = engine_on(camp)

@@ -106,7 +106,7 @@ def test_gpr_layer_reduces_held_out_rms_and_round_trips_through_json():
     np.testing.assert_allclose(back.residual.predict_std(qt), layer.predict_std(qt), atol=1e-12)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_payload_as_an_input_and_the_deflection_grows_with_payload():
     kin = irb4600()
     q = random_configurations(40, seed=0)

@@ -55,7 +55,7 @@ def test_reduced_rank_kernel_approaches_the_exact_kernel():
     np.testing.assert_allclose(P @ np.diag(lam) @ P.T, exact, atol=2e-3 * 4.0)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_recovers_per_joint_cyclic_errors_and_predicts_new_poses():
     kin = irb2600()
     rng = np.random.default_rng(1)
@@ -74,7 +74,7 @@ def test_recovers_per_joint_cyclic_errors_and_predicts_new_poses():
     assert layer.noise_mm >= NOISE_AXIS_MM * (1 - 1e-9)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_cv_from_gram_differences_equals_a_fit_on_the_training_rows():
     kin = irb2600()
     rng = np.random.default_rng(3)
@@ -135,7 +135,7 @@ def test_not_kept_on_pure_noise():
     assert kept == 0
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_diagnosis_names_the_joint_whose_curve_is_left_over():
     """Residuals from a J3 angle error of 9 periods per revolution only (plus noise): the diagnosis' joint curves put
     J3 first, with about the simulated amplitude (RMS of 0.75e-4 rad sin: 10.9 arcsec)."""

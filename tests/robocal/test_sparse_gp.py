@@ -31,7 +31,7 @@ def rms(e):
     return float(np.sqrt(np.mean(np.sum(np.square(e), axis=1))))
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_inducing_inputs_at_the_training_inputs_give_the_exact_gp():
     X, Y = data(250, 0)
     Xt, _ = data(400, 1)
@@ -44,7 +44,7 @@ def test_inducing_inputs_at_the_training_inputs_give_the_exact_gp():
     np.testing.assert_allclose(s_sparse, s_exact, rtol=1e-3)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_few_inducing_inputs_agree_with_the_exact_gp_within_a_tenth_of_its_error():
     """1500 points, 300 inducing inputs: the two predictions differ by less than 10 % of the exact GP's own
     held-out error (stated tolerance of the approximation), and both learn the field."""

@@ -37,7 +37,7 @@ def dataset(q, P, sets, source="sim3"):
                    p3_tracker_mm=P[2], source=source)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_corrupted_smr_readings_are_set_aside_on_calib_and_test_rows():
     cfg = replace(CFG, tool=replace(CFG.tool, p_flange_smr2_mm=tuple(OFFSETS[1]), p_flange_smr3_mm=tuple(OFFSETS[2])))
     _, q, P, sets = three_smr_dataset()

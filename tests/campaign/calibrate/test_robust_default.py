@@ -102,7 +102,7 @@ def test_structure_is_kept_and_faults_found_under_strong_compliance():
         assert final < 0.7 * kinematic
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_three_smr_dataset_reports_offsets_and_orientation():
     from dataclasses import replace
     from robocal.multi_smr.calibration import predict_multi

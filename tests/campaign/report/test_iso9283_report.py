@@ -110,7 +110,7 @@ def test_terminal_summary_units_and_the_verdict_at_80_columns(tmp_path, rp_robot
     assert f"RD ±{rep['runs'][0]['distance']['rd_mm']:.4f} mm" in flat and "+-" not in flat
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_html_table_units_verdict_and_3d_scatter(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     from campaign.report import html_figures
