@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -37,7 +38,13 @@ def reference_text() -> str:
 
 
 def reference_dict() -> dict[str, Any]:
-    return yaml.safe_load(reference_text())
+    """A fresh copy of the reference config as a dict (parsed once: most bad-config cases edit it)."""
+    return copy.deepcopy(_reference_data(reference_text()))
+
+
+@functools.lru_cache(maxsize=1)
+def _reference_data(text: str) -> dict[str, Any]:
+    return yaml.safe_load(text)
 
 
 # --------------------------------------------------------------------------- good configs
