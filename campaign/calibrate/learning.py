@@ -18,13 +18,14 @@ from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 from campaign.plan.learning import SIZES, forecast_curve
 from campaign.plan.points import Plan, PlanPoint
+from campaign.run.log_events import ForecastEvent
 from campaign.run.log_records import PointRecord
 from campaign.run.eta import budget_duration_s, estimate_duration_s, grid_duration_s
 
 from .report_sections import LearningCurve
 from .stages import calibrate_dataset
 
-FORECAST_EVENT = "forecast"
+FORECAST_EVENT = ForecastEvent.TYPE
 MEASURED_SIZES = tuple(s for s in SIZES if s >= 25)
 
 
@@ -37,12 +38,11 @@ def plan_learning(cell: CellModel, plan: Plan) -> tuple[tuple[tuple[int, float],
     return forecast_curve(cell, plan), minutes
 
 
-def forecast_event(cell: CellModel, plan: Plan) -> dict:
+def forecast_event(cell: CellModel, plan: Plan) -> ForecastEvent:
     """The ``forecast`` log event of a run that starts now."""
     curve, minutes = plan_learning(cell, plan)
-    return {"type": FORECAST_EVENT, "curve": [list(c) for c in curve],
-            "minutes_planned": minutes["budget"] if minutes["budget"] is not None else minutes["plan"],
-            "minutes_grid": minutes["grid"]}
+    return ForecastEvent([list(c) for c in curve],
+                         minutes["budget"] if minutes["budget"] is not None else minutes["plan"], minutes["grid"])
 
 
 def measured_curve(ds: Dataset, cell: CellModel, sizes=MEASURED_SIZES) -> tuple[tuple[int, float], ...]:

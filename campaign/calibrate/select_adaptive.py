@@ -24,7 +24,7 @@ from robocal.kinematics.models import smr_base, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
-from campaign.errors import DataError
+from campaign.errors import DataError, one_line
 from campaign.plan.adaptive import seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
@@ -110,7 +110,7 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
             add = _farthest(q * crit.levers_mm_per_rad, taken, k)
             rounds.append(Round(len(chosen), "none", None, None, tuple(ds.point_id[cal[i]] for i in add),
-                                f"refit failed ({' '.join(str(exc).split())[:120]}): the farthest rows instead"))
+                                f"refit failed ({one_line(exc)[:120]}): the farthest rows instead"))
             chosen += [int(i) for i in add]
     keep = ~ds.mask("calib")
     keep[cal[chosen]] = True

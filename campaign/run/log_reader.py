@@ -46,6 +46,7 @@ from campaign.errors import DataError
 from campaign.io.json_fields import RecordError
 from drivers.redact import redact
 
+from .log_events import ExitStatus
 from .log_records import NestRecord, PointRecord, point_from_dict
 
 
@@ -54,7 +55,7 @@ __all__ = ["LOG_NAME", "KINDS", "EXIT_STATUSES", "RunLogError", "RunLogExistsErr
 
 LOG_NAME = "log.jsonl"
 KINDS = ("start", "point", "event", "stop")
-EXIT_STATUSES = ("success", "abort", "fail", "paused")
+EXIT_STATUSES = tuple(s.value for s in ExitStatus)
 _RECORD_KEYS = frozenset(("kind", "seq", "data", "crc"))
 _HEX = frozenset("0123456789abcdef")
 
