@@ -71,8 +71,9 @@ def round_checks(contents: LogContents | None) -> list[RoundCheck]:
 
 
 def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: float,
-                 excluded: frozenset[str] = frozenset()) -> RoundCheck:
-    """Refit the calibration points of the log and choose the next batch (or stop), see the module docstring."""
+                 excluded: frozenset[str] = frozenset(), *, force: bool = False) -> RoundCheck:
+    """Refit the calibration points of the log and choose the next batch (or stop), see the module docstring;
+    ``force``: failed plausibility checks of the refit are overridden (``--force``)."""
     pl = cell.config.plan
     ds = dataset_from_log(contents)
     n = int(ds.mask("calib").sum())
@@ -87,7 +88,7 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
     if pl.max_minutes is not None and elapsed_min + per_point * k > pl.max_minutes:
         return stop(f"max_minutes budget: {elapsed_min:.0f} of {pl.max_minutes:g} min used, the next batch needs "
                     f"about {per_point * k:.0f}")
-    cur = refit(ds.subset(~ds.mask("test")), cell)
+    cur = refit(ds.subset(~ds.mask("test")), cell, force=force)
     measured = set(np.array(ds.point_id)[ds.mask("calib")])
     pool = [p for p in plan.candidates if p.point_id not in measured and p.point_id not in excluded]
     if len(pool) > MAX_CANDIDATES:
@@ -119,11 +120,12 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
 class AdaptiveRounds:
     """The passes of an adaptive run (``campaign.run.runner.PassPlan``): the seed, then one batch per round (a
     refit and an ``adaptive_round`` event before each), then the points after the seed (test set, final check and
-    nest rounds). ``on_skip(n)`` hears of budget points that will not be measured."""
+    nest rounds). ``on_skip(n)`` hears of budget points that will not be measured; ``force`` (``--force``) reaches
+    every refit."""
 
     def __init__(self, cell: CellModel, plan: Plan, run_dir: Path, log, done_ids: set[str],
-                 on_skip: Callable[[int], None] | None = None) -> None:
-        self.cell, self.plan, self.run_dir, self.log = cell, plan, Path(run_dir), log
+                 on_skip: Callable[[int], None] | None = None, *, force: bool = False) -> None:
+        self.cell, self.plan, self.run_dir, self.log, self.force = cell, plan, Path(run_dir), log, force
         self.done = set(done_ids)
         self.on_skip = on_skip
         self.by_id = plan.known_points()
@@ -176,7 +178,7 @@ class AdaptiveRounds:
             self.q_last = np.asarray(records[-1].q_cmd_deg, float)     # where the robot stands
         elapsed = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in contents.records())
         try:
-            check = decide_round(self.cell, self.plan, contents, elapsed, frozenset(self.excluded))
+            check = decide_round(self.cell, self.plan, contents, elapsed, frozenset(self.excluded), force=self.force)
         except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
             n = int(sum(r.set == "calib" for r in contents.records()))
             check = RoundCheck(n, "-", None, None, 0.0, None, None, (), elapsed / 60.0, "stop",

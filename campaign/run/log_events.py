@@ -135,21 +135,23 @@ class FirstPassEvent(LogEvent):
 
 
 @dataclass(frozen=True)
-class EnvironmentFault(LogEvent):
-    """The tracker's weather read failed at a point (the point is kept, without it)."""
-    TYPE: ClassVar[str] = "environment_fault"
+class PointFault(LogEvent):
+    """Base of a side reading that failed at a point (the point is kept without it): the one-line ``reason``."""
     point_id: str
     reason: str
     t_s: float
 
 
 @dataclass(frozen=True)
-class JointTemperatureFault(LogEvent):
-    """The robot's joint temperatures could not be read at a point (the point is kept, without them)."""
+class EnvironmentFault(PointFault):
+    """The tracker's weather read failed at a point."""
+    TYPE: ClassVar[str] = "environment_fault"
+
+
+@dataclass(frozen=True)
+class JointTemperatureFault(PointFault):
+    """The robot's joint temperatures could not be read at a point."""
     TYPE: ClassVar[str] = "joint_temperature_fault"
-    point_id: str
-    reason: str
-    t_s: float
 
 
 @dataclass(frozen=True)
