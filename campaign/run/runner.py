@@ -115,7 +115,7 @@ class Runner:
         except PointFailed as exc:
             self._safe_stop()
             status, reason = ExitStatus.PAUSED, str(exc)
-            self._event(log, PauseEvent(reason, self.clock.now()))
+            self._event(log, lambda t_s: PauseEvent(reason, t_s))
         except KeyboardInterrupt as exc:                     # Ctrl-C, or a signal raised as a subclass with a reason
             self._safe_stop()
             status = ExitStatus.ABORT
@@ -124,7 +124,7 @@ class Runner:
         except (DriverError, UnsafeMotion) as exc:
             self._safe_stop()
             status, reason = ExitStatus.FAIL, one_line(exc)
-            self._event(log, FaultEvent("robot", reason, self.clock.now()))
+            self._event(log, lambda t_s: FaultEvent("robot", reason, t_s))
         except (OSError, RunLogError) as exc:               # the log or the disk failed: stop, keep what is on disk
             self._safe_stop()
             status, reason = ExitStatus.FAIL, f"{type(exc).__name__}: {one_line(exc)}"
@@ -135,8 +135,8 @@ class Runner:
             raise
         finally:
             self._safe_stop()
-            (logger.info if status == ExitStatus.SUCCESS else logger.warning)("run %s: %s (%d points measured now)",
-                                                                      status, reason, n)
+            (logger.info if status == ExitStatus.SUCCESS else logger.warning)(
+                "run %s: %s (%d points measured now)", status, reason, n)
             close_log(log, status, reason)
         return RunOutcome(status, reason, n)
 
@@ -176,11 +176,11 @@ class Runner:
         except Exception:  # stop is best effort on an already failing device
             pass
 
-    @staticmethod
-    def _event(log: RunLog, event: LogEvent) -> None:
-        """Append an event on a failure path (never masks the failure being handled)."""
+    def _event(self, log: RunLog, event: Callable[[float], LogEvent]) -> None:
+        """Append ``event(t_s)`` on a failure path (never masks the failure being handled, a failing clock
+        included)."""
         try:
-            log.append_event(event)
+            log.append_event(event(self.clock.now()))
         except Exception:
             pass
 
