@@ -2,7 +2,6 @@
 simulated ones and the test doubles that have it, and on none that lack it; the retry back-off."""
 import pytest
 
-from drivers import base
 from drivers.base import (DrainsEvents, EnforcesMotionLimits, Identifies, ReacquireSwitch, Reacquires,
                           ReadsJointTemperatures, ReadsSpeedOverride, SelectsNest, SelectsSmr, Simulated,
                           TakesPayload, backoff_s, can_reacquire)
@@ -70,4 +69,3 @@ def test_reacquisition_needs_the_method_and_a_device_that_can_aim():
 
 def test_backoff_doubles_from_0_2_s_and_stops_at_2_s():
     assert [backoff_s(k) for k in (1, 2, 3, 4, 5, 6)] == pytest.approx([0.2, 0.4, 0.8, 1.6, 2.0, 2.0])
-    assert base.backoff_s is backoff_s
