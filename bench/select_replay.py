@@ -16,7 +16,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
-from campaign.calibrate.select_rows import select_rows  # noqa: E402
+from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 

@@ -29,7 +29,11 @@ def lazy_exports(package: str, homes: dict[str, tuple[str, ...]]):
 _HOMES = {                      # module -> the public names it holds
     "abb_axes": ("AbbAxes", "axes_layout"),
     "base": ("BeamBroken", "Clock", "DriverConfigError", "DriverError", "MotionLimits", "Payload", "Robot",
-             "SystemClock", "Tracker", "TrackerError", "TrackerReading", "Unstable", "average_samples"),
+             "SystemClock", "Tracker", "TrackerError", "TrackerReading", "Unstable", "average_samples",
+             # optional capabilities (runtime-checkable Protocols) and their helpers
+             "DrainsEvents", "EnforcesMotionLimits", "Identifies", "ReacquireSwitch", "Reacquires",
+             "ReadsJointTemperatures", "ReadsSpeedOverride", "SelectsNest", "SelectsSmr", "Simulated",
+             "TakesPayload", "Versioned", "backoff_s", "can_reacquire", "device_url"),
     "emscon_protocol": ("AU_DEGREE", "COMMAND_CT", "CS_RHR", "C_CLEAR_COMMAND_QUEUE", "C_FIND_REFLECTOR",
                         "C_GET_ENVIRONMENT_PARAMS", "C_GET_REFLECTOR", "C_GET_REFLECTORS", "C_GET_SYSTEM_SETTINGS",
                         "C_GET_SYSTEM_STATUS", "C_GO_POSITION", "C_INITIALIZE", "C_SET_COORDINATE_SYSTEM_TYPE",
@@ -44,7 +48,7 @@ _HOMES = {                      # module -> the public names it holds
                         "decode_command", "encode_error", "encode_meas_result", "encode_reply",
                         "encode_status_change"),
     "mock": ("MockTracker", "MockWorld"),
-    "redact": ("has_userinfo", "redact", "redact_url"),
+    "redaction": ("has_userinfo", "redact", "redact_url"),
     "registry": ("CellContext", "ROBOT_SCHEMES", "TRACKER_SCHEMES", "check_options", "open_robot", "open_tracker"),
     "ur_options": ("ROBOT_MODES", "SAFETY_MODES"),
 }

@@ -41,12 +41,7 @@ KNOWN_CYCLES = {}
 KNOWN_UPWARD: dict[tuple[str, str], str] = {}   # (importer, imported): arrows from a lower package to a higher one
 KNOWN_DOWNWARD: dict[tuple[str, str], str] = {}  # (importer, imported): a campaign room importing a room above it
 KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}   # (importer, defining module, name)
-KNOWN_CLOSED_DOORS: dict[str, str] = {   # a door rule broken (the message of door_violations) -> why
-    "campaign.calibrate: select_rows is both a public name and a module of the room":
-        "the select workflow moves from cli/commands.py into workflows.py (issue 35, part B); rename after it",
-    "drivers: redact is both a public name and a module of the room":
-        "redaction moves down to a shared leaf (issue 35, part B); the function or its module is renamed then",
-}
+KNOWN_CLOSED_DOORS: dict[str, str] = {}   # a door rule broken (the message of door_violations) -> why
 # The numerics of a config are built once per command and passed down (campaign.config.cell_model.CellModel):
 # call (or import, for a function) -> the only files (a folder ends in /) that may make it.
 CELL_BUILDERS = {

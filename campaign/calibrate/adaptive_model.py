@@ -57,14 +57,14 @@ class CurrentModel:
         return self.layer.kind
 
 
-def refit(ds: Dataset, cell: CellModel) -> CurrentModel:
+def refit(ds: Dataset, cell: CellModel, *, force: bool = False) -> CurrentModel:
     """The model ``reprocess`` would fit to ``ds`` (its calibration rows; test rows are never needed; the nest rows
     once every nest has been read twice: before, no drift can be told from them)."""
     if ds.nest_id is not None and ds.mask("nest").any():
         ids = np.array(ds.nest_id)[ds.mask("nest")]
         if min(np.unique(ids, return_counts=True)[1]) < 2:
             ds = ds.subset(~ds.mask("nest"))
-    ds, plaus = check_dataset(ds, cell)
+    ds, plaus = check_dataset(ds, cell, force=force)
     fitted = fit_stages(ds, cell, plaus)
     stage = fitted.stage
     fl = final_layer(fitted.dataset, cell, stage)

@@ -116,12 +116,14 @@ def _identified(result) -> np.ndarray:
     return np.array([layout.index(n) for n in result.identified], int)
 
 
-def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | None = None) -> DiagnosisReport:
+def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | None = None, *,
+                     force: bool = False) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract. ``options`` None: the defaults with the
-    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage)."""
+    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage);
+    ``force``: failed plausibility checks are overridden and reported as such."""
     cfg = cell.config
     _check(ds, cfg)
-    ds, plaus = check_dataset(ds, cell)                     # issue 12: does this data belong to this robot?
+    ds, plaus = check_dataset(ds, cell, force=force)        # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
         fitted = fit_stages(ds, cell, plaus)   # the same preparation, fits and effect engine as reprocess
@@ -140,10 +142,10 @@ def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | N
 
 
 def diagnose_source(source: str | os.PathLike, cell: CellModel,
-                    options: DiagnosisOptions | None = None) -> DiagnosisReport:
+                    options: DiagnosisOptions | None = None, *, force: bool = False) -> DiagnosisReport:
     """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
     ``calibration.cv_folds``, as in reprocess)."""
-    return diagnose_dataset(load_source(source).dataset, cell, options)
+    return diagnose_dataset(load_source(source).dataset, cell, options, force=force)
 
 
 def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:

@@ -13,17 +13,15 @@
 * a run directory whose log holds fewer points than its plan says so (an interrupted run is never silent).
 
 A failed check raises :class:`campaign.errors.PlausibilityError` (exit 2, one line) unless the operator passed
-``--force`` (:func:`forced`): then the rows outside the limits are dropped, and the report's
+``--force`` (``force=True``, passed by the command down to each check): then the rows outside the limits are dropped, and the report's
 ``plausibility.overridden`` lists every check that failed and was overridden.
 """
 from __future__ import annotations
 
 import csv
-from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator, Mapping
+from typing import Mapping
 
 import numpy as np
 
@@ -40,24 +38,6 @@ LIMIT_TOL_DEG = 1e-6
 TOOL_NOTE_MM = 3.0              # a registered SMR offset this far from the config is reported with the value to use
 ON_AXIS_START_MM = 5.0          # fits start with an SMR offset this close to the flange axis on the axis
 _UNITS = (("mm", 1.0), ("m", 1e-3), ("cm", 0.1), ("inch", 1 / 25.4))
-
-_FORCE: ContextVar[bool] = ContextVar("campaign_plausibility_force", default=False)
-
-
-@contextmanager
-def forced(flag: bool = True) -> Iterator[None]:
-    """Within this block failed plausibility checks are overridden (``--force``) and reported as such."""
-    token = _FORCE.set(bool(flag))
-    try:
-        yield
-    finally:
-        _FORCE.reset(token)
-
-
-def is_forced() -> bool:
-    """Whether the current command runs under ``--force`` (:func:`forced`)."""
-    return _FORCE.get()
-
 
 @dataclass(frozen=True)
 class ToolCheck:
@@ -127,9 +107,9 @@ class Plausibility:
                    figure_field(d, "max_angle_delta_deg"), record_field(d, "tool", ToolCheck.from_dict, True))
 
 
-def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
-    """Raise unless forced; when forced, record the overridden failure."""
-    if not _FORCE.get():
+def _fail(source: str, message: str, state: Plausibility, force: bool) -> Plausibility:
+    """Raise unless ``force``; then record the overridden failure."""
+    if not force:
         raise PlausibilityError(source, message)
     return replace(state, overridden=state.overridden + (message,), forced=True)
 
@@ -151,12 +131,12 @@ def row_locations(ds) -> list[str]:
     return [f"line {ln} ({pid})" for ln, pid in zip(lines, ds.point_id)]
 
 
-def check_dataset(ds, cell: CellModel):
+def check_dataset(ds, cell: CellModel, *, force: bool = False):
     """Checks on the data alone (before any fit): magnitudes, joint limits, unit, nominal RMS, completeness.
 
     Unit and nominal RMS are judged on the rows inside the limits; every failed check is named in one line
     (the wrong-robot verdict first). Returns (dataset, Plausibility): the dataset without the rejected rows
-    when forced, else unchanged."""
+    when ``force`` (``--force``: the failures are recorded as overridden), else unchanged."""
     cfg = cell.config
     state = Plausibility()
     ds.require_joints(len(cfg.robot.joints))
@@ -173,7 +153,7 @@ def check_dataset(ds, cell: CellModel):
     if limits_msg:
         failures.append(limits_msg)
     if failures:
-        if not _FORCE.get():
+        if not force:
             raise PlausibilityError(ds.source, "; ".join(failures))
         state = replace(state, overridden=state.overridden + tuple(failures), forced=True)
     return inside, state
@@ -346,9 +326,10 @@ def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) ->
     return state, None
 
 
-def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
-    """Identified joint geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error.
-    The base frame and the SMR offset are registration quantities and have no bound."""
+def check_deltas(kin0, kin, source: str, state: Plausibility, *, force: bool = False) -> Plausibility:
+    """Identified joint geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error
+    (recorded as overridden with ``force``). The base frame and the SMR offset are registration quantities and have
+    no bound."""
     nominal_len = np.concatenate([kin0.a_mm, kin0.d_mm])
     delta_len = np.concatenate([kin.a_mm, kin.d_mm]) - nominal_len
     names = [f"a{i + 1}" for i in range(kin0.n)] + [f"d{i + 1}" for i in range(kin0.n)]
@@ -367,7 +348,7 @@ def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
         return state
     shown = ", ".join(bad[:4]) + (f" and {len(bad) - 4} more" if len(bad) > 4 else "")
     return _fail(source, f"identified deltas beyond physical bounds: {shown}: not a calibration of this robot "
-                         "(wrong config, wrong data, or a crash)", state)
+                         "(wrong config, wrong data, or a crash)", state, force)
 
 
 

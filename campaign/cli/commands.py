@@ -7,7 +7,6 @@ Each registers itself with :func:`campaign.cli.common.command`; each handler rec
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
@@ -17,7 +16,6 @@ from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRU
                                  width_argument)
 from campaign.config.load import load_cell
 from campaign.errors import DataError
-from campaign.calibrate.plausibility import forced
 
 
 
@@ -67,8 +65,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     cell = load_cell(args.config)
     out = stdout_console()
-    with forced(args.force):
-        result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite)
+    result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite, force=args.force)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
@@ -152,8 +149,7 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     cell = load_cell(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
-    with forced(args.force):
-        processed = reprocess(args.source, cell, args.out, args.overwrite)
+    processed = reprocess(args.source, cell, args.out, args.overwrite, force=args.force)
     out = stdout_console()
     _print_calibration(out, processed.report)
     out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
@@ -190,31 +186,14 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
                    "--adaptive: replayed batch by batch with the model refitted)",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
-    from campaign.data.interchange_csv import write_csv
-    from campaign.data.source import load_source
-    from campaign.calibrate.select_rows import select_rows
     from campaign.report.terminal import render_selection
+    from campaign.workflows import select
 
     cell = load_cell(args.config)
-    if args.points < 1:
-        raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
-    if args.out.resolve() == args.data.resolve():
-        raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
-    from campaign.run.output_dirs import check_file
-
-    check_file(args.out, args.overwrite)
-    ds = load_source(args.data).dataset
-    with forced(args.force):
-        if args.adaptive:
-            from campaign.calibrate.select_adaptive import adaptive_selection
-            from campaign.report.adaptive_text import render_adaptive_selection
-            sel = adaptive_selection(ds, cell, args.points)
-        else:
-            sel = select_rows(ds, cell, args.points)
-    subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
-    origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
-    write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
+    sel, ds = select(args.data, cell, args.points, args.out, adaptive=args.adaptive, overwrite=args.overwrite,
+                     force=args.force)
     if args.adaptive:
+        from campaign.report.adaptive_text import render_adaptive_selection
         render_adaptive_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
     else:
         render_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
@@ -238,32 +217,16 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correct.accuracy import held_out_of, summary_lines
-    from campaign.correct.targets import check_model_fits, correct_targets, read_targets_csv, recorded_identity
-    from campaign.correct.write_back import read_rejected, write_corrected
-    from campaign.run.output_dirs import check_dir, source_key
-    from campaign.plan.poses import tool_rotation
-    from campaign.calibrate.outputs import load_model
+    from campaign.correct.accuracy import summary_lines
+    from campaign.workflows import correct
 
     cell = load_cell(args.config)
-    claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
-    model = load_model(args.model)
-    with forced(args.force):
-        check_model_fits(cell, model, str(args.model))
-    targets = read_targets_csv(args.targets, tool_rotation(cell.config.plan.tool_direction))
-    held = held_out_of(model, args.model)
-    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model),
-                                         held_out=held)
     out = stdout_console()
-    try:
-        paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
-    finally:
-        _print_rejected(out, len(targets.ids), args.out)
-    refused = {target_id for target_id, _ in read_rejected(args.out)}
-    out.print(f"{len(targets.ids) - len(refused)} of {len(targets.ids)} targets corrected; wrote "
-              f"{', '.join(p.name for p in paths)} in {args.out}", markup=False)
-    written = [t for t in accepted if t.target_id not in refused]
-    for line in summary_lines(written, held, cell.config.correction.threshold_mm):
+    done = correct(cell, args.model, args.targets, args.out, tuple(args.format or ()), overwrite=args.overwrite,
+                   force=args.force, on_rejected=lambda n: _print_rejected(out, n, args.out))
+    out.print(f"{done.n_targets - len(done.refused)} of {done.n_targets} targets corrected; wrote "
+              f"{', '.join(p.name for p in done.paths)} in {args.out}", markup=False)
+    for line in summary_lines(done.written, done.held_out, cell.config.correction.threshold_mm):
         out.print(line, markup=False)
     return EXIT_OK
 
@@ -295,8 +258,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.workflows import verify
     from campaign.report.terminal import render_verify
 
-    with forced(args.force):
-        result = verify(args.run_dir, stdout_console())
+    result = verify(args.run_dir, stdout_console(), force=args.force)
     render_verify(stdout_console(), result.report)
     stdout_console().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":

@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
-from drivers.redact import has_userinfo, redact_url
+from drivers.redaction import has_userinfo, redact_url
 from campaign.config.bounded_yaml import load_limited, read_limited
 
 from campaign.config.values import FrozenMap

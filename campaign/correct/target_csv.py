@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 from typing import Iterable, Sequence
 
+from campaign.errors import one_line
 from campaign.io.csv_cells import render_rows, restore
 from campaign.io.durable import atomic_write
 from .bounds import CorrectedTarget, Rejected, require_writable
@@ -85,6 +86,6 @@ def read_corrected_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]
 
 def write_rejected_csv(path: str | os.PathLike, rejected: Iterable[Rejected]) -> Path:
     """Write ``target_id,reason`` rows of the rejected targets atomically; return the path."""
-    text = render_rows(["target_id", "reason"], ([r.target_id, " ".join(str(r.reason).split())] for r in rejected),
+    text = render_rows(["target_id", "reason"], ([r.target_id, one_line(r.reason)] for r in rejected),
                        text_columns=(0, 1))
     return atomic_write(path, text.encode("utf-8"))

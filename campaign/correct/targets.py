@@ -291,9 +291,9 @@ def limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 
-def check_model_fits(cell: CellModel, model: CalibratedModel, source: str) -> None:
+def check_model_fits(cell: CellModel, model: CalibratedModel, source: str, *, force: bool = False) -> None:
     """The model must describe the config's robot: same joint count and convention (DataError otherwise), and
-    identified deltas from the nominal model within physical bounds."""
+    identified deltas from the nominal model within physical bounds (``force``: overridden)."""
     cfg = cell.config
     kin, n = model.kinematics, len(cfg.robot.joints)
     if kin.n != n:
@@ -303,4 +303,4 @@ def check_model_fits(cell: CellModel, model: CalibratedModel, source: str) -> No
                                 "not a model of this robot")
     from campaign.calibrate.plausibility import Plausibility, check_deltas
 
-    check_deltas(cell.kinematics, kin, source, Plausibility())   # a model of another robot: exit 2
+    check_deltas(cell.kinematics, kin, source, Plausibility(), force=force)   # a model of another robot: exit 2

@@ -6,6 +6,7 @@ import csv
 from pathlib import Path
 
 from campaign.config.schema import CampaignConfig
+from campaign.errors import one_line
 from campaign.io.csv_cells import restore
 
 from .bounds import Rejected
@@ -42,7 +43,7 @@ def _format_rejections(accepted, formats) -> tuple[list, list[Rejected]]:
             rapid_string(t.target_id)
             ok.append(t)
         except ValueError as exc:
-            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {' '.join(str(exc).split())}"))
+            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {one_line(exc)}"))
     return ok, bad
 
 
@@ -78,7 +79,7 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
                 extra = {"axes": _abb_axes(cfg)} if fmt == "rapid" else {}
                 texts[name] = renderers[name](accepted, **limits, **extra)
             except ValueError as exc:
-                raise CampaignError(f"{out / name}: not written: {' '.join(str(exc).split())}") from None
+                raise CampaignError(f"{out / name}: not written: {one_line(exc)}") from None
     paths = [atomic_write(out / name, text.encode("utf-8")) for name, text in texts.items()]
     return paths + [rejected_path]
 

@@ -6,7 +6,7 @@ from drivers import lazy_exports
 _HOMES = {                      # module -> the public names it holds
     "csv_cells": ("neutralise", "render_rows", "restore"),
     "durable": ("atomic_write", "fsync_dir", "remove_quietly", "write_json"),
-    "json_fields": ("RecordError", "count_field", "figure_field", "float_list", "float_rows", "get_field",
+    "json_fields": ("RecordError", "check_field", "count_field", "figure_field", "float_list", "float_rows", "get_field",
                     "json_value", "list_field", "mat3_field", "number_field", "object_field", "record_dict",
                     "record_field", "record_map_field", "records_field", "text_field", "vector_field"),
     "quantities": ("CONDITION_SCALE", "FLOOR_FMT", "condition_meaning", "condition_scale", "floor_mm"),

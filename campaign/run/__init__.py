@@ -9,6 +9,7 @@ from drivers import lazy_exports
 _HOMES = {                      # module -> the public names it holds
     "devices": ("open_devices",),
     "eta": ("RunEta", "budget_duration_s", "estimate_duration_s", "grid_duration_s", "point_times_s"),
+    "log_events": ("ExitStatus", "ForecastEvent", "LogEvent"),
     "log_reader": ("LOG_NAME", "LogContents", "completed_point_ids", "read_log"),
     "log_records": ("NestRecord", "OPTIONAL_FIELDS", "PointRecord", "Record", "SETS", "check_records"),
     "log_writer": ("RunLog",),

@@ -45,13 +45,13 @@ class Selection:
     criterion: str = SPACE_FILLING         # how the rows were chosen
 
 
-def select_rows(ds: Dataset, cell: CellModel, n: int) -> Selection:
+def select_rows(ds: Dataset, cell: CellModel, n: int, *, force: bool = False) -> Selection:
     """The subset with ``n`` calibration rows (see the module docstring); DataError when the data has
     another robot's joint count, fewer calibration rows, or ``n`` is below the identifiable geometric parameters
     + 10 % (the calibration's own minimum; the effects ``auto`` may take need more rows, which the record notes);
     the data-alone plausibility checks of ``reprocess`` first (``check_dataset``: PlausibilityError unless
-    forced)."""
-    check_dataset(ds, cell)
+    ``force``)."""
+    check_dataset(ds, cell, force=force)
     cal = np.flatnonzero(ds.mask("calib"))
     if len(cal) < n:
         raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")
