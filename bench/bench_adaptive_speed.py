@@ -29,8 +29,8 @@ from campaign.config.load import load_cell  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
-from robocal.adaptive import choose_batch  # noqa: E402
-from robocal.kinematics import smr_tracker  # noqa: E402
+from robocal.design.adaptive import choose_batch  # noqa: E402
+from robocal.kinematics.models import smr_tracker  # noqa: E402
 
 N_MEASURED, N_CANDIDATES, BATCH = 100, 3000, 10
 

@@ -21,9 +21,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from robocal.correct import GENERATORS, correct, correct_ensemble, pose_errors, tool_transform  # noqa: E402
-from robocal.effects import joint_compliance  # noqa: E402
-from robocal.ik import solve_on_branch  # noqa: E402
-from robocal.kinematics import fk  # noqa: E402
+from robocal.effects.bases import joint_compliance  # noqa: E402
+from robocal.kinematics.ik import solve_on_branch  # noqa: E402
+from robocal.kinematics.models import fk  # noqa: E402
 from robocal.simulation.mock_cell import random_geometric_errors  # noqa: E402
 from tests.cells import irb2600, tool_frame  # noqa: E402
 

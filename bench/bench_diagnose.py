@@ -33,7 +33,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.diagnose import diagnose  # noqa: E402
+from robocal.diagnose.core import diagnose  # noqa: E402
 from robocal.diagnose.selfcheck import format_confusion, run_self_check, truth_input  # noqa: E402
 from robocal.simulation.truth_cell import TruthProtocol, simulate  # noqa: E402
 

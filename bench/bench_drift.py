@@ -1,4 +1,4 @@
-"""Nest-drift model selection: leave-one-round-out CV by batched normal-equation downdates (robocal.drift) against
+"""Nest-drift model selection: leave-one-round-out CV by batched normal-equation downdates (robocal.measure.drift) against
 one least-squares fit per held-out round (the implementation before issue 21), on the same simulated nest readings
 (three floor nests read after every pose of a robocal.simulation.truth_cell campaign with registration drift, ~880 readings, ~290
 rounds). Prints the median time of each, the ratio, and the largest difference of their CV figures.
@@ -15,7 +15,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.drift import _design, fit_drift, nest_rounds  # noqa: E402
+from robocal.measure.drift import _design, fit_drift, nest_rounds  # noqa: E402
 from robocal.simulation.truth_cell import TruthProtocol, simulate  # noqa: E402
 
 

@@ -1,7 +1,7 @@
 """Seed 003 reproduction: GPR error model under heavy payloads, GPR vs RBF network, 6D pose of a three-SMR tool
 with measurement adjustment.
 
-Simulated cell (robocal/payload.py): IRB 4600-60/2.05 nominal DH of seed 003 + seeded geometric errors of seed 000
+Simulated cell (robocal/simulation/payload.py): IRB 4600-60/2.05 nominal DH of seed 003 + seeded geometric errors of seed 000
 Table 2 magnitude + payload-dependent joint and link deflection; AT960-class tracker ~3.9 m away (spherical
 model, k = 2), robot repeatability RP 0.06 mm as a rigid per-pose perturbation. Tool: three SMRs with the CMM
 distances of seed 003 Table 4; payload centre of gravity 150 mm in front of the flange.
@@ -39,16 +39,16 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.gp import GaussianProcess, MultiOutputGP  # noqa: E402
-from robocal.gp_layer import gp_inputs  # noqa: E402
-from robocal.rbf import RBFNetwork  # noqa: E402
-from robocal.identify import calibrate, register  # noqa: E402
-from robocal.ik import solve_on_branch  # noqa: E402
-from robocal.kinematics import smr_tracker  # noqa: E402
-from robocal.three_smr_pose import (MultiSMRPoseEstimator, fit_points_pose, measured_covariance, orientation_error_deg,
+from robocal.layers.gp import GaussianProcess, MultiOutputGP  # noqa: E402
+from robocal.layers.gp_layer import gp_inputs  # noqa: E402
+from robocal.layers.rbf import RBFNetwork  # noqa: E402
+from robocal.identify.identification import calibrate, register  # noqa: E402
+from robocal.kinematics.ik import solve_on_branch  # noqa: E402
+from robocal.kinematics.models import smr_tracker  # noqa: E402
+from robocal.multi_smr.three_smr_pose import (MultiSMRPoseEstimator, fit_points_pose, measured_covariance, orientation_error_deg,
                                     seed003_tool)
-from robocal.noise import TrackerUncertainty  # noqa: E402
-from robocal.payload import (SEED003_PAYLOADS_KG, HeavyPayloadCell, irb4600,  # noqa: E402
+from robocal.measure.noise import TrackerUncertainty  # noqa: E402
+from robocal.simulation.payload import (SEED003_PAYLOADS_KG, HeavyPayloadCell, irb4600,  # noqa: E402
                              random_configurations)
 from robocal.simulation.mock_cell import random_geometric_errors  # noqa: E402
 from tests.cells import tool_frame  # noqa: E402
@@ -257,7 +257,7 @@ def timings(runs):
 
 def gpr_speed(n=1000, folds=5, repeats=3, old=True):
     """Section 7: fit + k-fold CV of a 3-output GPR residual layer on n robot-like points."""
-    from robocal.elastic import kfold
+    from robocal.effects.cv import kfold
     rng = np.random.default_rng(5)
     q = random_configurations(n, seed=5)
     s2, s23, c23 = np.sin(q[:, 1]), np.sin(q[:, 1] + q[:, 2]), np.cos(q[:, 1] + q[:, 2])

@@ -12,8 +12,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal.identify import CalibrationOptions, calibrate  # noqa: E402
-from robocal.kinematics import ParamLayout  # noqa: E402
+from robocal.identify.identification import CalibrationOptions, calibrate  # noqa: E402
+from robocal.kinematics.models import ParamLayout  # noqa: E402
 from tests.cells import irb2600, irb2600_poses, make_cell, measure  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""Whether ``calibration.residual: auto`` should offer the joint-error GP layer (``robocal.joint_gp``), judged by
+"""Whether ``calibration.residual: auto`` should offer the joint-error GP layer (``robocal.layers.joint_gp``), judged by
 held-out prediction.
 
 The layer reads the residual as one smooth angle-error curve per joint, moved to the SMR through the Jacobian. It
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import robocal.layers as layers  # noqa: E402
+import robocal.layers.choice as layers  # noqa: E402
 from bench_layer_rule import TRUTH  # noqa: E402
 from bench_scan import ablation, ablation_parser  # noqa: E402
 from bench_select import ur5_dataset  # noqa: E402

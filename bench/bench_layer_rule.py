@@ -2,7 +2,7 @@
 
 Protocol (fixed before the comparison was run): two rules for keeping a CV-chosen layer over none, both with a CV
 RMS gain above 2 %: the strict test of a claim (one-sided paired t > 3, the rule before issue 22) and the
-one-standard-error rule (t > 1, ``robocal.stats.ONE_SE_T``). Data sets: the public real UR5 campaign (all 1000
+one-standard-error rule (t > 1, ``robocal.measure.stats.ONE_SE_T``). Data sets: the public real UR5 campaign (all 1000
 grid rows and 10 seeded random 100-row subsets, its 20 random held-out poses) and the four simulated cells of
 ``bench_select.py`` (seeds 1 2 3; all grid rows and 3 seeded random thirds, held-out = the plan's test poses), and
 (added after the first run) mock runs of the demo IRB 2600 cell with order-dependent errors: no nests, serpentine
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import robocal.stats as stats  # noqa: E402
+import robocal.measure.stats as stats  # noqa: E402
 from bench_select import FORMS, sim_dataset, ur5_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 

@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
-from campaign.calibrate.select_rows import select_rows  # noqa: E402
+from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.plan.learning import forecast_rms  # noqa: E402
 from select_forms import ur5_dataset  # noqa: E402
 from select_replay import held_out_rms, subset_rms  # noqa: E402

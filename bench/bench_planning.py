@@ -43,7 +43,7 @@ from campaign.workflows import run_campaign  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
 from campaign.plan.optimal import candidate_pool  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from robocal.design import d_optimal, greedy_order, space_filling  # noqa: E402
+from robocal.design.optimal import d_optimal, greedy_order, space_filling  # noqa: E402
 from tests.campaign.helpers import geometric_only  # noqa: E402
 
 EFFECTS = [{"name": "joint_compliance", "params": {"values": [1.0e-6, 2.0e-6]}},

@@ -29,9 +29,9 @@ from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.data.importers import import_target_dif  # noqa: E402
 from campaign.calibrate.calibration_report import CalibrationReport  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from robocal.effects import joint_compliance  # noqa: E402
-from robocal.frames import make_T, rotvec_to_matrix  # noqa: E402
-from robocal.gp import cholesky_inverse, nlml_shared, se_ard  # noqa: E402
+from robocal.effects.bases import joint_compliance  # noqa: E402
+from robocal.kinematics.frames import make_T, rotvec_to_matrix  # noqa: E402
+from robocal.layers.gp import cholesky_inverse, nlml_shared, se_ard  # noqa: E402
 from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors  # noqa: E402
 
 UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"

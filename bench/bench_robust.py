@@ -25,8 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from robocal.identify import CalibrationOptions, calibrate  # noqa: E402
-from robocal.kinematics import smr_tracker  # noqa: E402
+from robocal.identify.identification import CalibrationOptions, calibrate  # noqa: E402
+from robocal.kinematics.models import smr_tracker  # noqa: E402
 from tests.campaign.screen_campaigns import CELL, KIN0, sparse_campaign  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """Whether the effect engine should scan every joint for cyclic errors of a higher order, judged by held-out prediction.
 
-The scan (``robocal.elastic.library.scan_families``): per joint, single-order cyclic errors ``gear_cyclic(Jj hk)``
+The scan (``robocal.effects.library.scan_families``): per joint, single-order cyclic errors ``gear_cyclic(Jj hk)``
 of 9-40 periods per revolution (at least two periods over the joint's span), one candidate per joint, its order
 chosen inside every fold of the cross-validation. It was added after a look at the residuals of the public UR5
 campaign (a J1 error of 13-14 periods per revolution, about 25 arcsec, found by every 100-row subset), so the
@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import robocal.elastic.engine as engine  # noqa: E402
+import robocal.effects.engine as engine  # noqa: E402
 # FORMS: bench_select's and the OUTSIDE forms
 from bench_layer_rule import DRIFT, FORMS, data_sets, form_means, ratio_table, with_subsets  # noqa: E402
 from bench_select import ur5_split_datasets  # noqa: E402
@@ -93,7 +93,7 @@ def periodogram(k_max: int = 60, top: int = 6) -> None:
     5-fold CV over the calibration rows; the best orders for all rows and the best one of 10 random 100-row
     subsets, with its amplitude; and the GP layer's length scale of J1."""
     from bench_select import ur5_dataset
-    from robocal.kinematics import ParamLayout, identification_jacobian
+    from robocal.kinematics.models import ParamLayout, identification_jacobian
     ds, cell = ur5_dataset(None)
     engine.scan_families = _no_scan
 

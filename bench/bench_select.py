@@ -17,7 +17,7 @@ Protocol (fixed before the comparison was run; one smoke row of UR10 seen, nothi
     by more than 1 %. Seeded random subsets (median of 5 per data set) are the reference a criterion must beat.
   * Re-run when the default process gained the joint-error GP layer (docs/results.md): d_fx and kcenter tied
     within 0.3 % on the five forms, both more than 1 % ahead of d_spread; kcenter was taken (it uses no measured
-    error, and leads on ur5-split), so ``campaign select`` now uses it (``robocal.design.space_filling``). The
+    error, and leads on ur5-split), so ``campaign select`` now uses it (``robocal.design.optimal.space_filling``). The
     last line printed now keeps kcenter unless another is more than 1 % better.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select.py [--seeds 1 2 3] [--criteria ...]
@@ -75,11 +75,11 @@ from campaign.calibrate.effects_stage import effect_choices, effect_meta  # noqa
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
-from robocal.design import (_Design, criterion, criterion_effects, d_optimal, design_columns,  # noqa: E402
+from robocal.design.optimal import (_Design, criterion, criterion_effects, d_optimal, design_columns,  # noqa: E402
                             farthest_first, information_rows)
-from robocal.joint_gp import prior_columns  # noqa: E402
-from robocal.identify import calibrate, register  # noqa: E402
-from robocal.kinematics import ParamLayout  # noqa: E402
+from robocal.layers.joint_gp import prior_columns  # noqa: E402
+from robocal.identify.identification import calibrate, register  # noqa: E402
+from robocal.kinematics.models import ParamLayout  # noqa: E402
 from tests.campaign.helpers import simulated_campaign  # noqa: E402
 
 
@@ -96,7 +96,7 @@ UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 N_RANDOM = 5
 
 
-CURRENT = "kcenter"             # what ``campaign select`` uses (robocal.design.space_filling)
+CURRENT = "kcenter"             # what ``campaign select`` uses (robocal.design.optimal.space_filling)
 CRITERIA = ("d_spread", "d_joint", "d", "i", "di", "d_cover", "i_cover", "kcenter", "d_herd", "d_fill", "d_fx")
 
 
@@ -169,7 +169,7 @@ class _Coverage:
 
 
 def _farthest_first(X: np.ndarray, n: int) -> np.ndarray:
-    """n rows of X (M, d) chosen farthest-first (``robocal.design.farthest_first``), and the fill distance reached."""
+    """n rows of X (M, d) chosen farthest-first (``robocal.design.optimal.farthest_first``), and the fill distance reached."""
     out = farthest_first(X, n)
     return out, float(np.max(np.min(np.linalg.norm(X[:, None] - X[out][None], axis=2), axis=1)))
 

@@ -1,4 +1,4 @@
-"""Swept-path check of a whole plan: conservative advancement (robocal.sweep.check_segments) against fixed-step
+"""Swept-path check of a whole plan: conservative advancement (robocal.kinematics.sweep.check_segments) against fixed-step
 dense sampling (every segment sampled so no point moves more than 2 mm between samples, the same resolution).
 Prints medians, the ratio, and whether both agree on which segments are blocked; also the plan build time with
 and without a keep-out box (via search included)."""
@@ -13,7 +13,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
-from robocal.sweep import (Boxes, check_segments, clearances_mm, flange_points_base, lever_arms_mm,  # noqa: E402
+from robocal.kinematics.sweep import (Boxes, check_segments, clearances_mm, flange_points_base, lever_arms_mm,  # noqa: E402
                            sample_segments)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -31,8 +31,8 @@ from campaign.config.load import load_cell  # noqa: E402
 from campaign.data.importers import import_target_dif, read_target_dif_file  # noqa: E402
 from campaign.calibrate.plausibility import check_dataset  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from robocal.elastic import EffectChoice, elastic_flange  # noqa: E402
-from robocal.frames import transform_points  # noqa: E402
+from robocal.effects.model import EffectChoice, elastic_flange  # noqa: E402
+from robocal.kinematics.frames import transform_points  # noqa: E402
 
 UR5 = ROOT / "tests" / "data" / "serial_robots_datasets" / "UR5"
 GRID, RANDOM = UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv", UR5 / "3D_UR5_uncalibrated_random_cleaned.csv"

@@ -16,12 +16,12 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
-from campaign.calibrate.select_rows import select_rows  # noqa: E402
+from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 
 SIZES = (50, 100)
-RULES = ("i", "d")               # robocal.adaptive criteria: integrated variance at the task poses; information
+RULES = ("i", "d")               # robocal.design.adaptive criteria: integrated variance at the task poses; information
 N_RANDOM = 5
 
 

@@ -6,9 +6,12 @@ the CLI prints ``str(error)`` and exits with a code chosen by the error class.
 
 from __future__ import annotations
 
+__all__ = ["one_line", "CampaignError", "ConfigError", "DataError", "PlausibilityError", "DataWarning", "Terminated"]
 
-def _one_line(text: str) -> str:
-    """Collapse whitespace runs (including newlines) to single spaces."""
+
+def one_line(text: object) -> str:
+    """``str(text)`` (an exception's message, a path, ...) with whitespace runs, newlines included, collapsed to
+    single spaces: the one-line form every operator-facing message and log reason uses."""
     return " ".join(str(text).split())
 
 
@@ -28,8 +31,8 @@ class ConfigError(CampaignError, ValueError):
 
     def __init__(self, file: str, key_path: str, message: str) -> None:
         self.file = str(file)
-        self.key_path = _one_line(key_path)
-        self.message = _one_line(message)
+        self.key_path = one_line(key_path)
+        self.message = one_line(message)
         super().__init__(str(self))
 
     def __str__(self) -> str:
@@ -62,7 +65,7 @@ class DataError(CampaignError, ValueError):
         column: int | str | None = None,
     ) -> None:
         self.file = str(file)
-        self.message = _one_line(message)
+        self.message = one_line(message)
         self.line = line
         self.column = column
         super().__init__(str(self))
@@ -88,7 +91,7 @@ class PlausibilityError(CampaignError):
 
     def __init__(self, source: str, message: str) -> None:
         self.source = str(source)
-        self.message = _one_line(message)
+        self.message = one_line(message)
         super().__init__(str(self))
 
     def __str__(self) -> str:

@@ -1,6 +1,9 @@
 """The commands' workflows, built from the rooms: ``run_campaign`` (config -> plan -> devices -> durable log ->
-calibration -> report), ``reprocess`` (a log or CSV -> model + report), ``verify`` (closed-loop passes with
-corrected targets) and ``run_iso9283`` (the ISO 9283 acceptance run). The library API the CLI and the tests call."""
+calibration -> report), ``reprocess`` (a log or CSV -> model + report), ``select`` (N calibration rows of a measured
+campaign -> interchange CSV), ``correct`` (targets + model -> controller files), ``diagnose`` (the sim-to-real gap
+-> JSON, plots, HTML), ``verify`` (closed-loop passes with corrected targets) and ``run_iso9283`` (the ISO 9283
+acceptance run). The library API the CLI and the tests call; the CLI only parses and prints. ``force``
+(``--force``) overrides failed plausibility checks: it is passed down explicitly."""
 from __future__ import annotations
 
 from contextlib import ExitStack
@@ -13,7 +16,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 from rich.console import Console
 
-from campaign.calibrate.plausibility import is_forced
 from campaign.config.cell_model import CellModel
 from campaign.config.load import load_cell
 from campaign.data.interchange_csv import write_csv
@@ -28,6 +30,7 @@ from campaign.report.html import report_targets, write_report
 from campaign.report.iso9283 import RUN_PREFIX as ISO_RUN_PREFIX, calibration_dir, finish, is_iso_run_of
 from campaign.run.devices import open_devices
 from campaign.run.eta import RunEta, point_times_s
+from campaign.run.log_events import ExitStatus
 from campaign.run.log_reader import completed_point_ids, read_log
 from campaign.run.log_writer import RunLog
 from campaign.run.output_dirs import RUN, Claim, check_dir, check_finished_run, source_key
@@ -39,15 +42,17 @@ from campaign.run.traceability import (check_identity, device_identity, identifi
                                        software_version)
 from drivers.base import SystemClock
 from robocal.iso9283 import POSE_NAMES
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 
-from .errors import CampaignError, ConfigError
+from .errors import CampaignError, ConfigError, DataError
 
 if TYPE_CHECKING:
     from campaign.calibrate.stages import Calibrated
 
 
 logger = logging.getLogger(__name__)
+__all__ = ["RunResult", "run_campaign", "reprocess", "verify", "corrected_joints", "run_iso9283", "select", "correct", "diagnose",
+           "DiagnoseOutputs"]
 
 
 @dataclass(frozen=True)
@@ -60,7 +65,7 @@ class RunResult:
 
 def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | None = None,
                  console: Console | None = None, plan: Plan | None = None, overwrite: bool = False,
-                 iso_model: tuple[CalibratedModel, Path] | None = None) -> RunResult:
+                 iso_model: tuple[CalibratedModel, Path] | None = None, *, force: bool = False) -> RunResult:
     """Measure the plan of the cell's config (or the rest of it when resuming), then calibrate and report.
     ``run_dir`` must be new or empty (any directory but a run's with ``overwrite``: see
     :mod:`campaign.run.output_dirs`). An ISO 9283 plan is reported instead of calibrated, in the frame of
@@ -86,7 +91,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         runner = make_runner(cell, devices, first_pass=resume is None)
         times = point_times_s(plan.points, cell)
         identity = device_identity(robot, tracker)
-        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # a mismatch: exit 2, nothing moved
+        identity["identity_check"] = check_identity(cfg, identity, force)   # a mismatch: exit 2, nothing moved
         log, run_dir = open_log(cfg, plan, run_dir, resume, identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute on
         logging_.to_file(run_dir)
@@ -117,7 +122,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
             if plan.candidates:                         # plan.kind: adaptive: rounds chosen with the model refitted
                 from campaign.calibrate.adaptive_rounds import AdaptiveRounds
                 passes = AdaptiveRounds(cell, plan, run_dir, log, {p.point_id for p in plan.points} - {
-                    p.point_id for p in todo}, on_skip=advance.skip)
+                    p.point_id for p in todo}, on_skip=advance.skip, force=force)
                 outcome = runner.execute_passes(passes, log)
             elif plan.blocks:                           # plan.stop: auto: block by block, refit after each
                 from campaign.calibrate.adaptive_stop import AdaptivePasses
@@ -126,7 +131,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
                 outcome = runner.execute_passes(passes, log)
             else:
                 outcome = runner.execute(todo, log)
-    if outcome.exit_status != "success":
+    if outcome.exit_status != ExitStatus.SUCCESS:
         return RunResult(run_dir, outcome, None)
     if is_iso_plan(plan):                       # acceptance test: ISO 9283 characteristics, no calibration
         iso = finish(cell, run_dir, *(iso_model or ()))
@@ -134,24 +139,25 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
         return RunResult(run_dir, outcome, None, iso)
     source = load_source(run_dir)
     write_csv(run_dir / "data.csv", source.dataset)
-    return RunResult(run_dir, outcome, _calibrate(source.dataset, cell, run_dir, source.contents))
+    return RunResult(run_dir, outcome, _calibrate(source.dataset, cell, run_dir, source.contents, force=force))
 
 
-def reprocess(source: Path, cell: CellModel, out_dir: Path, overwrite: bool = False) -> Calibrated:
+def reprocess(source: Path, cell: CellModel, out_dir: Path, overwrite: bool = False, *,
+              force: bool = False) -> Calibrated:
     """Offline: calibrate and report from a run directory (its log) or an interchange CSV file into ``out_dir``:
     new, empty, or written by reprocess from the same source (any but a run's with ``overwrite``)."""
     claim = check_dir(out_dir, "reprocess", overwrite, source=source_key(source))
     data = load_source(source)
-    return _calibrate(data.dataset, cell, claim, data.contents)
+    return _calibrate(data.dataset, cell, claim, data.contents, force=force)
 
 
-def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -> Calibrated:
+def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None, *, force: bool = False) -> Calibrated:
     """Calibrate ``dataset``, write model/report files and report.html into ``out_dir`` (a run's directory, or a
     claim taken once the model exists); ``contents``: the log it came from (hardware identification)."""
     from campaign.calibrate.stages import calibrate_dataset
     from campaign.calibrate.outputs import write_outputs     # the numerics load when calibrating, not at every start-up
     from campaign.calibrate.summary import summarize
-    processed = calibrate_dataset(dataset, cell)
+    processed = calibrate_dataset(dataset, cell, force=force)
     if contents is not None:
         processed = replace(processed, report=processed.report.with_identification(identification(contents)))
         from campaign.calibrate.adaptive_stop import stop_summary
@@ -160,7 +166,8 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
         if stop is not None:
             processed = replace(processed, report=replace(processed.report, stop=stop))
         from campaign.calibrate.learning import learning_summary
-        learning = learning_summary(dataset, cell, contents, None if final is None else final.test.rms_mm)
+        learning = learning_summary(dataset, cell, contents, None if final is None else final.test.rms_mm,
+                                    force=force)
         if learning is not None:
             processed = replace(processed, report=replace(processed.report, learning=learning))
     else:                                       # an interchange CSV: where it came from, no device named
@@ -174,7 +181,7 @@ def _calibrate(dataset, cell: CellModel, out_dir: Path | Claim, contents=None) -
     return processed
 
 
-def verify(run_dir: Path, console: Console | None = None):
+def verify(run_dir: Path, console: Console | None = None, *, force: bool = False):
     """Closed-loop verification of a finished run: corrected test points measured on the cell (logged durably
     in RUN_DIR/verify-TIMESTAMP/log.jsonl), before / after like seed 000 Table 3; with reference nests in the
     config they are read at the start and after every pass, and every measurement is compared in the
@@ -204,7 +211,7 @@ def verify(run_dir: Path, console: Console | None = None):
         robot, tracker = devices.robot, devices.tracker
         continue_clock(devices.clock, contents)             # a simulated cell's time (and drift) goes on from the run
         identity = device_identity(robot, tracker)
-        identity["identity_check"] = check_identity(cfg, identity, is_forced())   # before the log and any move
+        identity["identity_check"] = check_identity(cfg, identity, force)   # before the log and any move
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
@@ -251,3 +258,137 @@ def run_iso9283(cell: CellModel, model: CalibratedModel | None, run_dir=None, co
     if result.iso9283 is not None and cal_dir is not None and is_iso_run_of(result.run_dir, cal_dir):
         write_report(cal_dir)                                   # the calibration report lists its ISO reports
     return result, result.iso9283
+
+
+def select(data: Path, cell: CellModel, n: int, out: Path, *, adaptive: bool = False, overwrite: bool = False,
+           force: bool = False):
+    """``campaign select``: ``n`` calibration rows of a measured campaign (a run directory or an interchange CSV),
+    space-filling with the geometry determined (``adaptive``: replayed batch by batch with the model refitted),
+    written to ``out`` as an interchange CSV (each kept row with how the robot reached it). Returns (the selection,
+    the dataset it was chosen from)."""
+    from campaign.calibrate.selection import select_rows
+    from campaign.run.output_dirs import check_file
+
+    if n < 1:
+        raise DataError(str(data), f"--points must be a positive number of rows, got {n}")
+    if out.resolve() == data.resolve():
+        raise DataError(str(out), "the subset would overwrite its source; choose another --out")
+    check_file(out, overwrite)
+    ds = load_source(data).dataset
+    if adaptive:
+        from campaign.calibrate.select_adaptive import adaptive_selection
+        sel = adaptive_selection(ds, cell, n, force=force)
+    else:
+        sel = select_rows(ds, cell, n, force=force)
+    subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
+    origin = f"{len(subset)} of {len(ds)} rows selected from {data} (campaign select)"
+    write_csv(out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
+    return sel, ds
+
+
+@dataclass(frozen=True)
+class CorrectResult:
+    """What ``correct`` wrote: the files, the number of targets, those refused (rejected.csv), the corrected
+    targets written and the model's held-out accuracy record (None if unknown)."""
+    paths: list
+    n_targets: int
+    refused: set
+    written: list
+    held_out: object
+
+
+def correct(cell: CellModel, model_path: Path, targets_path: Path, out: Path, formats: tuple[str, ...] = (), *,
+            overwrite: bool = False, force: bool = False, on_rejected=None) -> CorrectResult:
+    """``campaign correct``: Cartesian targets corrected with the calibrated model at ``model_path`` (it must
+    describe the config's robot) and written as controller files in ``out`` (``formats``: default the configured
+    controller's and csv) with rejected.csv; ``on_rejected(n_targets)`` is called once rejected.csv is written,
+    also when no target is left to write (CampaignError then)."""
+    from campaign.calibrate.outputs import load_model
+    from campaign.correct.accuracy import held_out_of
+    from campaign.correct.targets import check_model_fits, correct_targets, read_targets_csv, recorded_identity
+    from campaign.correct.write_back import read_rejected, write_corrected
+
+    claim = check_dir(out, "correct", overwrite, source=source_key(model_path))
+    model = load_model(model_path)
+    check_model_fits(cell, model, str(model_path), force=force)
+    targets = read_targets_csv(targets_path, tool_rotation(cell.config.plan.tool_direction))
+    held = held_out_of(model, model_path)
+    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, model_path),
+                                         held_out=held)
+    try:
+        paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(formats))
+    finally:
+        if on_rejected is not None:
+            on_rejected(len(targets.ids))
+    refused = {target_id for target_id, _ in read_rejected(out)}
+    return CorrectResult(paths, len(targets.ids), refused, [t for t in accepted if t.target_id not in refused], held)
+
+
+@dataclass(frozen=True)
+class DiagnoseOutputs:
+    """Where ``diagnose`` writes besides the terminal: ``json`` (a file), ``plots`` (a directory), ``html`` (a file;
+    None for a run directory: its own report.html with diagnosis.json beside it)."""
+    json: Path | None = None
+    plots: Path | None = None
+    html: Path | None = None
+    overwrite: bool = False
+
+
+def diagnose(source: Path, cell: CellModel, outputs: DiagnoseOutputs = DiagnoseOutputs(), *, force: bool = False,
+             on_written=None):
+    """``campaign diagnose``: the sim-to-real gap of a run directory or CSV. Every output path is checked before
+    any work; returns the :class:`DiagnosisReport` and ``write()``, which writes the outputs and calls
+    ``on_written(line)`` after each ("wrote PATH", or the note when matplotlib is missing)."""
+    from campaign.calibrate.diagnosis import diagnose_source
+
+    plots = _diagnosis_targets(source, outputs)
+    result = diagnose_source(source, cell, force=force)
+
+    def write() -> None:
+        say = on_written or (lambda line: None)
+        from campaign.calibrate.diagnosis import write_diagnosis_json
+        if outputs.json:
+            write_diagnosis_json(outputs.json, result.report)
+            say(f"wrote {outputs.json}")
+        if plots is not None:
+            from campaign.report.diagnosis_plots import write_plots
+            files = write_plots(result.report, plots)
+            say(files if isinstance(files, str) else f"wrote {', '.join(str(f) for f in files)}")
+        html = _diagnosis_html(source, outputs, result.report)
+        if html:
+            say(f"wrote {html}")
+    return result, write
+
+
+def _diagnosis_targets(source: Path, outputs: DiagnoseOutputs):
+    """--json FILE, --plots DIR, --html FILE (or the run directory's diagnosis.json and report.html) checked
+    (:mod:`campaign.run.output_dirs`); returns the claim of the plots directory (None without --plots)."""
+    from campaign.run.output_dirs import check_campaign_dir, check_file
+
+    if outputs.json:
+        check_file(outputs.json, outputs.overwrite, "--json")
+    if outputs.html is not None:                  # a page of the diagnosis alone: never a run's own report.html
+        check_file(outputs.html, outputs.overwrite, "--html")
+        report_targets(outputs.html.parent, outputs.html, outputs.overwrite)
+    elif source.is_dir():
+        check_campaign_dir(source, "diagnose")
+        report_targets(source)
+    if outputs.plots is None:
+        return None
+    return check_dir(outputs.plots, "plots", outputs.overwrite, source=source_key(source), option="--plots")
+
+
+def _diagnosis_html(source: Path, outputs: DiagnoseOutputs, report: dict) -> Path | None:
+    """The diagnosis as an HTML report: --html FILE (from the diagnosis alone), or the run directory's
+    report.html with diagnosis.json beside it."""
+    from campaign.calibrate.diagnosis import write_diagnosis_json
+    from campaign.report.html import ReportSources
+
+    if outputs.html is not None:
+        title = f"{report.get('config', 'diagnosis')}: {outputs.html.stem}"
+        return write_report(outputs.html.parent, outputs.html, outputs.overwrite,
+                            sources=ReportSources(title, diagnosis=report, files={"diagnosis": "(this command)"}))
+    if not source.is_dir():
+        return None
+    write_diagnosis_json(source / "diagnosis.json", report)
+    return write_report(source)

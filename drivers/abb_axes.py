@@ -50,7 +50,7 @@ class AbbAxes:
         return 0 if self.layout == "arm" else 1
 
 
-def abb_axes(n_joints: int, track: bool = False) -> AbbAxes:
+def axes_layout(n_joints: int, track: bool = False) -> AbbAxes:
     """The layout of an n-joint chain (``track``: joint 1 is a linear track); ValueError when ABB has none."""
     if track:
         if n_joints != 7:

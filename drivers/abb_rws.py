@@ -21,7 +21,7 @@ from urllib.parse import urlsplit
 
 import httpx
 
-from .abb_axes import abb_axes
+from .abb_axes import axes_layout
 from .base import DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
 from .rws_client import Credentials, Routes, RwsError, RwsSession, first
 from .rapid import calserver_text
@@ -29,8 +29,8 @@ from .rapid.literals import fmt_jointtarget, fmt_num, fmt_robtarget, fmt_string,
 from .abb_rws_options import (DEFAULT_PASSWORD, DEFAULT_USER, CredentialOptions, OptionsError, RapidRejected,  # noqa: F401
                               RwsOptions, load_credentials)
 from .abb_rws_preflight import (CALSERVER_VERSION, KIND_MOVEABSJ, KIND_MOVEL, KIND_PING, PreflightMixin,  # noqa: F401
-                                _module_bytes)
-from .abb_rws_program import ENTRY_ROUTINE, Deadline, RapidProgramMixin, _MasterRejected  # noqa: F401
+                                module_bytes)
+from .abb_rws_program import ENTRY_ROUTINE, Deadline, RapidProgramMixin, MasterRejected  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
             raise DriverError(f"{url}: expected abb-rws://host[:port]")
         self.url, self.opts, self.n_joints = url, options, options.n_joints
         try:
-            self.axes = abb_axes(options.n_joints, options.track_unit is not None)
+            self.axes = axes_layout(options.n_joints, options.track_unit is not None)
         except ValueError as exc:
             raise DriverError(f"{url}: {exc}") from None
         self._sleep = sleep
@@ -229,7 +229,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
     def write_module(self, name: str, text: str) -> None:
         """Upload ``text`` as ``<remote_dir>/<name>.mod``, read it back and compare, then load it into the task
         (RAPID is stopped for the load and restarted if it was running). Raises RobotError on any mismatch."""
-        data = _module_bytes(name, text, self.url)
+        data = module_bytes(name, text, self.url)
         remote = f"{self.opts.remote_dir}/{name}.mod"
         self.session.put_file(remote, data)
         back = self.session.get_file(remote)
@@ -330,7 +330,7 @@ class AbbRwsRobot(PreflightMixin, RapidProgramMixin):
                 for name, literal in values.items():
                     self._write(name, literal, cache=name in _CACHED)
                 return
-            except _MasterRejected:
+            except MasterRejected:
                 self._explicit = True
                 log.warning("%s: implicit mastership refused (403 E_MASTER_REJECT); using explicit edit "
                             "mastership for writes", self.url)
@@ -464,7 +464,7 @@ def validate_options(url: str, options: Mapping[str, Any], **context: Any) -> No
         raise DriverError(f"{url}: expected abb-rws://host[:port]")
     opts = _with_context(RwsOptions.from_mapping(options or {}), options, context)
     try:
-        abb_axes(opts.n_joints, opts.track_unit is not None)
+        axes_layout(opts.n_joints, opts.track_unit is not None)
     except ValueError as exc:
         raise DriverError(f"{url}: {exc}") from None
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from .base import DriverError, MotionError
-from .redact import register_secret
+from .redaction import register_secret
 from .rws_client import Credentials, RetryPolicy, Timeouts
 
 log = logging.getLogger("drivers.abb_rws")

@@ -20,7 +20,7 @@ KIND_PING, KIND_MOVEABSJ, KIND_MOVEL = 0, 1, 2
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 
-def _module_bytes(name: str, text: str, url: str) -> bytes:
+def module_bytes(name: str, text: str, url: str) -> bytes:
     """Validate a module name/text pair and encode it (ISO-8859-1, as RobotWare reads modules)."""
     if not _IDENT.match(name):
         raise RobotError(f"{url}: {name!r} is not a RAPID module name (letter, then letters/digits/_; max 32)")
@@ -167,7 +167,7 @@ class PreflightMixin:
     def _install_calserver(self) -> None:
         """Upload and verify CalServer, stop RAPID, load it with PP to main, and start RAPID."""
         text = _read_text(self.opts.module_file) if self.opts.module_file else calserver_text()
-        data = _module_bytes(self.opts.module, text, self.url)
+        data = module_bytes(self.opts.module, text, self.url)
         remote = f"{self.opts.remote_dir}/{self.opts.module}.mod"
         self.session.put_file(remote, data)
         if self.session.get_file(remote) != data:

@@ -27,7 +27,7 @@ class Deadline:
         return self._clock() >= self.end
 
 
-class _MasterRejected(RobotError):
+class MasterRejected(RobotError):
     """A write refused for lack of mastership (403 E_MASTER_REJECT): switch to explicit mastership."""
 
 
@@ -150,7 +150,7 @@ class RapidProgramMixin:
         except RwsError as exc:
             self._written.pop(name, None)
             if exc.code == E_MASTER_REJECT and not self._explicit:
-                raise _MasterRejected(str(exc)) from exc
+                raise MasterRejected(str(exc)) from exc
             if exc.code == E_RESOURCE_HELD:
                 raise RobotNotReady(f"{self.url}: cannot write {name}: RAPID mastership held by another client") \
                     from exc

@@ -140,12 +140,8 @@ class Robot(Protocol):
     def close(self) -> None:
         """Release the session (logout, mastership); idempotent."""
 
-    # Optional capabilities (the runner checks with ``hasattr``; real drivers implement them):
-    # def set_motion_limits(self, limits: MotionLimits) -> None: enforce the caps on every later command
-    # def set_payload(self, payload: Payload) -> None: send the load data to the controller
-    # def identity(self) -> Mapping[str, str]: vendor, model, controller_type, serial, software_version
-    # def speed_override_pct(self) -> float | None: the controller's speed override, if readable
-    # def joint_temperatures_c(self) -> Sequence[float] | None: joint (motor) temperatures, logged per point
+    # Optional capabilities: the Protocols below (the runner asks ``isinstance``): EnforcesMotionLimits,
+    # TakesPayload, Identifies, ReadsSpeedOverride, ReadsJointTemperatures, Versioned, Simulated.
 
 
 @runtime_checkable
@@ -162,12 +158,115 @@ class Tracker(Protocol):
 
     def close(self) -> None: ...
 
-    # Optional capabilities (the runner checks with ``hasattr``):
-    # def identity(self) -> Mapping[str, str]: vendor, model, serial, firmware
-    # def reacquire(self, p_tracker_mm_guess: Sequence[float]) -> None: aim at a predicted SMR position and
-    #     search (GoPosition + FindReflector or the protocol's equivalent) after a beam break; raises TrackerError
-    # can_reacquire: bool (attribute/property): False when ``reacquire`` exists but the device cannot aim or search
-    # def drain_events(self) -> list[dict]: the driver's own recovery steps since the last call ({"step": ..., ...}:
-    #     reconnect, initialize, go_position, find_reflector, ...), written to the run log by the runner
+    # Optional capabilities: the Protocols below (the runner asks ``isinstance``): Identifies, Reacquires (and
+    # ReacquireSwitch), SelectsSmr, SelectsNest, DrainsEvents, Versioned, Simulated.
     # TrackerReading.extra may carry the device's own statistics: "std_x_mm", "std_y_mm", "std_z_mm",
     #     "cov_xy_mm2", "cov_xz_mm2", "cov_yz_mm2" and environment values "temp_c", "pressure_hpa", "humidity_pct"
+
+
+# --------------------------------------------------------------------------
+# optional capabilities: one small Protocol each; a driver has one when it has the method (or attribute)
+
+
+@runtime_checkable
+class EnforcesMotionLimits(Protocol):
+    """A robot that enforces speed caps on every later command (the runner refuses to move one that cannot)."""
+
+    def set_motion_limits(self, limits: MotionLimits) -> None: ...
+
+
+@runtime_checkable
+class TakesPayload(Protocol):
+    """A robot that sends the load data (mass, centre of gravity) to its controller."""
+
+    def set_payload(self, payload: Payload) -> None: ...
+
+
+@runtime_checkable
+class ReadsSpeedOverride(Protocol):
+    """A robot whose controller speed override (percent) is readable (None: not now)."""
+
+    def speed_override_pct(self) -> float | None: ...
+
+
+@runtime_checkable
+class ReadsJointTemperatures(Protocol):
+    """A robot that reports joint (motor) temperatures, deg C (n,), logged per point (None: not now)."""
+
+    def joint_temperatures_c(self) -> Sequence[float] | None: ...
+
+
+@runtime_checkable
+class Identifies(Protocol):
+    """A device that tells what it is: a robot vendor, model, controller_type, serial, software_version; a tracker
+    vendor, model, serial, firmware."""
+
+    def identity(self) -> Mapping[str, str]: ...
+
+
+@runtime_checkable
+class Versioned(Protocol):
+    """A driver that names its own version (a string, or a callable giving it), logged beside its class."""
+
+    driver_version: object
+
+
+@runtime_checkable
+class Simulated(Protocol):
+    """A simulated device: ``simulated_clock`` is the simulated cell's time, shared by its robot and tracker."""
+
+    simulated_clock: Clock
+
+
+@runtime_checkable
+class Reacquires(Protocol):
+    """A tracker that aims at a predicted position (mm, tracker frame) and searches there after a beam break
+    (GoPosition + FindReflector or the protocol's equivalent); raises TrackerError when not found."""
+
+    def reacquire(self, p_tracker_mm_guess: Sequence[float]) -> None: ...
+
+
+@runtime_checkable
+class ReacquireSwitch(Protocol):
+    """A tracker whose ``reacquire`` depends on its configuration: ``can_reacquire`` False when it cannot aim or
+    search (a driver with ``reacquire`` and without this attribute always can)."""
+
+    can_reacquire: bool
+
+
+@runtime_checkable
+class SelectsSmr(Protocol):
+    """A tracker that aims at SMR ``k`` (1, 2, 3) of a multi-SMR tool at the same stop."""
+
+    def select_smr(self, k: int) -> None: ...
+
+
+@runtime_checkable
+class SelectsNest(Protocol):
+    """A tracker that finds a reference nest by its id (``p_tracker_mm_guess``, mm tracker frame, a hint or None)."""
+
+    def select_nest(self, nest_id: str, p_tracker_mm_guess: Sequence[float] | None = None) -> None: ...
+
+
+@runtime_checkable
+class DrainsEvents(Protocol):
+    """A tracker that reports its own recovery steps since the last call (``{"step": ..., ...}``: reconnect,
+    initialize, go_position, find_reflector, ...), written to the run log by the runner."""
+
+    def drain_events(self) -> list[dict]: ...
+
+
+def can_reacquire(tracker: object) -> bool:
+    """Whether ``tracker`` can aim and search after a beam break (:class:`Reacquires`, not switched off)."""
+    return isinstance(tracker, Reacquires) and (not isinstance(tracker, ReacquireSwitch) or bool(tracker.can_reacquire))
+
+
+def device_url(device: object, default: str) -> str:
+    """The device's ``url`` (how errors name it), else ``default``."""
+    url = getattr(device, "url", None)
+    return url if isinstance(url, str) else default
+
+
+def backoff_s(faults: int) -> float:
+    """Pause (s) after the ``faults``-th failed reading of a point: 0.2 s doubling per fault, at most 2 s."""
+    return min(2.0, 0.2 * 2 ** (faults - 1))

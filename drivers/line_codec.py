@@ -49,9 +49,9 @@ class TrackerCodec:
         for kind, pattern in self.profile.errors:
             m = pattern.search(line)
             if m:
-                return self._checked(Reply(kind, line, _groups(m)), seq)
+                return self._checked(Reply(kind, line, match_groups(m)), seq)
         m = regex.search(line) if regex is not None else None
-        return self._checked(Reply("ok", line, _groups(m)), seq) if m else Reply("garbage", line)
+        return self._checked(Reply("ok", line, match_groups(m)), seq) if m else Reply("garbage", line)
 
     @staticmethod
     def _checked(reply: Reply, seq: int | None) -> Reply:
@@ -71,7 +71,7 @@ class TrackerCodec:
 
         Raises ``ValueError`` if a coordinate is not a finite number.
         """
-        values = {k: _float(k, v) for k, v in groups.items() if v is not None and k != "seq"}
+        values = {k: group_float(k, v) for k, v in groups.items() if v is not None and k != "seq"}
         xyz = self._xyz(values)
         return xyz, self._extra(values)
 
@@ -114,7 +114,7 @@ class TrackerCodec:
         for name, value in values.items():
             if name in ENV_GROUPS and value is not None:
                 key, convert = ENV_GROUPS[name]
-                out[key] = convert(_float(name, value))
+                out[key] = convert(group_float(name, value))
         return out
 
     def error(self, reply: Reply, where: str) -> TrackerError:
@@ -124,11 +124,11 @@ class TrackerCodec:
         return ERROR_KINDS[reply.kind](f"{where}: device reports {reply.kind}: {show(reply.line)}")
 
 
-def _groups(m: re.Match[str]) -> dict[str, str]:
+def match_groups(m: re.Match[str]) -> dict[str, str]:
     return {k: v for k, v in m.groupdict().items() if v is not None}
 
 
-def _float(name: str, text: Any) -> float:
+def group_float(name: str, text: Any) -> float:
     if isinstance(text, (int, float)):
         return float(text)
     try:

@@ -23,7 +23,7 @@ import serial
 
 from .base import (ConnectionLost, DriverError, GarbageReply, TargetNotFound, TrackerError, TrackerReading,
                    TrackerTimeout)
-from .line_codec import Reply, TrackerCodec, _float, _groups, average_readings, spherical_to_xyz  # noqa: F401
+from .line_codec import Reply, TrackerCodec, group_float, match_groups, average_readings, spherical_to_xyz  # noqa: F401
 from .line_profile import (DEFAULT_OPTIONS, ENV_GROUPS, URL_SCHEMES, LineProfile, PortSpec, SensorProfile, port_spec,
                            show, uses_seq)
 
@@ -292,10 +292,10 @@ class LineSensor:
         m = self.profile.regex.search(line)
         if not m:
             raise GarbageReply(f"{self.profile.url}: unparseable sensor reply {show(line)}")
-        groups = _groups(m)
+        groups = match_groups(m)
         try:
             values = TrackerCodec.environment(groups)
-            values.update({k: _float(k, v) for k, v in groups.items() if k not in ENV_GROUPS})
+            values.update({k: group_float(k, v) for k, v in groups.items() if k not in ENV_GROUPS})
         except ValueError as exc:
             raise GarbageReply(f"{self.profile.url}: bad sensor reply {show(line)}: {exc}") from None
         return {self.profile.prefix + k: v for k, v in values.items()}

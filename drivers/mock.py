@@ -25,10 +25,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from robocal.noise import repeatability_sigma_mm
+from robocal.measure.noise import repeatability_sigma_mm
 from robocal.simulation.mock_cell import SimulatedCell, readback_joints_deg, tracker_drift_mm
 
-from robocal.sweep import move_durations_s, peak_speed_per_unit_s
+from robocal.kinematics.sweep import move_durations_s, peak_speed_per_unit_s
 
 from .base import (BeamBroken, GarbageReply, MotionError, MotionLimits, Payload, TargetNotFound, TrackerReading,
                    TrackerTimeout)

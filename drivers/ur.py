@@ -41,7 +41,7 @@ from urllib.parse import urlsplit
 from .base import ConnectionLost, DriverError, MotionError, MotionLimits, Payload, RobotError, RobotNotReady
 from .ur_options import (BOOL_OPTIONS, JOINT_ACCELERATION_MAX_RAD_S2, JOINT_SPEED_MAX_RAD_S,  # noqa: F401
                          ROBOT_MODES, SAFETY_MODES, UR_DH, InvalidTarget, UROptions, validate_options)
-from .ur_worker import _dh_points, _Settle, _Worker, _worker_main  # noqa: F401  (re-exported for tests)
+from .ur_worker import dh_points, Settle, Worker, worker_main  # noqa: F401  (re-exported for tests)
 
 
 class URRobot:
@@ -213,7 +213,7 @@ class URRobot:
             self._log_path = self.options.worker_log
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe(duplex=True)
-        self._proc = ctx.Process(target=_worker_main, args=(child, self.host, asdict(self.options), self._log_path),
+        self._proc = ctx.Process(target=worker_main, args=(child, self.host, asdict(self.options), self._log_path),
                                  name=f"ur-rtde-worker[{self.host}]", daemon=True)
         self._proc.start()
         child.close()

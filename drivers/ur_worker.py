@@ -26,10 +26,10 @@ class _Failure(Exception):
         self.kind = kind
 
 
-def _worker_main(conn: Any, host: str, options: dict[str, Any], log_path: str | None) -> None:
+def worker_main(conn: Any, host: str, options: dict[str, Any], log_path: str | None) -> None:
     """Worker process entry: redirect the library's output, then serve requests until close or EOF."""
     _redirect_output(log_path)
-    _Worker(conn, host, UROptions(**options)).serve()
+    Worker(conn, host, UROptions(**options)).serve()
 
 
 def _redirect_output(log_path: str | None) -> None:
@@ -40,7 +40,7 @@ def _redirect_output(log_path: str | None) -> None:
     os.close(fd)
 
 
-class _Worker:
+class Worker:
     """Owns the ur_rtde interfaces; every op_* runs one request. Radians throughout."""
 
     def __init__(self, conn: Any, host: str, options: UROptions) -> None:
@@ -227,7 +227,7 @@ class _Worker:
         capped = self._capped_speed(_six(self.rtde_r.getActualQ(), "actual_q"), q, speed, tcp_cap_m_s, joint_pct)
         if not self._controller().moveJ(q, capped, acceleration, True):
             raise self._motion_failure("moveJ was refused")
-        return _Settle(self, q).wait(), capped
+        return Settle(self, q).wait(), capped
 
     def _capped_speed(self, q0: list[float], q1: list[float], speed: float, tcp_cap_m_s: float,
                       joint_pct: float) -> float:
@@ -253,7 +253,7 @@ class _Worker:
         q = q0 + s * (q1 - q0)                                                      # (K, 6) rad
         r = self.o.tool_radius_mm / 1000.0
         offsets = [np.zeros(3)] + [sign * r * axis for axis in np.eye(3) for sign in (1.0, -1.0)]
-        points = np.stack([_dh_points(q, self.dh, np.asarray(self.tcp_offset[:3]) + d) for d in offsets])
+        points = np.stack([dh_points(q, self.dh, np.asarray(self.tcp_offset[:3]) + d) for d in offsets])
         return float(np.linalg.norm(np.diff(points, axis=1), axis=2).max()) * TCP_SAMPLES
 
     def _recover(self) -> None:
@@ -341,10 +341,10 @@ class _Worker:
         raise _Failure("motion", "move stopped by stop()")
 
 
-class _Settle:
+class Settle:
     """Wait for a move to settle in position (rad, rad/s) over a sliding window; see the module docstring."""
 
-    def __init__(self, worker: _Worker, target: Sequence[float]) -> None:
+    def __init__(self, worker: Worker, target: Sequence[float]) -> None:
         self.w, self.o = worker, worker.o
         self.target = list(target)
         self.tol = math.radians(self.o.in_position_tol_deg)
@@ -404,7 +404,7 @@ class _Settle:
         return None
 
 
-def _dh_points(q: np.ndarray, dh: tuple, tcp_m: Sequence[float]) -> np.ndarray:
+def dh_points(q: np.ndarray, dh: tuple, tcp_m: Sequence[float]) -> np.ndarray:
     """TCP positions (K, 3) m for joint rows q (K, 6) rad with standard DH (d, a) and ``UR_DH_ALPHA``."""
     t = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
     for i, (d, a, alpha) in enumerate(zip(dh[0], dh[1], UR_DH_ALPHA)):

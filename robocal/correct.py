@@ -7,7 +7,7 @@ pose is ``T_d``. Each iteration k (seed 001 steps 2-7):
     T_a = AP(q_a);  E = err(T_a, T_d);  keep (E_best, q_best);  stop when E_best < threshold or k = k_max
     T_p <- PT(T_p, T_a, T_d);  q_a <- IIK(T_p, warm start q_a)
 
-with the nominal model's iterative IK (Sugihara LM, ``robocal.ik``). Pseudo-target generators PT:
+with the nominal model's iterative IK (Sugihara LM, ``robocal.kinematics.ik``). Pseudo-target generators PT:
 ``yin`` (eq. 12, T_p T_a^-1 T_d), and the position update of eq. 14 combined with the orientation updates
 ``fixed`` (eq. 15), ``add`` (eq. 16), ``multiply`` (eq. 17), ``euler_zyz`` / ``euler_xyz`` (eq. 18),
 ``quaternion`` (eq. 19). The ensemble (§3) runs several generators and keeps the best result per target.
@@ -20,11 +20,13 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .chains import arm_angle_rad, redundant
-from .frames import inv_T, make_T, matrix_to_rotvec
-from .ik import solve_ik
-from .kinematics import Kinematics, fk, within_limits
+from robocal.kinematics.chains import arm_angle_rad, redundant
+from robocal.kinematics.frames import inv_T, make_T, matrix_to_rotvec
+from robocal.kinematics.ik import solve_ik
+from robocal.kinematics.models import Kinematics, fk, within_limits
 
+__all__ = ["GENERATORS", "Correction", "closed_loop_step", "correct", "correct_ensemble", "matrix_to_quat",
+           "quat_to_matrix", "tool_transform"]
 PoseFn = Callable[[np.ndarray], np.ndarray]
 GENERATORS = ("yin", "fixed", "add", "multiply", "euler_zyz", "euler_xyz", "quaternion")
 
@@ -122,11 +124,6 @@ def error_function(kind: str, length_mm: float = 100.0) -> Callable[[np.ndarray,
 # ---------------------------------------------------------------- pose predictors
 def tool_transform(p_flange_tool_mm, R_flange_tool=None) -> np.ndarray:
     return make_T(np.eye(3) if R_flange_tool is None else R_flange_tool, np.asarray(p_flange_tool_mm, float))
-
-
-def nominal_pose_fn(kin: Kinematics, T_flange_tool: np.ndarray) -> PoseFn:
-    """FK(q) of a kinematic model to the tool frame (base frame)."""
-    return lambda q: fk(kin, q) @ T_flange_tool
 
 
 @dataclass(frozen=True, eq=False)

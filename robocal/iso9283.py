@@ -33,8 +33,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .noise import RP_PER_SIGMA
+from robocal.measure.noise import RP_PER_SIGMA
 
+__all__ = ["COVERAGE_K", "CYCLE_ORDER", "DEFAULT_CYCLES", "POSE_NAMES", "DistanceCharacteristics", "PoseCharacteristics",
+           "RepeatabilitySplit", "characteristics", "cube_poses", "distance_characteristics", "largest_cube",
+           "pose_characteristics", "split_rp"]
 POSE_NAMES = ("P1", "P2", "P3", "P4", "P5")
 CYCLE_ORDER = (0, 4, 3, 2, 1)          # P1 -> P5 -> P4 -> P3 -> P2 (-> P1 of the next cycle)
 CORNER_FRACTION = 0.1                  # P2..P5 at 0.1 L from the corners along the plane's diagonals

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.ik import solve_on_branch
-from robocal.kinematics import Kinematics
-from robocal.noise import repeatability_sigma_mm
+from robocal.kinematics.ik import solve_on_branch
+from robocal.kinematics.models import Kinematics
+from robocal.measure.noise import repeatability_sigma_mm
 from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors
 
 # seed 000 eq. 17, re-orthonormalised (the printed matrix has 6 decimals)

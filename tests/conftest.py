@@ -31,3 +31,13 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     the time; a third fills it."""
     import os
     return len(os.sched_getaffinity(0)) + 1
+
+
+def pytest_ignore_collect(collection_path, config: pytest.Config) -> bool | None:
+    """``-m unit`` does not import a test module that cannot hold a unit test (its text never says "unit"): its
+    tests would all be deselected, and importing it (emulators, browsers, whole-run helpers) is most of the unit
+    tier's collection time. Any other selection collects every module, and the mark check above sees them all."""
+    if config.getoption("markexpr", "") != "unit" or collection_path.suffix != ".py" \
+            or not collection_path.name.startswith("test_"):
+        return None
+    return True if "unit" not in collection_path.read_text(encoding="utf-8").lower() else None

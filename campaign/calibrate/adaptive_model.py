@@ -2,7 +2,7 @@
 
 ``refit`` fits the measured rows as ``reprocess`` does (preparation, fault screen, geometry, the effect engine,
 the residual layer chosen by CV: ``campaign.calibrate.stages``). ``design_terms`` describes that model's
-uncertainty to ``robocal.adaptive``: the parametric part (identified geometry + the effects taken, linearised at the
+uncertainty to ``robocal.design.adaptive``: the parametric part (identified geometry + the effects taken, linearised at the
 fit, whitened by the calibration weights, variance scaled by the fit's unit-weight error s0^2) and the residual
 layer (the joint GP's own features and prior; the GPR's kernel; without a GP layer, a GP fitted to the parametric
 model's residuals, whose signal is small where the data show no structure).
@@ -13,14 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.adaptive import Batch, KernelTerm, LinearTerm
-from robocal.design import geometric_prior_sigma, whiten_rows
-from robocal.effects import effect_regressor
-from robocal.gp import MultiOutputGP
-from robocal.gp_layer import GPRResidual, gp_inputs
-from robocal.joint_gp import JointGPResidual
-from robocal.kinematics import ParamLayout, identification_jacobian
-from robocal.layers import layer_targets
+from robocal.design.adaptive import Batch, KernelTerm, LinearTerm
+from robocal.design.optimal import geometric_prior_sigma, whiten_rows
+from robocal.effects.bases import effect_regressor
+from robocal.layers.gp import MultiOutputGP
+from robocal.layers.gp_layer import GPRResidual, gp_inputs
+from robocal.layers.joint_gp import JointGPResidual
+from robocal.kinematics.models import ParamLayout, identification_jacobian
+from robocal.layers.choice import layer_targets
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
@@ -30,7 +30,7 @@ from .plausibility import check_dataset
 from .stages import final_layer, fit_stages
 
 MAX_TASK_ROWS = 400             # the task poses the variance is averaged over (a seeded sample beyond)
-RULE = "d"                      # robocal.adaptive criterion of the rounds: chosen by bench/bench_select.py --adaptive
+RULE = "d"                      # robocal.design.adaptive criterion of the rounds: chosen by bench/bench_select.py --adaptive
 #                                 (the protocol in its docstring: d 1.168 against i 2.257, mean over seven forms)
 
 
@@ -57,14 +57,14 @@ class CurrentModel:
         return self.layer.kind
 
 
-def refit(ds: Dataset, cell: CellModel) -> CurrentModel:
+def refit(ds: Dataset, cell: CellModel, *, force: bool = False) -> CurrentModel:
     """The model ``reprocess`` would fit to ``ds`` (its calibration rows; test rows are never needed; the nest rows
     once every nest has been read twice: before, no drift can be told from them)."""
     if ds.nest_id is not None and ds.mask("nest").any():
         ids = np.array(ds.nest_id)[ds.mask("nest")]
         if min(np.unique(ids, return_counts=True)[1]) < 2:
             ds = ds.subset(~ds.mask("nest"))
-    ds, plaus = check_dataset(ds, cell)
+    ds, plaus = check_dataset(ds, cell, force=force)
     fitted = fit_stages(ds, cell, plaus)
     stage = fitted.stage
     fl = final_layer(fitted.dataset, cell, stage)
@@ -111,7 +111,7 @@ def task_sample(n: int, seed: int = 0) -> np.ndarray:
 
 def design_terms(cur: CurrentModel, q_cand: np.ndarray, meta_cand: dict, cov_cand: np.ndarray,
                  q_task: np.ndarray, meta_task: dict | None = None) -> list:
-    """``robocal.adaptive`` terms of the current model over candidates q_cand (M, n) rad (their effect metadata
+    """``robocal.design.adaptive`` terms of the current model over candidates q_cand (M, n) rad (their effect metadata
     and covariances (M, 3, 3) mm^2), judged at the task poses q_task (T, n): [parametric, layer]. The parametric
     variance is scaled by the noise the layer leaves (per axis, over the noise model's), between 1 and s0^2: the
     structure the layer describes is not noise of the parametric fit."""

@@ -4,7 +4,7 @@ After the seed and after every batch the calibration points measured so far (rea
 with the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
 (``adaptive_model.refit``), and the next ``plan.block_points`` poses are those of the plan's candidates (at most
 ``MAX_CANDIDATES`` per round, a seeded sample of the pool) that tell the refitted model most about its parameters
-and its layer (``robocal.adaptive``, rule ``adaptive_model.RULE``, chosen by held-out prediction). Predicted
+and its layer (``robocal.design.adaptive``, rule ``adaptive_model.RULE``, chosen by held-out prediction). Predicted
 held-out RMS now: the larger of the refit's k-fold CV figure and the noise floor with the model's own prediction
 variance at the task poses; after the batch: that less the variance the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less than
 ``plan.stop_gain_pct`` % of the noise floor, when the next batch would exceed ``plan.max_minutes`` of robot time, or
@@ -16,24 +16,25 @@ plan's swept-path guard (via poses; a candidate no route reaches is left out of 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from robocal.adaptive import choose_batch
-from robocal.design import short_tour
-from robocal.identify import IdentificationError
-from robocal.kinematics import smr_tracker
+from robocal.design.adaptive import choose_batch
+from robocal.design.optimal import short_tour
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.log_dataset import dataset_from_log
-from campaign.errors import DataError
+from campaign.errors import DataError, one_line
 from campaign.io.quantities import floor_mm
 from campaign.plan.adaptive import task_poses
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import Plan, PlanPoint
+from campaign.run.log_events import LogEvent
 from campaign.run.log_reader import LogContents, read_log
 
 from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
@@ -44,10 +45,12 @@ MAX_CANDIDATES = 3000           # candidates judged per round (a seeded sample o
 
 
 @dataclass(frozen=True)
-class RoundCheck:
+class RoundCheck(LogEvent):
     """One refit: calibration points measured, the layer chosen, predicted held-out RMS now and after each point of
     the next batch (``curve``: (n, mm)), its gain, the threshold, floor and CV figure (mm), robot minutes so far,
-    the decision (continue | stop), why, and the batch (point ids in measurement order; empty on a stop)."""
+    the decision (continue | stop), why, and the batch (point ids in measurement order; empty on a stop). An
+    ``adaptive_round`` event of the log (``to_dict``/``from_dict``)."""
+    TYPE: ClassVar[str] = ROUND_EVENT
     n_calib: int
     layer: str
     predicted_rms_mm: float | None
@@ -61,32 +64,16 @@ class RoundCheck:
     reason: str
     added: tuple[str, ...] = field(default=())
 
-    def to_event(self) -> dict:
-        out = {k: getattr(self, k) for k in (f.name for f in fields(self))}
-        return {"type": ROUND_EVENT, **out, "curve": [list(c) for c in self.curve], "added": list(self.added)}
-
-    @classmethod
-    def from_event(cls, e: dict) -> "RoundCheck":
-        """The record of a logged event (ValueError when a field is missing or of the wrong kind)."""
-        try:
-            num = lambda k: None if e.get(k) is None else float(e[k])  # noqa: E731
-            added = tuple(str(a) for a in e.get("added", ()))
-            return cls(int(e["n_calib"]), str(e["layer"]), num("predicted_rms_mm"), num("gain_next_mm"),
-                       float(e["threshold_mm"]), num("floor_mm"), num("cv_rms_mm"),
-                       tuple((int(n), float(v)) for n, v in e.get("curve", ())), float(e["elapsed_min"]),
-                       str(e["decision"]), str(e["reason"]), added)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"adaptive_round event {e.get('n_calib')!r}: {exc}") from None
-
 
 def round_checks(contents: LogContents | None) -> list[RoundCheck]:
     """The ``adaptive_round`` events of a log, in order, as records."""
-    return [RoundCheck.from_event(e) for e in (getattr(contents, "events", None) or []) if e.get("type") == ROUND_EVENT]
+    return [RoundCheck.from_dict(e) for e in (getattr(contents, "events", None) or []) if e.get("type") == ROUND_EVENT]
 
 
 def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: float,
-                 excluded: frozenset[str] = frozenset()) -> RoundCheck:
-    """Refit the calibration points of the log and choose the next batch (or stop), see the module docstring."""
+                 excluded: frozenset[str] = frozenset(), *, force: bool = False) -> RoundCheck:
+    """Refit the calibration points of the log and choose the next batch (or stop), see the module docstring;
+    ``force``: failed plausibility checks of the refit are overridden (``--force``)."""
     pl = cell.config.plan
     ds = dataset_from_log(contents)
     n = int(ds.mask("calib").sum())
@@ -101,7 +88,7 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
     if pl.max_minutes is not None and elapsed_min + per_point * k > pl.max_minutes:
         return stop(f"max_minutes budget: {elapsed_min:.0f} of {pl.max_minutes:g} min used, the next batch needs "
                     f"about {per_point * k:.0f}")
-    cur = refit(ds.subset(~ds.mask("test")), cell)
+    cur = refit(ds.subset(~ds.mask("test")), cell, force=force)
     measured = set(np.array(ds.point_id)[ds.mask("calib")])
     pool = [p for p in plan.candidates if p.point_id not in measured and p.point_id not in excluded]
     if len(pool) > MAX_CANDIDATES:
@@ -133,11 +120,12 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
 class AdaptiveRounds:
     """The passes of an adaptive run (``campaign.run.runner.PassPlan``): the seed, then one batch per round (a
     refit and an ``adaptive_round`` event before each), then the points after the seed (test set, final check and
-    nest rounds). ``on_skip(n)`` hears of budget points that will not be measured."""
+    nest rounds). ``on_skip(n)`` hears of budget points that will not be measured; ``force`` (``--force``) reaches
+    every refit."""
 
     def __init__(self, cell: CellModel, plan: Plan, run_dir: Path, log, done_ids: set[str],
-                 on_skip: Callable[[int], None] | None = None) -> None:
-        self.cell, self.plan, self.run_dir, self.log = cell, plan, Path(run_dir), log
+                 on_skip: Callable[[int], None] | None = None, *, force: bool = False) -> None:
+        self.cell, self.plan, self.run_dir, self.log, self.force = cell, plan, Path(run_dir), log, force
         self.done = set(done_ids)
         self.on_skip = on_skip
         self.by_id = plan.known_points()
@@ -190,17 +178,17 @@ class AdaptiveRounds:
             self.q_last = np.asarray(records[-1].q_cmd_deg, float)     # where the robot stands
         elapsed = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in contents.records())
         try:
-            check = decide_round(self.cell, self.plan, contents, elapsed, frozenset(self.excluded))
+            check = decide_round(self.cell, self.plan, contents, elapsed, frozenset(self.excluded), force=self.force)
         except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
             n = int(sum(r.set == "calib" for r in contents.records()))
             check = RoundCheck(n, "-", None, None, 0.0, None, None, (), elapsed / 60.0, "stop",
-                               f"refit failed ({' '.join(str(exc).split())[:160]}): the rounds stop here")
+                               f"refit failed ({one_line(exc)[:160]}): the rounds stop here")
         points = self._routed([self.by_id[i] for i in check.added])
         if check.decision == "continue" and not points:
             check = replace(check, decision="stop", added=(), reason="no chosen candidate can be reached by a safe path")
         elif len(points) < len(check.added):
             check = replace(check, added=tuple(p.point_id for p in points))
-        self.log.append_event(check.to_event())          # durable before the batch moves the robot
+        self.log.append_event(check)          # durable before the batch moves the robot
         logger.info("adaptive round after %d calibration points: layer %s, predicted held-out RMS %s mm (floor %s "
                     "mm); %s: %s", check.n_calib, check.layer, _mm(check.predicted_rms_mm), floor_mm(check.floor_mm),
                     check.decision, check.reason)

@@ -2,7 +2,7 @@
 
 After every block (``Plan.blocks``) the calibration points measured so far (read back from the durable log) are
 refitted: geometry by Levenberg-Marquardt, the effects ``calibration.effects`` takes, linearised at that
-solution. ``robocal.design.prediction`` turns the fit into the held-out RMS expected of the model fitted on the
+solution. ``robocal.design.optimal.prediction`` turns the fit into the held-out RMS expected of the model fitted on the
 first n planned points, for every block end n: noise floor at the test poses + the part the model cannot fit
 (blocked cross-validation of the data so far) + the parameter uncertainty of exactly those planned poses. The run
 stops when the next block is predicted to lower it by less than ``plan.stop_gain_pct`` % of the floor, or when
@@ -15,21 +15,23 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from robocal.approach import approach_signs
-from robocal.design import prediction, whiten_rows
-from robocal.effects import effect_regressor
-from robocal.identify import IdentificationError, calibrate
-from robocal.kinematics import ParamLayout, identification_jacobian, smr_tracker
+from robocal.measure.approach import approach_signs
+from robocal.design.optimal import prediction, whiten_rows
+from robocal.effects.bases import effect_regressor
+from robocal.identify.identification import IdentificationError, calibrate
+from robocal.kinematics.models import ParamLayout, identification_jacobian, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.log_dataset import dataset_from_log
 from campaign.io.quantities import floor_mm
 from campaign.plan.points import Plan, PlanPoint
+from campaign.errors import one_line
+from campaign.run.log_events import LogEvent
 from campaign.run.log_reader import LogContents, read_log
 
 from .report_sections import StopSummary
@@ -40,26 +42,33 @@ ROUND_EVENT = "adaptive_round"          # plan.kind: adaptive (campaign.calibrat
 
 
 @dataclass(frozen=True)
-class StopCheck:
+class StopCheck(LogEvent):
     """One refit after a block: predicted held-out RMS (mm) now and at every block end (``curve``), the gain of
-    the next block, the threshold, the fit's figures and the decision (continue | stop) with its reason."""
+    the next block, the threshold, the fit's figures and the decision (continue | stop) with its reason. A
+    ``stop_check`` event of the log (a prediction not yet possible is inf here; the log stores it as null, read
+    back as None)."""
+    TYPE: ClassVar[str] = STOP_EVENT
     n_calib: int
-    predicted_rms_mm: float
+    predicted_rms_mm: float | None
     gain_next_mm: float | None
     threshold_mm: float
-    floor_mm: float
-    unmodelled_mm: float
-    cv_rms_mm: float
-    s0: float
+    floor_mm: float | None
+    unmodelled_mm: float | None
+    cv_rms_mm: float | None
+    s0: float | None
     curve: tuple[tuple[int, float], ...]
     elapsed_min: float
     decision: str
     reason: str
 
-    def to_event(self) -> dict:
-        """The log event (a prediction not yet possible is inf here; the log stores it as null)."""
-        fields = {k: (list(map(list, v)) if k == "curve" else v) for k, v in self.__dict__.items()}
-        return {"type": STOP_EVENT, **fields}
+
+@dataclass(frozen=True)
+class RefitFailed(LogEvent):
+    """A ``stop_check`` whose refit failed: the run keeps measuring as planned (``decision`` continue)."""
+    TYPE: ClassVar[str] = STOP_EVENT
+    n_calib: int
+    decision: str
+    reason: str
 
 
 def stop_checks(contents: LogContents | None) -> list[dict]:
@@ -205,11 +214,10 @@ class AdaptivePasses:
         try:
             check = evaluate(self.cell, self.plan, contents, elapsed)
         except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:   # keep measuring as planned
-            self.log.append_event({"type": STOP_EVENT, "n_calib": n, "decision": "continue",
-                                   "reason": f"refit failed: {' '.join(str(exc).split())}"})
+            self.log.append_event(RefitFailed(n, "continue", f"refit failed: {one_line(exc)}"))
             self.checked.add(n)
             return False
-        self.log.append_event(check.to_event())
+        self.log.append_event(check)
         self.checked.add(n)
         logger.info("stop check after %d calibration points: predicted held-out RMS %.4f mm (floor %s mm); %s: %s",
                     n, check.predicted_rms_mm, floor_mm(check.floor_mm), check.decision, check.reason)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from robocal.diagnose.budget import ErrorBudget, HeldOut, model_budget
-from robocal.kinematics import ParamLayout
+from robocal.kinematics.models import ParamLayout
 
 
 def calibration_budget(predict, stage_models: list, geo, elastic, layer_kind: str, q: np.ndarray, p: np.ndarray,

@@ -9,7 +9,7 @@ from typing import Any
 from campaign.io.json_fields import (RecordError, get_field, json_value, list_field, number_field, object_field,
                                      record_field, record_map_field, records_field, text_field)
 from robocal.diagnose.budget import ErrorBudget
-from robocal.identify import Unidentifiable
+from robocal.identify.identification import Unidentifiable
 
 from .plausibility import Plausibility
 from .summary import Summary

@@ -29,11 +29,12 @@ from campaign.data.dataset import Dataset
 from campaign.data.source import load_source
 from campaign.errors import DataError
 from campaign.io.durable import write_json as _write_json
-from robocal.diagnose import Diagnosis, DiagnosisInput, DiagnosisOptions, FittedStage, diagnose
-from robocal.elastic import EngineOptions, run_engine
-from robocal.identify import IdentificationError
-from robocal.kinematics import ParamLayout
-from robocal.repeats import noise_floor_from_repeats, repeat_dof
+from robocal.diagnose.records import Diagnosis, DiagnosisInput, DiagnosisOptions
+from robocal.diagnose.core import FittedStage, diagnose
+from robocal.effects.engine import EngineOptions, run_engine
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import ParamLayout
+from robocal.measure.repeats import noise_floor_from_repeats, repeat_dof
 
 from .effects_stage import subset
 from .plausibility import check_dataset, registered_kinematics
@@ -41,7 +42,7 @@ from .stages import fit_stages
 
 
 REPORT_FORMAT = "campaign-diagnosis/1"
-MIN_CALIB_ROWS = 40
+MIN_DIAGNOSIS_ROWS = 40      # calib rows a diagnosis needs (a calibration alone needs prepare.MIN_CALIB_ROWS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,8 +54,8 @@ class DiagnosisReport:
 def _check(ds: Dataset, cfg: CampaignConfig) -> None:
     ds.require_joints(len(cfg.robot.joints))
     n_cal = int(ds.mask("calib").sum())
-    if n_cal < MIN_CALIB_ROWS:
-        raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_CALIB_ROWS}")
+    if n_cal < MIN_DIAGNOSIS_ROWS:
+        raise DataError(ds.source, f"only {n_cal} calib rows: the diagnosis needs at least {MIN_DIAGNOSIS_ROWS}")
 
 
 def diagnosis_input(ds: Dataset, cell: CellModel, stage, baseline, nominal=None, q_cmd_deg=None
@@ -115,12 +116,14 @@ def _identified(result) -> np.ndarray:
     return np.array([layout.index(n) for n in result.identified], int)
 
 
-def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | None = None) -> DiagnosisReport:
+def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | None = None, *,
+                     force: bool = False) -> DiagnosisReport:
     """Diagnose one dataset; the report dict leads with the JSON contract. ``options`` None: the defaults with the
-    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage)."""
+    config's ``calibration.cv_folds`` (the engine answer itself always comes from reprocess's elastic stage);
+    ``force``: failed plausibility checks are overridden and reported as such."""
     cfg = cell.config
     _check(ds, cfg)
-    ds, plaus = check_dataset(ds, cell)                     # issue 12: does this data belong to this robot?
+    ds, plaus = check_dataset(ds, cell, force=force)        # issue 12: does this data belong to this robot?
     options = options or DiagnosisOptions(engine=EngineOptions(folds=cfg.calibration.cv_folds))
     try:
         fitted = fit_stages(ds, cell, plaus)   # the same preparation, fits and effect engine as reprocess
@@ -139,10 +142,10 @@ def diagnose_dataset(ds: Dataset, cell: CellModel, options: DiagnosisOptions | N
 
 
 def diagnose_source(source: str | os.PathLike, cell: CellModel,
-                    options: DiagnosisOptions | None = None) -> DiagnosisReport:
+                    options: DiagnosisOptions | None = None, *, force: bool = False) -> DiagnosisReport:
     """``diagnose_dataset`` of a run directory or CSV (``options`` None: the engine's folds are the config's
     ``calibration.cv_folds``, as in reprocess)."""
-    return diagnose_dataset(load_source(source).dataset, cell, options)
+    return diagnose_dataset(load_source(source).dataset, cell, options, force=force)
 
 
 def write_diagnosis_json(path: str | os.PathLike, data: dict) -> Path:

@@ -3,7 +3,7 @@
 ``reprocess`` (its ``elastic`` stage) and ``diagnose`` both call ``elastic_stage`` on the geometric fit of the
 same prepared dataset, so the same CSV and config give the same accepted effects, the same values and the same
 "after" figures in both reports. The effects come from ``calibration.effects`` (a list), or from the effect
-engine (``robocal.elastic.run_engine``) under ``auto``, the default.
+engine (``robocal.effects.engine.run_engine``) under ``auto``, the default.
 """
 from __future__ import annotations
 
@@ -11,15 +11,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.approach import approach_signs, moves_from_order
-from robocal.elastic import EffectChoice, EngineOptions, EngineResult, calibrate_elastic, select
-from robocal.kinematics import ParamLayout
-from robocal.model import CalibratedModel
-from robocal.screen import ScreenResult
+from robocal.measure.approach import approach_signs, moves_from_order
+from robocal.effects.model import EffectChoice
+from robocal.effects.engine import EngineOptions, EngineResult, select_candidates
+from robocal.effects.fit import calibrate_elastic
+from robocal.kinematics.models import ParamLayout
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.identify.screening import ScreenResult
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
+
+from .prepare import MIN_CALIB_ROWS
 
 
 def order_meta(ds: Dataset) -> dict:
@@ -59,7 +63,7 @@ def effect_choices(cell: CellModel, kin, cols, q, p, cov, meta) -> tuple[list[Ef
     if spec != "auto":
         return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                            for k, v in s.params.items())) for s in spec], None
-    eng = select(kin, cols, q, p, cov, meta, cell.gravity, EngineOptions(folds=cell.config.calibration.cv_folds))
+    eng = select_candidates(kin, cols, q, p, cov, meta, cell.gravity, EngineOptions(folds=cell.config.calibration.cv_folds))
     return list(eng.taken), eng
 
 
@@ -121,7 +125,7 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
         robust_rejected = ~geo.keep
         robust_rejected[[e.index for e in geo.screen.excluded]] = False      # IGG3/Huber zero weights only
         new_keep = final_screen.keep & ~robust_rejected
-        if new_keep.sum() < 10:
+        if new_keep.sum() < MIN_CALIB_ROWS:
             final_screen = geo.screen
         elif not np.array_equal(new_keep, geo.keep):
             kept = rc[new_keep]

@@ -18,13 +18,14 @@ from campaign.data.dataset import Dataset
 from campaign.errors import DataError
 from campaign.plan.learning import SIZES, forecast_curve
 from campaign.plan.points import Plan, PlanPoint
+from campaign.run.log_events import ForecastEvent
 from campaign.run.log_records import PointRecord
 from campaign.run.eta import budget_duration_s, estimate_duration_s, grid_duration_s
 
 from .report_sections import LearningCurve
 from .stages import calibrate_dataset
 
-FORECAST_EVENT = "forecast"
+FORECAST_EVENT = ForecastEvent.TYPE
 MEASURED_SIZES = tuple(s for s in SIZES if s >= 25)
 
 
@@ -37,15 +38,15 @@ def plan_learning(cell: CellModel, plan: Plan) -> tuple[tuple[tuple[int, float],
     return forecast_curve(cell, plan), minutes
 
 
-def forecast_event(cell: CellModel, plan: Plan) -> dict:
+def forecast_event(cell: CellModel, plan: Plan) -> ForecastEvent:
     """The ``forecast`` log event of a run that starts now."""
     curve, minutes = plan_learning(cell, plan)
-    return {"type": FORECAST_EVENT, "curve": [list(c) for c in curve],
-            "minutes_planned": minutes["budget"] if minutes["budget"] is not None else minutes["plan"],
-            "minutes_grid": minutes["grid"]}
+    return ForecastEvent([list(c) for c in curve],
+                         minutes["budget"] if minutes["budget"] is not None else minutes["plan"], minutes["grid"])
 
 
-def measured_curve(ds: Dataset, cell: CellModel, sizes=MEASURED_SIZES) -> tuple[tuple[int, float], ...]:
+def measured_curve(ds: Dataset, cell: CellModel, sizes=MEASURED_SIZES, *,
+                   force: bool = False) -> tuple[tuple[int, float], ...]:
     """((n, held-out RMS mm), ...): the first n calibration rows of ``ds`` (measurement order) with every other row,
     calibrated by the default process, for n in ``sizes`` below the number of calibration rows (not the last:
     that is the report itself)."""
@@ -58,7 +59,7 @@ def measured_curve(ds: Dataset, cell: CellModel, sizes=MEASURED_SIZES) -> tuple[
         keep = ~ds.mask("calib")
         keep[cal[:n]] = True
         try:
-            rms = calibrate_dataset(ordered.subset(keep), cell).report.final.test.rms_mm
+            rms = calibrate_dataset(ordered.subset(keep), cell, force=force).report.final.test.rms_mm
         except DataError:                                  # too few rows for a plausible fit: no point on the curve
             continue
         if rms is not None:
@@ -66,7 +67,8 @@ def measured_curve(ds: Dataset, cell: CellModel, sizes=MEASURED_SIZES) -> tuple[
     return tuple(out)
 
 
-def learning_summary(ds: Dataset, cell: CellModel, contents, final_rms_mm: float | None) -> LearningCurve | None:
+def learning_summary(ds: Dataset, cell: CellModel, contents, final_rms_mm: float | None, *,
+                     force: bool = False) -> LearningCurve | None:
     """``report.json``'s ``learning`` of a run whose log holds a ``forecast`` event (optimal and adaptive runs);
     ``final_rms_mm`` the report's own held-out RMS, the measured curve's last point (all calibration points)."""
     event = next((e for e in (getattr(contents, "events", None) or []) if e.get("type") == FORECAST_EVENT), None)
@@ -74,7 +76,7 @@ def learning_summary(ds: Dataset, cell: CellModel, contents, final_rms_mm: float
         return None
     records = contents.records()
     logged = sum(max(0.0, float(r.t_end_s - r.t_start_s)) for r in records) / 60.0
-    measured = measured_curve(ds, cell)
+    measured = measured_curve(ds, cell, force=force)
     if final_rms_mm is not None:
         measured += ((int(ds.mask("calib").sum()), float(final_rms_mm)),)
     return LearningCurve(tuple((int(n), float(v)) for n, v in event.get("curve", ())), measured,

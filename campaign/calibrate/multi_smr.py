@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.frames import inv_T, matrix_to_rotvec
-from robocal.identify import IdentificationError
-from robocal.multi_smr_calibration import calibrate_multi_smr, orientation_errors_arcsec
-from robocal.three_smr_pose import MultiSMRPoseEstimator, SMRTool, fit_points_pose
-from robocal.screen import smr_triangle
-from robocal.stats import error_stats
+from robocal.kinematics.frames import inv_T, matrix_to_rotvec
+from robocal.identify.identification import IdentificationError
+from robocal.multi_smr.calibration import calibrate_multi_smr, orientation_errors_arcsec
+from robocal.multi_smr.three_smr_pose import MultiSMRPoseEstimator, SMRTool, fit_points_pose
+from robocal.identify.screening import smr_triangle
+from robocal.measure.stats import error_stats
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import DataError

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from campaign.errors import DataError
 from campaign.io.durable import write_json
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 
 from .stages import Calibrated
 

@@ -4,7 +4,7 @@
 * the xyz unit guessed from the scale (spread of the measured points / spread of the nominal model's points):
   mm is stated, m / cm / inch is an error naming the factor;
 * registration before plausibility: the base frame and the SMR offsets (one per SMR) are registration quantities,
-  not robot parameters; they are fitted together on the nominal geometry first (:func:`robocal.identify.register_tool`),
+  not robot parameters; they are fitted together on the nominal geometry first (:func:`robocal.identify.identification.register_tool`),
   and an SMR offset more than ``TOOL_NOTE_MM`` from the config is reported with the value to configure;
 * nominal RMS after that registration on the calibration rows must be below 1 % of the robot's reach (wrong robot,
   wrong DH table, wrong joint order or offsets all fail it: "does this data belong to this robot?");
@@ -13,17 +13,15 @@
 * a run directory whose log holds fewer points than its plan says so (an interrupted run is never silent).
 
 A failed check raises :class:`campaign.errors.PlausibilityError` (exit 2, one line) unless the operator passed
-``--force`` (:func:`forced`): then the rows outside the limits are dropped, and the report's
+``--force`` (``force=True``, passed by the command down to each check): then the rows outside the limits are dropped, and the report's
 ``plausibility.overridden`` lists every check that failed and was overridden.
 """
 from __future__ import annotations
 
 import csv
-from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator, Mapping
+from typing import Mapping
 
 import numpy as np
 
@@ -40,24 +38,6 @@ LIMIT_TOL_DEG = 1e-6
 TOOL_NOTE_MM = 3.0              # a registered SMR offset this far from the config is reported with the value to use
 ON_AXIS_START_MM = 5.0          # fits start with an SMR offset this close to the flange axis on the axis
 _UNITS = (("mm", 1.0), ("m", 1e-3), ("cm", 0.1), ("inch", 1 / 25.4))
-
-_FORCE: ContextVar[bool] = ContextVar("campaign_plausibility_force", default=False)
-
-
-@contextmanager
-def forced(flag: bool = True) -> Iterator[None]:
-    """Within this block failed plausibility checks are overridden (``--force``) and reported as such."""
-    token = _FORCE.set(bool(flag))
-    try:
-        yield
-    finally:
-        _FORCE.reset(token)
-
-
-def is_forced() -> bool:
-    """Whether the current command runs under ``--force`` (:func:`forced`)."""
-    return _FORCE.get()
-
 
 @dataclass(frozen=True)
 class ToolCheck:
@@ -127,18 +107,11 @@ class Plausibility:
                    figure_field(d, "max_angle_delta_deg"), record_field(d, "tool", ToolCheck.from_dict, True))
 
 
-def _fail(source: str, message: str, state: Plausibility) -> Plausibility:
-    """Raise unless forced; when forced, record the overridden failure."""
-    if not _FORCE.get():
+def _fail(source: str, message: str, state: Plausibility, force: bool) -> Plausibility:
+    """Raise unless ``force``; then record the overridden failure."""
+    if not force:
         raise PlausibilityError(source, message)
     return replace(state, overridden=state.overridden + (message,), forced=True)
-
-
-def reach_mm(cfg, p_flange_smr_mm=None) -> float:
-    """Upper bound of the SMR's distance from the base origin (mm): sum |a| + |d| + |p_flange_smr| (the configured
-    offset unless one is given)."""
-    tool = cfg.tool.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm
-    return float(sum(abs(j.a_mm) + abs(j.d_mm) for j in cfg.robot.joints) + np.linalg.norm(tool))
 
 
 def row_locations(ds) -> list[str]:
@@ -158,12 +131,12 @@ def row_locations(ds) -> list[str]:
     return [f"line {ln} ({pid})" for ln, pid in zip(lines, ds.point_id)]
 
 
-def check_dataset(ds, cell: CellModel):
+def check_dataset(ds, cell: CellModel, *, force: bool = False):
     """Checks on the data alone (before any fit): magnitudes, joint limits, unit, nominal RMS, completeness.
 
     Unit and nominal RMS are judged on the rows inside the limits; every failed check is named in one line
     (the wrong-robot verdict first). Returns (dataset, Plausibility): the dataset without the rejected rows
-    when forced, else unchanged."""
+    when ``force`` (``--force``: the failures are recorded as overridden), else unchanged."""
     cfg = cell.config
     state = Plausibility()
     ds.require_joints(len(cfg.robot.joints))
@@ -180,7 +153,7 @@ def check_dataset(ds, cell: CellModel):
     if limits_msg:
         failures.append(limits_msg)
     if failures:
-        if not _FORCE.get():
+        if not force:
             raise PlausibilityError(ds.source, "; ".join(failures))
         state = replace(state, overridden=state.overridden + tuple(failures), forced=True)
     return inside, state
@@ -262,7 +235,7 @@ def _spread(p: np.ndarray) -> float:
 
 def _check_unit(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Guess the xyz unit from the ratio of measured to nominal point spread (registration cannot fix scale)."""
-    from robocal.kinematics import smr_base
+    from robocal.kinematics.models import smr_base
 
     p_nom = smr_base(cell.kinematics, np.radians(ds.q_deg[cal]))
     s_nom, s_meas = _spread(p_nom), _spread(ds.p_tracker_mm[cal])
@@ -284,7 +257,7 @@ def _check_unit(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tu
 def _register_tool(ds, cell: CellModel, cal: np.ndarray) -> ToolCheck | None:
     """Base and SMR offsets registered together on the nominal geometry (every SMR the config and the data have,
     on the calibration rows where all of them were read), or None when the rows cannot be registered."""
-    from robocal.identify import IdentificationError, register_tool
+    from robocal.identify.identification import IdentificationError, register_tool
 
     cfg = cell.config
     clouds = [c for c in (ds.p_tracker_mm, ds.p2_tracker_mm, ds.p3_tracker_mm) if c is not None]
@@ -314,7 +287,7 @@ def start_kinematics(cell: CellModel, plaus: Plausibility | None = None):
     """The model every fit starts from: :func:`registered_kinematics`, with an SMR offset within ON_AXIS_START_MM
     of the flange axis put on the axis. From an on-axis start the calibration admits the wrist parameters that a
     small lateral lever makes only marginally identifiable when its solution identifies them strongly
-    (:func:`robocal.identify.calibrate`), so neither the configured lateral values nor a rough config decide which
+    (:func:`robocal.identify.identification.calibrate`), so neither the configured lateral values nor a rough config decide which
     parameters are fitted (the fit identifies the lateral offset itself)."""
     kin = registered_kinematics(cell, plaus)
     p = kin.p_flange_smr_mm
@@ -329,8 +302,9 @@ def start_smr_offsets_mm(cfg, plaus: Plausibility | None = None) -> tuple:
 
 def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) -> tuple[Plausibility, str | None]:
     """Nominal RMS after registering the base and the SMR offsets on the calibration rows < 1 % of the reach."""
-    from robocal.identify import IdentificationError, register
-    from robocal.kinematics import smr_tracker
+    from robocal.identify.identification import IdentificationError, register
+    from robocal.identify.screening import reach_mm
+    from robocal.kinematics.models import smr_tracker
 
     cfg = cell.config
     q, p = np.radians(ds.q_deg[cal]), ds.p_tracker_mm[cal]
@@ -342,7 +316,7 @@ def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) ->
         return state, None                  # calibration reports it with its own message
     err = p - smr_tracker(kin, q)
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    reach = reach_mm(cfg, kin.p_flange_smr_mm)
+    reach = reach_mm(kin)
     bound = REACH_FRACTION * reach
     state = replace(state, nominal_rms_mm=rms, bound_mm=bound)
     if not np.isfinite(rms) or rms > bound:
@@ -352,9 +326,10 @@ def _check_nominal(ds, cell: CellModel, cal: np.ndarray, state: Plausibility) ->
     return state, None
 
 
-def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
-    """Identified joint geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error.
-    The base frame and the SMR offset are registration quantities and have no bound."""
+def check_deltas(kin0, kin, source: str, state: Plausibility, *, force: bool = False) -> Plausibility:
+    """Identified joint geometry vs nominal: lengths within max(5 mm, 2 %), angles within 2 deg; else an error
+    (recorded as overridden with ``force``). The base frame and the SMR offset are registration quantities and have
+    no bound."""
     nominal_len = np.concatenate([kin0.a_mm, kin0.d_mm])
     delta_len = np.concatenate([kin.a_mm, kin.d_mm]) - nominal_len
     names = [f"a{i + 1}" for i in range(kin0.n)] + [f"d{i + 1}" for i in range(kin0.n)]
@@ -373,7 +348,7 @@ def check_deltas(kin0, kin, source: str, state: Plausibility) -> Plausibility:
         return state
     shown = ", ".join(bad[:4]) + (f" and {len(bad) - 4} more" if len(bad) > 4 else "")
     return _fail(source, f"identified deltas beyond physical bounds: {shown}: not a calibration of this robot "
-                         "(wrong config, wrong data, or a crash)", state)
+                         "(wrong config, wrong data, or a crash)", state, force)
 
 
 

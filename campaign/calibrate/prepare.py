@@ -10,11 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from robocal.drift import DriftModel, fit_drift, nest_rounds
-from robocal.identify import CalibrationOptions, IdentificationError, calibrate
-from robocal.readback import ENCODER_NOISE_DEG, prefer_commanded, readback_statistics
-from robocal.screen import nest_misreads
-from robocal.stats import error_stats
+from robocal.measure.drift import DriftModel, fit_drift, nest_rounds
+from robocal.identify.identification import CalibrationOptions, IdentificationError, calibrate
+from robocal.measure.readback import ENCODER_NOISE_DEG, prefer_commanded, readback_statistics
+from robocal.identify.screening import nest_misreads
+from robocal.measure.stats import error_stats
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
@@ -31,6 +31,7 @@ class Prepared:
     report: dict
 
 
+MIN_CALIB_ROWS = 10         # the fewest calibration rows a calibration fits (a fault screen may not leave fewer)
 MAX_READBACK_RMS_DEG = 1.0   # read-back lags are hundredths of a degree; more means the two sets are not the same poses
 FIT_MARGIN = 0.9    # the read-back set overrides the statistics only when it fits >= 10 % better
 
@@ -50,7 +51,7 @@ def _confirm_by_fit(cell: CellModel | None, ds: Dataset, robot: np.ndarray) -> t
     The same geometric model is fitted to the calib rows with each set; the read-back set wins only when its
     RMS is clearly (>= 10 %) lower."""
     cal = ds.mask("calib")
-    if cell is None or cal.sum() < 10:
+    if cell is None or cal.sum() < MIN_CALIB_ROWS:
         return True, "", {}
     p = ds.p_tracker_mm[cal]
     rms_cmd, rms_read = _fit_rms(cell, ds.qc_deg[cal], p), _fit_rms(cell, ds.q_deg[cal], p)
@@ -65,7 +66,7 @@ def _confirm_by_fit(cell: CellModel | None, ds: Dataset, robot: np.ndarray) -> t
 
 def choose_joints(ds: Dataset, setting: str, cell: CellModel | None = None) -> tuple[np.ndarray, str, dict]:
     """(q_deg (N, n) of the robot rows, set name, report) for ``calibration.joints`` = auto|commanded|readback.
-    ``auto``: the read-back statistics decide (robocal.readback.prefer_commanded); when they say the sets differ,
+    ``auto``: the read-back statistics decide (robocal.measure.readback.prefer_commanded); when they say the sets differ,
     a geometric fit with each set confirms it (with ``cell``; the read-back set wins only if it fits clearly
     better)."""
     robot = ds.mask("nest") == False  # noqa: E712
@@ -111,7 +112,7 @@ def fit_nest_drift(source: str, t_s: np.ndarray, nest_id: np.ndarray, p_tracker_
                    point_id: np.ndarray, t_end_s: float) -> tuple[DriftModel, dict]:
     """Drift model from nest readings (times t_s (M,) s from the registration's frame, nest ids (M,), readings
     (M, 3) mm tracker frame, point ids (M,)) and its report section (translation at ``t_end_s``): misread
-    readings (a jump against the same nest's readings before and after, robocal.screen.nest_misreads) are set
+    readings (a jump against the same nest's readings before and after, robocal.identify.screening.nest_misreads) are set
     aside and listed, the model is fitted on the rest. A nest read only once is bad input (DataError)."""
     t, ids, p = np.asarray(t_s, float), np.asarray(nest_id), np.asarray(p_tracker_mm, float)
     names, index, counts = np.unique(ids, return_inverse=True, return_counts=True)

@@ -4,7 +4,7 @@ stands for with ``to_dict()`` (keys and order as in the file) and reads one back
 earlier versions lack are optional when read.
 
 Sections that another component writes stay the JSON it writes: the effect selection and fitted effects
-(``robocal.elastic``), the layer CV table (``robocal.layers``), the stop checks (run log events).
+(``robocal.effects``), the layer CV table (``robocal.layers``), the stop checks (run log events).
 """
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING
 
 from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, object_field, record_dict,
                                      record_field, record_map_field, records_field, text_field, vector_field)
-from robocal.identify import Unidentifiable
-from robocal.parameters import ParameterTable
-from robocal.stats import ErrorStats
+from robocal.identify.identification import Unidentifiable
+from robocal.identify.parameters import ParameterTable
+from robocal.measure.stats import ErrorStats
 
 if TYPE_CHECKING:                                   # robocal.layers loads the GP stack: not needed to read a report
-    from robocal.layers import LayerChoice
+    from robocal.layers.choice import LayerChoice
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ _CURVES = "joint_curve_rms_arcsec"
 
 @dataclass(frozen=True)
 class LayerSummary:
-    """The fitted residual layer beside its honest figures (``robocal.layers.layer_summary``): calibration RMS (a
+    """The fitted residual layer beside its honest figures (``robocal.layers.choice.layer_summary``): calibration RMS (a
     fit to its own points), CV-predicted held-out RMS, test RMS (mm); for a GPR its approximation, training size,
     inducing inputs (None: exact), noise and the floor bounding it (mm)."""
     kind: str
@@ -161,7 +161,7 @@ class ParameterRow:
 
 
 def parameter_rows(table: ParameterTable) -> tuple[ParameterRow, ...]:
-    """The rows of a model's parameter record (``robocal.parameters``) exactly as model.json writes them (angles in
+    """The rows of a model's parameter record (``robocal.identify.parameters``) exactly as model.json writes them (angles in
     deg): the one conversion behind report.json ``parameters``, the terminal and the HTML tables."""
     return tuple(ParameterRow.from_dict(row) for row in table.to_dict()["rows"])
 
@@ -182,7 +182,7 @@ class ExcludedPoint:
 
 
 def unidentifiable_from_dict(d: Mapping) -> Unidentifiable:
-    """``robocal.identify.Unidentifiable`` of its JSON object."""
+    """``robocal.identify.identification.Unidentifiable`` of its JSON object."""
     return Unidentifiable(text_field(d, "name"), tuple(list_field(d, "redundant_with")), text_field(d, "reason"))
 
 
@@ -219,7 +219,7 @@ class EffectCounts:
 
 
 def tried_candidates(selection: Mapping) -> list[str]:
-    """The candidates a selection (``robocal.elastic.EffectSelection.to_dict``) tried, in the order first tried;
+    """The candidates a selection (``robocal.effects.select.EffectSelection.to_dict``) tried, in the order first tried;
     for a report of an earlier version (trials without their candidate) the candidates offered at the start."""
     trials = selection.get("trials") or ()
     if any("candidate" not in t for t in trials):
@@ -229,7 +229,7 @@ def tried_candidates(selection: Mapping) -> list[str]:
 
 @dataclass(frozen=True)
 class EffectsReport:
-    """The physical effects: the CV selection and the fitted effects as ``robocal.elastic`` writes them, the
+    """The physical effects: the CV selection and the fitted effects as ``robocal.effects`` writes them, the
     effect parameters fixed as unidentifiable; with an elastic stage its sigma0, notes and condition number."""
     selection: dict | None
     fitted: tuple[dict, ...] = ()

@@ -4,7 +4,7 @@ The same loop as ``plan.kind: adaptive``, with the measured calibration rows as 
 (the plan's criterion, joints spread; the identifiable geometric parameters + 10 %, at least the rows the layer's
 cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
 nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
-where that model learns most about its parameters and its layer (``robocal.adaptive`` rule ``d``, the default:
+where that model learns most about its parameters and its layer (``robocal.design.adaptive`` rule ``d``, the default:
 chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).
 The task poses (the calibration rows, i.e. the measured box, or ``task_q_rad``) weigh the predicted held-out RMS
 of every round, and the choice under rule ``i``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.adaptive import choose_batch
-from robocal.design import criterion, d_optimal
-from robocal.identify import IdentificationError
-from robocal.kinematics import smr_base, smr_tracker
+from robocal.design.adaptive import choose_batch
+from robocal.design.optimal import criterion, d_optimal
+from robocal.identify.identification import IdentificationError
+from robocal.kinematics.models import smr_base, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
-from campaign.errors import DataError
+from campaign.errors import DataError, one_line
 from campaign.plan.adaptive import seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
@@ -61,20 +61,20 @@ class AdaptiveSelection:
     criterion: str = ADAPTIVE
 
 
-def adaptive_selection(ds: Dataset, cell: CellModel, n: int) -> AdaptiveSelection:
+def adaptive_selection(ds: Dataset, cell: CellModel, n: int, *, force: bool = False) -> AdaptiveSelection:
     """``campaign select --adaptive``: ``adaptive_rows`` judged at the config's ``plan.task`` when it has one."""
     if cell.config.plan.task is None:
-        return adaptive_rows(ds, cell, n)
+        return adaptive_rows(ds, cell, n, force=force)
     cal = ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1)
     q = np.radians(ds.q_deg[cal])
-    return adaptive_rows(ds, cell, n, task_q_rad=task_poses(cell, q, smr_base(cell.kinematics, q)))
+    return adaptive_rows(ds, cell, n, task_q_rad=task_poses(cell, q, smr_base(cell.kinematics, q)), force=force)
 
 
 def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
-                  task_q_rad: np.ndarray | None = None) -> AdaptiveSelection:
+                  task_q_rad: np.ndarray | None = None, *, force: bool = False) -> AdaptiveSelection:
     """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring); DataError as for
-    ``select_rows``."""
-    check_dataset(ds, cell)
+    ``select_rows``; ``force`` overrides failed plausibility checks (here and in every refit)."""
+    check_dataset(ds, cell, force=force)
     cal = np.flatnonzero(ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1))
     if len(cal) < n:
         raise DataError(ds.source, f"has {len(cal)} calibration rows, fewer than the {n} requested (--points)")
@@ -101,7 +101,7 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         keep = others.copy()
         keep[cal[chosen]] = True
         try:
-            cur = refit(ordered.subset(keep), cell)
+            cur = refit(ordered.subset(keep), cell, force=force)
             cov = cell.covariance(smr_tracker(cur.kinematics, q))       # where the refit predicts the SMR
             b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule)
             rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, predicted_curve(cur, b, 0)[-1][1],
@@ -110,7 +110,7 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         except (DataError, IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
             add = _farthest(q * crit.levers_mm_per_rad, taken, k)
             rounds.append(Round(len(chosen), "none", None, None, tuple(ds.point_id[cal[i]] for i in add),
-                                f"refit failed ({' '.join(str(exc).split())[:120]}): the farthest rows instead"))
+                                f"refit failed ({one_line(exc)[:120]}): the farthest rows instead"))
             chosen += [int(i) for i in add]
     keep = ~ds.mask("calib")
     keep[cal[chosen]] = True

@@ -21,23 +21,23 @@ from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, DataWarning
-from robocal.frames import transform_points
-from robocal.gp_layer import GPRResidual
-from robocal.joint_gp import MIN_SPAN_RAD, JointGPResidual
-from robocal.identify import CalibrationResult, IdentificationError, calibrate, register
-from robocal.kinematics import smr_tracker
-from robocal.layers import LayerChoice, choose_layer, fit_layer, layer_summary
-from robocal.model import CalibratedModel
-from robocal.repeats import noise_floor_from_repeats, repeat_groups
-from robocal.screen import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
-from robocal.stats import error_stats
+from robocal.kinematics.frames import transform_points
+from robocal.layers.gp_layer import GPRResidual
+from robocal.layers.joint_gp import MIN_SPAN_RAD, JointGPResidual
+from robocal.identify.identification import CalibrationResult, IdentificationError, calibrate, register
+from robocal.kinematics.models import smr_tracker
+from robocal.layers.choice import LayerChoice, choose_layer, fit_layer, layer_summary
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.measure.repeats import noise_floor_from_repeats, repeat_groups
+from robocal.identify.screening import NEAR_FRACTION, ScreenResult, joint_levers_mm, near_neighbours, reach_mm, screen
+from robocal.measure.stats import error_stats
 
 from .budget_stage import calibration_budget
 from .calibration_report import COMPENSATED, ELASTIC, KINEMATIC, NOMINAL, CalibrationReport
 from .effects_stage import ElasticStage, elastic_stage, order_meta, subset
 from .multi_smr import multi_smr_report, screen_smrs
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
-from .prepare import prepare
+from .prepare import MIN_CALIB_ROWS, prepare
 from .report_points import PointTable, cell_summary, point_table, report_points_value
 from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, LayerSummary, MethodChoice,
                               PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult, parameter_rows)
@@ -57,8 +57,9 @@ class Calibrated:
 
 def _check_dataset(ds: Dataset, cfg: CampaignConfig) -> None:
     ds.require_joints(len(cfg.robot.joints))
-    if ds.mask("calib").sum() < 10:
-        raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least 10 are needed")
+    if ds.mask("calib").sum() < MIN_CALIB_ROWS:
+        raise DataError(ds.source, f"only {int(ds.mask('calib').sum())} calib rows: at least {MIN_CALIB_ROWS} are "
+                                   "needed")
 
 
 def _predict(kin_or_model, q, payload=None, meta=None) -> np.ndarray:
@@ -116,7 +117,7 @@ class GeometricFit:
         return np.asarray(self.result.point_weights) > 0
 
 
-def _calibrate(kin0, q, p, cov, options, source):
+def _identify(kin0, q, p, cov, options, source):
     try:
         return calibrate(kin0, q, p, cov, options)
     except IdentificationError as exc:
@@ -131,7 +132,7 @@ def _geometric(ds: Dataset, cell: CellModel, kin0, rescreen: _Screen) -> Geometr
     q, p = np.radians(ds.q_deg[rows]), ds.p_tracker_mm[rows]
     cov = cell.weights(ds)[0][rows]
     options = cell.options
-    result = _calibrate(kin0, q, p, cov, options, ds.source)
+    result = _identify(kin0, q, p, cov, options, ds.source)
     keep = np.ones(len(rows), bool)
     sc = None
     if cell.config.calibration.outliers == "local":
@@ -141,9 +142,9 @@ def _geometric(ds: Dataset, cell: CellModel, kin0, rescreen: _Screen) -> Geometr
             if np.array_equal(new_keep, keep):
                 break
             keep = new_keep
-            if keep.sum() < 10:
-                raise DataError(ds.source, "the fault screen left fewer than 10 calibration points")
-            result = _calibrate(kin0, q[keep], p[keep], cov[keep], options, ds.source)
+            if keep.sum() < MIN_CALIB_ROWS:
+                raise DataError(ds.source, f"the fault screen left fewer than {MIN_CALIB_ROWS} calibration points")
+            result = _identify(kin0, q[keep], p[keep], cov[keep], options, ds.source)
     w = np.zeros(len(rows))
     w[keep] = result.point_weights
     result = replace(result, point_weights=w, residual_tracker_mm=p - smr_tracker(result.kinematics, q))
@@ -169,11 +170,11 @@ class _Screen:
                       repeat_groups(ds.q_deg[rows]), neighbours=self._last[1])
 
 
-def geometric_fit(ds: Dataset, cell: CellModel) -> CalibrationResult:
+def geometric_fit(ds: Dataset, cell: CellModel, *, force: bool = False) -> CalibrationResult:
     """The geometric-only calibration the "kinematic" stage reports (after the dataset preparation and the
     measurement-fault screen): the baseline of ``diagnose``. ``point_weights`` (calib rows) 0 = excluded."""
     _check_dataset(ds, cell.config)
-    ds, plaus = check_dataset(ds, cell)
+    ds, plaus = check_dataset(ds, cell, force=force)
     ds = prepared_dataset(ds, cell)
     keep, _ = screen_smrs(ds, cell)
     ds = ds.subset(keep) if not keep.all() else ds
@@ -251,91 +252,139 @@ def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer
     return FinalLayer(choice, payload, floor, repeats, specs)
 
 
-def calibrate_dataset(ds: Dataset, cell: CellModel) -> Calibrated:
-    """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report."""
-    cfg = cell.config
-    _check_dataset(ds, cfg)
-    ds, plaus = check_dataset(ds, cell)                     # issue 12: before anything is fitted or written
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Every stage of a calibration evaluated, before the report is written: ``fitted`` the checked fits,
+    ``dataset`` the rows they saw, ``plaus`` the plausibility verdict, ``layer`` the final layer, ``model`` the
+    model written (SMR offsets of a multi-SMR tool in its meta), ``stage_models`` (name, model) in stage order,
+    ``stages`` their figures, ``table`` the per-point rows and ``points`` their report value, the excluded and
+    weight-rejected calibration points, the multi-SMR section and the error budget."""
+    fitted: Fitted
+    dataset: Dataset
+    plaus: object
+    layer: FinalLayer
+    model: CalibratedModel
+    stage_models: list
+    stages: dict
+    table: PointTable
+    points: dict
+    excluded: list
+    rejected_ids: list
+    multi: object
+    budget: object
+
+
+def calibrate_dataset(ds: Dataset, cell: CellModel, *, force: bool = False) -> Calibrated:
+    """Calibrate on the calib rows, evaluate every stage on the test rows, and build the report; ``force``
+    (``--force``): failed plausibility checks are overridden and reported as such."""
+    ev = evaluate_stages(ds, cell, force=force)
+    return Calibrated(calibration_report(ev, cell), ev.model, ev.fitted.geo.result, ev.table)
+
+
+def _checked_fit(ds: Dataset, cell: CellModel, force: bool):
+    """The plausibility checks and the fits of ``ds`` (checked again on the identified geometry): (fitted, plaus)."""
+    _check_dataset(ds, cell.config)
+    ds, plaus = check_dataset(ds, cell, force=force)        # issue 12: before anything is fitted or written
     fitted = fit_stages(ds, cell, plaus)
-    prep, ds, smr_excluded, geo, stage = fitted.prep, fitted.dataset, fitted.smr_excluded, fitted.geo, fitted.stage
-    kin0 = fitted.kin0
-    result = geo.result
-    plaus = check_deltas(kin0, result.kinematics, ds.source, plaus)
-    q = np.radians(ds.q_deg)
-    p = ds.p_tracker_mm
-    cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
-    if not test.any():
+    plaus = check_deltas(fitted.kin0, fitted.geo.result.kinematics, fitted.dataset.source, plaus, force=force)
+    if not fitted.dataset.mask("test").any():
         plaus = replace(plaus, notes=plaus.notes + (NO_TEST_ROWS,))
-        warnings.warn(f"{ds.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=2)
-    cov_source = cell.weights(ds)[1]
-    meta_all, kept_rows, model_el, elastic = stage.meta, stage.kept_rows, stage.model, stage.elastic
-    final_screen, selection = stage.screen, None if stage.engine is None else stage.engine.selection
-    sub = subset
-    payload_model = float(cfg.tool.payload_kg or 0.0)
-    c = cfg.calibration
+        # stacklevel 4: the caller of calibrate_dataset (through evaluate_stages), where the warning was raised before
+        warnings.warn(f"{fitted.dataset.source}: {NO_TEST_ROWS}", DataWarning, stacklevel=4)
+    return fitted, plaus
+
+
+def evaluate_stages(ds: Dataset, cell: CellModel, *, force: bool = False) -> Evaluation:
+    """The checked fits of ``ds``, the final model and every stage's figures on the test and calib rows, the
+    per-point table and the error budget (see :class:`Evaluation`)."""
+    cfg, c = cell.config, cell.config.calibration
+    fitted, plaus = _checked_fit(ds, cell, force)
+    ds, geo, stage = fitted.dataset, fitted.geo, fitted.stage
+    q, p = np.radians(ds.q_deg), ds.p_tracker_mm
+    cal, test = ds.mask("calib"), ds.mask("test")
+    meta_all, kept_rows, model_el = stage.meta, stage.kept_rows, stage.model
     fl = final_layer(ds, cell, stage)
-    payload, floor, repeats, specs, choice = fl.payload, fl.floor_mm, fl.repeats_mm, fl.specs_mm, fl.choice
+    payload, choice = fl.payload, fl.choice
     layer = choice.layer
     if isinstance(layer, GPRResidual) and layer.uses_payload:
         layer = layer.with_payload(cfg.tool.payload_kg)
     model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
-                            model_el.effects, payload_model, model_el.parameters)
+                            model_el.effects, float(cfg.tool.payload_kg or 0.0), model_el.parameters)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
+    predict = lambda m, r: _predict(m, q[r], rows(r), subset(meta_all, r))  # noqa: E731
     stage_models = [(NOMINAL, register(registered_kinematics(cell, plaus), q[cal], p[cal])),
-                    (KINEMATIC, result.kinematics)]
-    if elastic is not None:
+                    (KINEMATIC, geo.result.kinematics)]
+    if stage.elastic is not None:
         stage_models.append((ELASTIC, model_el))
     stage_models.append((COMPENSATED, model))
-    stages = {name: StageResult(_stage(m, q[test], p[test], rows(test), sub(meta_all, test)),
-                                _stage(m, q[cal], p[cal], rows(cal), sub(meta_all, cal)))
+    stages = {name: StageResult(_stage(m, q[test], p[test], rows(test), subset(meta_all, test)),
+                                _stage(m, q[cal], p[cal], rows(cal), subset(meta_all, cal)))
               for name, m in stage_models}
     spread, pred_std = None, None                         # (N,) GPR predictive std of the test rows, else NaN
     if isinstance(model.residual, (GPRResidual, JointGPResidual)):
         pred_std = np.full(len(ds), np.nan)
         spread, pred_std[test] = _pred_std(model.residual, q[test], rows(test), np.array(ds.point_id)[test].tolist())
-    calib_ids = np.array(ds.point_id)[geo.rows]
-    excluded = list(smr_excluded) + ([] if final_screen is None else [
-        ExcludedPoint(str(calib_ids[e.index]), "calib", e.reason) for e in final_screen.excluded])
-    in_fit = np.zeros(len(ds), bool)
-    in_fit[kept_rows] = True
-    rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()          # calib rows left out, in calib order
-    listed = {e.point_id for e in excluded}
-    excluded += [ExcludedPoint(pid, "calib", f"zero {c.weights} weight of the robust_ridge estimator")
-                 for pid in rejected_ids if pid not in listed]
+    excluded, rejected_ids = _excluded_points(ds, fitted, c.weights)
     multi = None
     if ds.p2_tracker_mm is not None:
-        multi = multi_smr_report(ds, cell, kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
+        multi = multi_smr_report(ds, cell, fitted.kin0, kept_rows, test, start_smr_offsets_mm(cfg, plaus))
         if multi.p_flange_smr_mm is not None:
             model = replace(model, meta={**(model.meta or {}), "p_flange_smrs_mm": multi.p_flange_smr_mm})
     used = np.full(len(ds), np.nan)                      # 1 = in the fit, 0 = excluded calib row
     used[geo.rows], used[kept_rows] = 0.0, 1.0
     table = point_table(ds.point_id, ds.set, ds.q_deg, p, model.kinematics.T_tracker_base,  # HTML figures
-                        {name: (lambda r, m=m: _predict(m, q[r], rows(r), sub(meta_all, r)))
-                         for name, m in stage_models}, used, ds.t_s, pred_std)
+                        {name: (lambda r, m=m: predict(m, r)) for name, m in stage_models}, used, ds.t_s, pred_std)
     points = report_points_value(table)
     stages[COMPENSATED] = _final_stage(stages[COMPENSATED], choice, spread, points)
-    budget = calibration_budget(lambda m, r: _predict(m, q[r], rows(r), sub(meta_all, r)), stage_models, geo,
-                                elastic, choice.kind, q, p, cell.weights(ds)[0], cell.covariance(p), meta_all,
-                                kept_rows, test, floor, sub, c.cv_folds)
-    report = CalibrationReport(
+    budget = calibration_budget(predict, stage_models, geo, stage.elastic, choice.kind, q, p, cell.weights(ds)[0],
+                                cell.covariance(p), meta_all, kept_rows, test, fl.floor_mm, subset, c.cv_folds)
+    return Evaluation(fitted, ds, plaus, fl, model, stage_models, stages, table, points, excluded, rejected_ids,
+                      multi, budget)
+
+
+def _excluded_points(ds: Dataset, fitted: Fitted, weights: str) -> tuple[list, list]:
+    """The calibration points left out of the fit: (every excluded point with its reason: SMR-triangle faults,
+    the measurement-fault screen, zero robust weight; the ids of the calib rows out of the fit, calib order)."""
+    geo, stage = fitted.geo, fitted.stage
+    calib_ids = np.array(ds.point_id)[geo.rows]
+    excluded = list(fitted.smr_excluded) + ([] if stage.screen is None else [
+        ExcludedPoint(str(calib_ids[e.index]), "calib", e.reason) for e in stage.screen.excluded])
+    in_fit = np.zeros(len(ds), bool)
+    in_fit[stage.kept_rows] = True
+    rejected_ids = calib_ids[~in_fit[geo.rows]].tolist()
+    listed = {e.point_id for e in excluded}
+    excluded += [ExcludedPoint(pid, "calib", f"zero {weights} weight of the robust_ridge estimator")
+                 for pid in rejected_ids if pid not in listed]
+    return excluded, rejected_ids
+
+
+def calibration_report(ev: Evaluation, cell: CellModel) -> CalibrationReport:
+    """The report of an evaluated calibration (report.json)."""
+    cfg, c, ds = cell.config, cell.config.calibration, ev.dataset
+    result, stage, choice, model = ev.fitted.geo.result, ev.fitted.stage, ev.layer.choice, ev.model
+    selection = None if stage.engine is None else stage.engine.selection
+    repeats = ev.layer.repeats_mm
+    return CalibrationReport(
         format=REPORT_FORMAT, config=cfg.name, source=ds.source,
-        n=RowCounts(int(cal.sum()), int(test.sum()), int(check.sum()), len(rejected_ids)),
-        stages=stages, noise_floor_mm=floor, noise_floor_source="repeats" if repeats is not None else "specs",
-        noise_floor_specs_mm=specs, noise_floor_repeats_mm=repeats,
+        n=RowCounts(int(ds.mask("calib").sum()), int(ds.mask("test").sum()), int(ds.mask("check").sum()),
+                    len(ev.rejected_ids)),
+        stages=ev.stages, noise_floor_mm=ev.layer.floor_mm,
+        noise_floor_source="repeats" if repeats is not None else "specs",
+        noise_floor_specs_mm=ev.layer.specs_mm, noise_floor_repeats_mm=repeats,
         parameters=parameter_rows(model.parameters), unidentifiable=tuple(result.unidentifiable),
         condition_number=result.condition_number, observability=result.observability,
         sigma0=result.sigma0, iterations=result.iterations, converged=result.converged,
-        rejected_points=tuple(rejected_ids), excluded_points=tuple(excluded),
-        structure_note=None if final_screen is None else final_screen.structure_note(),
+        rejected_points=tuple(ev.rejected_ids), excluded_points=tuple(ev.excluded),
+        structure_note=None if stage.screen is None else stage.screen.structure_note(),
         T_tracker_base=model.kinematics.T_tracker_base.tolist(),
         method=MethodChoice(c.method, c.weights if c.method == "robust_ridge" else None, c.outliers,
-                            c.effects if isinstance(c.effects, str) else "list", choice.kind, c.residual, cov_source),
-        effects=_effects_report(selection, elastic), residual_choice=ResidualChoice.of(choice), plausibility=plaus,
-        residual_cv=_residual_cv_summary(choice), preparation=prep.report, multi_smr=multi,
-        cell=cell_summary(cfg), points=points, parameters_fit=model.parameters.fit,
+                            c.effects if isinstance(c.effects, str) else "list", choice.kind, c.residual,
+                            cell.weights(ds)[1]),
+        effects=_effects_report(selection, stage.elastic), residual_choice=ResidualChoice.of(choice),
+        plausibility=ev.plaus, residual_cv=_residual_cv_summary(choice), preparation=ev.fitted.prep.report,
+        multi_smr=ev.multi, cell=cell_summary(cfg), points=ev.points, parameters_fit=model.parameters.fit,
         parameters_sigma0=model.parameters.sigma0,
-        parameters_geometry_only=None if elastic is None else parameter_rows(result.table()), budget=budget)
-    return Calibrated(report, model, result, table)
+        parameters_geometry_only=None if stage.elastic is None else parameter_rows(result.table()), budget=ev.budget)
 
 
 def _final_stage(stage: StageResult, choice: LayerChoice, spread: PredictiveStd | None, points: dict) -> StageResult:

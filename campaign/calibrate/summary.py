@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from campaign.io.json_fields import (count_field, figure_field, get_field, list_field, record_dict, record_field,
                                      records_field, text_field)
 
-from robocal.noise import noise_max_mm
+from robocal.measure.noise import noise_max_mm
 
 from .report_sections import ErrorFigures
 
@@ -24,7 +24,7 @@ PASS, FAIL, NO_CRITERION, NO_TEST_SET = "pass", "fail", "no acceptance criterion
 
 @dataclass(frozen=True)
 class EffectValue:
-    """One fitted parameter of a physical effect, in the unit ``robocal.elastic`` reports it in."""
+    """One fitted parameter of a physical effect, in the unit ``robocal.effects`` reports it in."""
     name: str
     value: float
     unit: str

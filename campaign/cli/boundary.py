@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
-from campaign.errors import CampaignError, ConfigError, DataError, PlausibilityError, Terminated
+from campaign.errors import CampaignError, ConfigError, DataError, PlausibilityError, Terminated, one_line
 
 # The exit codes, one table for the CLI (campaign.cli.common re-exports them; README "Exit codes")
 EXIT_OK = 0
@@ -63,12 +63,12 @@ def classify(exc: BaseException) -> tuple[str, int] | None:
 
 def write_crash_report(exc: BaseException, argv: Sequence[str], run_dir: Path | None) -> Path:
     """Traceback, versions and command line in RUN_DIR/crash-TIMESTAMP.txt, else a temporary file; URL user-info
-    and known secrets masked (:func:`drivers.redact.redact`)."""
+    and known secrets masked (:func:`drivers.redaction.redact`)."""
     import platform
     import tempfile
     import traceback
 
-    from drivers.redact import redact
+    from drivers.redaction import redact
 
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     text = "\n".join([
@@ -200,7 +200,7 @@ def run_process(main: Callable[[], int], line: Callable[[str], None]) -> None:
 
 
 def _short(exc: BaseException, limit: int = 160) -> str:
-    text = " ".join(str(exc).split())
+    text = one_line(exc)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
@@ -210,7 +210,7 @@ def _unique_warnings(caught, limit: int = 3) -> list[str]:
 
     seen: list[str] = []
     for w in caught:
-        message = " ".join(str(w.message).split())
+        message = one_line(w.message)
         text = message if issubclass(w.category, DataWarning) else f"{w.category.__name__}: {message}"
         if text not in seen:
             seen.append(text)

@@ -7,16 +7,15 @@ Each registers itself with :func:`campaign.cli.common.command`; each handler rec
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
 
-from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout,
-                                 command, overwrite_argument, print_plausibility, width_argument)
+from campaign.cli.common import (EXIT_ACCEPTANCE_FAIL, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, command,
+                                 overwrite_argument, print_plausibility, stderr_console, stdout_console,
+                                 width_argument)
 from campaign.config.load import load_cell
 from campaign.errors import DataError
-from campaign.calibrate.plausibility import forced
 
 
 
@@ -30,7 +29,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     summary."""
     cell = load_cell(args.config)
     cfg = cell.config
-    _stdout().print(
+    stdout_console().print(
         f"OK {cfg.source_path}: {cfg.name}: {cfg.robot.model}, {cfg.robot.n_joints} joints, "
         f"robot {cfg.robot.url}, tracker {cfg.tracker.url}",
         style="green",
@@ -46,7 +45,7 @@ def _warn_acceptance(cell, plan=None) -> None:
     from campaign.plan.acceptance import acceptance_warnings
 
     for line in acceptance_warnings(cell, plan):
-        _stderr().print(f"warning: {line}", style="yellow", markup=False)
+        stderr_console().print(f"warning: {line}", style="yellow", markup=False)
 
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
@@ -65,13 +64,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     from campaign.workflows import run_campaign
 
     cell = load_cell(args.config)
-    out = _stdout()
-    with forced(args.force):
-        result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite)
+    out = stdout_console()
+    result = run_campaign(cell, args.out, args.resume, out, overwrite=args.overwrite, force=args.force)
     o = result.outcome
     if o.exit_status != "success":
         hint = f"; continue with: campaign run {args.config} --resume {result.run_dir}"
-        _stderr().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
+        stderr_console().print(f"run {o.exit_status}: {o.reason}{hint}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     if result.iso9283 is not None:                     # plan.kind: iso9283
         from campaign.report.terminal import render_iso
@@ -118,15 +116,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.csv:
         check_file(args.csv, args.overwrite, "--csv")
     plan = build_plan(cell)
-    render_plan(_stdout(), plan, estimate_duration_s(plan.points, cell))
+    render_plan(stdout_console(), plan, estimate_duration_s(plan.points, cell))
     _warn_acceptance(cell, plan)
     if cell.config.plan.kind != "iso9283" and plan.count("calib"):
         from campaign.plan.optimal import plan_forecast
         from campaign.report.terminal import render_forecast
-        render_forecast(_stdout(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
+        render_forecast(stdout_console(), plan_forecast(cell, plan), () if plan.candidates else plan.blocks)
         from campaign.calibrate.learning import plan_learning
         from campaign.report.adaptive_text import render_plan_learning
-        render_plan_learning(_stdout(), *plan_learning(cell, plan))
+        render_plan_learning(stdout_console(), *plan_learning(cell, plan))
     if args.csv:
         write_plan_csv(plan, args.csv)
     return EXIT_OK
@@ -151,9 +149,8 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     cell = load_cell(args.config)
     if not args.source.exists():
         raise DataError(str(args.source), "no such file or run directory")
-    with forced(args.force):
-        processed = reprocess(args.source, cell, args.out, args.overwrite)
-    out = _stdout()
+    processed = reprocess(args.source, cell, args.out, args.overwrite, force=args.force)
+    out = stdout_console()
     _print_calibration(out, processed.report)
     out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
     return _verdict_exit(processed.report, args.out)
@@ -167,7 +164,7 @@ def _verdict_exit(report, out_dir: Path) -> int:
     v = None if report.summary is None else report.summary.verdict
     if v is None or v.result != FAIL:
         return EXIT_OK
-    _stderr().print(f"acceptance FAIL ({', '.join(v.failed)} exceeded on the held-out test set): every output is "
+    stderr_console().print(f"acceptance FAIL ({', '.join(v.failed)} exceeded on the held-out test set): every output is "
                     f"written in {out_dir}; exit {EXIT_ACCEPTANCE_FAIL}", style="red", markup=False)
     return EXIT_ACCEPTANCE_FAIL
 
@@ -189,34 +186,17 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
                    "--adaptive: replayed batch by batch with the model refitted)",
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
-    from campaign.data.interchange_csv import write_csv
-    from campaign.data.source import load_source
-    from campaign.calibrate.select_rows import select_rows
     from campaign.report.terminal import render_selection
+    from campaign.workflows import select
 
     cell = load_cell(args.config)
-    if args.points < 1:
-        raise DataError(str(args.data), f"--points must be a positive number of rows, got {args.points}")
-    if args.out.resolve() == args.data.resolve():
-        raise DataError(str(args.out), "the subset would overwrite its source; choose another --out")
-    from campaign.run.output_dirs import check_file
-
-    check_file(args.out, args.overwrite)
-    ds = load_source(args.data).dataset
-    with forced(args.force):
-        if args.adaptive:
-            from campaign.calibrate.select_adaptive import adaptive_selection
-            from campaign.report.adaptive_text import render_adaptive_selection
-            sel = adaptive_selection(ds, cell, args.points)
-        else:
-            sel = select_rows(ds, cell, args.points)
-    subset = ds.with_order_context().subset(sel.keep)              # each kept row: how the robot reached it
-    origin = f"{len(subset)} of {len(ds)} rows selected from {args.data} (campaign select)"
-    write_csv(args.out, replace(subset, provenance=f"{origin}; {ds.provenance}" if ds.provenance else origin))
+    sel, ds = select(args.data, cell, args.points, args.out, adaptive=args.adaptive, overwrite=args.overwrite,
+                     force=args.force)
     if args.adaptive:
-        render_adaptive_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+        from campaign.report.adaptive_text import render_adaptive_selection
+        render_adaptive_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
     else:
-        render_selection(_stdout(), sel, int((~ds.mask("calib")).sum()), args.out)
+        render_selection(stdout_console(), sel, int((~ds.mask("calib")).sum()), args.out)
     return EXIT_OK
 
 
@@ -237,32 +217,16 @@ def _correct_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("correct", "correct Cartesian targets with a calibrated model and write controller files", _correct_arguments)
 def cmd_correct(args: argparse.Namespace) -> int:
-    from campaign.correct.accuracy import held_out_of, summary_lines
-    from campaign.correct.targets import check_model_fits, correct_targets, read_targets_csv, recorded_identity
-    from campaign.correct.write_back import read_rejected, write_corrected
-    from campaign.run.output_dirs import check_dir, source_key
-    from campaign.plan.poses import tool_rotation
-    from campaign.calibrate.outputs import load_model
+    from campaign.correct.accuracy import summary_lines
+    from campaign.workflows import correct
 
     cell = load_cell(args.config)
-    claim = check_dir(args.out, "correct", args.overwrite, source=source_key(args.model))
-    model = load_model(args.model)
-    with forced(args.force):
-        check_model_fits(cell, model, str(args.model))
-    targets = read_targets_csv(args.targets, tool_rotation(cell.config.plan.tool_direction))
-    held = held_out_of(model, args.model)
-    accepted, rejected = correct_targets(cell, model, targets, robot_identity=recorded_identity(model, args.model),
-                                         held_out=held)
-    out = _stdout()
-    try:
-        paths = write_corrected(cell.config, accepted, rejected, claim.take(), tuple(args.format or ()))
-    finally:
-        _print_rejected(out, len(targets.ids), args.out)
-    refused = {target_id for target_id, _ in read_rejected(args.out)}
-    out.print(f"{len(targets.ids) - len(refused)} of {len(targets.ids)} targets corrected; wrote "
-              f"{', '.join(p.name for p in paths)} in {args.out}", markup=False)
-    written = [t for t in accepted if t.target_id not in refused]
-    for line in summary_lines(written, held, cell.config.correction.threshold_mm):
+    out = stdout_console()
+    done = correct(cell, args.model, args.targets, args.out, tuple(args.format or ()), overwrite=args.overwrite,
+                   force=args.force, on_rejected=lambda n: _print_rejected(out, n, args.out))
+    out.print(f"{done.n_targets - len(done.refused)} of {done.n_targets} targets corrected; wrote "
+              f"{', '.join(p.name for p in done.paths)} in {args.out}", markup=False)
+    for line in summary_lines(done.written, done.held_out, cell.config.correction.threshold_mm):
         out.print(line, markup=False)
     return EXIT_OK
 
@@ -294,12 +258,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from campaign.workflows import verify
     from campaign.report.terminal import render_verify
 
-    with forced(args.force):
-        result = verify(args.run_dir, _stdout())
-    render_verify(_stdout(), result.report)
-    _stdout().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
+    result = verify(args.run_dir, stdout_console(), force=args.force)
+    render_verify(stdout_console(), result.report)
+    stdout_console().print(f"wrote {result.out_dir}/verify.json and log.jsonl", markup=False)
     if result.exit_status != "success":
-        _stderr().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
+        stderr_console().print(f"verify {result.exit_status}: {result.reason}", style="red", markup=False)
         return EXIT_FAILED
     return EXIT_OK
 

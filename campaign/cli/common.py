@@ -46,14 +46,16 @@ def command(name: str, help: str, configure: Configure) -> Callable[[Handler], H
     return register
 
 
-def _stdout() -> Console:
-    from campaign.io.terminal_text import stdout_console
-    return stdout_console()
+def stdout_console() -> Console:
+    """The safe stdout console of campaign.io.terminal_text, imported on first use."""
+    from campaign.io.terminal_text import stdout_console as safe_console
+    return safe_console()
 
 
-def _stderr() -> Console:
-    from campaign.io.terminal_text import stderr_console
-    return stderr_console()
+def stderr_console() -> Console:
+    """The safe stderr console of campaign.io.terminal_text, imported on first use."""
+    from campaign.io.terminal_text import stderr_console as safe_console
+    return safe_console()
 
 
 def overwrite_argument(parser: argparse.ArgumentParser) -> None:

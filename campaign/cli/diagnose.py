@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import (EXIT_FAILED, EXIT_OK, _stderr, _stdout, command, overwrite_argument,
+from campaign.cli.common import (EXIT_FAILED, EXIT_OK, stderr_console, stdout_console, command, overwrite_argument,
                                  width_argument)
 from campaign.errors import DataError
 
@@ -57,64 +57,20 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         raise DataError("diagnose", "needs RUN_DIR_OR_CSV and --config CONFIG (or --self-check)")
     from campaign.cli.common import print_plausibility
     from campaign.config.load import load_cell
-    from campaign.calibrate.diagnosis import diagnose_source, write_diagnosis_json
     from campaign.report.diagnosis_text import render
-    from campaign.report.diagnosis_plots import write_plots
-    from campaign.calibrate.plausibility import Plausibility, forced
+    from campaign.calibrate.plausibility import Plausibility
+    from campaign.workflows import DiagnoseOutputs, diagnose
 
     cell = load_cell(args.config)
-    plots = _check_outputs(args)                  # every output path refused or accepted before any work
-    with forced(args.force):
-        result = diagnose_source(args.source, cell)
-    out = _stdout()
+    out = stdout_console()
+    outputs = DiagnoseOutputs(args.json, args.plots, args.html, args.overwrite)   # checked before any work
+    result, write = diagnose(args.source, cell, outputs, force=args.force,
+                             on_written=lambda line: out.print(line, markup=False))
     render(out, result.report)
     plaus = result.report.get("plausibility")                 # the diagnosis document carries its JSON
     print_plausibility(out, None if plaus is None else Plausibility.from_dict(plaus))
-    if args.json:
-        write_diagnosis_json(args.json, result.report)
-        out.print(f"wrote {args.json}", markup=False)
-    if plots is not None:
-        files = write_plots(result.report, plots)
-        out.print(files if isinstance(files, str) else f"wrote {', '.join(str(f) for f in files)}", markup=False)
-    html = _write_html(args, result.report)       # RUN_DIR/diagnosis.json + report.html, or --html FILE
-    if html:
-        out.print(f"wrote {html}", markup=False)
+    write()                                       # --json, --plots, RUN_DIR/diagnosis.json + report.html or --html
     return EXIT_OK
-
-
-def _check_outputs(args: argparse.Namespace):
-    """--json FILE, --plots DIR, --html FILE (or the run directory's diagnosis.json and report.html) checked
-    (:mod:`campaign.run.output_dirs`); returns the claim of the plots directory (None without --plots)."""
-    from campaign.report.html import report_targets
-    from campaign.run.output_dirs import check_campaign_dir, check_dir, check_file, source_key
-
-    if args.json:
-        check_file(args.json, args.overwrite, "--json")
-    if args.html is not None:                     # a page of the diagnosis alone: never a run's own report.html
-        check_file(args.html, args.overwrite, "--html")
-        report_targets(args.html.parent, args.html, args.overwrite)
-    elif args.source.is_dir():
-        check_campaign_dir(args.source, "diagnose")
-        report_targets(args.source)
-    if args.plots is None:
-        return None
-    return check_dir(args.plots, "plots", args.overwrite, source=source_key(args.source), option="--plots")
-
-
-def _write_html(args: argparse.Namespace, report: dict) -> Path | None:
-    """The diagnosis as an HTML report: --html FILE (from the diagnosis alone), or the run directory's
-    report.html with diagnosis.json beside it."""
-    from campaign.calibrate.diagnosis import write_diagnosis_json
-    from campaign.report.html import ReportSources, write_report
-
-    if args.html is not None:
-        title = f"{report.get('config', 'diagnosis')}: {args.html.stem}"
-        return write_report(args.html.parent, args.html, args.overwrite,
-                            sources=ReportSources(title, diagnosis=report, files={"diagnosis": "(this command)"}))
-    if not args.source.is_dir():
-        return None
-    write_diagnosis_json(args.source / "diagnosis.json", report)
-    return write_report(args.source)
 
 
 def _self_check(args: argparse.Namespace) -> int:
@@ -124,7 +80,7 @@ def _self_check(args: argparse.Namespace) -> int:
     from campaign.calibrate.diagnosis import write_diagnosis_json
     from robocal.diagnose.selfcheck import run_self_check, trial_plan
 
-    out = _stdout()
+    out = stdout_console()
     total = len(trial_plan(args.seeds))
     out.print(f"self-check: {total} simulated campaigns from robocal/simulation/truth_cell.py ({args.seeds} seeds per effect, controls, "
               "two-effect cases, an effect outside the library)", markup=False)
@@ -137,7 +93,7 @@ def _self_check(args: argparse.Namespace) -> int:
         write_diagnosis_json(args.json, result.to_dict())
         out.print(f"wrote {args.json}", markup=False)
     if not result.passed():
-        _stderr().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
+        stderr_console().print("self-check below target: an effect or failure class named right in < 95 % of its trials, an "
                         "effect accepted on a control, a confound class not named, or a lag called backlash",
                         style="red", markup=False)
         return EXIT_FAILED

@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from campaign.cli.common import COMMANDS, EXIT_BAD_INPUT, _stderr
+from campaign.cli.common import COMMANDS, EXIT_BAD_INPUT, stderr_console
 
 
 class _Parser(argparse.ArgumentParser):
@@ -75,5 +75,5 @@ def _run_dir_hint(args: argparse.Namespace) -> Path | None:
 
 def _fail(message: str, code: int) -> int:
     """Print one red line on stderr; return ``code``."""
-    _stderr().print(" ".join(message.split()), style="red", markup=False)
+    stderr_console().print(" ".join(message.split()), style="red", markup=False)
     return code

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import EXIT_OK, _stdout, command, overwrite_argument
+from campaign.cli.common import EXIT_OK, stdout_console, command, overwrite_argument
 
 
 def _import_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +34,6 @@ def cmd_import(args: argparse.Namespace) -> int:
     ds = import_target_dif(args.calib, args.test, float(args.dif_sign))
     write_csv(args.out, ds)
     n_cal, n_test = int(ds.mask("calib").sum()), int(ds.mask("test").sum())
-    _stdout().print(f"wrote {args.out}: {n_cal} calib + {n_test} test rows in measurement order (step_order), "
+    stdout_console().print(f"wrote {args.out}: {n_cal} calib + {n_test} test rows in measurement order (step_order), "
                     f"xyz = target {args.dif_sign[0]} dif", markup=False)
     return EXIT_OK

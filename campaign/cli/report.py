@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, _stderr, _stdout, command,
+from campaign.cli.common import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, stderr_console, stdout_console, command,
                                  overwrite_argument, width_argument)
 from campaign.errors import DataError
 
@@ -30,7 +30,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from campaign.report.html import figures_dir, write_report
 
     path = write_report(args.run_dir, args.out, args.overwrite)
-    _stdout().print(f"wrote {path} (figures as PNG in {figures_dir(path)})", markup=False)
+    stdout_console().print(f"wrote {path} (figures as PNG in {figures_dir(path)})", markup=False)
     return EXIT_OK
 
 
@@ -52,7 +52,7 @@ def _export_arguments(parser: argparse.ArgumentParser) -> None:
 
 @command("export", "export a calibrated model as URDF, a DH table (CSV) or a RoboDK DH(M) table", _export_arguments)
 def cmd_export(args: argparse.Namespace) -> int:
-    from campaign.report.export import export
+    from campaign.report.export import export_model
     from campaign.calibrate.outputs import load_model
 
     from campaign.run.output_dirs import check_file
@@ -65,13 +65,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     config = args.config or (_run_config(args.model) if args.urdf else None)
     limits = _urdf_limits(args, model, config) if args.urdf and config else None     # export: --urdf needs them
-    files = export(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
+    files = export_model(model, args.urdf, args.dh_csv, args.robodk, args.name, limits)
     if limits is not None and not args.config:
-        _stdout().print(f"URDF joint limits and speeds from {config} (the config of the run that wrote "
+        stdout_console().print(f"URDF joint limits and speeds from {config} (the config of the run that wrote "
                         f"{args.model.name}; --config CONFIG to take another)", markup=False)
-    _stdout().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
+    stdout_console().print(f"wrote {', '.join(str(f) for f in files)}", markup=False)
     if limits is not None and limits.effort_nm is None:
-        _stdout().print("URDF: joint effort limits omitted (no --effort-nm); tools that require them (urdfdom, "
+        stdout_console().print("URDF: joint effort limits omitted (no --effort-nm); tools that require them (urdfdom, "
                         "ROS) need the datasheet torques", markup=False)
     return EXIT_OK
 
@@ -128,11 +128,11 @@ def cmd_iso9283(args: argparse.Namespace) -> int:
 
     cell = load_cell(args.config)
     model = load_model(args.model) if args.model else None
-    out = _stdout()
+    out = stdout_console()
     result, report = run_iso9283(cell, model, args.out, out, overwrite=args.overwrite, model_path=args.model)
     o = result.outcome
     if report is None:
-        _stderr().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)
+        stderr_console().print(f"iso9283 {o.exit_status}: {o.reason}", style="red", markup=False)
         return EXIT_INTERRUPTED if o.exit_status == "abort" else EXIT_FAILED
     render_iso(out, report)
     out.print(f"run directory {result.run_dir}: log.jsonl, report.json, report.html", markup=False)

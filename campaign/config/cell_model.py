@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.effects import GravityModel
-from robocal.identify import CalibrationOptions
-from robocal.kinematics import Kinematics
-from robocal.noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
+from robocal.kinematics.gravity import GravityModel
+from robocal.identify.identification import CalibrationOptions
+from robocal.kinematics.models import Kinematics
+from robocal.measure.noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
 
 from .schema import CampaignConfig
 

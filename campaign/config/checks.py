@@ -178,7 +178,7 @@ def _check_hayati(cell: CellModel) -> None:
     cfg, file = cell.config, cell.config.source_path
     if not cfg.robot.hayati_joints:
         return
-    from robocal.kinematics import chain
+    from robocal.kinematics.models import chain
 
     n = cfg.robot.n_joints
     axes = chain(cell.kinematics, np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]).axis[0]    # (n, 3) base frame
@@ -216,8 +216,8 @@ def _check_effects(cell: CellModel) -> None:
     effects = simulated_effects(cfg, cfg.robot.n_joints)
     if not effects:
         return
-    from robocal.effects import apply_effects
-    from robocal.kinematics import smr_tracker
+    from robocal.effects.bases import apply_effects
+    from robocal.kinematics.models import smr_tracker
 
     q = np.radians(np.asarray(cfg.plan.q_ref_deg, float))[None]
     meta = {"t_s": np.array([3600.0]), "temp_c": np.array([25.0]), "payload_kg": np.array([cfg.tool.payload_kg])}

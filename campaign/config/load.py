@@ -24,19 +24,19 @@ from typing import Any
 import yaml
 
 from campaign.config.bounded_yaml import load_limited, read_limited
-from campaign.config.reader import _Reader, _describe, _fmt, _keys
+from campaign.config.reader import Reader, describe, fmt, field_keys
 from campaign.config.plan_schema import PlanConfig
 from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CampaignConfig, CorrectionConfig,
                                     JointConfig, MeasurementConfig, OutputConfig, RobotConfig, SimulationConfig,
                                     ToolConfig, TrackerConfig)
-from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, _NAME_RE
+from campaign.config.values import CONVENTIONS, FILE_NAME_MAX, MAX_JOINTS, MAX_NAME_CHARS, NAME_RE
 from campaign.errors import ConfigError
 from drivers.registry import ROBOT_SCHEMES, TRACKER_SCHEMES
-from robocal.noise import TrackerUncertainty
+from robocal.measure.noise import TrackerUncertainty
 
 from .cell_model import CellModel
 from .checks import check_config, check_joint_count, check_numerics
-from .sections import _acceptance, _calibration, _correction, _output, _plan, _simulation
+from .sections import read_acceptance, read_calibration, read_correction, read_output, read_plan, read_simulation
 
 
 __all__ = ["load_cell", "load_config", "parse_config"]
@@ -81,8 +81,8 @@ def parse_config(data: bytes, file: str) -> CampaignConfig:
     if doc is None:
         raise ConfigError(file, "", "empty config file (expected a mapping of sections)")
     if not isinstance(doc, dict):
-        raise ConfigError(file, "", f"top level must be a mapping of sections, got {_describe(doc)}")
-    cfg = _campaign(_Reader(doc, file, "", _keys(CampaignConfig, "source_path", "sha256")),
+        raise ConfigError(file, "", f"top level must be a mapping of sections, got {describe(doc)}")
+    cfg = _campaign(Reader(doc, file, "", field_keys(CampaignConfig, "source_path", "sha256")),
                     sha256=hashlib.sha256(data).hexdigest())
     check_config(cfg)                                   # cross-key checks: sizes, drivers, effects
     return cfg
@@ -124,42 +124,42 @@ def _parse_yaml(text: str, file: str) -> Any:
 # --------------------------------------------------------------------------- sections
 
 
-def _campaign(r: _Reader, sha256: str) -> CampaignConfig:
+def _campaign(r: Reader, sha256: str) -> CampaignConfig:
     """Top level: sections in dependency order (robot -> tool -> tracker -> plan -> simulation)."""
     name = r.string("name")
-    if not _NAME_RE.match(name):
-        raise r.error("name", f"expected letters, digits, '_', '.' or '-' (it names run directories), got {_describe(name)}")
+    if not NAME_RE.match(name):
+        raise r.error("name", f"expected letters, digits, '_', '.' or '-' (it names run directories), got {describe(name)}")
     if len(name) > MAX_NAME_CHARS:
         raise r.error("name", f"{len(name)} characters: at most {MAX_NAME_CHARS} (it names run directories, "
                               f"NAME-TIMESTAMP, and a file name holds {FILE_NAME_MAX} bytes)")
     robot = _robot(r.section("robot", RobotConfig))
     tool = _tool(r.section("tool", ToolConfig))
     tracker = _tracker(r.section("tracker", TrackerConfig))
-    plan = _plan(r.section("plan", PlanConfig), robot, tool)
+    plan = read_plan(r.section("plan", PlanConfig), robot, tool)
     return CampaignConfig(
         name=name,
         robot=robot,
         tool=tool,
         tracker=tracker,
         plan=plan,
-        calibration=_calibration(r.section("calibration", CalibrationConfig, required=False)),
-        correction=_correction(r.section("correction", CorrectionConfig, required=False)),
-        simulation=_simulation(r.section("simulation", SimulationConfig, required=False), tool, tracker,
+        calibration=read_calibration(r.section("calibration", CalibrationConfig, required=False)),
+        correction=read_correction(r.section("correction", CorrectionConfig, required=False)),
+        simulation=read_simulation(r.section("simulation", SimulationConfig, required=False), tool, tracker,
                                robot.n_joints),
-        output=_output(r.section("output", OutputConfig, required=False)),
+        output=read_output(r.section("output", OutputConfig, required=False)),
         source_path=r.file,
         sha256=sha256,
-        acceptance=_acceptance(r.section("acceptance", AcceptanceConfig, required=False)),
+        acceptance=read_acceptance(r.section("acceptance", AcceptanceConfig, required=False)),
     )
 
 
-def _robot(r: _Reader) -> RobotConfig:
+def _robot(r: Reader) -> RobotConfig:
     model = r.string("model")
     url = r.url("url", ROBOT_SCHEMES)
     convention = r.choice("convention", CONVENTIONS)
     rows = r.items("joints", min_len=1, max_len=MAX_JOINTS, what="joint mappings")
     where = r.child_list("joints")
-    joints = tuple(_joint(_Reader(row, r.file, where.key_path(i), TRACK_KEYS)) if _prismatic(row)
+    joints = tuple(_joint(Reader(row, r.file, where.key_path(i), TRACK_KEYS)) if _prismatic(row)
                    else _joint(where.reader(i, row, JointConfig)) for i, row in enumerate(rows))
     check_joint_count(joints, r.file)                   # before the plan's checks use the joints
     return RobotConfig(
@@ -176,7 +176,7 @@ def _robot(r: _Reader) -> RobotConfig:
     )
 
 
-def _gravity(r: _Reader, n: int) -> dict[str, Any]:
+def _gravity(r: Reader, n: int) -> dict[str, Any]:
     """Link masses (kg, >= 0), the arm's mass (kg) and the direction of gravity in the base frame (non-zero)."""
     masses = r.vector("link_masses_kg", n, None)
     if masses is not None and any(m < 0 for m in masses):
@@ -189,14 +189,14 @@ def _gravity(r: _Reader, n: int) -> dict[str, Any]:
             "gravity_direction_base": g}
 
 
-def _motion_caps(r: _Reader) -> dict[str, Any]:
+def _motion_caps(r: Reader) -> dict[str, Any]:
     """Speed caps: the TCP cap must not exceed the datasheet maximum (mm/s) when one is given."""
     given = r.data.get("datasheet_max_tcp_speed_mm_s") is not None
     datasheet = r.number("datasheet_max_tcp_speed_mm_s", positive=True) if given else None
     tcp = r.number("max_tcp_speed_mm_s", 250.0, positive=True)
     if datasheet is not None and tcp > datasheet:
-        raise r.error("max_tcp_speed_mm_s", f"{_fmt(tcp)} mm/s exceeds the robot's datasheet maximum "
-                                            f"datasheet_max_tcp_speed_mm_s = {_fmt(datasheet)} mm/s")
+        raise r.error("max_tcp_speed_mm_s", f"{fmt(tcp)} mm/s exceeds the robot's datasheet maximum "
+                                            f"datasheet_max_tcp_speed_mm_s = {fmt(datasheet)} mm/s")
     first = r.data.get("first_pass_speed_pct")
     return {"max_tcp_speed_mm_s": tcp, "datasheet_max_tcp_speed_mm_s": datasheet,
             "max_joint_speed_pct": r.number("max_joint_speed_pct", 100.0, positive=True, hi=100.0),
@@ -211,13 +211,13 @@ def _prismatic(row: Any) -> bool:
     return isinstance(row, dict) and row.get("type") == "prismatic"
 
 
-def _joint(r: _Reader) -> JointConfig:
+def _joint(r: Reader) -> JointConfig:
     kind = r.choice("type", ("revolute", "prismatic"), "revolute")
     unit = "mm" if kind == "prismatic" else "deg"
     q_min = r.number(f"q_min_{unit}")
     q_max = r.number(f"q_max_{unit}")
     if q_min >= q_max:
-        raise r.error(f"q_max_{unit}", f"expected a number > q_min_{unit} = {_fmt(q_min)}, got {_fmt(q_max)}")
+        raise r.error(f"q_max_{unit}", f"expected a number > q_min_{unit} = {fmt(q_min)}, got {fmt(q_max)}")
     if kind == "prismatic":
         axis = r.vector("axis", 3)
         if math.hypot(*axis) < 1e-9:
@@ -235,7 +235,7 @@ def _joint(r: _Reader) -> JointConfig:
     )
 
 
-def _tool(r: _Reader) -> ToolConfig:
+def _tool(r: Reader) -> ToolConfig:
     tool = ToolConfig(
         p_flange_smr_mm=r.vector("p_flange_smr_mm", 3),
         smr_diameter_mm=r.number("smr_diameter_mm", 38.1, positive=True),
@@ -248,7 +248,7 @@ def _tool(r: _Reader) -> ToolConfig:
     return tool
 
 
-def _check_smrs(tool: ToolConfig, r: _Reader) -> None:
+def _check_smrs(tool: ToolConfig, r: Reader) -> None:
     """The third SMR needs the second; no two SMR centres closer than one ball diameter (mm)."""
     if tool.p_flange_smr3_mm is not None and tool.p_flange_smr2_mm is None:
         raise r.error("p_flange_smr3_mm", "a third SMR needs p_flange_smr2_mm (the second SMR)")
@@ -259,10 +259,10 @@ def _check_smrs(tool: ToolConfig, r: _Reader) -> None:
             gap = math.dist(smrs[i], smrs[j])
             if gap < tool.smr_diameter_mm:
                 raise r.error(keys[j], f"SMR centre {gap:.1f} mm from {keys[i]}: closer than one ball "
-                                       f"(smr_diameter_mm = {_fmt(tool.smr_diameter_mm)})")
+                                       f"(smr_diameter_mm = {fmt(tool.smr_diameter_mm)})")
 
 
-def _tracker(r: _Reader) -> TrackerConfig:
+def _tracker(r: Reader) -> TrackerConfig:
     return TrackerConfig(
         model=r.string("model", "", allow_empty=True),
         url=r.url("url", TRACKER_SCHEMES),
@@ -275,7 +275,7 @@ def _tracker(r: _Reader) -> TrackerConfig:
     )
 
 
-def _uncertainty(r: _Reader) -> TrackerUncertainty:
+def _uncertainty(r: Reader) -> TrackerUncertainty:
     return TrackerUncertainty(
         transverse_a_um=r.number("transverse_a_um", positive=True),
         transverse_b_um_per_m=r.number("transverse_b_um_per_m", lo=0.0),
@@ -285,7 +285,7 @@ def _uncertainty(r: _Reader) -> TrackerUncertainty:
     )
 
 
-def _measurement(r: _Reader) -> MeasurementConfig:
+def _measurement(r: Reader) -> MeasurementConfig:
     return MeasurementConfig(
         samples=r.integer("samples", 5, lo=1),
         stability_mm=r.number("stability_mm", 0.02, positive=True),

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from campaign.config.reader import _describe, _Reader
+from campaign.config.reader import describe, Reader
 from campaign.config.plan_schema import PoolConfig, TaskConfig
 from campaign.config.values import PLAN_KINDS, STOP_RULES
 
 
-def optimal_keys(r: _Reader) -> dict[str, Any]:
+def optimal_keys(r: Reader) -> dict[str, Any]:
     """``plan.kind``, and for optimal plans ``points``, ``pool``, ``stop`` and its budget keys."""
     kind = r.choice("kind", PLAN_KINDS, "grid")
     adaptive = kind == "adaptive"
@@ -37,7 +37,7 @@ def optimal_keys(r: _Reader) -> dict[str, Any]:
     return out
 
 
-def _task(r: _Reader) -> TaskConfig:
+def _task(r: Reader) -> TaskConfig:
     """``plan.task``: ``targets_csv`` or ``box_mm`` (one of them)."""
     if (r.data.get("targets_csv") is None) == (r.data.get("box_mm") is None):
         raise r.error(None, "give one of targets_csv (Cartesian targets, CSV) or box_mm (two corners, mm)")
@@ -50,10 +50,10 @@ def _task(r: _Reader) -> TaskConfig:
     return TaskConfig(box_mm=(tuple(map(min, lo, hi)), tuple(map(max, lo, hi))))
 
 
-def _pool(r: _Reader) -> PoolConfig:
+def _pool(r: Reader) -> PoolConfig:
     flip = r.data.get("wrist_flip", True)
     if not isinstance(flip, bool):
-        raise r.error("wrist_flip", f"expected true or false, got {_describe(flip)}")
+        raise r.error("wrist_flip", f"expected true or false, got {describe(flip)}")
     step = r.data.get("step_mm")
     return PoolConfig(step_mm=None if step is None else r.number("step_mm", positive=True),
                       tilt_deg=r.number("tilt_deg", 20.0, lo=0.0, hi=60.0), tilts=r.integer("tilts", 6, lo=0, hi=24),

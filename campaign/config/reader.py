@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
-from drivers.redact import has_userinfo, redact_url
+from drivers.redaction import has_userinfo, redact_url
 from campaign.config.bounded_yaml import load_limited, read_limited
 
 from campaign.config.values import FrozenMap
@@ -22,12 +22,12 @@ from campaign.config.values import FrozenMap
 _REQUIRED: Any = object()
 
 
-def _keys(cls: type, *exclude: str) -> tuple[str, ...]:
+def field_keys(cls: type, *exclude: str) -> tuple[str, ...]:
     """YAML keys of a section: the dataclass field names."""
     return tuple(f.name for f in dataclasses.fields(cls) if f.name not in exclude)
 
 
-def _describe(value: Any) -> str:
+def describe(value: Any) -> str:
     """Short YAML-flavoured rendering of a found value for error messages."""
     if value is None:
         return "null"
@@ -45,7 +45,7 @@ def _describe(value: Any) -> str:
     return f"a {type(value).__name__}"
 
 
-def _fmt(x: float) -> str:
+def fmt(x: float) -> str:
     """Compact number for messages (``1450`` rather than ``1450.0``)."""
     return f"{x:.6g}"
 
@@ -60,11 +60,11 @@ def _bound_text(noun: str, positive: bool, lo: float | None, hi: float | None) -
         return f"a positive {noun}"
     article = "an" if noun[0] in "aeiou" else "a"
     if lo is not None and hi is not None:
-        return f"{article} {noun} in [{_fmt(lo)}, {_fmt(hi)}]"
+        return f"{article} {noun} in [{fmt(lo)}, {fmt(hi)}]"
     if lo is not None:
-        return f"{article} {noun} >= {_fmt(lo)}"
+        return f"{article} {noun} >= {fmt(lo)}"
     if hi is not None:
-        return f"{article} {noun} <= {_fmt(hi)}"
+        return f"{article} {noun} <= {fmt(hi)}"
     return f"{article} {noun}"
 
 
@@ -79,7 +79,7 @@ def _number_hint(value: Any) -> str:
     return ""
 
 
-class _Reader:
+class Reader:
     """Typed, validated access to one YAML mapping.
 
     Knows its file and key path; rejects keys outside ``allowed`` on creation.
@@ -90,7 +90,7 @@ class _Reader:
         self.file = file
         self.path = path
         if not isinstance(data, dict):
-            raise ConfigError(file, path, f"expected a mapping, got {_describe(data)}")
+            raise ConfigError(file, path, f"expected a mapping, got {describe(data)}")
         self.data = data
         for key in data:
             if key not in allowed:
@@ -133,7 +133,7 @@ class _Reader:
         """A string, non-blank unless ``allow_empty``."""
         value, _ = self._get(key, default)
         if not isinstance(value, str) or (not value.strip() and not allow_empty):
-            raise self.error(key, f"expected a non-empty string, got {_describe(value)}")
+            raise self.error(key, f"expected a non-empty string, got {describe(value)}")
         return value
 
     def choice(self, key: str, options: Iterable[str], default: Any = _REQUIRED) -> str:
@@ -141,7 +141,7 @@ class _Reader:
         value, _ = self._get(key, default)
         options = tuple(options)
         if not isinstance(value, str) or value not in options:
-            raise self.error(key, f"expected one of: {', '.join(options)}, got {_describe(value)}")
+            raise self.error(key, f"expected one of: {', '.join(options)}, got {describe(value)}")
         return value
 
     def url(self, key: str, schemes: Iterable[str]) -> str:
@@ -151,13 +151,13 @@ class _Reader:
         scheme, sep, _ = value.partition("://")
         if not sep:
             raise self.error(key, f"expected a driver URL like 'mock://...' (drivers: {known}), got "
-                                  f"{_describe(redact_url(value))}")
+                                  f"{describe(redact_url(value))}")
         if has_userinfo(value):
             raise self.error(key, "credentials in the URL are refused (the URL is written to logs and reports): "
                                   "remove 'user:password@'; credentials go in the environment (RWS_USER, RWS_PASSWORD) "
                                   "or a file named by options.credentials.file (docs/drivers_abb.md)")
         if scheme not in schemes:
-            raise self.error(key, f"unknown driver {_describe(scheme[:40])} (expected one of: {known})")
+            raise self.error(key, f"unknown driver {describe(scheme[:40])} (expected one of: {known})")
         return value
 
     # -- containers
@@ -174,7 +174,7 @@ class _Reader:
         """A list of distinct ints within ``[lo, hi]``."""
         value, _ = self._get(key, default)
         if not isinstance(value, (list, tuple)):
-            raise self.error(key, f"expected a list of integers, got {_describe(value)}")
+            raise self.error(key, f"expected a list of integers, got {describe(value)}")
         sub = self.child_list(key)
         out = tuple(_check_integer(v, sub.error_at(i), lo=lo, hi=hi) for i, v in enumerate(value))
         for i, v in enumerate(out):
@@ -187,7 +187,7 @@ class _Reader:
         value, _ = self._get(key, default)
         shape = f"expected a {rows}x{cols} matrix (a list of {rows} lists of {cols} numbers)"
         if not isinstance(value, (list, tuple)):
-            raise self.error(key, f"{shape}, got {_describe(value)}")
+            raise self.error(key, f"{shape}, got {describe(value)}")
         if len(value) != rows:
             raise self.error(key, f"{shape}, got {len(value)} rows")
         path = self.key_path(key)
@@ -197,28 +197,28 @@ class _Reader:
         """A free-form mapping of JSON-like values (string keys), frozen."""
         value, _ = self._get(key, default)
         if not isinstance(value, dict):
-            raise self.error(key, f"expected a mapping, got {_describe(value)}")
+            raise self.error(key, f"expected a mapping, got {describe(value)}")
         return _freeze(value, self.key_path(key), self.file)
 
-    def section(self, key: str, cls: type, *, required: bool = True) -> _Reader:
+    def section(self, key: str, cls: type, *, required: bool = True) -> Reader:
         """Reader for a nested mapping whose allowed keys are ``cls``'s fields."""
         value, _ = self._get(key, _REQUIRED if required else {})
-        return _Reader(value, self.file, self.key_path(key), _keys(cls))
+        return Reader(value, self.file, self.key_path(key), field_keys(cls))
 
     def items(self, key: str, default: Any = _REQUIRED, *,
               min_len: int = 0, max_len: int | None = None, what: str = "items") -> list[Any]:
         """A list (raw elements) with a length check; see ``child_list`` for element paths."""
         value, _ = self._get(key, default)
         if not isinstance(value, (list, tuple)):
-            raise self.error(key, f"expected a list of {what}, got {_describe(value)}")
+            raise self.error(key, f"expected a list of {what}, got {describe(value)}")
         if len(value) < min_len or (max_len is not None and len(value) > max_len):
             span = f"{min_len} to {max_len}" if max_len is not None else f"at least {min_len}"
             raise self.error(key, f"expected a list of {span} {what}, got {len(value)}")
         return list(value)
 
-    def child_list(self, key: str) -> _ListPath:
+    def child_list(self, key: str) -> ListPath:
         """Error helper for elements of the list at ``key``."""
-        return _ListPath(self.file, self.key_path(key))
+        return ListPath(self.file, self.key_path(key))
 
     def error_at(self, key: str | int) -> Callable[[str], ConfigError]:
         """Factory of errors at ``key`` (for the shared checkers)."""
@@ -226,7 +226,7 @@ class _Reader:
 
 
 @dataclass(frozen=True, slots=True)
-class _ListPath:
+class ListPath:
     """Key-path helper for the elements of a list."""
 
     file: str
@@ -241,8 +241,8 @@ class _ListPath:
     def error_at(self, index: int) -> Callable[[str], ConfigError]:
         return lambda message: self.error(index, message)
 
-    def reader(self, index: int, value: Any, cls: type) -> _Reader:
-        return _Reader(value, self.file, self.key_path(index), _keys(cls))
+    def reader(self, index: int, value: Any, cls: type) -> Reader:
+        return Reader(value, self.file, self.key_path(index), field_keys(cls))
 
 
 def _check_number(value: Any, error: Callable[[str], ConfigError], *, positive: bool = False,
@@ -250,12 +250,12 @@ def _check_number(value: Any, error: Callable[[str], ConfigError], *, positive: 
     """Validate one number; ``error(message)`` builds the exception."""
     expected = _bound_text("number", positive, lo, hi)
     if not _is_number(value):
-        raise error(f"expected {expected}, got {_describe(value)}{_number_hint(value)}")
+        raise error(f"expected {expected}, got {describe(value)}{_number_hint(value)}")
     x = float(value)
     if not math.isfinite(x):
-        raise error(f"expected a finite number, got {_describe(value)}")
+        raise error(f"expected a finite number, got {describe(value)}")
     if (positive and x <= 0) or (lo is not None and x < lo) or (hi is not None and x > hi):
-        raise error(f"expected {expected}, got {_describe(value)}")
+        raise error(f"expected {expected}, got {describe(value)}")
     return x
 
 
@@ -264,7 +264,7 @@ def _check_integer(value: Any, error: Callable[[str], ConfigError], *,
     """Validate one integer (bools and floats rejected)."""
     expected = _bound_text("integer", False, lo, hi)
     if not isinstance(value, int) or isinstance(value, bool):
-        raise error(f"expected {expected}, got {_describe(value)}")
+        raise error(f"expected {expected}, got {describe(value)}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         raise error(f"expected {expected}, got {value}")
     return value
@@ -274,10 +274,10 @@ def _check_vector(value: Any, n: int, path: str, file: str, *, positive: bool = 
     """Validate a list of exactly ``n`` finite numbers at ``path``."""
     noun = "positive numbers" if positive else "numbers"
     if not isinstance(value, (list, tuple)):
-        raise ConfigError(file, path, f"expected a list of {n} {noun}, got {_describe(value)}")
+        raise ConfigError(file, path, f"expected a list of {n} {noun}, got {describe(value)}")
     if len(value) != n:
         raise ConfigError(file, path, f"expected a list of {n} {noun}, got {len(value)}")
-    where = _ListPath(file, path)
+    where = ListPath(file, path)
     return tuple(_check_number(v, where.error_at(i), positive=positive) for i, v in enumerate(value))
 
 
@@ -286,7 +286,7 @@ def _freeze(value: Any, path: str, file: str) -> Any:
     if isinstance(value, dict):
         for key in value:
             if not isinstance(key, str):
-                raise ConfigError(file, path, f"expected string keys, got key {_describe(key)}")
+                raise ConfigError(file, path, f"expected string keys, got key {describe(key)}")
         return FrozenMap((k, _freeze(v, f"{path}.{k}", file)) for k, v in value.items())
     if isinstance(value, (list, tuple)):
         return tuple(_freeze(v, f"{path}[{i}]", file) for i, v in enumerate(value))
@@ -294,6 +294,6 @@ def _freeze(value: Any, path: str, file: str) -> Any:
         return value
     if isinstance(value, float) and math.isfinite(value):
         return value
-    raise ConfigError(file, path, f"expected JSON-like data (text, numbers, lists, mappings), got {_describe(value)}")
+    raise ConfigError(file, path, f"expected JSON-like data (text, numbers, lists, mappings), got {describe(value)}")
 
 

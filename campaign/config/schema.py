@@ -12,7 +12,7 @@ from typing import Any
 
 # tracker.uncertainty: robocal owns the class and its numerics; the YAML section requires the four MPE terms
 # (micrometres, micrometres per metre) and takes coverage_k (default 2), see campaign.config.load._uncertainty
-from robocal.noise import TrackerUncertainty, noise_max_mm
+from robocal.measure.noise import TrackerUncertainty, noise_max_mm
 
 from campaign.config.plan_schema import PlanConfig
 from campaign.config.values import Matrix4, Vec3
@@ -59,7 +59,7 @@ class RobotConfig:
     (default none). ``repeatability_mm`` (ISO 9283 RP, default 0.05) and
     ``max_joint_speed_deg_s`` (default 30) feed noise and duration estimates.
     ``options`` (default empty) are passed to the driver unchanged.
-    Gravity model of the physical effects (``robocal.effects.GravityModel``): ``link_masses_kg`` (one lumped mass
+    Gravity model of the physical effects (``robocal.effects.bases.GravityModel``): ``link_masses_kg`` (one lumped mass
     per link, J1..Jn, default none), else ``mass_kg`` (the arm's datasheet mass: 70 % of it shared over the links
     as 0/38/43/13/4/1 %, default none), else the default masses of a ~130 kg arm (stiffnesses then scale with
     the true mass); ``gravity_direction_base`` (default [0, 0, -1], floor mount): gravity in the base frame, any
@@ -179,7 +179,7 @@ class CalibrationConfig:
     ``outliers``: ``local`` excludes a point only as a measurement fault (residual isolated against its
     neighbours in joint space and in the workspace, tracker statistics, repeats); ``none`` keeps all.
     ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
-    ``none``, or a list of effect specs (``name`` in ``robocal.effects.MODEL_EFFECTS``, optional ``params`` with the
+    ``none``, or a list of effect specs (``name`` in ``robocal.effects.bases.MODEL_EFFECTS``, optional ``params`` with the
     factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
     ``residual`` ``auto`` chooses none / idw / gpr / joint_gp by k-fold CV and keeps a layer only when it beats
     none by more than one standard error of the CV difference.
@@ -191,7 +191,7 @@ class CalibrationConfig:
     when it varies across the calibration points; the report gives the
     predictive standard deviation of every test point), ``joint_gp`` one
     angle-error curve per joint (a GP over that joint's angle) moved to the
-    SMR through the Jacobian (``robocal.joint_gp``), ``none`` no layer.
+    SMR through the Jacobian (``robocal.layers.joint_gp``), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
 
     ``joints`` (one of ``values.JOINT_SETS``, default auto) which joint values drive
@@ -252,7 +252,7 @@ class FaultsConfig:
 class EffectSpec:
     """One non-geometric error effect of the simulated robot.
 
-    ``name`` in ``robocal.effects.SIMULATED_EFFECTS``; ``scale`` >= 0 (default 1); ``params``
+    ``name`` in ``robocal.effects.bases.SIMULATED_EFFECTS``; ``scale`` >= 0 (default 1); ``params``
     (default empty) are effect-specific. In YAML an effect is either a mapping
     ``{name: ..., scale: ..., params: {...}}`` or just its name.
     """
@@ -319,7 +319,7 @@ class AcceptanceConfig:
     def below_noise(self, floor_mm: float, n_test: int) -> tuple[str, ...]:
         """The bounds a perfect model fails more often than not on noise alone: ``max_rms_mm`` below the noise floor
         ``floor_mm`` (3-D RMS, mm), ``max_mm`` below the median largest of ``n_test`` noise-only errors
-        (:func:`robocal.noise.noise_max_mm`)."""
+        (:func:`robocal.measure.noise.noise_max_mm`)."""
         rms = self.max_rms_mm is not None and self.max_rms_mm < floor_mm
         big = self.max_mm is not None and n_test > 0 and self.max_mm < noise_max_mm(floor_mm, n_test)
         return ("max_rms_mm",) * rms + ("max_mm",) * big

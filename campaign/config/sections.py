@@ -5,20 +5,20 @@ from collections.abc import Sequence
 import math
 
 from campaign.config.plan_section import optimal_keys
-from campaign.config.reader import _ListPath, _Reader, _describe, _fmt
+from campaign.config.reader import ListPath, Reader, describe, fmt
 from campaign.config.plan_schema import (BoxConfig, CheckPosesConfig, GridConfig, Iso9283Config, NestConfig,
                                          NestsConfig, PlanConfig, TestSetConfig)
 from campaign.config.schema import (AcceptanceConfig, CalibrationConfig, CorrectionConfig, EffectSpec, FaultsConfig,
                                     JointConfig, OutputConfig, RobotConfig, SimulationConfig, ToolConfig,
                                     TrackerConfig)
 from campaign.config.values import (CALIBRATION_METHODS, CORRECTION_GENERATORS, ERROR_FUNCTIONS, JOINT_SETS,
-                                    OUTLIER_SCREENS, PLAN_ORDERS, RESIDUAL_MODELS, Vec3, WEIGHT_FUNCTIONS, _NAME_RE,
-                                    _ORTHONORMAL_TOL)
+                                    OUTLIER_SCREENS, PLAN_ORDERS, RESIDUAL_MODELS, Vec3, WEIGHT_FUNCTIONS, NAME_RE,
+                                    ORTHONORMAL_TOL)
 from campaign.errors import ConfigError
-from robocal.effects import SIMULATED_EFFECTS, MODEL_EFFECTS
+from robocal.effects.bases import SIMULATED_EFFECTS, MODEL_EFFECTS
 
 
-def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
+def read_plan(r: Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
     grid = _grid(r.section("grid", GridConfig))
     _check_reach(grid, robot, tool, r)
     direction = r.vector("tool_direction", 3)
@@ -44,7 +44,7 @@ def _plan(r: _Reader, robot: RobotConfig, tool: ToolConfig) -> PlanConfig:
     )
 
 
-def _track_keys(r: _Reader, robot: RobotConfig) -> dict:
+def _track_keys(r: Reader, robot: RobotConfig) -> dict:
     """``plan.track_stations`` of a robot on a track (grid plans only)."""
     if robot.track is None:
         if r.data.get("track_stations") is not None:                   # (None: written by to_dict)
@@ -56,22 +56,22 @@ def _track_keys(r: _Reader, robot: RobotConfig) -> dict:
     return {"track_stations": r.integer("track_stations", 5, lo=2, hi=1000)}
 
 
-def _keep_out(r: _Reader) -> tuple[BoxConfig, ...]:
+def _keep_out(r: Reader) -> tuple[BoxConfig, ...]:
     """``plan.keep_out``: a list of boxes ``{name, min_mm, max_mm}`` (base frame, mm)."""
     where = r.child_list("keep_out")
     return tuple(_box(where.reader(i, item, BoxConfig), f"keep_out[{i}]")
                  for i, item in enumerate(r.items("keep_out", [], what="boxes")))
 
 
-def _box(r: _Reader, default_name: str) -> BoxConfig:
+def _box(r: Reader, default_name: str) -> BoxConfig:
     lo, hi = r.vector("min_mm", 3), r.vector("max_mm", 3)
     for k, axis in enumerate("xyz"):
         if hi[k] <= lo[k]:
-            raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {_fmt(lo[k])}, got {_fmt(hi[k])}")
+            raise r.error("max_mm", f"expected max_mm.{axis} > min_mm.{axis} = {fmt(lo[k])}, got {fmt(hi[k])}")
     return BoxConfig(name=r.string("name", default_name), min_mm=lo, max_mm=hi)
 
 
-def _nests(r: _Reader) -> NestsConfig:
+def _nests(r: Reader) -> NestsConfig:
     """``plan.nests``: ids unique and non-empty, positions in the base frame (mm)."""
     where = r.child_list("points")
     points: list[NestConfig] = []
@@ -79,8 +79,8 @@ def _nests(r: _Reader) -> NestsConfig:
         nr = where.reader(i, item, NestConfig)
         nest = NestConfig(id=nr.string("id"), p_base_mm=nr.vector("p_base_mm", 3),
                           p_tracker_mm=nr.vector("p_tracker_mm", 3, None))
-        if not _NAME_RE.match(nest.id):
-            raise nr.error("id", f"expected letters, digits, '_', '.' or '-', got {_describe(nest.id)}")
+        if not NAME_RE.match(nest.id):
+            raise nr.error("id", f"expected letters, digits, '_', '.' or '-', got {describe(nest.id)}")
         if any(n.id == nest.id for n in points):
             raise nr.error("id", f"duplicate nest id {nest.id!r}")
         points.append(nest)
@@ -88,11 +88,11 @@ def _nests(r: _Reader) -> NestsConfig:
                        max_move_mm=r.number("max_move_mm", 0.2, positive=True))
 
 
-def _iso9283(r: _Reader) -> Iso9283Config:
+def _iso9283(r: Reader) -> Iso9283Config:
     return Iso9283Config(cycles=r.integer("cycles", 30, lo=3), edge_mm=r.number("edge_mm", 0.0, lo=0.0))
 
 
-def _grid(r: _Reader) -> GridConfig:
+def _grid(r: Reader) -> GridConfig:
     return GridConfig(
         center_mm=r.vector("center_mm", 3),
         size_mm=r.vector("size_mm", 3, positive=True),
@@ -100,14 +100,14 @@ def _grid(r: _Reader) -> GridConfig:
     )
 
 
-def _check_reach(grid: GridConfig, robot: RobotConfig, tool: ToolConfig, plan: _Reader) -> None:
+def _check_reach(grid: GridConfig, robot: RobotConfig, tool: ToolConfig, plan: Reader) -> None:
     """Every box corner must lie within sum(|a| + |d|) + |p_flange_smr| of the base origin (mm)."""
     reach = sum(abs(j.a_mm) + abs(j.d_mm) for j in robot.joints) + math.hypot(*tool.p_flange_smr_mm)
     half = [s / 2 for s in grid.size_mm]
     corner = tuple(c + (h if c >= 0 else -h) for c, h in zip(grid.center_mm, half))  # farthest corner
     distance = math.hypot(*corner)
     if distance > reach:
-        coords = ", ".join(_fmt(c) for c in corner)
+        coords = ", ".join(fmt(c) for c in corner)
         raise ConfigError(
             plan.file,
             plan.key_path("grid") + ".center_mm",
@@ -116,34 +116,34 @@ def _check_reach(grid: GridConfig, robot: RobotConfig, tool: ToolConfig, plan: _
         )
 
 
-def _check_q_ref(q_ref: Sequence[float], joints: Sequence[JointConfig], where: _ListPath) -> None:
+def _check_q_ref(q_ref: Sequence[float], joints: Sequence[JointConfig], where: ListPath) -> None:
     """Each reference joint value must lie inside its joint's limits (deg; a track's in mm)."""
     for i, (q, joint) in enumerate(zip(q_ref, joints)):
         if not joint.q_min_deg <= q <= joint.q_max_deg:
             u = "mm" if joint.type == "prismatic" else "deg"
             raise where.error(
                 i,
-                f"{_fmt(q)} {u} is outside joint {i + 1} limits "
-                f"[{_fmt(joint.q_min_deg)}, {_fmt(joint.q_max_deg)}] {u}",
+                f"{fmt(q)} {u} is outside joint {i + 1} limits "
+                f"[{fmt(joint.q_min_deg)}, {fmt(joint.q_max_deg)}] {u}",
             )
 
 
-def _test_set(r: _Reader) -> TestSetConfig:
+def _test_set(r: Reader) -> TestSetConfig:
     return TestSetConfig(count=r.integer("count", 50, lo=0), seed=r.integer("seed", 0, lo=0))
 
 
-def _check_poses(r: _Reader) -> CheckPosesConfig:
+def _check_poses(r: Reader) -> CheckPosesConfig:
     return CheckPosesConfig(
         count=r.integer("count", 0, lo=0),
         every_n_points=r.integer("every_n_points", 50, lo=1),
     )
 
 
-def _calibration(r: _Reader) -> CalibrationConfig:
+def read_calibration(r: Reader) -> CalibrationConfig:
     k0 = r.number("k0", 1.5, positive=True)
     k1 = r.number("k1", 2.5, positive=True)
     if k1 <= k0:
-        raise r.error("k1", f"expected a number > k0 = {_fmt(k0)}, got {_fmt(k1)}")
+        raise r.error("k1", f"expected a number > k0 = {fmt(k0)}, got {fmt(k1)}")
     return CalibrationConfig(
         method=r.choice("method", CALIBRATION_METHODS, "lm"),
         weights=r.choice("weights", WEIGHT_FUNCTIONS, "igg3"),
@@ -160,14 +160,14 @@ def _calibration(r: _Reader) -> CalibrationConfig:
     )
 
 
-def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
+def _model_effects(r: Reader) -> str | tuple[EffectSpec, ...]:
     """``calibration.effects``: ``auto`` | ``none`` | a list of effect specs of the robot model."""
     value = r.data.get("effects", "auto")
     if value is None or isinstance(value, str):
         return r.choice("effects", ("auto", "none"), "auto")
     specs = _effects(r, MODEL_EFFECTS)
     where = r.child_list("effects")
-    from robocal.effects import FACTORY_KEYS
+    from robocal.effects.bases import FACTORY_KEYS
 
     for i, spec in enumerate(specs):
         for key in spec.params:
@@ -179,7 +179,7 @@ def _model_effects(r: _Reader) -> str | tuple[EffectSpec, ...]:
     return specs
 
 
-def _correction(r: _Reader) -> CorrectionConfig:
+def read_correction(r: Reader) -> CorrectionConfig:
     return CorrectionConfig(
         generator=r.choice("generator", CORRECTION_GENERATORS, "ensemble"),
         error=r.choice("error", ERROR_FUNCTIONS, "position"),
@@ -192,7 +192,7 @@ def _correction(r: _Reader) -> CorrectionConfig:
     )
 
 
-def _simulation(r: _Reader, tool: ToolConfig, tracker: TrackerConfig, n_joints: int = 6) -> SimulationConfig:
+def read_simulation(r: Reader, tool: ToolConfig, tracker: TrackerConfig, n_joints: int = 6) -> SimulationConfig:
     matrix = r.matrix("T_tracker_base", 4, 4, _default_T_tracker_base(tracker.position_in_base_mm))
     _check_rigid(matrix, r.key_path("T_tracker_base"), r.file)
     return SimulationConfig(
@@ -220,7 +220,7 @@ def _default_T_tracker_base(position: Vec3 | None) -> list[list[float]]:
 def _check_rigid(m: Sequence[Sequence[float]], path: str, file: str) -> None:
     """Last row [0, 0, 0, 1]; rotation block orthonormal with det +1 (tolerance 1e-3)."""
     if any(abs(v - e) > 1e-9 for v, e in zip(m[3], (0.0, 0.0, 0.0, 1.0))):
-        got = ", ".join(_fmt(v) for v in m[3])
+        got = ", ".join(fmt(v) for v in m[3])
         raise ConfigError(file, f"{path}[3]", f"expected the last row [0, 0, 0, 1], got [{got}]")
     cols = [[m[r][c] for r in range(3)] for c in range(3)]
     gram_err = max(
@@ -228,10 +228,10 @@ def _check_rigid(m: Sequence[Sequence[float]], path: str, file: str) -> None:
         for i in range(3)
         for j in range(3)
     )
-    if gram_err > _ORTHONORMAL_TOL:
-        raise ConfigError(file, path, f"rotation part is not orthonormal (max |R^T R - I| = {gram_err:.3g} > {_ORTHONORMAL_TOL:g})")
+    if gram_err > ORTHONORMAL_TOL:
+        raise ConfigError(file, path, f"rotation part is not orthonormal (max |R^T R - I| = {gram_err:.3g} > {ORTHONORMAL_TOL:g})")
     det = _det3([row[:3] for row in m[:3]])
-    if abs(det - 1.0) > _ORTHONORMAL_TOL:
+    if abs(det - 1.0) > ORTHONORMAL_TOL:
         raise ConfigError(file, path, f"rotation part must have det +1 (a proper rotation), got {det:.6g}")
 
 
@@ -244,7 +244,7 @@ def _det3(a: Sequence[Sequence[float]]) -> float:
     )
 
 
-def _effects(r: _Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> tuple[EffectSpec, ...]:
+def _effects(r: Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> tuple[EffectSpec, ...]:
     """``simulation.effects`` (or ``calibration.effects`` with ``names``): names or ``{name, scale, params}``
     mappings, no duplicates (the same name twice needs other params, e.g. gear_cyclic on two joints)."""
     where = r.child_list("effects")
@@ -257,7 +257,7 @@ def _effects(r: _Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> tuple[Ef
     return tuple(specs)
 
 
-def _effect(r: _Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> EffectSpec:
+def _effect(r: Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> EffectSpec:
     return EffectSpec(
         name=r.choice("name", names),
         scale=r.number("scale", 1.0, lo=0.0),
@@ -265,7 +265,7 @@ def _effect(r: _Reader, names: tuple[str, ...] = SIMULATED_EFFECTS) -> EffectSpe
     )
 
 
-def _faults(r: _Reader) -> FaultsConfig:
+def _faults(r: Reader) -> FaultsConfig:
     def p(key: str) -> float:
         return r.number(key, 0.0, lo=0.0, hi=1.0)
 
@@ -276,11 +276,11 @@ def _faults(r: _Reader) -> FaultsConfig:
     )
 
 
-def _output(r: _Reader) -> OutputConfig:
+def read_output(r: Reader) -> OutputConfig:
     return OutputConfig(dir=r.string("dir", "runs"))
 
 
-def _acceptance(r: _Reader) -> AcceptanceConfig:
+def read_acceptance(r: Reader) -> AcceptanceConfig:
     """Each bound optional (absent or null: not checked)."""
     return AcceptanceConfig(*(None if r.data.get(k) is None else r.number(k, positive=True)
                               for k in ("max_rms_mm", "max_mm")))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from campaign.errors import ConfigError
-from robocal.effects import by_name
+from robocal.effects.bases import by_name
 from robocal.simulation.mock_cell import SimulatedCell, random_geometric_errors
 
 from .cell_model import CellModel

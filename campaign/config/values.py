@@ -20,8 +20,8 @@ CORRECTION_GENERATORS = ("ensemble", "yin", "fixed", "add", "multiply", "euler_z
 ERROR_FUNCTIONS = ("position", "pose")
 MAX_JOINTS = 12
 
-_ORTHONORMAL_TOL = 1e-3
-_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*\Z")
+ORTHONORMAL_TOL = 1e-3
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*\Z")
 FILE_NAME_MAX = 255                                      # bytes in one path component (ext4, XFS, APFS, NTFS)
 MAX_NAME_CHARS = FILE_NAME_MAX - len("-YYYYmmdd-HHMMSS-NNNN")   # the name + a run directory's timestamp fit
 

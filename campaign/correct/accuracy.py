@@ -16,7 +16,9 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
+
+from campaign.errors import one_line
 
 from .bounds import CorrectedTarget
 
@@ -58,7 +60,7 @@ def held_out_of(model: CalibratedModel, model_path: str | Path) -> HeldOut:
             return unknown(f"{path} is not a calibration report")
         report = CalibrationReport.from_dict(doc)
     except (OSError, ValueError, RecordError) as exc:
-        return unknown(f"{path} is not readable ({' '.join(str(exc).split())})")
+        return unknown(f"{path} is not readable ({one_line(exc)})")
     meta = model.meta or {}
     if any(k in meta and meta[k] != getattr(report, k) for k in ("config", "source")):
         return unknown(f"{path} is the report of another calibration than {Path(model_path).name}")

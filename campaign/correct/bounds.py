@@ -46,7 +46,7 @@ class CorrectedTarget:
     unless orientation was measured (three SMRs); ``predicted_std_mm``: 3-D
     predictive standard deviation of the residual layer at the corrected joints
     (GPR), nan when the model has none.
-    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.chains), nan otherwise.
+    ``arm_angle_deg``: a seven-axis arm's arm angle (robocal.kinematics.chains), nan otherwise.
     """
 
     target_id: str
@@ -82,7 +82,7 @@ def _fmt(x: Any) -> str:
         return repr(x)
 
 
-def _as_float(x: Any) -> float | None:
+def as_float(x: Any) -> float | None:
     """``float(x)`` for real numbers (not bool/str), else None."""
     if isinstance(x, (bool, str, bytes)):
         return None
@@ -94,8 +94,8 @@ def _as_float(x: Any) -> float | None:
 
 def _limits(q_min_deg: Sequence[float], q_max_deg: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Validated joint limits (deg) as float tuples; ValueError when unusable."""
-    lo = tuple(_as_float(v) for v in q_min_deg)
-    hi = tuple(_as_float(v) for v in q_max_deg)
+    lo = tuple(as_float(v) for v in q_min_deg)
+    hi = tuple(as_float(v) for v in q_max_deg)
     if not lo or len(lo) != len(hi):
         raise ValueError(f"joint limits: q_min_deg has {len(lo)} values, q_max_deg {len(hi)}")
     for j, (a, b) in enumerate(zip(lo, hi), 1):
@@ -108,7 +108,7 @@ def _bound(value: float | None, name: str) -> float | None:
     """A finite non-negative bound, or None; ValueError otherwise."""
     if value is None:
         return None
-    v = _as_float(value)
+    v = as_float(value)
     if v is None or not math.isfinite(v) or v < 0:
         raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
     return v
@@ -134,7 +134,7 @@ def _vector_problems(values: Any, n: int, name: str) -> list[str]:
         return [f"{name} has {len(vals)} values, expected {n}"]
     out = []
     for k, v in enumerate(vals):
-        f = _as_float(v)
+        f = as_float(v)
         if f is None or not math.isfinite(f):
             out.append(f"non-finite {name}[{k}] = {v!r}")
     return out
@@ -150,11 +150,11 @@ def _shape_problems(t: CorrectedTarget, n: int) -> list[str]:
     out += _vector_problems(t.q_nominal_deg, n, "q_nominal_deg")
     out += _vector_problems(t.p_command_base_mm, 3, "p_command_base_mm")
     out += _vector_problems(t.quat_command_wxyz, 4, "quat_command_wxyz")
-    res = _as_float(t.solver_tolerance_mm)
+    res = as_float(t.solver_tolerance_mm)
     if res is None or not math.isfinite(res) or res < 0:
         out.append(f"solver_tolerance_mm must be finite and >= 0, got {t.solver_tolerance_mm!r}")
     for name in ("predicted_error_mm", "predicted_rot_err_deg", "predicted_std_mm"):
-        v = _as_float(getattr(t, name))
+        v = as_float(getattr(t, name))
         if v is None or math.isinf(v) or v < 0:
             out.append(f"{name} must be nan or finite >= 0, got {getattr(t, name)!r}")
     conf = tuple(t.confdata) if isinstance(t.confdata, (tuple, list)) else ()
@@ -247,7 +247,7 @@ def check_targets(targets: Iterable[CorrectedTarget], q_min_deg: Sequence[float]
     return accepted, rejected
 
 
-def _require_writable(targets: Iterable[CorrectedTarget], q_min_deg: Sequence[float], q_max_deg: Sequence[float],
+def require_writable(targets: Iterable[CorrectedTarget], q_min_deg: Sequence[float], q_max_deg: Sequence[float],
                       *, n_joints: int | None = None, allow_empty: bool = True) -> list[CorrectedTarget]:
     """The writers' re-check: targets as a list, or ValueError naming every invalid target."""
     items = list(targets)

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.chains import arm_angle_rad, redundant, spherical_joints, wrap_rad
-from robocal.ik import branch_signature
-from robocal.kinematics import Kinematics
+from robocal.kinematics.chains import arm_angle_rad, redundant, spherical_joints, wrap_rad
+from robocal.kinematics.ik import branch_signature
+from robocal.kinematics.models import Kinematics
 
 ARM_ANGLE_TOL_DEG = 0.01      # a corrected seven-axis target keeps its arm angle to this
-BRANCH_JOINTS_6R = ("J1 (shoulder)", "J3 (elbow)", "J5 (wrist)")   # the joints of robocal.ik.branch_signature
+BRANCH_JOINTS_6R = ("J1 (shoulder)", "J3 (elbow)", "J5 (wrist)")   # the joints of robocal.kinematics.ik.branch_signature
 
 
 def branch_joint_names(kin: Kinematics) -> tuple[str, ...]:

@@ -8,7 +8,7 @@ import textwrap
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-from drivers.abb_axes import AbbAxes, abb_axes
+from drivers.abb_axes import AbbAxes, axes_layout
 from drivers.rapid import check_rapid_syntax
 from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggregate, fixed_literal, rapid_array_lines,
                                     rapid_ident_problem, rapid_string)
@@ -16,7 +16,7 @@ from drivers.rapid.literals import (RAPID_MAX_LINE_ID, RAPID_UNUSED, rapid_aggre
 from campaign.io.durable import atomic_write
 from .accuracy import PREDICTED_ERROR_METHOD
 from .bounds import (GENERATOR, JOINT_DECIMALS, POSITION_DECIMALS, QUAT_DECIMALS, RAPID_FORMAT, ERROR_DECIMALS,
-                     CorrectedTarget, _as_float, _require_writable)
+                     CorrectedTarget, as_float, require_writable)
 
 def _rapid_quat(q: Sequence[float]) -> list[str]:
     """Quaternion (w, x, y, z) renormalised and written with 9 decimals (unit to 1e-8)."""
@@ -42,7 +42,7 @@ def _rapid_extax(external_axes: Sequence[float] | Mapping[str, Sequence[float]] 
     else:
         vals = external_axes
     vals = list(vals)
-    if len(vals) > 6 or any(_as_float(v) is None or not math.isfinite(_as_float(v)) for v in vals):
+    if len(vals) > 6 or any(as_float(v) is None or not math.isfinite(as_float(v)) for v in vals):
         raise ValueError(f"external_axes for {target_id!r}: expected at most 6 finite numbers, got {vals!r}")
     return [fixed_literal(v, JOINT_DECIMALS) for v in vals] + [RAPID_UNUSED] * (6 - len(vals))
 
@@ -102,8 +102,8 @@ def render_rapid_module(targets: Iterable[CorrectedTarget], *, module_name: str 
                         external_axes: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
                         axes: AbbAxes | None = None) -> str:
     """Text of the RAPID module for ``targets`` (see :func:`write_rapid_module`)."""
-    axes = abb_axes(6) if axes is None else axes
-    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=axes.n, allow_empty=False)
+    axes = axes_layout(6) if axes is None else axes
+    items = require_writable(targets, q_min_deg, q_max_deg, n_joints=axes.n, allow_empty=False)
     if axes.external and external_axes is not None:
         raise ValueError("external_axes: this chain's own external axis is eax_a (a track or axis 7)")
     problem = rapid_ident_problem(module_name)

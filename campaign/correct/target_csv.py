@@ -10,9 +10,10 @@ import re
 from pathlib import Path
 from typing import Iterable, Sequence
 
+from campaign.errors import one_line
 from campaign.io.csv_cells import render_rows, restore
 from campaign.io.durable import atomic_write
-from .bounds import CorrectedTarget, Rejected, _require_writable
+from .bounds import CorrectedTarget, Rejected, require_writable
 
 def _csv_float(x: float) -> str:
     """Shortest exact text of a float ('nan' for nan)."""
@@ -29,7 +30,7 @@ def _csv_header(n: int, with_std: bool = True) -> list[str]:
 def render_targets_csv(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
                        q_max_deg: Sequence[float]) -> str:
     """Text of the targets CSV (see :func:`write_targets_csv`)."""
-    items = _require_writable(targets, q_min_deg, q_max_deg)
+    items = require_writable(targets, q_min_deg, q_max_deg)
     with_std = any(not math.isnan(float(t.predicted_std_mm)) for t in items)   # no all-nan column
     rows = ([t.target_id, *map(_csv_float, t.q_corrected_deg), *map(_csv_float, t.q_nominal_deg),
              *map(_csv_float, t.p_command_base_mm), *map(_csv_float, t.quat_command_wxyz),
@@ -85,6 +86,6 @@ def read_corrected_targets_csv(path: str | os.PathLike) -> list[CorrectedTarget]
 
 def write_rejected_csv(path: str | os.PathLike, rejected: Iterable[Rejected]) -> Path:
     """Write ``target_id,reason`` rows of the rejected targets atomically; return the path."""
-    text = render_rows(["target_id", "reason"], ([r.target_id, " ".join(str(r.reason).split())] for r in rejected),
+    text = render_rows(["target_id", "reason"], ([r.target_id, one_line(r.reason)] for r in rejected),
                        text_columns=(0, 1))
     return atomic_write(path, text.encode("utf-8"))

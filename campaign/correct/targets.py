@@ -19,10 +19,10 @@ from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
 from campaign.plan.poses import unreachable_reasons
 from robocal.correct import Correction, correct, matrix_to_quat, tool_transform
-from robocal.chains import arm_angle_rad, branch_signs, redundant
-from robocal.ik import branch_signature, solve_on_branch
-from robocal.kinematics import fk
-from robocal.model import CalibratedModel
+from robocal.kinematics.chains import arm_angle_rad, branch_signs, redundant
+from robocal.kinematics.ik import branch_signature, solve_on_branch
+from robocal.kinematics.models import fk
+from robocal.layers.calibrated_model import CalibratedModel
 
 from .accuracy import HeldOut, predicted_errors_mm, rotation_errors_deg
 from .bounds import CorrectedTarget, Rejected, check_targets
@@ -154,7 +154,7 @@ def abb_confdata(kin, q_rad: np.ndarray) -> np.ndarray:
     """(N, 4) ABB confdata [cf1, cf4, cf6, cfx]: quadrants of axes 1, 4, 6 and cfx from the branch
     (shoulder: wrist centre in front of axis 1, elbow, sign of axis 5) as in ABB's confdata table. On a track: the
     arm's. A seven-axis arm (ABB numbers a YuMi's joints 1, 2, 7, 3, 4, 5, 6: its axes 1, 4, 6 are joints 1, 5, 7):
-    cfx from the chain's branch signs (``robocal.chains.branch_signs``). Fewer than six joints: the axes it has."""
+    cfx from the chain's branch signs (``robocal.kinematics.chains.branch_signs``). Fewer than six joints: the axes it has."""
     q_rad = np.atleast_2d(q_rad)
     if kin.track is not None:
         return abb_confdata(kin.arm(), q_rad[:, kin.n_track:])
@@ -250,7 +250,7 @@ def correct_targets(cell: CellModel, model: CalibratedModel, targets: Targets,
                 solver_tolerance_mm=float(c.pos_err_mm[j]), predicted_error_mm=float(err[j]),
                 predicted_rot_err_deg=float(rot[j]), predicted_std_mm=float(std[j]),
                 arm_angle_deg=float(np.degrees(arm_angle_rad(kin, c.q_rad[j:j + 1])[0])) if redundant(kin) else np.nan))
-    lim = _limits_deg(cfg)
+    lim = limits_deg(cfg)
     ok_targets, bad = check_targets(accepted, *lim, cfg.correction.max_joint_correction_deg,
                                     cfg.correction.max_position_correction_mm,
                                     {t: tuple(p) for t, p in zip(targets.ids, targets.p_base_mm)})
@@ -287,13 +287,13 @@ def predictive_std_mm(model: CalibratedModel, q_rad: np.ndarray) -> np.ndarray:
     return np.linalg.norm(fn(q_rad, None, include_noise=False), axis=1)
 
 
-def _limits_deg(cfg: CampaignConfig):
+def limits_deg(cfg: CampaignConfig):
     return [j.q_min_deg for j in cfg.robot.joints], [j.q_max_deg for j in cfg.robot.joints]
 
 
-def check_model_fits(cell: CellModel, model: CalibratedModel, source: str) -> None:
+def check_model_fits(cell: CellModel, model: CalibratedModel, source: str, *, force: bool = False) -> None:
     """The model must describe the config's robot: same joint count and convention (DataError otherwise), and
-    identified deltas from the nominal model within physical bounds."""
+    identified deltas from the nominal model within physical bounds (``force``: overridden)."""
     cfg = cell.config
     kin, n = model.kinematics, len(cfg.robot.joints)
     if kin.n != n:
@@ -303,4 +303,4 @@ def check_model_fits(cell: CellModel, model: CalibratedModel, source: str) -> No
                                 "not a model of this robot")
     from campaign.calibrate.plausibility import Plausibility, check_deltas
 
-    check_deltas(cell.kinematics, kin, source, Plausibility())   # a model of another robot: exit 2
+    check_deltas(cell.kinematics, kin, source, Plausibility(), force=force)   # a model of another robot: exit 2

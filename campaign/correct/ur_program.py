@@ -15,12 +15,12 @@ from drivers.rapid.literals import fixed_literal
 from campaign.io.durable import atomic_write
 from .accuracy import PREDICTED_ERROR_METHOD
 from .bounds import (GENERATOR, ERROR_DECIMALS, UR_JSON_FORMAT, UR_MAX_A_RAD_S2, UR_MAX_V_RAD_S, UR_RAD_DECIMALS,
-                     URSCRIPT_FORMAT, CorrectedTarget, _as_float, _require_writable)
+                     URSCRIPT_FORMAT, CorrectedTarget, as_float, require_writable)
 
 def render_ur_json(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[float],
                    q_max_deg: Sequence[float]) -> str:
     """Text of the UR joint-targets JSON (see :func:`write_ur_json`)."""
-    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=6)
+    items = require_writable(targets, q_min_deg, q_max_deg, n_joints=6)
     doc = {
         "format": UR_JSON_FORMAT,
         "units": {"q": "rad", "predicted_error": "mm", "predicted_std": "mm", "solver_tolerance": "mm"},
@@ -64,7 +64,7 @@ _UR_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 def _ur_motion_bound(value: float, name: str, upper: float) -> float:
     """A URScript speed/acceleration in (0, upper]; ValueError otherwise."""
-    v = _as_float(value)
+    v = as_float(value)
     if v is None or not math.isfinite(v) or not 0 < v <= upper:
         raise ValueError(f"{name}: expected a number in (0, {upper:g}], got {value!r}")
     return v
@@ -74,7 +74,7 @@ def render_urscript(targets: Iterable[CorrectedTarget], *, q_min_deg: Sequence[f
                     q_max_deg: Sequence[float], a_rad_s2: float = 0.5, v_rad_s: float = 0.3,
                     name: str = "cal_targets") -> str:
     """Text of the URScript program (see :func:`write_urscript`)."""
-    items = _require_writable(targets, q_min_deg, q_max_deg, n_joints=6, allow_empty=False)
+    items = require_writable(targets, q_min_deg, q_max_deg, n_joints=6, allow_empty=False)
     a = _ur_motion_bound(a_rad_s2, "a_rad_s2", UR_MAX_A_RAD_S2)
     v = _ur_motion_bound(v_rad_s, "v_rad_s", UR_MAX_V_RAD_S)
     if not _UR_NAME_RE.match(name) or name in _UR_KEYWORDS:

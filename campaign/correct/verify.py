@@ -15,13 +15,13 @@ from campaign.io.durable import write_json
 from campaign.plan.points import PlanPoint
 from campaign.run.log_records import PointRecord
 from robocal.correct import closed_loop_step, tool_transform
-from robocal.frames import transform_points
-from robocal.kinematics import fk
-from robocal.model import CalibratedModel
-from robocal.stats import error_stats
+from robocal.kinematics.frames import transform_points
+from robocal.kinematics.models import fk
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.measure.stats import error_stats
 
 from .configuration import configuration_reasons
-from .targets import _limits_deg, model_pose_fn, run_correction
+from .targets import limits_deg, model_pose_fn, run_correction
 from .verify_drift import VerifyDrift
 from .verify_report import VERIFY_FORMAT, VerifyReport
 
@@ -95,7 +95,7 @@ class VerifyPasses:
         self.R_planned = fk(kin, q0)[:, :3, :3] @ T_tool[:3, :3]     # each point's planned tool orientation
         self.orientation: dict[str, np.ndarray] = {}     # stage -> tool orientation errors (arc seconds)
         self.limit = np.radians(cfg.correction.max_joint_correction_deg)
-        self.lo, self.hi = np.radians(_limits_deg(cfg)[0]), np.radians(_limits_deg(cfg)[1])
+        self.lo, self.hi = np.radians(limits_deg(cfg)[0]), np.radians(limits_deg(cfg)[1])
         self.p_pseudo = (fk(kin, q) @ T_tool)[:, :3, 3]
         self.k, self.stage = 0, "model-corrected"
         self.safe, self.held = np.ones(len(ids), bool), [None] * len(ids)

@@ -6,11 +6,12 @@ import csv
 from pathlib import Path
 
 from campaign.config.schema import CampaignConfig
+from campaign.errors import one_line
 from campaign.io.csv_cells import restore
 
 from .bounds import Rejected
 from .target_csv import write_rejected_csv
-from .targets import _limits_deg
+from .targets import limits_deg
 
 
 FORMATS = {"rapid": ("CalTargets.mod",), "ur": ("targets_ur.json", "targets_ur.script"), "csv": ("targets.csv",)}
@@ -42,7 +43,7 @@ def _format_rejections(accepted, formats) -> tuple[list, list[Rejected]]:
             rapid_string(t.target_id)
             ok.append(t)
         except ValueError as exc:
-            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {' '.join(str(exc).split())}"))
+            bad.append(Rejected(t.target_id, f"cannot be written to RAPID: {one_line(exc)}"))
     return ok, bad
 
 
@@ -62,7 +63,7 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
     rejected = list(rejected) + unfit
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lo, hi = _limits_deg(cfg)
+    lo, hi = limits_deg(cfg)
     limits = dict(q_min_deg=lo, q_max_deg=hi)
     rejected_path = write_rejected_csv(out / "rejected.csv", rejected)
     if not accepted:
@@ -78,16 +79,16 @@ def write_corrected(cfg: CampaignConfig, accepted, rejected, out_dir: str | Path
                 extra = {"axes": _abb_axes(cfg)} if fmt == "rapid" else {}
                 texts[name] = renderers[name](accepted, **limits, **extra)
             except ValueError as exc:
-                raise CampaignError(f"{out / name}: not written: {' '.join(str(exc).split())}") from None
+                raise CampaignError(f"{out / name}: not written: {one_line(exc)}") from None
     paths = [atomic_write(out / name, text.encode("utf-8")) for name, text in texts.items()]
     return paths + [rejected_path]
 
 
 def _abb_axes(cfg: CampaignConfig):
     """How the config's joints map onto an ABB controller's axes (ValueError: no ABB layout, one line)."""
-    from drivers.abb_axes import abb_axes
+    from drivers.abb_axes import axes_layout
 
-    return abb_axes(cfg.robot.n_joints, cfg.robot.track is not None)
+    return axes_layout(cfg.robot.n_joints, cfg.robot.track is not None)
 
 
 def read_rejected(out_dir: str | Path) -> list[tuple[str, str]]:

@@ -2,3 +2,14 @@
 (``interchange_csv``: the format, ``read_csv``, ``write_csv``; their steps in ``interchange_reader`` and
 ``interchange_writer``), the durable log as a dataset (``log_dataset``), and ``load_source(path)`` for a run directory
 or a CSV. Imports run (log records), config and robocal."""
+from drivers import lazy_exports
+
+_HOMES = {                      # module -> the public names it holds
+    "dataset": ("Dataset",),
+    "importers": ("import_target_dif",),
+    "interchange_csv": ("write_csv",),
+    "log_dataset": ("dataset_from_log",),
+    "source": ("csv_provenance", "load_source"),
+}
+__all__ = [name for names in _HOMES.values() for name in names]
+__getattr__ = lazy_exports(__name__, _HOMES)

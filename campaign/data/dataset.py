@@ -8,10 +8,10 @@ import numpy as np
 
 from campaign.errors import DataError
 from campaign.run.log_records import SETS
-from robocal.approach import approach_signs, moves_from_order
+from robocal.measure.approach import approach_signs, moves_from_order
 
-_SCALARS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
-_ENV = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
+SCALAR_COLUMNS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in write order
+ENV_COLUMNS = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
 
 
 def _float_array(value: Any, name: str, shape: tuple) -> np.ndarray:
@@ -36,7 +36,7 @@ class OrderContext:
 
     @classmethod
     def of(cls, q_deg: np.ndarray) -> "OrderContext":
-        """From all rows' joints (N, n) deg in measurement order (``robocal.approach``)."""
+        """From all rows' joints (N, n) deg in measurement order (``robocal.measure.approach``)."""
         q = np.radians(np.asarray(q_deg, float))
         move, prev = moves_from_order(q)
         return cls(approach_signs(q), move, prev, np.arange(len(q), dtype=float))
@@ -98,7 +98,7 @@ class Dataset:
         for name in ("p2_tracker_mm", "p3_tracker_mm"):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows, 3)))
-        for name in (*_SCALARS, "sigma_mm", *_ENV):
+        for name in (*SCALAR_COLUMNS, "sigma_mm", *ENV_COLUMNS):
             if getattr(self, name) is not None:
                 put(name, _float_array(getattr(self, name), name, (n_rows,)))
         if self.cov_mm2 is not None:

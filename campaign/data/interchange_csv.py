@@ -62,10 +62,10 @@ from campaign.io.durable import atomic_write
 from campaign.io.terminal_text import clean
 
 from .dataset import SETS, Dataset, OrderContext  # noqa: F401  (SETS and Dataset are re-exported)
-from .interchange_reader import (_SMR, _blank_cells, _check_ids, _check_scalars, _data_table, _is_skipped, _nest_ids,
-                                 _numbers, _parse_header, _parse_sets, _read_lines, check_order_columns,
-                                 order_columns)
-from .interchange_writer import _blank_allowed, _check_writable, _header, _numeric_block
+from .interchange_reader import (SMR_COLUMNS, blank_cells, check_ids, check_order_columns, check_scalars, data_table,
+                                 is_skipped, numeric_columns, order_columns, parse_header, parse_sets, read_lines,
+                                 read_nest_ids)
+from .interchange_writer import blank_allowed, check_writable, header_columns, numeric_block
 
 __all__ = ["SETS", "Dataset", "read_csv", "write_csv"]
 
@@ -78,18 +78,18 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     problem.  Handles 10^5 rows in about a second or less.
     """
     src = str(path)
-    lines = _read_lines(path)
-    header_idx = next((i for i, ln in enumerate(lines) if not _is_skipped(ln)), None)
+    lines = read_lines(path)
+    header_idx = next((i for i, ln in enumerate(lines) if not is_skipped(ln)), None)
     if header_idx is None:
         raise DataError(src, "no data rows (empty file, no header)")
-    layout = _parse_header(lines[header_idx], src, header_idx + 1)
-    table = _data_table(lines, header_idx + 1, layout, src)
+    layout = parse_header(lines[header_idx], src, header_idx + 1)
+    table = data_table(lines, header_idx + 1, layout, src)
     line_nos = table.line_nos
     ids = [restore(v) for v in table.column(layout.index("point_id"))]
-    sets = _parse_sets(table.column(layout.index("set")), line_nos, src)
-    nest_ids = _nest_ids(table, layout, sets, src)
-    blanks = _blank_cells(table, layout, sets)
-    _check_ids(
+    sets = parse_sets(table.column(layout.index("set")), line_nos, src)
+    nest_ids = read_nest_ids(table, layout, sets, src)
+    blanks = blank_cells(table, layout, sets)
+    check_ids(
         ids,
         sets,
         lambda i, what: DataError(src, what, line=line_nos[i]),
@@ -97,11 +97,11 @@ def read_csv(path: str | os.PathLike) -> Dataset:
     )
     names = [f"q{k}" for k in range(1, layout.n_joints + 1)] + ["x", "y", "z"]
     for k in layout.smr:
-        names += _SMR[k]
+        names += SMR_COLUMNS[k]
     names += layout.scalars
     tail = [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc + list(layout.env)
     tail += order_columns(layout.n_joints) * layout.has_order
-    values = _numbers(table, layout, names + tail, src)
+    values = numeric_columns(table, layout, names + tail, src)
     for name, rows in blanks.items():
         values[rows, (names + tail).index(name)] = np.nan
     n = layout.n_joints
@@ -110,7 +110,7 @@ def read_csv(path: str | os.PathLike) -> Dataset:
         extra[f"p{k}_tracker_mm"] = values[:, n + 3 + 3 * j : n + 6 + 3 * j]
     for j, name in enumerate(layout.scalars):
         extra[name] = values[:, n + 3 + 3 * len(layout.smr) + j]
-    _check_scalars(extra, layout, line_nos, src)
+    check_scalars(extra, layout, line_nos, src)
     m = len(names)
     if layout.has_qc:
         extra["qc_deg"] = values[:, m : m + n]
@@ -143,9 +143,9 @@ def write_csv(path: str | os.PathLike, dataset: Dataset) -> None:
     written to a temporary name and renamed into place.
     """
     src = str(path)
-    numbers = _numeric_block(dataset)
-    header = _header(dataset)
-    _check_writable(dataset, src, numbers, _blank_allowed(dataset, header))
+    numbers = numeric_block(dataset)
+    header = header_columns(dataset)
+    check_writable(dataset, src, numbers, blank_allowed(dataset, header))
     lines = [",".join(header)]
     if dataset.provenance:                      # one line: control characters and line breaks escaped
         lines.insert(0, f"{PROVENANCE} " + clean(dataset.provenance).replace("\n", "\\n"))

@@ -17,16 +17,16 @@ import numpy as np
 from campaign.errors import DataError
 from campaign.io.csv_cells import restore
 
-from .dataset import _ENV, _SCALARS, SETS
+from .dataset import ENV_COLUMNS, SCALAR_COLUMNS, SETS
 
 _QC_RE = re.compile(r"qc([1-9][0-9]*)")
 _ORDER_RE = re.compile(r"(approach|move|move_before)([1-9][0-9]*)")   # a subset's places in the full order
-_SMR = {2: ("x2", "y2", "z2"), 3: ("x3", "y3", "z3")}
+SMR_COLUMNS = {2: ("x2", "y2", "z2"), 3: ("x3", "y3", "z3")}
 _Q_RE = re.compile(r"q([1-9][0-9]*)")
 _NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUM_RE = re.compile(_NUM)
 _COLUMN_RE = re.compile(rf"(?>{_NUM}\n)*+")  # a whole column joined with "\n"
-_BAD_ID_CHARS = frozenset(',;"\r\n')
+BAD_ID_CHARS = frozenset(',;"\r\n')
 MAX_ID_CHARS = 256  # point_id / nest_id length bound (ids end up in file names, terminal lines and reports)
 
 
@@ -54,7 +54,7 @@ class _Layout:
         return self.names.index(name)
 
 
-def _read_lines(path: str | os.PathLike) -> list[str]:
+def read_lines(path: str | os.PathLike) -> list[str]:
     """The file's lines (BOM and ``\\r`` removed); DataError on bad UTF-8."""
     blob = Path(path).read_bytes()
     try:
@@ -67,7 +67,7 @@ def _read_lines(path: str | os.PathLike) -> list[str]:
     return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
 
 
-def _is_skipped(line: str) -> bool:
+def is_skipped(line: str) -> bool:
     """Blank lines and ``#`` comment lines are ignored."""
     stripped = line.strip()
     return not stripped or stripped.startswith("#")
@@ -82,7 +82,7 @@ def _split(line: str, sep: str) -> list[str]:
     return [p.strip() for p in parts]
 
 
-def _parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
+def parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
     """Validate the header line and return the column layout."""
     sep = ";" if line.count(";") > line.count(",") else ","
     shown = _split(line, sep)
@@ -96,9 +96,9 @@ def _parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
         seen.add(name)
     n_joints = _check_known_columns(names, shown, src)
     smr = _check_smr_groups(seen, src, line_no)
-    scalars = tuple(s for s in _SCALARS if s in seen)
+    scalars = tuple(s for s in SCALAR_COLUMNS if s in seen)
     has_qc = _check_qc_columns(names, shown, n_joints, src, line_no)
-    env = tuple(e for e in _ENV if e in seen)
+    env = tuple(e for e in ENV_COLUMNS if e in seen)
     has_order = _check_order_columns(names, n_joints, src, line_no)
     return _Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no, has_order)
 
@@ -141,7 +141,7 @@ def _check_qc_columns(names: list[str], shown: list[str], n_joints: int, src: st
 
 def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
     """Reject unknown columns, require the mandatory ones; return n joints."""
-    known = {"point_id", "set", "x", "y", "z", *_SCALARS, *_SMR[2], *_SMR[3], "nest_id", *_ENV}
+    known = {"point_id", "set", "x", "y", "z", *SCALAR_COLUMNS, *SMR_COLUMNS[2], *SMR_COLUMNS[3], "nest_id", *ENV_COLUMNS}
     joints = set()
     for name, as_written in zip(names, shown):
         match = _Q_RE.fullmatch(name)
@@ -159,7 +159,7 @@ def _check_known_columns(names: list[str], shown: list[str], src: str) -> int:
 def _check_smr_groups(present: set[str], src: str, line_no: int | None = None) -> tuple[int, ...]:
     """Second/third SMR columns come as complete groups, the third only with the second."""
     groups = []
-    for k, cols in _SMR.items():
+    for k, cols in SMR_COLUMNS.items():
         have = [c for c in cols if c in present]
         if have and len(have) < 3:
             missing = next(c for c in cols if c not in present)
@@ -183,9 +183,9 @@ class _Table:
         return self.flat[pos :: self.width]
 
 
-def _data_table(lines: list[str], start: int, layout: _Layout, src: str) -> _Table:
+def data_table(lines: list[str], start: int, layout: _Layout, src: str) -> _Table:
     """Split the data lines after the header into cells (bulk, then checked)."""
-    line_nos = [i + 1 for i in range(start, len(lines)) if not _is_skipped(lines[i])]
+    line_nos = [i + 1 for i in range(start, len(lines)) if not is_skipped(lines[i])]
     if not line_nos:
         raise DataError(src, "no data rows")
     data = [lines[n - 1] for n in line_nos]
@@ -232,7 +232,7 @@ def _first_bad_cell(table: _Table, positions: Sequence[int], decimal_comma: bool
     raise AssertionError("no malformed cell found")  # pragma: no cover
 
 
-def _numbers(table: _Table, layout: _Layout, names: Sequence[str], src: str) -> np.ndarray:
+def numeric_columns(table: _Table, layout: _Layout, names: Sequence[str], src: str) -> np.ndarray:
     """(N, len(names)) float64 from the named columns; strict, vectorised."""
     positions = [layout.index(n) for n in names]
     cells = [cell for pos in positions for cell in table.column(pos)]  # column-major
@@ -258,7 +258,7 @@ def _numbers(table: _Table, layout: _Layout, names: Sequence[str], src: str) -> 
     return values
 
 
-def _check_ids(
+def check_ids(
     ids: Sequence[str], sets: Sequence[str], fail: Callable[[int, str], DataError], ref: Callable[[int], str]
 ) -> None:
     """Unique non-empty point ids; ``check`` rows may repeat among themselves.
@@ -276,7 +276,7 @@ def _check_ids(
             raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
 
 
-def _check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -> None:
+def check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -> None:
     """What the config would refuse or the physics cannot be: a negative ``payload_kg``; a negative ``t_s``, or
     one that goes back in time (rows are in measurement order)."""
     def where(name: str, i: int) -> dict:
@@ -314,7 +314,7 @@ def check_order_columns(approach: np.ndarray, order: np.ndarray, layout: _Layout
                              "order", line=line_nos[i], column=column)
 
 
-def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
+def read_nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
     """The ``nest_id`` column: required (non-empty) on nest rows, empty elsewhere; nest rows need ``t_s``."""
     first = next((i for i, s in enumerate(sets) if s == "nest"), None)
     if "nest_id" not in layout.names:
@@ -337,13 +337,13 @@ def _nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tupl
     return tuple(col)
 
 
-def _blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np.ndarray]:
+def blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np.ndarray]:
     """Empty cells that are allowed (joints, extra SMRs, temp_c, payload_kg on nest rows; environment and move
     columns anywhere): set to "0" in ``table`` for the strict parser; returns {column: row indices} to become NaN."""
     nest_rows = [i for i, s in enumerate(sets) if s == "nest"]
     nullable_on_nest = [f"q{k}" for k in range(1, layout.n_joints + 1)]
     nullable_on_nest += [f"qc{k}" for k in range(1, layout.n_joints + 1)] * layout.has_qc
-    nullable_on_nest += [c for k in layout.smr for c in _SMR[k]]
+    nullable_on_nest += [c for k in layout.smr for c in SMR_COLUMNS[k]]
     nullable_on_nest += [s for s in ("temp_c", "payload_kg") if s in layout.scalars]
     out: dict[str, np.ndarray] = {}
     anywhere = list(layout.env) + [c for c in order_columns(layout.n_joints) if c.startswith("move")] * layout.has_order
@@ -358,7 +358,7 @@ def _blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, n
     return out
 
 
-def _parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
+def parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
     """Lower-cased set names; DataError for anything but calib/test/check."""
     sets = [s.lower() for s in raw]
     for i, s in enumerate(sets):

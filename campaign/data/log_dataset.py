@@ -11,7 +11,7 @@ from campaign.run.log_reader import LogContents
 from campaign.run.log_records import OPTIONAL_FIELDS, PointRecord, Record, check_records
 
 from .dataset import Dataset
-from .interchange_csv import _check_ids
+from .interchange_csv import check_ids
 
 _ENV_KEYS = {"env_temp_c": "temp_c", "env_pressure_hpa": "pressure_hpa", "env_humidity_pct": "humidity_pct"}
 
@@ -81,7 +81,7 @@ def dataset_from_log(contents: LogContents) -> Dataset:
     check_records(recs, src, lines)
     ids = [r.point_id for r in recs]
     sets = [r.set for r in recs]
-    _check_ids(
+    check_ids(
         ids,
         sets,
         lambda i, what: DataError(src, f"point record {i + 1}: {what}", line=lines[i] if i < len(lines) else None),

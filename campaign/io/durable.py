@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from drivers.redact import redact
+from drivers.redaction import redact
 
 
 def fsync_dir(directory: str | os.PathLike) -> None:
@@ -68,5 +68,5 @@ def _plain(x: Any) -> Any:
 
 def write_json(path: str | os.PathLike, data: Any) -> Path:
     """The one way the project writes a JSON file: atomically (see :func:`atomic_write`), NaN refused (missing
-    figures are null), numpy values converted, URL user-info and known secrets masked (``drivers.redact``)."""
+    figures are null), numpy values converted, URL user-info and known secrets masked (``drivers.redaction``)."""
     return atomic_write(path, redact(json.dumps(data, indent=1, allow_nan=False, default=_plain)).encode())

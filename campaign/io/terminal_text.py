@@ -4,7 +4,7 @@ Data strings (point and target ids, config names, file names, messages from devi
 rich. A rich console would read ``[link=...]``/``[/]`` in them as markup, ``:smile:`` as emoji and pass escape
 sequences (ESC, CSI, bidi overrides) straight to the terminal. :class:`SafeConsole` renders every string as plain
 text: no markup, no emoji, control characters shown as ``\\x1b``-style escapes, URL user-info and known secrets
-masked (:func:`drivers.redact.redact`). Styling is done with ``style=`` and :class:`rich.text.Text`, never with
+masked (:func:`drivers.redaction.redact`). Styling is done with ``style=`` and :class:`rich.text.Text`, never with
 markup in strings. :class:`CleanLogRecords` applies the same to log records (console and ``campaign.log``).
 
 Width: :func:`console_width` is the one rule (``--width N``, else ``COLUMNS``, else the terminal, else 100 columns
@@ -21,7 +21,7 @@ from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
-from drivers.redact import redact
+from drivers.redaction import redact
 
 # C0 controls except tab and newline, DEL, C1 controls, bidi embeddings/overrides/isolates, line/paragraph
 # separators and the BOM/zero-width no-break space: anything that moves the cursor, changes the terminal's state

@@ -9,7 +9,7 @@ import numpy as np
 
 from campaign.config.cell_model import CellModel
 from campaign.io.quantities import floor_mm
-from robocal.noise import noise_max_mm
+from robocal.measure.noise import noise_max_mm
 
 from .points import Plan
 from .poses import test_targets

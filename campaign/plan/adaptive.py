@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.design import d_optimal, short_tour
+from robocal.design.optimal import d_optimal, short_tour
 from robocal.correct import quat_to_matrix
-from robocal.ik import solve_on_branch
+from robocal.kinematics.ik import solve_on_branch
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import ConfigError

@@ -10,7 +10,7 @@ import numpy as np
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import CampaignError, ConfigError
-from robocal.ik import solve_on_branch
+from robocal.kinematics.ik import solve_on_branch
 from robocal.iso9283 import CYCLE_ORDER, POSE_NAMES, cube_poses, largest_cube
 
 from .points import Plan, PlanPoint

@@ -1,7 +1,7 @@
 """How many poses a plan needs, before anything moves: the forecast learning curve.
 
 ``forecast_curve``: the held-out RMS expected of the model fitted on the first n calibration poses, for n up to the
-plan's count (``robocal.adaptive.learning_curve``): the noise floor at the test poses (tracker model + robot
+plan's count (``robocal.design.adaptive.learning_curve``): the noise floor at the test poses (tracker model + robot
 repeatability) and the parameter uncertainty of the geometry and the pose-dependent effects ``calibration.effects:
 auto`` may take, each with its prior (1 mm / 1 mrad, the effects' typical sizes), so that a parameter the first
 poses cannot determine still counts with its prior. The poses in the order the plan measures them: an optimal
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.adaptive import learning_curve
-from robocal.design import criterion, criterion_effects, d_optimal, design_columns, greedy_order
+from robocal.design.adaptive import learning_curve
+from robocal.design.optimal import criterion, criterion_effects, d_optimal, design_columns, greedy_order
 
 from campaign.config.cell_model import CellModel
 from .optimal import pose_covariance, tracker_kinematics

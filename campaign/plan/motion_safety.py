@@ -2,7 +2,7 @@
 
 The planner and the runner share one ``PathGuard``: the flange origin and every SMR centre must stay
 ``plan.clearance_mm`` away from every ``plan.keep_out`` box and inside ``plan.envelope`` along the whole
-joint-interpolated path between consecutive poses (proven on the continuous path, ``robocal.sweep``).
+joint-interpolated path between consecutive poses (proven on the continuous path, ``robocal.kinematics.sweep``).
 A blocked move gets one or two via poses (the reference configuration, blends towards it, other planned
 poses), or one of the next points is visited first; when neither works the plan is refused naming the pair of
 points. The runner checks every move
@@ -19,8 +19,8 @@ from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
 from campaign.errors import CampaignError, ConfigError
 from drivers.base import MotionLimits, Payload
-from robocal.kinematics import Kinematics
-from robocal.sweep import Boxes, check_segments, clearances_mm, flange_points_base
+from robocal.kinematics.models import Kinematics
+from robocal.kinematics.sweep import Boxes, check_segments, clearances_mm, flange_points_base
 
 from .points import PlanPoint
 
@@ -84,7 +84,7 @@ class PathGuard:
 
     # -- segments
     def blocked(self, q_a_deg: np.ndarray, q_b_deg: np.ndarray):
-        """robocal.sweep.Violation of the segments (M, n) -> (M, n) deg."""
+        """robocal.kinematics.sweep.Violation of the segments (M, n) -> (M, n) deg."""
         return check_segments(self.kin, np.radians(q_a_deg), np.radians(q_b_deg), self.p_flange_points_mm,
                               self.keep_out, self.envelope, self.clearance_mm)
 
@@ -141,14 +141,6 @@ class PathGuard:
         lo, hi = np.degrees(self.kin.q_min_rad), np.degrees(self.kin.q_max_rad)
         keep &= np.all((c >= lo) & (c <= hi), axis=1)
         return c[keep]
-
-
-def plan_vias(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str]) -> list[tuple[tuple[float, ...], ...]]:
-    """Via poses before each of the planned poses (N, n) deg, in the given order (none before the first: the
-    runner routes the move from wherever the robot stands). Raises UnsafeMotion naming the pair of points when a
-    move cannot be made safe."""
-    order, vias = plan_route(guard, q_deg, ids, reorder=0)
-    return vias
 
 
 def plan_route(guard: PathGuard, q_deg: np.ndarray, ids: Sequence[str],

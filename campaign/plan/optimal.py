@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.design import Criterion, Forecast, criterion, d_optimal, forecast, short_tour
-from robocal.chains import alignment_margin_rad
-from robocal.kinematics import Kinematics
-from robocal.pool import candidate_poses, incidence_rad, smr_base_and_axis, tilted_rotations
+from robocal.design.optimal import Criterion, Forecast, criterion, d_optimal, forecast, short_tour
+from robocal.kinematics.chains import alignment_margin_rad
+from robocal.kinematics.models import Kinematics
+from robocal.design.pool import candidate_poses, incidence_rad, smr_base_and_axis, tilted_rotations
 
 from campaign.config.cell_model import CellModel
 from campaign.config.schema import CampaignConfig
@@ -165,7 +165,7 @@ def optimal_plan(cell: CellModel) -> Plan:
 
 
 def plan_forecast(cell: CellModel, plan: Plan) -> Forecast:
-    """What a plan's calibration points should achieve before any is measured (``robocal.design.forecast``):
+    """What a plan's calibration points should achieve before any is measured (``robocal.design.optimal.forecast``):
     parameter std, the calibrated model's own RMS error at the test poses (AP(theta)) and the noise floor there."""
     kin_t = tracker_kinematics(cell)
     q_cal = np.radians([p.q_deg for p in plan.points if p.set == "calib"])

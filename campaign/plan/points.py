@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 
 @dataclass(frozen=True)
 class PlanPoint:
@@ -47,17 +45,6 @@ class Plan:
     def count(self, set_name: str) -> int:
         return sum(p.set == set_name for p in self.points)
 
-    def estimated_duration_s(self, joint_speed_deg_s: float, settle_s: float, samples: int,
-                             sample_s: float = 1.5) -> float:
-        """Rough campaign duration: moves at the joint speed + settle + sampling per point (``sample_s`` per
-        stationary reading). ``campaign.run.eta.estimate_duration_s`` adds the speed caps and via poses."""
-        if not self.points:
-            return 0.0
-        q = np.array([p.q_deg for p in self.points if p.set != "nest"])
-        if len(q) == 0:
-            return 0.0
-        moves = np.max(np.abs(np.diff(q, axis=0)), axis=1).sum() / joint_speed_deg_s
-        return float(moves + len(self.points) * (settle_s + samples * sample_s))
 
 
 CANDIDATE = "candidate"          # plan.csv's set of an adaptive plan's candidate poses (measured as "calib")

@@ -16,16 +16,16 @@ import json
 import numpy as np
 
 from campaign.config.schema import CampaignConfig
-from robocal.chains import alignment_label, alignment_margin_rad, alignments
-from robocal.ik import solve_ik, solve_on_branch
-from robocal.kinematics import Kinematics
+from robocal.kinematics.chains import alignment_label, alignment_margin_rad, alignments
+from robocal.kinematics.ik import solve_ik, solve_on_branch
+from robocal.kinematics.models import Kinematics
 
 from .motion_safety import PathGuard, with_vias
 from .points import Plan, PlanPoint, Skipped, nest_point_id
 
 
 WRIST_MARGIN_DEG = 10.0    # points closer than this to the wrist singularity (J4 || J6 on a 6-axis arm; the
-                           # alignments of robocal.chains on other chains) are not planned
+                           # alignments of robocal.kinematics.chains on other chains) are not planned
 
 
 def tool_rotation(direction, down=(0.0, 0.0, -1.0)) -> np.ndarray:

@@ -9,7 +9,7 @@ from campaign.io.terminal_text import clean, keep_words, print_notes
 from campaign.report.budget_text import render_budget
 from campaign.report.terminal import render_preparation
 from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
-from robocal.elastic import EffectChoice
+from robocal.effects.model import EffectChoice
 
 from campaign.io.quantities import floor_mm
 

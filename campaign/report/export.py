@@ -28,8 +28,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robocal.kinematics import JOINT_PARAMS, Kinematics
-from robocal.model import CalibratedModel
+from robocal.kinematics.models import JOINT_PARAMS, Kinematics
+from robocal.layers.calibrated_model import CalibratedModel
 
 from campaign.config.schema import CampaignConfig
 from campaign.errors import DataError
@@ -282,8 +282,8 @@ def robodk_text(model: CalibratedModel) -> str:
     return "\n".join(out) + "\n"
 
 
-def export(model: CalibratedModel, urdf: Path | None = None, dh_csv: Path | None = None,
-           robodk: Path | None = None, name: str = "robot", limits: UrdfLimits | None = None) -> list[Path]:
+def export_model(model: CalibratedModel, urdf: Path | None = None, dh_csv: Path | None = None,
+                 robodk: Path | None = None, name: str = "robot", limits: UrdfLimits | None = None) -> list[Path]:
     """Write the requested files (the URDF needs ``limits``); returns their paths."""
     written = []
     if urdf:

@@ -26,7 +26,7 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from markupsafe import Markup
 
 from campaign.errors import DataError
-from drivers.redact import redact
+from drivers.redaction import redact
 
 from campaign.io.durable import atomic_write
 from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file

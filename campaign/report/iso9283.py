@@ -32,9 +32,9 @@ from campaign.config.cell_model import CellModel
 from campaign.errors import DataError
 from campaign.plan.iso9283 import IsoCube, iso_cube
 from campaign.run.log_records import PointRecord
-from robocal.frames import fit_rigid, inv_T, transform_points
+from robocal.kinematics.frames import fit_rigid, inv_T, transform_points
 from robocal.iso9283 import COVERAGE_K, POSE_NAMES, RepeatabilitySplit, characteristics, split_rp
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 
 
 REPORT_FORMAT = "campaign-iso9283/1"

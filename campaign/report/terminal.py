@@ -6,7 +6,7 @@ import math
 from rich.console import Console
 from rich.table import Table
 
-from robocal.elastic import EffectChoice
+from robocal.effects.model import EffectChoice
 
 from campaign.calibrate.calibration_report import STAGES, CalibrationReport
 from campaign.calibrate.report_sections import LayerSummary
@@ -223,7 +223,7 @@ def render_forecast(console: Console, fc, blocks: tuple[int, ...] = ()) -> None:
 
 def render_selection(console: Console, sel, n_other: int, out) -> None:
     """``campaign select``: what was kept, and the AP(theta) RMS the parameter uncertainty predicts for the subset
-    and for all calibration rows (``campaign.calibrate.select_rows.Selection``)."""
+    and for all calibration rows (``campaign.calibrate.selection.Selection``)."""
     console.print(f"selected {sel.n_chosen} of {sel.n_calib} calibration rows ({sel.criterion}), kept the "
                   f"{n_other} other rows; wrote {out}", markup=False)
     every = "" if sel.everything is None else (f", all {sel.n_calib} rows {sel.everything.model_rms_effects_mm:.4f} "

@@ -10,7 +10,7 @@ from typing import Iterator
 
 import numpy as np
 
-from drivers.base import Clock, Robot, SystemClock, Tracker
+from drivers.base import Clock, Robot, Simulated, SystemClock, Tracker
 from drivers.mock import MockWorld
 from drivers.registry import CellContext, open_robot, open_tracker
 
@@ -42,7 +42,8 @@ def open_devices(cell: CellModel) -> Iterator[Devices]:
         stack.callback(tracker.close)
         robot.connect()
         tracker.connect()
-        clock = getattr(robot, "simulated_clock", None) or getattr(tracker, "simulated_clock", None) or SystemClock()
+        simulated = next((d for d in (robot, tracker) if isinstance(d, Simulated) and d.simulated_clock), None)
+        clock = simulated.simulated_clock if simulated is not None else SystemClock()
         yield Devices(robot, tracker, clock)
 
 

@@ -11,7 +11,7 @@ import argparse
 import sys
 from typing import Callable, Sequence
 
-from drivers.emulators import emscon_server
+from drivers.emulators.emscon_server import PositionSource, parser, serve
 from drivers.mock import MockTracker
 from drivers.registry import CellContext, open_robot
 
@@ -20,7 +20,7 @@ from campaign.run.devices import mock_world
 
 
 def cell_position_source(config_path: str, robot_url: str | None = None
-                         ) -> tuple[emscon_server.PositionSource, Callable[[], None]]:
+                         ) -> tuple[PositionSource, Callable[[], None]]:
     """The SMR of the config's simulated cell (mm, tracker frame, with its per-point tracker error) and a close
     function; with ``robot_url`` the simulated robot follows that robot's read-back joints (the robot session is
     released by the close function), else it stays at the plan's q_ref."""
@@ -42,8 +42,8 @@ def cell_position_source(config_path: str, robot_url: str | None = None
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = emscon_server.parser("python -m campaign.run.emscon_cell",
-                             "emScon emulator on 127.0.0.1 measuring a campaign config's simulated cell.")
+    p = parser("python -m campaign.run.emscon_cell",
+               "emScon emulator on 127.0.0.1 measuring a campaign config's simulated cell.")
     p.add_argument("config", help="campaign config whose simulated cell (mock world) is measured")
     p.add_argument("--robot-url", help="follow this robot's read-back joints (a driver URL)")
     return p
@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     source, release = cell_position_source(args.config, args.robot_url)
     try:
-        return emscon_server.serve(args, source)
+        return serve(args, source)
     finally:
         release()
 

@@ -1,6 +1,6 @@
 """Campaign duration: predicted from the motion caps and the tracker's reading time, refined during the run.
 
-Per point: the moves (via poses included) at the capped speeds (``robocal.sweep.move_durations_s`` on the
+Per point: the moves (via poses included) at the capped speeds (``robocal.kinematics.sweep.move_durations_s`` on the
 nominal model, the same timing law the mock controller uses), the settle time and ``samples`` x
 ``reading_time_s`` per SMR. During a run, the ratio of measured to predicted point times (move + settle +
 readings, from the log records) scales the prediction of the remaining points.
@@ -11,18 +11,11 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.sweep import move_durations_s
+from robocal.kinematics.sweep import move_durations_s
 
 from campaign.config.cell_model import CellModel
 from campaign.plan.points import PlanPoint
 from .log_records import NestRecord, PointRecord
-
-
-def point_durations_s(points: Sequence[PlanPoint], cell: CellModel,
-                      q_start_deg: Sequence[float] | None = None) -> np.ndarray:
-    """(N,) predicted seconds per point, in plan order, starting from ``q_start_deg`` (default ``plan.q_ref_deg``)."""
-    move, fixed = point_times_s(points, cell, q_start_deg)
-    return move + fixed
 
 
 def point_times_s(points: Sequence[PlanPoint], cell: CellModel,
@@ -73,10 +66,6 @@ class RunEta:
         self.read = np.zeros_like(self.move) if predicted_read_s is None else np.asarray(predicted_read_s, float)
         self.done = 0
         self.sums = np.zeros(4)              # measured move, predicted move, measured reading, predicted reading
-
-    @classmethod
-    def for_plan(cls, points: Sequence[PlanPoint], cell: CellModel) -> "RunEta":
-        return cls(*point_times_s(points, cell))
 
     def observe(self, record: PointRecord | NestRecord) -> None:
         """A measured point record (``t_start_s`` before its move, ``t_measure_s`` settled, ``t_end_s`` after the

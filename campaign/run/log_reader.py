@@ -44,8 +44,9 @@ import zlib
 
 from campaign.errors import DataError
 from campaign.io.json_fields import RecordError
-from drivers.redact import redact
+from drivers.redaction import redact
 
+from .log_events import ExitStatus
 from .log_records import NestRecord, PointRecord, point_from_dict
 
 
@@ -54,7 +55,7 @@ __all__ = ["LOG_NAME", "KINDS", "EXIT_STATUSES", "RunLogError", "RunLogExistsErr
 
 LOG_NAME = "log.jsonl"
 KINDS = ("start", "point", "event", "stop")
-EXIT_STATUSES = ("success", "abort", "fail", "paused")
+EXIT_STATUSES = tuple(s.value for s in ExitStatus)
 _RECORD_KEYS = frozenset(("kind", "seq", "data", "crc"))
 _HEX = frozenset("0123456789abcdef")
 
@@ -139,7 +140,7 @@ def encode_record(kind: str, seq: int, data: dict) -> bytes:
 
     ``data`` is first normalised through a JSON round trip (numpy values to
     lists/floats, keys to strings; URL user-info and known secrets masked by
-    ``drivers.redact.redact``) so that a reader re-serialising the parsed
+    ``drivers.redaction.redact``) so that a reader re-serialising the parsed
     record gets exactly the canonical text the CRC was computed on.
     Raises ``ValueError``/``TypeError`` for NaN/inf or unserialisable data.
     """

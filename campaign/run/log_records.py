@@ -3,6 +3,8 @@
 * :class:`PointRecord` -- one robot measurement (a ``point`` record of ``log.jsonl``, kind plan/check/test/verify);
 * :class:`NestRecord` -- one reference-nest reading (a ``point`` record with ``set`` and ``kind`` "nest").
 
+The ``event`` records and the exit status are typed in :mod:`campaign.run.log_events`.
+
 Each has ``to_dict()`` giving exactly the JSON written today (same keys, same order, optional keys left out when
 they are absent) and ``from_dict()`` that checks the types and raises :class:`RecordError` naming the field.
 

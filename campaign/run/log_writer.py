@@ -16,6 +16,7 @@ import threading
 from campaign.io.durable import fsync_dir, remove_quietly
 
 from .log_reader import EXIT_STATUSES, LOG_NAME, LogContents, RunLogError, RunLogExistsError, encode_record, parse_log
+from .log_events import ExitStatus, LogEvent, ResumeEvent
 from .log_records import NestRecord, PointRecord
 
 
@@ -204,9 +205,7 @@ class RunLog:
             raise
         log = cls(path, fd, contents.n_records, len(contents.points), contents)
         previous = contents.stops[-1]["exit_status"] if contents.stops else None
-        log.append_event(
-            {"type": "resume", "previous_exit": previous, "dropped_tail_bytes": dropped}
-        )
+        log.append_event(ResumeEvent(previous, dropped))
         return log
 
     # ---- appending ------------------------------------------------------
@@ -240,18 +239,20 @@ class RunLog:
         self._n_points += 1
         return seq
 
-    def append_event(self, data: dict) -> int:
-        """Durably append an event (``{"type": "pause"|"fault"|..., ...}``); return its seq. An event is a note
-        about the run, not a measurement: a non-finite float in it is stored as null, so a note can never stop
-        the run (a point record with one is still refused)."""
+    def append_event(self, event: LogEvent | dict) -> int:
+        """Durably append an event (a :class:`campaign.run.log_events.LogEvent`, stored as its ``to_dict()``; or
+        a plain dict with a string ``type``, other writers and tools); return its seq. An event is a note about the
+        run, not a measurement: a non-finite float in it is stored as null, so a note can never stop the run (a
+        point record with one is still refused)."""
+        data = event.to_dict() if isinstance(event, LogEvent) else event
         if not isinstance(data, dict) or not isinstance(data.get("type"), str):
             raise TypeError("event data must be a dict with a string 'type'")
         return self._append("event", _finite_json(data))
 
-    def close(self, exit_status: str = "success", reason: str = "") -> None:
+    def close(self, exit_status: ExitStatus | str = ExitStatus.SUCCESS, reason: str = "") -> None:
         """Write the ``stop`` record and close the file; idempotent.
 
-        ``exit_status`` is one of ``success``, ``abort``, ``fail``, ``paused``;
+        ``exit_status`` is an :class:`ExitStatus` (or its value: ``success``, ``abort``, ``fail``, ``paused``);
         ``n_points`` counts every point record in the log; ``closed_utc`` is the wall-clock time (ISO 8601, UTC).
         """
         if exit_status not in EXIT_STATUSES:
@@ -260,7 +261,7 @@ class RunLog:
             return
         try:
             if not self._broken:
-                stop = {"exit_status": exit_status, "reason": str(reason), "n_points": self._n_points,
+                stop = {"exit_status": ExitStatus(exit_status).value, "reason": str(reason), "n_points": self._n_points,
                         "closed_utc": datetime.now(timezone.utc).isoformat()}
                 self._append("stop", stop)
         finally:

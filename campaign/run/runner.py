@@ -26,17 +26,21 @@ from typing import Callable, Iterable, Iterator, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from robocal.approach import next_approach
+from robocal.measure.approach import next_approach
 
-from drivers.base import (BeamBroken, Clock, DriverError, MotionLimits, Payload, Robot, Tracker, TrackerError,
-                          Unstable, average_samples)
+from drivers.base import (BeamBroken, Clock, DrainsEvents, DriverError, EnforcesMotionLimits, MotionLimits, Payload,
+                          ReadsJointTemperatures, ReadsSpeedOverride, Robot, SelectsSmr, TakesPayload, Tracker,
+                          TrackerError, Unstable, average_samples, backoff_s, can_reacquire, device_url)
 
 from campaign.config.plan_schema import NestsConfig
 from campaign.config.schema import MeasurementConfig
+from campaign.errors import one_line
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.points import PlanPoint
+from .log_events import (DevicesEvent, EnvironmentFault, ExitStatus, FaultEvent, FirstPassEvent,
+                         JointTemperatureFault, LogEvent, PauseEvent, ReacquireEvent, TrackerFault, TrackerStep)
 from .log_records import NestRecord, PointRecord, SmrReading
-from .runner_nests import NestReadings, PointFailed
+from .runner_nests import NestReader, PointFailed, Readings
 from .log_writer import RunLog
 from .log_reader import RunLogError
 from .tracker_quality import check_device_stability, device_covariance
@@ -48,18 +52,18 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class RunOutcome:
-    """How a run ended: exit_status success | paused | abort | fail, a one-line reason, points measured now."""
-    exit_status: str
+    """How a run ended: its exit status, a one-line reason, points measured now."""
+    exit_status: ExitStatus
     reason: str
     n_measured: int
 
 
-class Runner(NestReadings):
+class Runner:
     """Executes plan points; ``covariance(p_tracker_mm (3,)) -> (3, 3)`` gives the logged uncertainty;
     ``on_point(point, record)`` is called after each record is on disk (a :class:`PointRecord`, or a
     :class:`NestRecord` for a nest point). ``limits`` (caps sent to the driver before the first move),
     ``payload``, ``guard`` (swept-path checks and routes) and ``first_pass_limits`` (a reduced-speed traverse of
-    the plan before measuring): None = none."""
+    the plan before measuring): None = none. Reference nests are read by its :class:`NestReader` (``nests``)."""
 
     def __init__(self, robot: Robot, tracker: Tracker, measurement: MeasurementConfig, clock: Clock,
                  covariance: Callable[[np.ndarray], np.ndarray], payload_kg: float = 0.0,
@@ -72,16 +76,16 @@ class Runner(NestReadings):
                  first_pass_limits: MotionLimits | None = None) -> None:
         self.robot, self.tracker, self.m, self.clock = robot, tracker, measurement, clock
         self.covariance, self.payload_kg, self.on_point = covariance, payload_kg, on_point
-        if n_smrs > 1 and not callable(getattr(tracker, "select_smr", None)):
-            raise DriverError(f"{getattr(tracker, 'url', 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
+        if n_smrs > 1 and not isinstance(tracker, SelectsSmr):
+            raise DriverError(f"{device_url(tracker, 'tracker')}: the tool has {n_smrs} SMRs but this tracker "
                               "driver cannot aim at another SMR (no select_smr)")
         self.n_smrs = n_smrs
         # after a beam break: aim the tracker at predict_p_tracker_mm(q_read_deg) (mm, tracker frame) and search;
         # covariance_from_device(device cov (3, 3)) -> the logged covariance when the tracker reports its own
         self.predict_p_tracker_mm, self.covariance_from_device = predict_p_tracker_mm, covariance_from_device
         self.q_read: np.ndarray | None = None
-        self._smr = 1
-        self._init_nests(tracker, nests)
+        self._smr = 1                                     # the SMR the tracker aims at (0: a reference nest)
+        self.nests = NestReader(tracker, nests, self)
         self.p_last: np.ndarray | None = None             # last robot SMR reading (to aim back after a nest)
         self.q_prev: np.ndarray | None = None
         self.approach: np.ndarray | None = None
@@ -99,40 +103,40 @@ class Runner(NestReadings):
         """Measure the passes of ``plan`` in turn (each pass's measurements decide the next), then close the log
         with the exit status and reason whatever happens; the robot is stopped once at the end."""
         n = 0
-        status, reason, self._stopped = "fail", "internal error", False
-        self._remember_nests(getattr(log, "contents", None))
+        status, reason, self._stopped = ExitStatus.FAIL, "internal error", False
+        self._remember(getattr(log, "contents", None))
         try:
             points = plan.first()
             while points is not None:
                 p_tracker_mm, n_pass = self._measure_pass(list(points), log)
                 n += n_pass
                 points = plan.next(p_tracker_mm)
-            status, reason = "success", "all planned points measured"
+            status, reason = ExitStatus.SUCCESS, "all planned points measured"
         except PointFailed as exc:
             self._safe_stop()
-            status, reason = "paused", str(exc)
-            self._event(log, {"type": "pause", "reason": reason})
+            status, reason = ExitStatus.PAUSED, str(exc)
+            self._event(log, lambda t_s: PauseEvent(reason, t_s))
         except KeyboardInterrupt as exc:                     # Ctrl-C, or a signal raised as a subclass with a reason
             self._safe_stop()
-            status = "abort"
-            reason = _one_line(exc) if type(exc) is not KeyboardInterrupt and str(exc) else \
+            status = ExitStatus.ABORT
+            reason = one_line(exc) if type(exc) is not KeyboardInterrupt and str(exc) else \
                 "interrupted by the operator (Ctrl-C)"
         except (DriverError, UnsafeMotion) as exc:
             self._safe_stop()
-            status, reason = "fail", _one_line(exc)
-            self._event(log, {"type": "fault", "device": "robot", "reason": reason})
+            status, reason = ExitStatus.FAIL, one_line(exc)
+            self._event(log, lambda t_s: FaultEvent("robot", reason, t_s))
         except (OSError, RunLogError) as exc:               # the log or the disk failed: stop, keep what is on disk
             self._safe_stop()
-            status, reason = "fail", f"{type(exc).__name__}: {_one_line(exc)}"
+            status, reason = ExitStatus.FAIL, f"{type(exc).__name__}: {one_line(exc)}"
         except BaseException as exc:                         # a bug or a signal: stop, close, then re-raise
             self._safe_stop()
-            status = "fail" if isinstance(exc, Exception) else "abort"
-            reason = f"{type(exc).__name__}: {_one_line(exc)}"
+            status = ExitStatus.FAIL if isinstance(exc, Exception) else ExitStatus.ABORT
+            reason = f"{type(exc).__name__}: {one_line(exc)}"
             raise
         finally:
             self._safe_stop()
-            (logger.info if status == "success" else logger.warning)("run %s: %s (%d points measured now)",
-                                                                      status, reason, n)
+            (logger.info if status == ExitStatus.SUCCESS else logger.warning)(
+                "run %s: %s (%d points measured now)", status, reason, n)
             close_log(log, status, reason)
         return RunOutcome(status, reason, n)
 
@@ -146,12 +150,12 @@ class Runner(NestReadings):
             self._first_pass(points, log)
         for point in points:
             if point.set == "nest":
-                record = self.read_nest(point, log)           # read twice when the first reading is off
+                record = self.nests.read(point, log)          # read twice when the first reading is off
                 log.append_point(record)                  # durable before the bound check can pause
                 n += 1
                 if self.on_point:
                     self.on_point(point, record)
-                self._check_nest(record)
+                self.nests.check(record)
                 continue
             record = self.measure_point(point, log)
             log.append_point(record)                      # flushed + fsynced before the next move
@@ -172,48 +176,56 @@ class Runner(NestReadings):
         except Exception:  # stop is best effort on an already failing device
             pass
 
-    def _event(self, log: RunLog, data: dict) -> None:
-        """Append an event on a failure path (never masks the failure being handled)."""
+    def _event(self, log: RunLog, event: Callable[[float], LogEvent]) -> None:
+        """Append ``event(t_s)`` on a failure path (never masks the failure being handled, a failing clock
+        included)."""
         try:
-            log.append_event({**data, "t_s": self.clock.now()})
+            log.append_event(event(self.clock.now()))
         except Exception:
             pass
 
+    def _remember(self, contents) -> None:
+        """The last robot SMR reading and the nests' first/last readings of earlier sessions (resume)."""
+        for rec in contents.records() if contents is not None else ():
+            if isinstance(rec, NestRecord):
+                self.nests.remember(rec)
+            else:
+                self.p_last = np.asarray(rec.p_tracker_mm, float)
+
     def _prepare(self, log: RunLog) -> None:
         """Caps and payload to the driver before the first move; speed override and identities logged."""
-        robot, url = self.robot, getattr(self.robot, "url", "robot")
-        info: dict = {"type": "devices", **device_identity(robot, self.tracker)}
+        robot, url = self.robot, device_url(self.robot, "robot")
+        limits = payload = None
         if self.limits is not None:
-            if not callable(getattr(robot, "set_motion_limits", None)):
+            if not isinstance(robot, EnforcesMotionLimits):
                 raise UnsafeMotion(f"{url}: this robot driver cannot enforce the speed caps (no set_motion_limits); "
                                    "refusing to move")
             robot.set_motion_limits(self.limits)
-            info["motion_limits"] = {"max_tcp_speed_mm_s": self.limits.max_tcp_speed_mm_s,
-                                     "max_joint_speed_pct": self.limits.max_joint_speed_pct}
+            limits = {"max_tcp_speed_mm_s": self.limits.max_tcp_speed_mm_s,
+                      "max_joint_speed_pct": self.limits.max_joint_speed_pct}
         if self.payload is not None:
-            if callable(getattr(robot, "set_payload", None)):
+            if isinstance(robot, TakesPayload):
                 robot.set_payload(self.payload)
             elif self.payload.mass_kg > 0:
                 raise UnsafeMotion(f"{url}: this robot driver cannot send the payload "
                                    f"({self.payload.mass_kg:g} kg) to the controller; refusing to move")
-            info["payload"] = {"mass_kg": self.payload.mass_kg, "cog_flange_mm": list(self.payload.cog_flange_mm)}
-        override = robot.speed_override_pct() if callable(getattr(robot, "speed_override_pct", None)) else None
-        info["speed_override_pct"] = override
-        log.append_event({**info, "t_s": self.clock.now()})
-        rid = info["robot_identity"]
+            payload = {"mass_kg": self.payload.mass_kg, "cog_flange_mm": list(self.payload.cog_flange_mm)}
+        override = robot.speed_override_pct() if isinstance(robot, ReadsSpeedOverride) else None
+        event = DevicesEvent(**device_identity(robot, self.tracker), speed_override_pct=override,
+                             t_s=self.clock.now(), motion_limits=limits, payload=payload)
+        log.append_event(event)
+        rid = event.robot_identity
         logger.info("robot %s %s serial %s software %s; caps %s; payload %s; speed override %s %%", rid["vendor"],
-                    rid["model"], rid["serial"], rid["software_version"], info.get("motion_limits"),
-                    info.get("payload"), override)
+                    rid["model"], rid["serial"], rid["software_version"], limits, payload, override)
 
     def _first_pass(self, points: list[PlanPoint], log: RunLog) -> None:
         """Traverse every planned move (vias included) at the reduced caps without measuring, then restore."""
         lim = self.first_pass_limits
         self.robot.set_motion_limits(lim)
-        log.append_event({"type": "first_pass", "state": "start", "max_tcp_speed_mm_s": lim.max_tcp_speed_mm_s,
-                          "max_joint_speed_pct": lim.max_joint_speed_pct, "t_s": self.clock.now()})
+        log.append_event(FirstPassEvent("start", self.clock.now(), lim.max_tcp_speed_mm_s, lim.max_joint_speed_pct))
         for point in points:
             self._move_to(point)
-        log.append_event({"type": "first_pass", "state": "done", "t_s": self.clock.now()})
+        log.append_event(FirstPassEvent("done", self.clock.now()))
         self.robot.set_motion_limits(self.limits if self.limits is not None else MotionLimits())
 
     def _move_to(self, point: PlanPoint) -> None:
@@ -240,14 +252,8 @@ class Runner(NestReadings):
         self.q_read = q_read
         approach = self._approach(q_cmd)
         t_measure = self.clock.now()                        # in position and settled: the readings start
-        mean, spread, readings, retries = self._measure_with_retries(point, log)
-        try:
-            env = dict(self.tracker.environment() or {})
-        except DriverError as exc:                          # a failed weather read never costs the point
-            env = {}
-            log.append_event({"type": "environment_fault", "point_id": point.point_id,
-                              "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
-        env = {**environment_from_readings(readings), **env}
+        mean, spread, readings, retries = self.measure_readings(point, log)
+        env = {**environment_from_readings(readings), **self.tracker_environment(point, log)}
         joint_temp = self._joint_temperatures(point, log)
         dev_cov = device_covariance(readings)
         use_dev = dev_cov is not None and self.covariance_from_device is not None
@@ -266,27 +272,31 @@ class Runner(NestReadings):
             device_cov_mm2=None if dev_cov is None else tuple(map(tuple, dev_cov)),
             smrs=tuple(self._measure_smr(k, point, log) for k in range(2, self.n_smrs + 1)))
 
+    def tracker_environment(self, point: PlanPoint, log: RunLog) -> dict:
+        """The tracker's environment readings now; a failed weather read never costs the point (empty, logged)."""
+        try:
+            return dict(self.tracker.environment() or {})
+        except DriverError as exc:
+            log.append_event(EnvironmentFault(point.point_id, one_line(exc), self.clock.now()))
+            return {}
+
     def _joint_temperatures(self, point: PlanPoint, log: RunLog) -> list[float] | None:
-        """Joint (motor) temperatures in deg C where the driver offers ``joint_temperatures_c()``."""
-        read = getattr(self.robot, "joint_temperatures_c", None)
-        if not callable(read):
+        """Joint (motor) temperatures in deg C where the driver reads them (:class:`ReadsJointTemperatures`)."""
+        if not isinstance(self.robot, ReadsJointTemperatures):
             return None
         try:
-            values = read()
+            values = self.robot.joint_temperatures_c()
         except DriverError as exc:                          # never costs the point
-            log.append_event({"type": "joint_temperature_fault", "point_id": point.point_id,
-                              "reason": _one_line(exc), "t_s": self.clock.now()})
+            log.append_event(JointTemperatureFault(point.point_id, one_line(exc), self.clock.now()))
             return None
         return None if values is None else [float(v) for v in values]
 
     def _measure_smr(self, k: int, point: PlanPoint, log: RunLog) -> SmrReading:
         """SMR k at the current stop; the tracker is aimed back at SMR 1 afterwards, also on failure."""
         self.tracker.select_smr(k)
-        self._smr = k
         try:
-            mean, spread, _, retries = self._measure_with_retries(point, log)
+            mean, spread, _, retries = self.measure_readings(point, log, smr=k)
         finally:
-            self._smr = 1
             self.tracker.select_smr(1)
         return SmrReading(k, tuple(mean), tuple(map(tuple, self.covariance(mean))), spread, retries)
 
@@ -296,10 +306,18 @@ class Runner(NestReadings):
         self.q_prev = q_cmd
         return self.approach
 
-    def _measure_with_retries(self, point: PlanPoint, log: RunLog):
-        """Collect ``samples`` good readings; every failed reading (or an unstable set, which is discarded)
-        uses one of the point's ``retries`` and is followed by a short back-off. Returns (mean, spread,
+    def measure_readings(self, point: PlanPoint, log: RunLog, smr: int = 1) -> Readings:
+        """Collect ``samples`` good readings of the SMR the tracker aims at (``smr`` k of the tool, 0 a reference
+        nest: a beam break searches only at SMR 1); every failed reading (or an unstable set, which is discarded)
+        uses one of the point's ``retries`` and is followed by a short back-off. Returns (mean (3,) mm, spread mm,
         readings, faults)."""
+        self._smr = smr
+        try:
+            return self._measure_with_retries(point, log)
+        finally:
+            self._smr = 1
+
+    def _measure_with_retries(self, point: PlanPoint, log: RunLog) -> Readings:
         faults, readings = 0, []
         while True:
             try:
@@ -317,45 +335,54 @@ class Runner(NestReadings):
                 if isinstance(exc, BeamBroken):
                     faults = self._reacquire(point, log, faults)
                 else:
-                    self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+                    self.clock.sleep(backoff_s(faults))
 
     def _fault(self, point: PlanPoint, log: RunLog, exc: TrackerError, faults: int) -> None:
         """Log a failed reading (and the driver's recovery steps); PointFailed once the retry limit is spent."""
         self._log_tracker_steps(point, log)
-        log.append_event({"type": "tracker_fault", "point_id": point.point_id, "kind": exc.kind,
-                          "attempt": faults, "reason": " ".join(str(exc).split()), "t_s": self.clock.now()})
+        log.append_event(TrackerFault(point.point_id, exc.kind, faults, one_line(exc), self.clock.now()))
         if faults > self.m.retries:
-            raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({' '.join(str(exc).split())}); "
+            raise PointFailed(f"point {point.point_id}: tracker {exc.kind} ({one_line(exc)}); "
                               f"{faults} failed readings, retry limit {self.m.retries}") from None
 
     def _reacquire(self, point: PlanPoint, log: RunLog, faults: int) -> int:
         """After a beam break: aim at the predicted SMR position and search (each step logged); every failed
         search uses one of the point's retries (then PointFailed names it). Returns the updated fault count."""
-        reacquire = getattr(self.tracker, "reacquire", None)
-        if not callable(reacquire) or not getattr(self.tracker, "can_reacquire", True) \
-                or self.predict_p_tracker_mm is None or self.q_read is None or self._smr != 1:
-            self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+        if not can_reacquire(self.tracker) or self.predict_p_tracker_mm is None or self.q_read is None \
+                or self._smr != 1:
+            self.clock.sleep(backoff_s(faults))
             return faults
         p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
-        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "predicted",
-                          "p_tracker_mm": [round(float(v), 3) for v in p], "t_s": self.clock.now()})
+        log.append_event(ReacquireEvent(point.point_id, "predicted", self.clock.now(),
+                                        [round(float(v), 3) for v in p]))
         while True:                                 # search again until found or the point's retries are spent
             try:
-                reacquire(p.tolist())
+                self.tracker.reacquire(p.tolist())
                 break
             except TrackerError as exc:
                 faults += 1
                 self._fault(point, log, exc, faults)
-                self.clock.sleep(min(2.0, 0.2 * 2 ** (faults - 1)))
+                self.clock.sleep(backoff_s(faults))
         self._log_tracker_steps(point, log)
-        log.append_event({"type": "reacquire", "point_id": point.point_id, "step": "found", "t_s": self.clock.now()})
+        log.append_event(ReacquireEvent(point.point_id, "found", self.clock.now()))
         return faults
+
+    def aim_at_robot_smr(self) -> None:
+        """Aim the tracker back at the robot's SMR 1 (after a nest reading): SMR selection, else a search at its
+        predicted position (else its last reading)."""
+        if isinstance(self.tracker, SelectsSmr):
+            self.tracker.select_smr(1)
+            return
+        p = self.p_last
+        if self.predict_p_tracker_mm is not None and self.q_read is not None:
+            p = np.asarray(self.predict_p_tracker_mm(self.q_read), float)
+        if p is not None and can_reacquire(self.tracker):
+            self.tracker.reacquire(tuple(float(v) for v in p))
 
     def _log_tracker_steps(self, point: PlanPoint, log: RunLog) -> None:
         """The driver's own recovery steps (reconnect, initialise, aim, search), if it reports them."""
-        drain = getattr(self.tracker, "drain_events", None)
-        for step in (drain() if callable(drain) else ()):
-            log.append_event({"type": "tracker_step", "point_id": point.point_id, **step, "t_s": self.clock.now()})
+        for step in self.tracker.drain_events() if isinstance(self.tracker, DrainsEvents) else ():
+            log.append_event(TrackerStep(point.point_id, dict(step), self.clock.now()))
 
 
 class PassPlan(Protocol):
@@ -380,7 +407,7 @@ class _OnePass:
         return None
 
 
-def close_log(log: RunLog, status: str, reason: str) -> None:
+def close_log(log: RunLog, status: ExitStatus, reason: str) -> None:
     """Close ``log`` with its stop record (status, one-line reason) unless already closed; a broken log stays as
     it is (a resume drops its torn tail)."""
     try:
@@ -396,12 +423,9 @@ def closing_on_error(log: RunLog) -> Iterator[RunLog]:
     try:
         yield log
     except BaseException as exc:
-        close_log(log, "fail" if isinstance(exc, Exception) else "abort", f"{type(exc).__name__}: {_one_line(exc)}")
+        close_log(log, ExitStatus.FAIL if isinstance(exc, Exception) else ExitStatus.ABORT,
+                  f"{type(exc).__name__}: {one_line(exc)}")
         raise
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())
 
 
 def pending(points: Iterable[PlanPoint], done_ids: set[str]) -> list[PlanPoint]:

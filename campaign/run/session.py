@@ -16,7 +16,7 @@ from campaign.errors import ConfigError
 from campaign.io.durable import atomic_write
 from campaign.plan.motion_safety import PathGuard, motion_limits, payload
 from campaign.plan.points import Plan, plan_csv_text
-from drivers.base import SystemClock
+from drivers.base import SelectsNest, SystemClock
 
 from .devices import Devices
 from .eta import RunEta
@@ -50,7 +50,7 @@ def make_runner(cell: CellModel, devices: Devices, *, first_pass: bool = False, 
 def check_nest_aiming(cfg, tracker) -> None:
     """ConfigError (before anything moves) when a reference nest has no ``p_tracker_mm`` and the tracker cannot
     find a nest by itself (no ``select_nest``: emScon, the line protocol): it would not know where to aim."""
-    if callable(getattr(tracker, "select_nest", None)):
+    if isinstance(tracker, SelectsNest):
         return
     for k, nest in enumerate(cfg.plan.nests.points):
         if nest.p_tracker_mm is None:
@@ -112,7 +112,7 @@ def unique_path(base: Path) -> Path:
 def copy_config(cfg: CampaignConfig, path: Path) -> None:
     """The run's copy of its config file (URL user-info and known secrets masked); ConfigError if the file changed
     since it was read."""
-    from drivers.redact import redact
+    from drivers.redaction import redact
 
     data = Path(cfg.source_path).read_bytes()
     if hashlib.sha256(data).hexdigest() != cfg.sha256:

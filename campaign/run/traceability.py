@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Iterator, Mapping, Sequence
 from urllib.parse import urlsplit
 
-from drivers.base import DriverError, TrackerReading
+from drivers.base import DriverError, Identifies, TrackerReading, Versioned, device_url
 
-from campaign.errors import PlausibilityError
+from campaign.errors import PlausibilityError, one_line
 from campaign.io.terminal_text import CleanLogRecords
 
 ROBOT_KEYS = ("vendor", "model", "controller_type", "serial", "software_version")
@@ -41,14 +41,13 @@ def software_version() -> str:
 
 def _identity(device, keys: Sequence[str]) -> dict[str, str]:
     """The device's ``identity()`` with every expected key ("unknown" where the driver cannot tell)."""
-    read = getattr(device, "identity", None)
-    if not callable(read):
+    if not isinstance(device, Identifies):
         return {k: "unknown" for k in keys} | {"note": "driver reports no identity"}
     try:
-        got = dict(read() or {})
+        got = dict(device.identity() or {})
     except DriverError as exc:
-        log.warning("%s: identity not readable: %s", getattr(device, "url", "device"), exc)
-        return {k: "unknown" for k in keys} | {"note": f"identity not readable: {' '.join(str(exc).split())}"}
+        log.warning("%s: identity not readable: %s", device_url(device, "device"), exc)
+        return {k: "unknown" for k in keys} | {"note": f"identity not readable: {one_line(exc)}"}
     return {k: str(got.get(k, "unknown")) for k in keys} | {k: str(v) for k, v in got.items() if k not in keys}
 
 
@@ -58,7 +57,7 @@ def driver_versions(robot, tracker) -> dict[str, str]:
     for role, dev in (("robot", robot), ("tracker", tracker)):
         cls = type(dev)
         out[f"{role}_driver"] = f"{cls.__module__}.{cls.__qualname__}"
-        extra = getattr(dev, "driver_version", None)
+        extra = dev.driver_version if isinstance(dev, Versioned) else None
         if extra:
             out[f"{role}_driver_version"] = str(extra() if callable(extra) else extra)
     for lib in LIBRARIES:

@@ -16,8 +16,8 @@ from typing import Sequence
 import numpy as np
 
 from drivers.base import TrackerReading, Unstable
-from robocal.frames import fit_rigid
-from robocal.kinematics import Kinematics, smr_base
+from robocal.kinematics.frames import fit_rigid
+from robocal.kinematics.models import Kinematics, smr_base
 
 STD_KEYS = ("std_x_mm", "std_y_mm", "std_z_mm")
 COV_KEYS = ((0, 1, "cov_xy_mm2"), (0, 2, "cov_xz_mm2"), (1, 2, "cov_yz_mm2"))

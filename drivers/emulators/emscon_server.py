@@ -43,8 +43,20 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from drivers import emscon_protocol as P
-from robocal.noise import TrackerUncertainty
+from drivers.emscon_protocol import (AU_DEGREE, COMMAND_CT, CS_RHR, C_CLEAR_COMMAND_QUEUE, C_FIND_REFLECTOR,
+                                     C_GET_ENVIRONMENT_PARAMS, C_GET_REFLECTOR, C_GET_REFLECTORS,
+                                     C_GET_SYSTEM_SETTINGS, C_GET_SYSTEM_STATUS, C_GO_POSITION, C_INITIALIZE,
+                                     C_SET_COORDINATE_SYSTEM_TYPE, C_SET_ENVIRONMENT_PARAMS, C_SET_MEASUREMENT_MODE,
+                                     C_SET_REFLECTOR, C_SET_STATIONARY_MODE_PARAMS, C_SET_STATISTIC_MODE,
+                                     C_SET_SYSTEM_SETTINGS, C_SET_UNITS, C_START_MEASUREMENT, C_STOP_MEASUREMENT,
+                                     DEFAULT_PORT, FramingError, HU_RH, LU_MILLIMETER, MM_STATIONARY, PU_MBAR,
+                                     PacketReader, RS_ALL_OK, RS_MEASUREMENT_STATUS_NOT_READY,
+                                     RS_METEO_DATA_OUT_OF_RANGE, RS_NOT_IMPLEMENTED, RS_SENSOR_NOT_WARMED_UP,
+                                     RS_TRACKER_NOT_INITIALIZED, RS_WRONG_PARAMETER, SM_EXTENDED, SM_STANDARD,
+                                     SSC_MEAS_STATUS_NOT_READY, SSC_MEAS_STATUS_READY, TPS_INITIALIZED, TU_CELSIUS,
+                                     WMS_NOT_CONNECTED, WMS_READ_AND_CALCULATE, WMS_READ_ONLY, decode_command,
+                                     encode_error, encode_meas_result, encode_reply, encode_status_change)
+from robocal.measure.noise import TrackerUncertainty
 
 from .faults import FaultDeck
 from .tcp import TcpServer, wait_for_shutdown
@@ -58,9 +70,9 @@ LENGTH_PER_MM = {0: 1e-3, 1: 1.0, 2: 1e3, 3: 1 / 304.8, 4: 1 / 914.4, 5: 1 / 25.
 PRESSURE_PER_MBAR = {0: 1.0, 1: 1.0, 2: 0.1, 3: 0.750062, 4: 0.0145038, 5: 0.401865, 6: 0.0295300}
 REFLECTORS = ((1, 5, 19.05, "RRR 1.5in"), (2, 6, 6.35, "RRR 0.5in"), (3, 11, 11.1125, "RRR 7/8in"),
               (4, 2, 0.0, "CatsEye"))
-STATUS_AFTER = {P.C_SET_UNITS: 6, P.C_SET_REFLECTOR: 7, P.C_SET_SYSTEM_SETTINGS: 8, P.C_SET_COORDINATE_SYSTEM_TYPE: 12,
-                P.C_SET_MEASUREMENT_MODE: 17, P.C_SET_STATIONARY_MODE_PARAMS: 18, P.C_SET_STATISTIC_MODE: 24,
-                P.C_SET_ENVIRONMENT_PARAMS: 2}
+STATUS_AFTER = {C_SET_UNITS: 6, C_SET_REFLECTOR: 7, C_SET_SYSTEM_SETTINGS: 8, C_SET_COORDINATE_SYSTEM_TYPE: 12,
+                C_SET_MEASUREMENT_MODE: 17, C_SET_STATIONARY_MODE_PARAMS: 18, C_SET_STATISTIC_MODE: 24,
+                C_SET_ENVIRONMENT_PARAMS: 2}
 
 PositionSource = Callable[[], Sequence[float]]
 
@@ -118,10 +130,10 @@ class EmsconDevice:
         if bad:
             raise ValueError(f"unknown faults {sorted(bad)} (expected {', '.join(FAULTS)})")
         self.fault_probabilities = dict(fault_probabilities or {})
-        self.units = (P.LU_MILLIMETER, P.AU_DEGREE, P.TU_CELSIUS, P.PU_MBAR, P.HU_RH)
-        self.settings = [P.WMS_READ_AND_CALCULATE, 0, 0, 1, 1, 0, 0, 1, 1]
-        self.coord_type, self.meas_mode, self.meas_time_ms, self.use_adm = P.CS_RHR, P.MM_STATIONARY, 1000, 1
-        self.statistic_mode, self.reflector_id = P.SM_STANDARD, 1
+        self.units = (LU_MILLIMETER, AU_DEGREE, TU_CELSIUS, PU_MBAR, HU_RH)
+        self.settings = [WMS_READ_AND_CALCULATE, 0, 0, 1, 1, 0, 0, 1, 1]
+        self.coord_type, self.meas_mode, self.meas_time_ms, self.use_adm = CS_RHR, MM_STATIONARY, 1000, 1
+        self.statistic_mode, self.reflector_id = SM_STANDARD, 1
         self.beam_ok, self.reflector_lost = True, False
         self.aim_mm: tuple[float, float, float] | None = None     # where the tracker points when the beam is broken
         self.last_true_mm: tuple[float, float, float] | None = None
@@ -140,152 +152,152 @@ class EmsconDevice:
     def respond(self, packet: bytes) -> list[Out]:
         """Replies to one whole command packet."""
         try:
-            command, params = P.decode_command(packet)
-        except P.FramingError:
-            return [Out(P.encode_reply(P.COMMAND_CT.unpack_from(packet)[2], P.RS_WRONG_PARAMETER))]
+            command, params = decode_command(packet)
+        except FramingError:
+            return [Out(encode_reply(COMMAND_CT.unpack_from(packet)[2], RS_WRONG_PARAMETER))]
         self.commands.append(command)
         handler = self._handlers().get(command)
         if handler is None:
-            return [Out(P.encode_reply(command, P.RS_NOT_IMPLEMENTED))]
+            return [Out(encode_reply(command, RS_NOT_IMPLEMENTED))]
         return handler(*params)
 
     def _handlers(self) -> dict[int, Callable[..., list[Out]]]:
-        return {P.C_GET_SYSTEM_STATUS: self._get_system_status, P.C_INITIALIZE: self._initialize,
-                P.C_SET_UNITS: self._set_units, P.C_SET_COORDINATE_SYSTEM_TYPE: self._set_coord,
-                P.C_SET_MEASUREMENT_MODE: self._set_mode, P.C_SET_STATIONARY_MODE_PARAMS: self._set_stationary,
-                P.C_SET_SYSTEM_SETTINGS: self._set_settings, P.C_GET_SYSTEM_SETTINGS: self._get_settings,
-                P.C_SET_ENVIRONMENT_PARAMS: self._set_env, P.C_GET_ENVIRONMENT_PARAMS: self._get_env,
-                P.C_SET_REFLECTOR: self._set_reflector, P.C_GET_REFLECTOR: self._get_reflector,
-                P.C_GET_REFLECTORS: self._get_reflectors, P.C_SET_STATISTIC_MODE: self._set_statistic,
-                P.C_START_MEASUREMENT: self._start_measurement, P.C_GO_POSITION: self._go_position,
-                P.C_FIND_REFLECTOR: self._find_reflector, P.C_CLEAR_COMMAND_QUEUE: self._ok(P.C_CLEAR_COMMAND_QUEUE),
-                P.C_STOP_MEASUREMENT: self._ok(P.C_STOP_MEASUREMENT)}
+        return {C_GET_SYSTEM_STATUS: self._get_system_status, C_INITIALIZE: self._initialize,
+                C_SET_UNITS: self._set_units, C_SET_COORDINATE_SYSTEM_TYPE: self._set_coord,
+                C_SET_MEASUREMENT_MODE: self._set_mode, C_SET_STATIONARY_MODE_PARAMS: self._set_stationary,
+                C_SET_SYSTEM_SETTINGS: self._set_settings, C_GET_SYSTEM_SETTINGS: self._get_settings,
+                C_SET_ENVIRONMENT_PARAMS: self._set_env, C_GET_ENVIRONMENT_PARAMS: self._get_env,
+                C_SET_REFLECTOR: self._set_reflector, C_GET_REFLECTOR: self._get_reflector,
+                C_GET_REFLECTORS: self._get_reflectors, C_SET_STATISTIC_MODE: self._set_statistic,
+                C_START_MEASUREMENT: self._start_measurement, C_GO_POSITION: self._go_position,
+                C_FIND_REFLECTOR: self._find_reflector, C_CLEAR_COMMAND_QUEUE: self._ok(C_CLEAR_COMMAND_QUEUE),
+                C_STOP_MEASUREMENT: self._ok(C_STOP_MEASUREMENT)}
 
     def _ok(self, command: int) -> Callable[..., list[Out]]:
-        return lambda *_: [Out(P.encode_reply(command, P.RS_ALL_OK))]
+        return lambda *_: [Out(encode_reply(command, RS_ALL_OK))]
 
-    def _changed(self, command: int, status: int = P.RS_ALL_OK) -> list[Out]:
-        out = [Out(P.encode_reply(command, status))]
-        if status == P.RS_ALL_OK and command in STATUS_AFTER:
-            out.append(Out(P.encode_status_change(STATUS_AFTER[command])))
+    def _changed(self, command: int, status: int = RS_ALL_OK) -> list[Out]:
+        out = [Out(encode_reply(command, status))]
+        if status == RS_ALL_OK and command in STATUS_AFTER:
+            out.append(Out(encode_status_change(STATUS_AFTER[command])))
         return out
 
     # -- commands
     def _get_system_status(self) -> list[Out]:
-        tps = P.TPS_INITIALIZED if self.initialised else 4           # ES_TPS_CompensationSet
-        return [Out(P.encode_reply(P.C_GET_SYSTEM_STATUS, P.RS_ALL_OK, P.RS_ALL_OK, tps, 3, 2, 3, 8, 500,
+        tps = TPS_INITIALIZED if self.initialised else 4           # ES_TPS_CompensationSet
+        return [Out(encode_reply(C_GET_SYSTEM_STATUS, RS_ALL_OK, RS_ALL_OK, tps, 3, 2, 3, 8, 500,
                                    self.settings[0], 0, self.serial))]
 
     def _initialize(self) -> list[Out]:
         self.initialised, self.beam_ok, self.aim_mm = True, not self.reflector_lost, None
-        return [Out(P.encode_reply(P.C_INITIALIZE, P.RS_ALL_OK), delay_s=self.init_time_s)]
+        return [Out(encode_reply(C_INITIALIZE, RS_ALL_OK), delay_s=self.init_time_s)]
 
     def _set_units(self, length, angle, temp, pressure, humidity) -> list[Out]:
         if length not in LENGTH_PER_MM or angle not in (0, 1, 2) or temp not in (0, 1) \
-                or pressure not in PRESSURE_PER_MBAR or humidity != P.HU_RH:
-            return [Out(P.encode_reply(P.C_SET_UNITS, P.RS_WRONG_PARAMETER))]
+                or pressure not in PRESSURE_PER_MBAR or humidity != HU_RH:
+            return [Out(encode_reply(C_SET_UNITS, RS_WRONG_PARAMETER))]
         self.units = (length, angle, temp, pressure, humidity)
-        return self._changed(P.C_SET_UNITS)
+        return self._changed(C_SET_UNITS)
 
     def _set_coord(self, kind) -> list[Out]:
-        if kind != P.CS_RHR:
-            return [Out(P.encode_reply(P.C_SET_COORDINATE_SYSTEM_TYPE, P.RS_NOT_IMPLEMENTED))]
+        if kind != CS_RHR:
+            return [Out(encode_reply(C_SET_COORDINATE_SYSTEM_TYPE, RS_NOT_IMPLEMENTED))]
         self.coord_type = kind
-        return self._changed(P.C_SET_COORDINATE_SYSTEM_TYPE)
+        return self._changed(C_SET_COORDINATE_SYSTEM_TYPE)
 
     def _set_mode(self, mode) -> list[Out]:
-        if mode != P.MM_STATIONARY:
-            return [Out(P.encode_reply(P.C_SET_MEASUREMENT_MODE, P.RS_NOT_IMPLEMENTED))]
+        if mode != MM_STATIONARY:
+            return [Out(encode_reply(C_SET_MEASUREMENT_MODE, RS_NOT_IMPLEMENTED))]
         self.meas_mode = mode
-        return self._changed(P.C_SET_MEASUREMENT_MODE)
+        return self._changed(C_SET_MEASUREMENT_MODE)
 
     def _set_stationary(self, meas_time_ms, use_adm) -> list[Out]:
         if not 0 < meas_time_ms <= 100000:
-            return [Out(P.encode_reply(P.C_SET_STATIONARY_MODE_PARAMS, P.RS_WRONG_PARAMETER))]
+            return [Out(encode_reply(C_SET_STATIONARY_MODE_PARAMS, RS_WRONG_PARAMETER))]
         self.meas_time_ms, self.use_adm = meas_time_ms, use_adm
-        return self._changed(P.C_SET_STATIONARY_MODE_PARAMS)
+        return self._changed(C_SET_STATIONARY_MODE_PARAMS)
 
     def _set_settings(self, *values) -> list[Out]:
-        if values[0] not in (P.WMS_NOT_CONNECTED, P.WMS_READ_ONLY, P.WMS_READ_AND_CALCULATE):
-            return [Out(P.encode_reply(P.C_SET_SYSTEM_SETTINGS, P.RS_WRONG_PARAMETER))]
+        if values[0] not in (WMS_NOT_CONNECTED, WMS_READ_ONLY, WMS_READ_AND_CALCULATE):
+            return [Out(encode_reply(C_SET_SYSTEM_SETTINGS, RS_WRONG_PARAMETER))]
         self.settings = list(values[:7]) + self.settings[7:]            # bHasNivel, bHasVideoCamera are read-only
-        return self._changed(P.C_SET_SYSTEM_SETTINGS)
+        return self._changed(C_SET_SYSTEM_SETTINGS)
 
     def _get_settings(self) -> list[Out]:
-        return [Out(P.encode_reply(P.C_GET_SYSTEM_SETTINGS, P.RS_ALL_OK, *self.settings))]
+        return [Out(encode_reply(C_GET_SYSTEM_SETTINGS, RS_ALL_OK, *self.settings))]
 
     def _set_env(self, temperature, pressure, humidity) -> list[Out]:
         t_c = self._temp_to_c(temperature)
         p_mbar = pressure / PRESSURE_PER_MBAR[self.units[3]]
         if not (-10 <= t_c <= 50 and 500 <= p_mbar <= 1200 and 0 <= humidity <= 100):
-            return [Out(P.encode_reply(P.C_SET_ENVIRONMENT_PARAMS, P.RS_METEO_DATA_OUT_OF_RANGE))]
+            return [Out(encode_reply(C_SET_ENVIRONMENT_PARAMS, RS_METEO_DATA_OUT_OF_RANGE))]
         self.manual_env = (t_c, p_mbar, humidity)
-        return self._changed(P.C_SET_ENVIRONMENT_PARAMS)
+        return self._changed(C_SET_ENVIRONMENT_PARAMS)
 
     def _get_env(self) -> list[Out]:
-        return [Out(P.encode_reply(P.C_GET_ENVIRONMENT_PARAMS, P.RS_ALL_OK, *self._env_in_units()))]
+        return [Out(encode_reply(C_GET_ENVIRONMENT_PARAMS, RS_ALL_OK, *self._env_in_units()))]
 
     def _set_reflector(self, reflector_id) -> list[Out]:
         if reflector_id not in [r[0] for r in REFLECTORS]:
-            return [Out(P.encode_reply(P.C_SET_REFLECTOR, P.RS_WRONG_PARAMETER))]
+            return [Out(encode_reply(C_SET_REFLECTOR, RS_WRONG_PARAMETER))]
         self.reflector_id = reflector_id
-        return self._changed(P.C_SET_REFLECTOR)
+        return self._changed(C_SET_REFLECTOR)
 
     def _get_reflector(self) -> list[Out]:
-        return [Out(P.encode_reply(P.C_GET_REFLECTOR, P.RS_ALL_OK, self.reflector_id))]
+        return [Out(encode_reply(C_GET_REFLECTOR, RS_ALL_OK, self.reflector_id))]
 
     def _get_reflectors(self) -> list[Out]:
         k = LENGTH_PER_MM[self.units[0]]
-        return [Out(P.encode_reply(P.C_GET_REFLECTORS, P.RS_ALL_OK, len(REFLECTORS), rid, ttype, offset_mm * k,
+        return [Out(encode_reply(C_GET_REFLECTORS, RS_ALL_OK, len(REFLECTORS), rid, ttype, offset_mm * k,
                                    name.encode("utf-16-le"))) for rid, ttype, offset_mm, name in REFLECTORS]
 
     def _set_statistic(self, stationary, continuous) -> list[Out]:
-        if stationary not in (P.SM_STANDARD, P.SM_EXTENDED) or continuous not in (P.SM_STANDARD, P.SM_EXTENDED):
-            return [Out(P.encode_reply(P.C_SET_STATISTIC_MODE, P.RS_WRONG_PARAMETER))]
+        if stationary not in (SM_STANDARD, SM_EXTENDED) or continuous not in (SM_STANDARD, SM_EXTENDED):
+            return [Out(encode_reply(C_SET_STATISTIC_MODE, RS_WRONG_PARAMETER))]
         self.statistic_mode = stationary
-        return self._changed(P.C_SET_STATISTIC_MODE)
+        return self._changed(C_SET_STATISTIC_MODE)
 
     def _go_position(self, x, y, z, use_adm) -> list[Out]:
         if not self.initialised:
-            return [Out(P.encode_reply(P.C_GO_POSITION, P.RS_TRACKER_NOT_INITIALIZED))]
+            return [Out(encode_reply(C_GO_POSITION, RS_TRACKER_NOT_INITIALIZED))]
         k = LENGTH_PER_MM[self.units[0]]
         self.aim_mm = (x / k, y / k, z / k)
-        return [Out(P.encode_reply(P.C_GO_POSITION, P.RS_ALL_OK))]
+        return [Out(encode_reply(C_GO_POSITION, RS_ALL_OK))]
 
     def _find_reflector(self, approx_distance) -> list[Out]:
         if not self.initialised:
-            return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_TRACKER_NOT_INITIALIZED))]
+            return [Out(encode_reply(C_FIND_REFLECTOR, RS_TRACKER_NOT_INITIALIZED))]
         true = self._true()
         if self.beam_ok or (not self.reflector_lost and self.aim_mm is not None
                             and math.dist(self.aim_mm, true) <= self.search_radius_mm):
             self.beam_ok, self.aim_mm = True, None
-            return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_ALL_OK)),
-                    Out(P.encode_status_change(P.SSC_MEAS_STATUS_READY))]
-        return [Out(P.encode_reply(P.C_FIND_REFLECTOR, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+            return [Out(encode_reply(C_FIND_REFLECTOR, RS_ALL_OK)),
+                    Out(encode_status_change(SSC_MEAS_STATUS_READY))]
+        return [Out(encode_reply(C_FIND_REFLECTOR, RS_MEASUREMENT_STATUS_NOT_READY))]
 
     def _start_measurement(self) -> list[Out]:
         if not self.initialised:
-            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_TRACKER_NOT_INITIALIZED))]
+            return [Out(encode_reply(C_START_MEASUREMENT, RS_TRACKER_NOT_INITIALIZED))]
         fault = self._draw_fault()
         if fault == "disconnect":
             return [Out(disconnect=True)]
         if fault == "garbage":
             return [Out(GARBAGE)]
         if fault == "warm_up":
-            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_SENSOR_NOT_WARMED_UP))]
+            return [Out(encode_reply(C_START_MEASUREMENT, RS_SENSOR_NOT_WARMED_UP))]
         if fault == "not_initialised":
             self.initialised = False
-            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_TRACKER_NOT_INITIALIZED))]
+            return [Out(encode_reply(C_START_MEASUREMENT, RS_TRACKER_NOT_INITIALIZED))]
         if fault in ("beam_break", "lost_reflector"):
             self.beam_ok, self.reflector_lost = False, fault == "lost_reflector"
             self.aim_mm = self.last_true_mm or (0.0, 0.0, 1000.0)
-            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_ALL_OK)),
-                    Out(P.encode_status_change(P.SSC_MEAS_STATUS_NOT_READY)),
-                    Out(P.encode_error(P.C_START_MEASUREMENT, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+            return [Out(encode_reply(C_START_MEASUREMENT, RS_ALL_OK)),
+                    Out(encode_status_change(SSC_MEAS_STATUS_NOT_READY)),
+                    Out(encode_error(C_START_MEASUREMENT, RS_MEASUREMENT_STATUS_NOT_READY))]
         if not self.beam_ok:
-            return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_MEASUREMENT_STATUS_NOT_READY))]
+            return [Out(encode_reply(C_START_MEASUREMENT, RS_MEASUREMENT_STATUS_NOT_READY))]
         delay = self.meas_time_ms / 1000.0 * self.meas_time_scale + (self.late_s if fault == "late" else 0.0)
-        return [Out(P.encode_reply(P.C_START_MEASUREMENT, P.RS_ALL_OK)), Out(self._result(), delay_s=delay)]
+        return [Out(encode_reply(C_START_MEASUREMENT, RS_ALL_OK)), Out(self._result(), delay_s=delay)]
 
     # -- measurement
     def _true(self) -> tuple[float, float, float]:
@@ -303,11 +315,11 @@ class EmsconDevice:
         k = LENGTH_PER_MM[self.units[0]]
         std = [math.sqrt(cov[i][i]) * k for i in range(3)]
         covar = [cov[0][1] * k * k, cov[0][2] * k * k, cov[1][2] * k * k]
-        return P.encode_meas_result([v * k for v in meas], std, covar, self._env_in_units(),
-                                    extended=self.statistic_mode == P.SM_EXTENDED)
+        return encode_meas_result([v * k for v in meas], std, covar, self._env_in_units(),
+                                    extended=self.statistic_mode == SM_EXTENDED)
 
     def _env_used(self) -> tuple[float, float, float]:
-        return self.manual_env if self.settings[0] == P.WMS_NOT_CONNECTED else self.station_env
+        return self.manual_env if self.settings[0] == WMS_NOT_CONNECTED else self.station_env
 
     def _env_in_units(self) -> tuple[float, float, float]:
         t_c, p_mbar, h = self._env_used()
@@ -344,14 +356,14 @@ class EmsconEmulator(TcpServer):
 
     def _serve_client(self, conn: socket.socket) -> None:
         conn.settimeout(2.0)
-        reader = P.PacketReader()
+        reader = PacketReader()
         for data in self._received(conn, 65536):
             reader.feed(data)
             try:
                 while (packet := reader.next_packet()) is not None:
                     if not self._answer(conn, packet):
                         return
-            except P.FramingError:
+            except FramingError:
                 return                               # a client out of step: drop it, as a server would
 
     def _answer(self, conn: socket.socket, packet: bytes) -> bool:
@@ -368,7 +380,7 @@ def parser(prog: str = "python -m drivers.emulators.emscon_server",
            description: str = "Leica emScon laser-tracker emulator on 127.0.0.1.") -> argparse.ArgumentParser:
     """The emulator's command-line options (a caller may add its own before ``serve``)."""
     p = argparse.ArgumentParser(prog=prog, description=description)
-    p.add_argument("--port", type=int, default=P.DEFAULT_PORT, help="TCP port (0: any free port; default 700)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0: any free port; default 700)")
     p.add_argument("--print-port", action="store_true", help="print the bound port as the first stdout line")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--initialised", action="store_true", help="start initialised (default: Initialize needed)")

@@ -9,7 +9,8 @@ import time
 from typing import Any
 from urllib.request import parse_http_list, parse_keqv_list
 
-from .rws_http import E, REALM, Request, Response, S_OK, _Session, _cookies, _esc, _json, _md5, _xhtml
+from .rws_http import (E, REALM, Request, Response, S_OK, Session, json_response, md5_hex, parse_cookies, xhtml_list,
+                       xml_escape)
 
 
 class AuthMixin:
@@ -17,10 +18,10 @@ class AuthMixin:
 
     # -- authentication and sessions
 
-    def _authenticate(self, req: Request) -> tuple[_Session | None, list[str], Response | None]:
+    def _authenticate(self, req: Request) -> tuple[Session | None, list[str], Response | None]:
         """(session, Set-Cookie values, refusal). Cookie first, then Digest (1.0) / Basic (2.0)."""
         self._expire_idle()
-        sid = _cookies(req.header("Cookie")).get("-http-session-")
+        sid = parse_cookies(req.header("Cookie")).get("-http-session-")
         if self._fail_401 > 0:
             self._fail_401 -= 1
             if sid in self._sessions:
@@ -39,8 +40,8 @@ class AuthMixin:
             return None, [], Response(503, b"Too many sessions", [("Content-Type", "text/plain")])
         return self._new_session(user)
 
-    def _new_session(self, user: str) -> tuple[_Session, list[str], None]:
-        session = _Session(secrets.token_hex(12), secrets.token_hex(8), user, time.monotonic())
+    def _new_session(self, user: str) -> tuple[Session, list[str], None]:
+        session = Session(secrets.token_hex(12), secrets.token_hex(8), user, time.monotonic())
         self._sessions[session.sid] = session
         self.counts["sessions"] += 1
         return session, [f"-http-session-={session.sid}; path=/; httponly", f"ABBCX={session.abbcx}; path=/"], None
@@ -77,9 +78,9 @@ class AuthMixin:
             return None, False
         if f["nonce"] not in self._nonces:
             return None, True
-        ha1 = _md5(f"{f['username']}:{REALM}:{self._password}")
-        ha2 = _md5(f"{req.method}:{f['uri']}")
-        expected = _md5(f"{ha1}:{f['nonce']}:{f['nc']}:{f['cnonce']}:auth:{ha2}")
+        ha1 = md5_hex(f"{f['username']}:{REALM}:{self._password}")
+        ha2 = md5_hex(f"{req.method}:{f['uri']}")
+        expected = md5_hex(f"{ha1}:{f['nonce']}:{f['nc']}:{f['cnonce']}:auth:{ha2}")
         ok = hmac.compare_digest(expected, f["response"]) and f["username"] == self._user
         return (f["username"] if ok else None), False
 
@@ -120,15 +121,15 @@ class AuthMixin:
         """200 with items in the flavour's envelope (1.0 JSON/XHTML, 2.0 HAL)."""
         base = {"href": f"{self.base_url}{req.path.rsplit('/', 1)[0]}/"}
         if self.version == 1 and req.q("json") != "1":
-            return Response(200, _xhtml(items).encode(), [("Content-Type", "application/xhtml+xml")])
+            return Response(200, xhtml_list(items).encode(), [("Content-Type", "application/xhtml+xml")])
         if self.version == 1:
             doc: dict[str, Any] = {"_links": {"base": base}, "_embedded": {"_state": items}}
-            return _json(200, doc, "application/json")
+            return json_response(200, doc, "application/json")
         if collection:
             doc = {"_links": {"base": base, "self": {"href": ""}}, "_embedded": {"resources": items}}
         else:
             doc = {"_links": {"base": base, "self": {"href": ""}}, "status": {"code": S_OK}, "state": items}
-        return _json(200, doc, "application/hal+json;v=2.0")
+        return json_response(200, doc, "application/hal+json;v=2.0")
 
     def _error(self, req: Request, status: int, code: int, detail: str = "") -> Response:
         """Error envelope: 1.0 ``_embedded.status`` (or XHTML), 2.0 ``status``."""
@@ -136,10 +137,10 @@ class AuthMixin:
         base = {"href": f"{self.base_url}/"}
         if self.version == 1 and req.q("json") != "1":
             body = (f'<html><body><div class="status"><span class="code">{code}</span>'
-                    f'<span class="msg">{_esc(msg)}</span></div></body></html>')
+                    f'<span class="msg">{xml_escape(msg)}</span></div></body></html>')
             return Response(status, body.encode(), [("Content-Type", "application/xhtml+xml")])
         if self.version == 1:
-            return _json(status, {"_links": {"base": base}, "_embedded": {"status": {"code": code, "msg": msg},
+            return json_response(status, {"_links": {"base": base}, "_embedded": {"status": {"code": code, "msg": msg},
                                                                            "_state": []}}, "application/json")
-        return _json(status, {"_links": {"base": base}, "status": {"code": code, "msg": msg}},
+        return json_response(status, {"_links": {"base": base}, "status": {"code": code, "msg": msg}},
                      "application/hal+json;v=2.0")

@@ -7,7 +7,7 @@ import time
 
 from drivers.rapid.values import Symbol, parse_literal, render
 
-from .rws_http import ENTRY, EmulatedMotionFault, UNUSED, _Fault
+from .rws_http import ENTRY, EmulatedMotionFault, UNUSED, Fault
 
 log = logging.getLogger("drivers.emulators.rws_server")
 
@@ -88,7 +88,7 @@ class CalServerMixin:
         return record
 
     def _serve(self, seq: float, kind: int, target: list, ptarget: list, limits: dict | None, settle_s: float,
-               fault: _Fault | None) -> None:
+               fault: Fault | None) -> None:
         if fault is not None and self._apply_fault(seq, fault):
             return
         if kind == 0:
@@ -104,7 +104,7 @@ class CalServerMixin:
             return
         self._set_done(seq)
 
-    def _apply_fault(self, seq: float, fault: _Fault) -> bool:
+    def _apply_fault(self, seq: float, fault: Fault) -> bool:
         """Play an injected fault; True if the request ends here."""
         if fault.after_s and not self._dwell(fault.after_s):
             return True

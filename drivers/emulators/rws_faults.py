@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from datetime import datetime
 
-from .rws_http import _Fault, _Holder, _domain_key
+from .rws_http import Fault, Holder, domain_key
 
 log = logging.getLogger("drivers.emulators.rws_server")
 
@@ -39,7 +39,7 @@ class FaultsMixin:
         if kind not in ("error", "motors_off", "rapid_stop", "hang"):
             raise ValueError(f"unknown fault kind {kind!r}")
         with self._lock:
-            self._faults.append(_Fault(kind, message, code, after_s))
+            self._faults.append(Fault(kind, message, code, after_s))
 
     def set_opmode(self, mode: str) -> None:
         """Turn the mode key (AUTO, MANR, MANF)."""
@@ -69,13 +69,13 @@ class FaultsMixin:
         """A foreign client (RobotStudio, FlexPendant editor) takes mastership of ``domain``; with
         ``release_after`` it lets go after refusing that many mastership requests (a short edit)."""
         with self._lock:
-            self.mastership[_domain_key(domain)] = _Holder(None, application, location)
+            self.mastership[domain_key(domain)] = Holder(None, application, location)
             if release_after is not None:
-                self._foreign_refusals[_domain_key(domain)] = release_after
+                self._foreign_refusals[domain_key(domain)] = release_after
 
     def release_foreign_mastership(self, domain: str) -> None:
         with self._lock:
-            self.mastership.pop(_domain_key(domain), None)
+            self.mastership.pop(domain_key(domain), None)
 
     def add_elog(self, msgtype: int, code: int, title: str, desc: str = "") -> int:
         """Append an event log entry; returns its sequence number."""

@@ -100,7 +100,7 @@ class EmulatedMotionFault(Exception):
 
 
 @dataclass
-class _Session:
+class Session:
     sid: str
     abbcx: str
     user: str
@@ -108,7 +108,7 @@ class _Session:
 
 
 @dataclass
-class _Holder:
+class Holder:
     """Who holds a mastership domain: a session id (remote client) or a foreign local/remote client."""
     session: str | None
     application: str
@@ -116,14 +116,14 @@ class _Holder:
 
 
 @dataclass
-class _Fault:
+class Fault:
     kind: str                  # error, motors_off, rapid_stop, hang
     message: str = ""
     code: int = 0
     after_s: float = 0.0
 
 
-class _Reject(Exception):
+class Reject(Exception):
     """An RWS error answer (HTTP status, return code, detail)."""
 
     def __init__(self, status: int, code: int, detail: str = "") -> None:
@@ -131,12 +131,12 @@ class _Reject(Exception):
         self.status, self.code, self.detail = status, code, detail
 
 
-def _domain_key(domain: str) -> str:
+def domain_key(domain: str) -> str:
     """1.0 ``rapid`` and 2.0 ``edit`` guard the same thing."""
     return "edit" if domain in ("rapid", "edit") else domain
 
 
-def _cookies(header: str) -> dict[str, str]:
+def parse_cookies(header: str) -> dict[str, str]:
     out = {}
     for part in header.split(";"):
         name, sep, value = part.strip().partition("=")
@@ -145,24 +145,24 @@ def _cookies(header: str) -> dict[str, str]:
     return out
 
 
-def _md5(text: str) -> str:
+def md5_hex(text: str) -> str:
     return hashlib.md5(text.encode("utf-8")).hexdigest()
 
 
-def _json(status: int, doc: dict, ctype: str) -> Response:
+def json_response(status: int, doc: dict, ctype: str) -> Response:
     return Response(status, json.dumps(doc).encode(), [("Content-Type", ctype)])
 
 
-def _esc(text: str) -> str:
+def xml_escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 
-def _xhtml(items: Iterable[dict]) -> str:
+def xhtml_list(items: Iterable[dict]) -> str:
     """RWS 1.0 XHTML: one ``li`` per item with ``span`` fields."""
     lis = []
     for item in items:
-        spans = "".join(f'<span class="{_esc(k)}">{_esc(str(v))}</span>' for k, v in item.items()
+        spans = "".join(f'<span class="{xml_escape(k)}">{xml_escape(str(v))}</span>' for k, v in item.items()
                         if not k.startswith("_") and not isinstance(v, (dict, list)))
-        lis.append(f'<li class="{_esc(item.get("_type", ""))}" title="{_esc(item.get("_title", ""))}">{spans}</li>')
+        lis.append(f'<li class="{xml_escape(item.get("_type", ""))}" title="{xml_escape(item.get("_title", ""))}">{spans}</li>')
     return ('<?xml version="1.0" encoding="utf-8"?><html xmlns="http://www.w3.org/1999/xhtml"><head>'
             '<title>rws</title></head><body><div class="state"><ul>' + "".join(lis) + "</ul></div></body></html>")

@@ -73,7 +73,7 @@ from .rws_calserver import CalServerMixin
 from .rws_controller import ControllerMixin
 from .rws_faults import FaultsMixin
 from .rws_http import (CUSTOMER_PROGRAMS, DEFAULT_LIMITS_DEG, ENTRY, UNRESOLVED_URL, UNUSED, EmulatedMotionFault,  # noqa: F401
-                       Request, Response, _Fault, _Holder, _Reject, _Session)
+                       Request, Response, Fault, Holder, Reject, Session)
 
 log = logging.getLogger(__name__)
 
@@ -107,10 +107,10 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
         self._halt = threading.Event()
         self._opaque = secrets.token_hex(8)
         self._nonces: dict[str, float] = {}
-        self._sessions: dict[str, _Session] = {}
+        self._sessions: dict[str, Session] = {}
         self._fail_503 = 0
         self._fail_401 = 0
-        self._faults: list[_Fault] = []
+        self._faults: list[Fault] = []
         self.calserver_alive = True    # False: RAPID runs but the loop never takes requests (stuck elsewhere)
         # controller model
         self.opmode, self.ctrlstate, self.speedratio = "AUTO", "motoron", 100
@@ -122,7 +122,7 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
                                "Multitasking"] + (["Absolute Accuracy"] if absacc else [])
         self.executed: list[dict] = []    # per served motion request: what the simulated RAPID did (speeds, load)
         self._foreign_refusals: dict[str, int] = {}
-        self.mastership: dict[str, _Holder] = {}
+        self.mastership: dict[str, Holder] = {}
         self.modules: dict[str, Module] = {}
         self.files: dict[str, bytes] = {}
         self.elog: list[dict] = []
@@ -256,14 +256,14 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
             return bad
         try:
             resp = self._route(req, session)
-        except _Reject as rej:
+        except Reject as rej:
             resp = self._error(req, rej.status, rej.code, rej.detail)
         resp.headers.extend(("Set-Cookie", c) for c in cookies)
         return resp
 
     # -- routing
 
-    def _route(self, req: Request, session: _Session) -> Response:
+    def _route(self, req: Request, session: Session) -> Response:
         path = req.path.rstrip("/") or "/"
         for method, pattern, handler in self._table():
             m = re.fullmatch(pattern, path)
@@ -271,7 +271,7 @@ class RwsEmulator(FaultsMixin, AuthMixin, ControllerMixin, CalServerMixin):
                 return handler(req, session, *m.groups())
         if any(re.fullmatch(p, path) for _, p, _ in self._table()):
             return Response(405, b"", [("Content-Type", "text/plain")])
-        raise _Reject(404, UNRESOLVED_URL, path)
+        raise Reject(404, UNRESOLVED_URL, path)
 
     def _table(self) -> list[tuple[str, str, Callable[..., Response]]]:
         common = [

@@ -10,10 +10,19 @@ from __future__ import annotations
 
 from importlib import resources
 
-from .lexer import RapidExpr
-from .parser import check_rapid_syntax, parse_rapid_module
+from drivers import lazy_exports
 
-__all__ = ["RapidExpr", "check_rapid_syntax", "parse_rapid_module", "calserver_text"]
+_HOMES = {                      # module -> the public names it holds
+    "lexer": ("RapidExpr",),
+    "literals": ("RAPID_MAX_LINE_ID", "RAPID_UNUSED", "fixed_literal", "fmt_jointtarget", "fmt_num", "fmt_robtarget",
+                 "fmt_string", "parse_num", "parse_string", "rapid_aggregate", "rapid_array_lines",
+                 "rapid_ident_problem", "rapid_string"),
+    "parser": ("check_rapid_syntax", "parse_rapid_module"),
+    "values": ("Module", "RapidSyntaxError", "SHAPES", "Symbol", "matches", "parse_literal", "parse_module",
+               "render"),
+}
+__all__ = ["calserver_text", *(name for names in _HOMES.values() for name in names)]
+__getattr__ = lazy_exports(__name__, _HOMES)
 
 
 def calserver_text() -> str:

@@ -6,27 +6,27 @@ from __future__ import annotations
 
 from typing import Any, Iterable
 
-from .lexer import _BINOPS, _RAPID_TYPES, _Agg, _Decl, _Expr, _Lit, _ParseError, _strip_percent_header, _Tok, _tokenize
-from .literals import _RAPID_RESERVED
+from .lexer import BINOPS, RAPID_TYPES, Agg, Decl, Expr, Lit, ParseError, strip_percent_header, Tok, tokenize
+from .literals import RAPID_RESERVED
 
 
-class _ExpressionParser:
+class ExpressionParser:
     """Token access and the value grammar of RAPID; collects errors as (line, message)."""
 
     def __init__(self, text: str, extra_types: Iterable[str] = ()) -> None:
         self.lex_errors: list[tuple[int, str]] = []
         self.errors: list[tuple[int, str]] = []
-        self.toks = _tokenize(_strip_percent_header(text), self.lex_errors)
+        self.toks = tokenize(strip_percent_header(text), self.lex_errors)
         self.i = 0
         self.in_stmt = False
-        self.types = dict(_RAPID_TYPES)
+        self.types = dict(RAPID_TYPES)
         self.types.update({t.lower(): None for t in extra_types})
 
     # -- token access
-    def peek(self) -> _Tok:
+    def peek(self) -> Tok:
         return self.toks[self.i]
 
-    def next(self) -> _Tok:
+    def next(self) -> Tok:
         tok = self.toks[self.i]
         if self.in_stmt and tok.comment and tok.kind != "eof":
             self.err(tok.line, "comment inside a statement (a RAPID comment must stand on its own)")
@@ -40,22 +40,22 @@ class _ExpressionParser:
     def is_op(self, text: str) -> bool:
         return self.peek().kind == "op" and self.peek().text == text
 
-    def expect_op(self, text: str, what: str) -> _Tok:
+    def expect_op(self, text: str, what: str) -> Tok:
         tok = self.peek()
         if tok.kind != "op" or tok.text != text:
-            raise _ParseError(tok.line, f"expected '{text}' {what}, got '{tok.text}'")
+            raise ParseError(tok.line, f"expected '{text}' {what}, got '{tok.text}'")
         return self.next()
 
-    def name(self, what: str) -> _Tok:
+    def name(self, what: str) -> Tok:
         """An identifier token that may name a declared thing."""
         tok = self.peek()
         if tok.kind != "id":
-            raise _ParseError(tok.line, f"expected {what}, got '{tok.text}'")
-        if tok.up in _RAPID_RESERVED:  # form and length are reported by the tokenizer
-            raise _ParseError(tok.line, f"{what}: '{tok.text}' is a reserved word")
+            raise ParseError(tok.line, f"expected {what}, got '{tok.text}'")
+        if tok.up in RAPID_RESERVED:  # form and length are reported by the tokenizer
+            raise ParseError(tok.line, f"{what}: '{tok.text}' is a reserved word")
         return self.next()
 
-    def skip_group(self, open_tok: _Tok) -> None:
+    def skip_group(self, open_tok: Tok) -> None:
         """Skip to the bracket closing ``open_tok`` (brackets must nest)."""
         pairs = {"(": ")", "[": "]", "{": "}"}
         stack = [open_tok]
@@ -63,12 +63,12 @@ class _ExpressionParser:
             tok = self.next()
             if tok.kind == "eof" or (tok.kind == "op" and tok.text == ";"):
                 o = stack[-1]
-                raise _ParseError(tok.line, f"unbalanced brackets: '{o.text}' of line {o.line} is not closed")
+                raise ParseError(tok.line, f"unbalanced brackets: '{o.text}' of line {o.line} is not closed")
             if tok.kind == "op" and tok.text in pairs:
                 stack.append(tok)
             elif tok.kind == "op" and tok.text in ")]}":
                 if pairs[stack[-1].text] != tok.text:
-                    raise _ParseError(tok.line, f"unbalanced brackets: '{tok.text}' closes "
+                    raise ParseError(tok.line, f"unbalanced brackets: '{tok.text}' closes "
                                                 f"'{stack[-1].text}' of line {stack[-1].line}")
                 stack.pop()
 
@@ -77,12 +77,12 @@ class _ExpressionParser:
         """expr := term {binop term}; a lone literal or aggregate stays structured."""
         start = self.i
         node = self.term()
-        while self.peek().text.upper() in _BINOPS and self.peek().kind in ("op", "id"):
+        while self.peek().text.upper() in BINOPS and self.peek().kind in ("op", "id"):
             self.next()
             self.term()
             node = None
         if node is None:
-            return _Expr(" ".join(t.text for t in self.toks[start:self.i]), self.toks[start].line)
+            return Expr(" ".join(t.text for t in self.toks[start:self.i]), self.toks[start].line)
         return node
 
     def term(self) -> Any:
@@ -90,31 +90,31 @@ class _ExpressionParser:
         if tok.kind == "op" and tok.text in "+-" or tok.up == "NOT":
             self.next()
             inner = self.term()
-            if isinstance(inner, _Lit) and inner.kind == "num" and tok.text in "+-":
+            if isinstance(inner, Lit) and inner.kind == "num" and tok.text in "+-":
                 value = -inner.value if tok.text == "-" else inner.value
-                return _Lit(value, "num", tok.line, tok.text + inner.text)
-            return _Expr(tok.text + " " + getattr(inner, "text", "..."), tok.line)
+                return Lit(value, "num", tok.line, tok.text + inner.text)
+            return Expr(tok.text + " " + getattr(inner, "text", "..."), tok.line)
         return self.primary()
 
     def primary(self) -> Any:
         tok = self.next()
         if tok.kind == "num":
-            return _Lit(tok.value, "num", tok.line, tok.text)
+            return Lit(tok.value, "num", tok.line, tok.text)
         if tok.kind == "str":
-            return _Lit(tok.value, "string", tok.line, '"' + tok.text + '"')
+            return Lit(tok.value, "string", tok.line, '"' + tok.text + '"')
         if tok.up in ("TRUE", "FALSE"):
-            return _Lit(tok.up == "TRUE", "bool", tok.line, tok.up)
+            return Lit(tok.up == "TRUE", "bool", tok.line, tok.up)
         if tok.kind == "op" and tok.text == "[":
             return self.aggregate(tok)
         if tok.kind == "op" and tok.text == "(":
             inner = self.expression()
             self.expect_op(")", f"to close '(' of line {tok.line}")
-            return _Expr(f"({getattr(inner, 'text', '...')})", tok.line)
-        if tok.kind == "id" and tok.up not in _RAPID_RESERVED:
+            return Expr(f"({getattr(inner, 'text', '...')})", tok.line)
+        if tok.kind == "id" and tok.up not in RAPID_RESERVED:
             return self.reference(tok)
-        raise _ParseError(tok.line, f"expected a value, got '{tok.text}'")
+        raise ParseError(tok.line, f"expected a value, got '{tok.text}'")
 
-    def reference(self, tok: _Tok) -> _Expr:
+    def reference(self, tok: Tok) -> Expr:
         """A name with optional {index}, (arguments) and .component parts."""
         start = self.i - 1
         while True:
@@ -125,12 +125,12 @@ class _ExpressionParser:
                 self.name("record component")
             else:
                 break
-        return _Expr("".join(t.text for t in self.toks[start:self.i]), tok.line)
+        return Expr("".join(t.text for t in self.toks[start:self.i]), tok.line)
 
-    def aggregate(self, open_tok: _Tok) -> _Agg:
+    def aggregate(self, open_tok: Tok) -> Agg:
         items = []
         if self.is_op("]"):
-            raise _ParseError(open_tok.line, "empty aggregate '[]'")
+            raise ParseError(open_tok.line, "empty aggregate '[]'")
         while True:
             items.append(self.expression())
             tok = self.peek()
@@ -138,13 +138,13 @@ class _ExpressionParser:
                 self.next()
             elif tok.kind == "op" and tok.text == "]":
                 self.next()
-                return _Agg(items, open_tok.line)
+                return Agg(items, open_tok.line)
             else:
-                raise _ParseError(tok.line, f"unbalanced brackets: expected ',' or ']' in the aggregate "
+                raise ParseError(tok.line, f"unbalanced brackets: expected ',' or ']' in the aggregate "
                                             f"opened at line {open_tok.line}, got '{tok.text}'")
 
     # -- structure of initial values
-    def check_value(self, decl: _Decl) -> None:
+    def check_value(self, decl: Decl) -> None:
         if decl.value is None:
             return
         if decl.dims:
@@ -153,9 +153,9 @@ class _ExpressionParser:
             self.check_type(decl.value, decl.type_name, decl.name)
 
     def check_array(self, node: Any, dims: tuple, type_name: str, where: str) -> None:
-        if isinstance(node, _Expr):
+        if isinstance(node, Expr):
             return
-        if not isinstance(node, _Agg):
+        if not isinstance(node, Agg):
             self.err(node.line, f"{where}: an array needs an aggregate [...] initial value")
             return
         if isinstance(dims[0], int) and len(node.items) != dims[0]:
@@ -170,16 +170,16 @@ class _ExpressionParser:
 
     def check_type(self, node: Any, type_name: str, where: str) -> None:
         spec = self.types.get(type_name)
-        if spec is None or isinstance(node, _Expr):
+        if spec is None or isinstance(node, Expr):
             return
         if isinstance(spec, str):
-            if isinstance(node, _Agg):
+            if isinstance(node, Agg):
                 self.err(node.line, f"{where}: {type_name} takes one value, got an aggregate of "
                                     f"{len(node.items)} elements")
             elif node.kind != spec:
                 self.err(node.line, f"{where}: expected a {spec} value, got {node.text}")
             return
-        if not isinstance(node, _Agg):
+        if not isinstance(node, Agg):
             self.err(node.line, f"{where}: {type_name} needs an aggregate of {len(spec)} components, "
                                 f"got {node.text}")
             return

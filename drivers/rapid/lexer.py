@@ -10,7 +10,7 @@ from .literals import RAPID_MAX_IDENT, RAPID_MAX_STRING
 
 # Structure of the known data types: an atomic kind ("num", "bool", "string"),
 # a tuple of (component, type) pairs, or None (opaque: no initialiser check).
-_RAPID_TYPES: dict[str, Any] = {
+RAPID_TYPES: dict[str, Any] = {
     "num": "num", "dnum": "num", "byte": "num", "errnum": "num", "intnum": "num",
     "bool": "bool", "string": "string",
     "pos": tuple((c, "num") for c in ("x", "y", "z")),
@@ -31,17 +31,17 @@ _RAPID_TYPES: dict[str, Any] = {
         "pzone_tcp", "pzone_ori", "pzone_eax", "zone_ori", "zone_leax", "zone_reax")),
     "clock": None,
 }
-_MODULE_ATTRS = frozenset({"SYSMODULE", "NOVIEW", "NOSTEPIN", "VIEWONLY", "READONLY"})
-_DECL_WORDS = frozenset({"CONST", "PERS", "VAR"})
-_ROUTINE_END = {"PROC": "ENDPROC", "FUNC": "ENDFUNC", "TRAP": "ENDTRAP"}
-_END_WORDS = frozenset({"ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "ENDPROC", "ENDFUNC", "ENDTRAP",
+MODULE_ATTRS = frozenset({"SYSMODULE", "NOVIEW", "NOSTEPIN", "VIEWONLY", "READONLY"})
+DECL_WORDS = frozenset({"CONST", "PERS", "VAR"})
+ROUTINE_END = {"PROC": "ENDPROC", "FUNC": "ENDFUNC", "TRAP": "ENDTRAP"}
+END_WORDS = frozenset({"ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "ENDPROC", "ENDFUNC", "ENDTRAP",
                         "ENDMODULE", "ENDRECORD"})
-_MODULE_LEVEL = frozenset({"CONST", "PERS", "VAR", "LOCAL", "TASK", "PROC", "FUNC", "TRAP", "RECORD",
+MODULE_LEVEL = frozenset({"CONST", "PERS", "VAR", "LOCAL", "TASK", "PROC", "FUNC", "TRAP", "RECORD",
                            "ALIAS", "ENDMODULE", "MODULE"})
-_STATEMENT_WORDS = _END_WORDS | {"IF", "ELSEIF", "ELSE", "FOR", "WHILE", "TEST", "CASE", "DEFAULT",
-                                 "ERROR", "UNDO", "BACKWARD"} | _MODULE_LEVEL
-_CONTINUE_WORDS = frozenset({"AND", "OR", "XOR", "NOT", "DIV", "MOD", "THEN", "DO", "TO", "FROM", "STEP"})
-_BINOPS = frozenset({"+", "-", "*", "/", "<", "<=", ">", ">=", "=", "<>", "DIV", "MOD", "AND", "OR", "XOR"})
+STATEMENT_WORDS = END_WORDS | {"IF", "ELSEIF", "ELSE", "FOR", "WHILE", "TEST", "CASE", "DEFAULT",
+                                 "ERROR", "UNDO", "BACKWARD"} | MODULE_LEVEL
+CONTINUE_WORDS = frozenset({"AND", "OR", "XOR", "NOT", "DIV", "MOD", "THEN", "DO", "TO", "FROM", "STEP"})
+BINOPS = frozenset({"+", "-", "*", "/", "<", "<=", ">", ">=", "=", "<>", "DIV", "MOD", "AND", "OR", "XOR"})
 _OPS = (":=", "<>", "<=", ">=", "+", "-", "*", "/", "<", ">", "=", "(", ")", "[", "]", "{", "}",
         ",", ";", ":", "\\", ".", "%")
 _NUM_RE = re.compile(r"0[xX][0-9A-Fa-f]+|0[oO][0-7]+|0[bB][01]+|(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
@@ -57,7 +57,7 @@ class RapidExpr:
 
 
 @dataclass(frozen=True)
-class _Tok:
+class Tok:
     kind: str          # "id", "num", "str", "op", "eof"
     text: str
     line: int
@@ -71,7 +71,7 @@ class _Tok:
 
 
 @dataclass
-class _Lit:
+class Lit:
     value: Any
     kind: str  # "num", "bool", "string"
     line: int
@@ -79,19 +79,19 @@ class _Lit:
 
 
 @dataclass
-class _Agg:
+class Agg:
     items: list
     line: int
 
 
 @dataclass
-class _Expr:
+class Expr:
     text: str
     line: int
 
 
 @dataclass
-class _Decl:
+class Decl:
     storage: str
     type_name: str
     name: str
@@ -100,14 +100,14 @@ class _Decl:
     line: int
 
 
-class _ParseError(Exception):
+class ParseError(Exception):
     def __init__(self, line: int, message: str) -> None:
         super().__init__(message)
         self.line = line
         self.message = message
 
 
-def _strip_percent_header(text: str) -> str:
+def strip_percent_header(text: str) -> str:
     """Blank an old-style ``%%%`` ... ``%%%`` file header, keeping line numbers."""
     lines = text.split("\n")
     first = next((k for k, s in enumerate(lines) if s.strip()), None)
@@ -163,14 +163,14 @@ def _num_value(text: str) -> float | int:
     return float(text)
 
 
-def _tokenize(text: str, errors: list[tuple[int, str]]) -> list[_Tok]:
+def tokenize(text: str, errors: list[tuple[int, str]]) -> list[Tok]:
     """RAPID tokens of ``text``; lexical errors go to ``errors`` as (line, message)."""
-    toks: list[_Tok] = []
+    toks: list[Tok] = []
     i, line, first, comment = 0, 1, True, False
 
     def add(kind: str, s: str, value: Any = None) -> None:
         nonlocal first, comment
-        toks.append(_Tok(kind, s, line, value, first, comment))
+        toks.append(Tok(kind, s, line, value, first, comment))
         first = comment = False
 
     while i < len(text):
@@ -217,5 +217,5 @@ def _tokenize(text: str, errors: list[tuple[int, str]]) -> list[_Tok]:
                 continue
             add("op", op)
             i += len(op)
-    toks.append(_Tok("eof", "end of file", line, None, True, comment))
+    toks.append(Tok("eof", "end of file", line, None, True, comment))
     return toks

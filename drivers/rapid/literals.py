@@ -28,7 +28,7 @@ def fixed_literal(x: float, decimals: int) -> str:
 
 
 
-_RAPID_RESERVED = frozenset("""
+RAPID_RESERVED = frozenset("""
 ALIAS AND BACKWARD CASE CONNECT CONST DEFAULT DIV DO ELSE ELSEIF ENDFOR ENDFUNC ENDIF ENDMODULE
 ENDPROC ENDRECORD ENDTEST ENDTRAP ENDWHILE ERROR EXIT FALSE FOR FROM FUNC GOTO IF INOUT LOCAL MOD
 MODULE NOSTEPIN NOT NOVIEW OR PERS PROC RAISE READONLY RECORD RETRY RETURN STEP SYSMODULE TASK TEST
@@ -42,7 +42,7 @@ def rapid_ident_problem(name: str) -> str | None:
         return f"bad identifier '{name}': a letter, then letters, digits or '_'"
     if len(name) > RAPID_MAX_IDENT:
         return f"identifier '{name}' is longer than {RAPID_MAX_IDENT} characters"
-    if name.upper() in _RAPID_RESERVED:
+    if name.upper() in RAPID_RESERVED:
         return f"'{name}' is a reserved word"
     return None
 

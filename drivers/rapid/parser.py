@@ -9,11 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Iterable
 
-from .lexer import _DECL_WORDS, _MODULE_ATTRS, _MODULE_LEVEL, _ROUTINE_END, RapidExpr, _Agg, _Lit, _ParseError, _Tok
-from .statements import _StatementParser
+from .lexer import DECL_WORDS, MODULE_ATTRS, MODULE_LEVEL, ROUTINE_END, RapidExpr, Agg, Lit, ParseError, Tok
+from .statements import StatementParser
 
 
-class _RapidParser(_StatementParser):
+class _RapidParser(StatementParser):
     """Recursive-descent checker of a RAPID module; collects errors and module-level declarations."""
 
     def __init__(self, text: str, extra_types: Iterable[str] = ()) -> None:
@@ -31,7 +31,7 @@ class _RapidParser(_StatementParser):
             self.module_name = name.text
             if self.is_op("("):
                 self.module_attributes()
-        except _ParseError as e:
+        except ParseError as e:
             self.err(e.line, e.message)
             return
         self.module_items(name)
@@ -42,14 +42,14 @@ class _RapidParser(_StatementParser):
         self.next()
         while True:
             tok = self.next()
-            if tok.up not in _MODULE_ATTRS:
-                raise _ParseError(tok.line, f"unknown module attribute '{tok.text}'")
+            if tok.up not in MODULE_ATTRS:
+                raise ParseError(tok.line, f"unknown module attribute '{tok.text}'")
             if self.is_op(")"):
                 self.next()
                 return
             self.expect_op(",", "between module attributes")
 
-    def module_items(self, module: _Tok) -> None:
+    def module_items(self, module: Tok) -> None:
         while True:
             tok, before = self.peek(), self.i
             up = tok.up
@@ -62,13 +62,13 @@ class _RapidParser(_StatementParser):
                     return
                 if up in ("LOCAL", "TASK"):
                     after = self.toks[self.i + 1].up
-                    if after in _ROUTINE_END and up == "LOCAL":
+                    if after in ROUTINE_END and up == "LOCAL":
                         self.routine()
                     else:
                         self.declaration(module_level=True)
-                elif up in _DECL_WORDS:
+                elif up in DECL_WORDS:
                     self.declaration(module_level=True)
-                elif up in _ROUTINE_END:
+                elif up in ROUTINE_END:
                     self.routine()
                 elif up == "RECORD":
                     self.record()
@@ -81,8 +81,8 @@ class _RapidParser(_StatementParser):
                     self.err(tok.line, f"MODULE inside MODULE {module.text}: missing ENDMODULE?")
                     return
                 else:
-                    raise _ParseError(tok.line, f"unexpected '{tok.text}' at module level")
-            except _ParseError as e:
+                    raise ParseError(tok.line, f"unexpected '{tok.text}' at module level")
+            except ParseError as e:
                 self.err(e.line, e.message)
                 self.sync(module_level=True)
                 if self.i == before:
@@ -93,8 +93,8 @@ class _RapidParser(_StatementParser):
         name = self.name("record name")
         self.types[name.text.lower()] = None
         while self.peek().up != "ENDRECORD":
-            if self.peek().kind == "eof" or self.peek().up in _MODULE_LEVEL:
-                raise _ParseError(start.line, f"RECORD {name.text} without ENDRECORD")
+            if self.peek().kind == "eof" or self.peek().up in MODULE_LEVEL:
+                raise ParseError(start.line, f"RECORD {name.text} without ENDRECORD")
             self.type_name()
             self.name("record component")
             self.expect_op(";", "after record component")
@@ -136,9 +136,9 @@ def check_rapid_syntax(text: str, *, max_line_len: int | None = None,
 def _to_python(node: Any) -> Any:
     if node is None:
         return None
-    if isinstance(node, _Agg):
+    if isinstance(node, Agg):
         return [_to_python(item) for item in node.items]
-    if isinstance(node, _Lit):
+    if isinstance(node, Lit):
         return node.value
     return RapidExpr(node.text)
 
@@ -184,17 +184,17 @@ def parse_rapid_literal(text: str) -> Any:
     try:
         node = parser.expression()
         if parser.peek().kind != "eof":
-            raise _ParseError(parser.peek().line, f"text after the literal: '{parser.peek().text}'")
-    except _ParseError as e:
+            raise ParseError(parser.peek().line, f"text after the literal: '{parser.peek().text}'")
+    except ParseError as e:
         parser.err(e.line, e.message)
     errors = _messages(parser)
     if errors:
         raise ValueError(f"RAPID syntax errors: {'; '.join(errors)}")
     value = _to_python(node)
-    if _has_expr(value):
+    if has_expr(value):
         raise ValueError(f"not a RAPID literal: {text.strip()[:40]!r}")
     return value
 
 
-def _has_expr(value: Any) -> bool:
-    return isinstance(value, RapidExpr) or (isinstance(value, list) and any(map(_has_expr, value)))
+def has_expr(value: Any) -> bool:
+    return isinstance(value, RapidExpr) or (isinstance(value, list) and any(map(has_expr, value)))

@@ -6,19 +6,19 @@ from __future__ import annotations
 
 from typing import Any, Iterable
 
-from .expressions import _ExpressionParser
-from .lexer import _CONTINUE_WORDS, _DECL_WORDS, _END_WORDS, _MODULE_LEVEL, _ROUTINE_END, _STATEMENT_WORDS, _Decl, \
-    _ParseError, _Tok
-from .literals import _RAPID_RESERVED, rapid_ident_problem
+from .expressions import ExpressionParser
+from .lexer import CONTINUE_WORDS, DECL_WORDS, END_WORDS, MODULE_LEVEL, ROUTINE_END, STATEMENT_WORDS, Decl, \
+    ParseError, Tok
+from .literals import RAPID_RESERVED, rapid_ident_problem
 
 
-class _StatementParser(_ExpressionParser):
+class StatementParser(ExpressionParser):
     """Declarations, routines and statements; module-level declarations are kept in ``decls``, procedures (with
     the procedures they call without arguments) in ``procs`` and ``proc_calls``."""
 
     def __init__(self, text: str, extra_types: Iterable[str] = ()) -> None:
         super().__init__(text, extra_types)
-        self.decls: dict[str, _Decl] = {}
+        self.decls: dict[str, Decl] = {}
         self.procs: dict[str, str] = {}               # lower-case PROC name -> its parameter text
         self.proc_calls: dict[str, set[str]] = {}     # lower-case PROC name -> procedures it calls without arguments
         self.proc: str | None = None                  # the PROC being read
@@ -31,14 +31,14 @@ class _StatementParser(_ExpressionParser):
             if tok.kind == "op" and tok.text == ";":
                 self.next()
                 return
-            if tok.first and (tok.up in _MODULE_LEVEL or not module_level):
+            if tok.first and (tok.up in MODULE_LEVEL or not module_level):
                 return
             self.next()
 
     def type_name(self) -> str:
         tok = self.name("data type")
         if tok.text.lower() not in self.types:
-            raise _ParseError(tok.line, f"unknown data type '{tok.text}'")
+            raise ParseError(tok.line, f"unknown data type '{tok.text}'")
         return tok.text.lower()
 
     # -- declarations
@@ -48,7 +48,7 @@ class _StatementParser(_ExpressionParser):
             self.in_stmt = True
             storage = self.next().up if start.up in ("LOCAL", "TASK") else start.up
             if storage == "PERS" and not module_level:
-                raise _ParseError(start.line, "PERS data must be declared at module level")
+                raise ParseError(start.line, "PERS data must be declared at module level")
             type_name = self.type_name()
             name = self.name("data name")
             dims = self.dimensions() if self.is_op("{") else ()
@@ -57,18 +57,18 @@ class _StatementParser(_ExpressionParser):
                 self.next()
                 value = self.expression()
             elif storage == "CONST":
-                raise _ParseError(name.line, f"CONST {name.text} needs an initial value ':='")
+                raise ParseError(name.line, f"CONST {name.text} needs an initial value ':='")
             tok = self.peek()
             if not (tok.kind == "op" and tok.text == ";"):
-                raise _ParseError(self.toks[self.i - 1].line, f"missing ';' after the declaration of "
+                raise ParseError(self.toks[self.i - 1].line, f"missing ';' after the declaration of "
                                                               f"'{name.text}' (got '{tok.text}')")
             self.next()
             self.in_stmt = False
-        except _ParseError as e:
+        except ParseError as e:
             self.err(e.line, e.message)
             self.sync(module_level)
             return
-        decl = _Decl(storage, type_name, name.text, dims, value, start.line)
+        decl = Decl(storage, type_name, name.text, dims, value, start.line)
         self.check_value(decl)
         if module_level:
             key = name.text.lower()
@@ -87,13 +87,13 @@ class _StatementParser(_ExpressionParser):
             elif tok.kind == "id" and not rapid_ident_problem(tok.text):
                 dims.append(tok.text)  # a named constant: not checked
             else:
-                raise _ParseError(tok.line, f"array dimension must be an integer > 0, got '{tok.text}'")
+                raise ParseError(tok.line, f"array dimension must be an integer > 0, got '{tok.text}'")
             if self.is_op("}"):
                 self.next()
                 break
             self.expect_op(",", "between array dimensions")
         if len(dims) > 3:
-            raise _ParseError(tok.line, "arrays have at most 3 dimensions")
+            raise ParseError(tok.line, "arrays have at most 3 dimensions")
         return tuple(dims)
 
     # -- routines
@@ -117,23 +117,23 @@ class _StatementParser(_ExpressionParser):
         finally:
             self.proc = None
 
-    def body(self, kind: str, name: _Tok) -> None:
+    def body(self, kind: str, name: Tok) -> None:
         """Statements up to the routine's END word, checking nested blocks and ';'."""
-        stack = [(_ROUTINE_END[kind], f"{kind} {name.text}", name.line)]
+        stack = [(ROUTINE_END[kind], f"{kind} {name.text}", name.line)]
         while stack:
             tok, before = self.peek(), self.i
             try:
-                if tok.kind == "eof" or tok.up in _MODULE_LEVEL - _DECL_WORDS - {"LOCAL"}:
+                if tok.kind == "eof" or tok.up in MODULE_LEVEL - DECL_WORDS - {"LOCAL"}:
                     for end, opener, line in reversed(stack):
                         self.err(line, f"missing {end} for {opener} (line {line})")
                     return
-                if tok.up in _DECL_WORDS or tok.up == "LOCAL":
+                if tok.up in DECL_WORDS or tok.up == "LOCAL":
                     self.declaration(module_level=False)
-                elif tok.up in _END_WORDS:
+                elif tok.up in END_WORDS:
                     self.close_block(stack)
                 else:
                     self.statement(stack)
-            except _ParseError as e:
+            except ParseError as e:
                 self.err(e.line, e.message)
                 self.sync(module_level=False)
                 if self.i == before:
@@ -162,7 +162,7 @@ class _StatementParser(_ExpressionParser):
                 stack.append(("ENDIF", "IF", tok.line))
         elif up in ("ELSEIF", "ELSE"):
             if top != "ENDIF":
-                raise _ParseError(tok.line, f"{up} outside IF ... ENDIF")
+                raise ParseError(tok.line, f"{up} outside IF ... ENDIF")
             if up == "ELSEIF":
                 self.scan({"THEN"}, tok)
         elif up in ("FOR", "WHILE"):
@@ -173,37 +173,37 @@ class _StatementParser(_ExpressionParser):
             stack.append(("ENDTEST", "TEST", tok.line))
         elif up in ("CASE", "DEFAULT"):
             if top != "ENDTEST":
-                raise _ParseError(tok.line, f"{up} outside TEST ... ENDTEST")
+                raise ParseError(tok.line, f"{up} outside TEST ... ENDTEST")
             self.scan({":"}, tok)
         elif up in ("ERROR", "UNDO", "BACKWARD"):
             if len(stack) != 1:
-                raise _ParseError(tok.line, f"{up} handler inside a block: missing {top}?")
+                raise ParseError(tok.line, f"{up} handler inside a block: missing {top}?")
             if up == "ERROR" and self.is_op("(") and not self.peek().first:
                 self.skip_group(self.next())
         elif tok.kind == "op" and tok.text == ";":
-            raise _ParseError(tok.line, "empty statement ';'")
-        elif tok.kind == "id" and self.is_op(":") and tok.up not in _RAPID_RESERVED:
+            raise ParseError(tok.line, "empty statement ';'")
+        elif tok.kind == "id" and self.is_op(":") and tok.up not in RAPID_RESERVED:
             self.next()  # a label
         else:
             if tok.kind == "id" and self.is_op(";") and self.proc is not None:
                 self.proc_calls[self.proc].add(tok.text.lower())     # a call without arguments
             self.scan({";"}, tok, first=tok)
 
-    def scan(self, terminators: set[str], start: _Tok, consume: bool = True, first: _Tok | None = None) -> str:
+    def scan(self, terminators: set[str], start: Tok, consume: bool = True, first: Tok | None = None) -> str:
         """Consume a statement up to one of ``terminators`` at bracket depth 0; return it.
 
         ``first``: the statement's first token when already consumed.
         """
         pairs = {"(": ")", "[": "]", "{": "}"}
-        stack: list[_Tok] = [first] if first is not None and first.kind == "op" and first.text in pairs else []
-        prev: _Tok | None = first
+        stack: list[Tok] = [first] if first is not None and first.kind == "op" and first.text in pairs else []
+        prev: Tok | None = first
         self.in_stmt = True
         try:
             while True:
                 tok = self.peek()
                 word = tok.up or (tok.text if tok.kind == "op" else "")
                 if tok.kind == "eof":
-                    raise _ParseError(start.line, f"statement of line {start.line} is not terminated")
+                    raise ParseError(start.line, f"statement of line {start.line} is not terminated")
                 if not stack:
                     if word in terminators:
                         if consume:
@@ -211,25 +211,25 @@ class _StatementParser(_ExpressionParser):
                         return word
                     if prev is not None and tok.first and self._line_break_ends(prev, tok):
                         want = " or ".join(sorted(f"'{t}'" for t in terminators))
-                        raise _ParseError(prev.line, f"missing {want} at the end of the line")
+                        raise ParseError(prev.line, f"missing {want} at the end of the line")
                 elif tok.kind == "op" and tok.text == ";":
-                    raise _ParseError(tok.line, f"unbalanced brackets: '{stack[-1].text}' of line "
+                    raise ParseError(tok.line, f"unbalanced brackets: '{stack[-1].text}' of line "
                                                 f"{stack[-1].line} is not closed")
                 if tok.kind == "op" and tok.text in pairs:
                     stack.append(tok)
                 elif tok.kind == "op" and tok.text in ")]}":
                     if not stack or pairs[stack[-1].text] != tok.text:
-                        raise _ParseError(tok.line, f"unbalanced brackets: unexpected '{tok.text}'")
+                        raise ParseError(tok.line, f"unbalanced brackets: unexpected '{tok.text}'")
                     stack.pop()
                 prev = self.next()
         finally:
             self.in_stmt = False
 
     @staticmethod
-    def _line_break_ends(prev: _Tok, tok: _Tok) -> bool:
+    def _line_break_ends(prev: Tok, tok: Tok) -> bool:
         """True when ``tok`` (first on its line) cannot continue the statement ending with ``prev``."""
-        if tok.up in _STATEMENT_WORDS:
+        if tok.up in STATEMENT_WORDS:
             return True
-        ends_value = prev.kind in ("num", "str") or (prev.kind == "id" and prev.up not in _CONTINUE_WORDS) \
+        ends_value = prev.kind in ("num", "str") or (prev.kind == "id" and prev.up not in CONTINUE_WORDS) \
             or (prev.kind == "op" and prev.text in ")]}")
-        return ends_value and tok.kind == "id" and tok.up not in _CONTINUE_WORDS
+        return ends_value and tok.kind == "id" and tok.up not in CONTINUE_WORDS

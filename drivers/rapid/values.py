@@ -7,8 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from .lexer import _RAPID_TYPES
-from .parser import _has_expr, parse_rapid_literal, read_rapid_module
+from .lexer import RAPID_TYPES
+from .parser import has_expr, parse_rapid_literal, read_rapid_module
 
 
 class RapidSyntaxError(ValueError):
@@ -33,7 +33,7 @@ def _as_num(value: Any) -> Any:
 N, S, B = "num", "string", "bool"
 def _shape(type_name: str) -> Any:
     """Literal shape of a type of the shared table: "num"/"string"/"bool" or a list of component shapes."""
-    spec = _RAPID_TYPES[type_name]
+    spec = RAPID_TYPES[type_name]
     return spec if isinstance(spec, str) else [_shape(component) for _, component in spec]
 
 
@@ -114,7 +114,7 @@ def _initial_value(dtype: str, init: Any, array: bool, name: str) -> str:
     if init is None:
         shape = SHAPES.get(dtype)
         return render(_zero(shape)) if shape is not None and not array else "[]"
-    if _has_expr(init):
+    if has_expr(init):
         raise RapidSyntaxError(f"initial value of {name} is not a literal")
     return render(_as_num(init))
 

@@ -2,7 +2,7 @@
 it shrinks once that effect is added, where the residual lies, and what the data cannot tell.
 
 Pure numerics: arrays in, dataclasses out. The question "which effect" has one answer in this project: the effect
-engine (``robocal.elastic``: library, blocked cross-validation, selection, joint fit), which ``campaign
+engine (``robocal.effects``: library, blocked cross-validation, selection, joint fit), which ``campaign
 reprocess`` uses too. The diagnosis (``core.diagnose``) adds what only it does:
 
 1. **How far it shrinks**, step by step on held-out points (test rows, else cross-validation).
@@ -25,13 +25,15 @@ reprocess`` uses too. The diagnosis (``core.diagnose``) adds what only it does:
 
 Joint numbers are 1-based everywhere in the output.
 """
-from __future__ import annotations
+from robocal import lazy_exports
 
-from ..effects import EFFECT_NAMES
-from .core import FittedStage, diagnose
-from .prose import REMEDY, SEPARATING_EXPERIMENT, separating_experiment
-from .records import Diagnosis, DiagnosisInput, DiagnosisOptions, Finding, Region
-from .regions import structure_test, where_analysis
-
-__all__ = ["Diagnosis", "DiagnosisInput", "DiagnosisOptions", "EFFECT_NAMES", "Finding", "FittedStage", "REMEDY",
-           "Region", "SEPARATING_EXPERIMENT", "diagnose", "separating_experiment", "structure_test", "where_analysis"]
+_HOMES = {                      # module -> the public names it holds
+    "budget": ("ErrorBudget", "HeldOut", "model_budget"),
+    "core": ("FittedStage", "diagnose"),
+    "prose": ("REMEDY", "SEPARATING_EXPERIMENT", "separating_experiment"),
+    "records": ("Diagnosis", "DiagnosisInput", "DiagnosisOptions", "Finding", "Region"),
+    "regions": ("structure_test", "where_analysis"),
+    "selfcheck": ("LABELS", "SHORT", "SelfCheckResult", "run_self_check", "trial_plan"),
+}
+__all__ = [name for names in _HOMES.values() for name in names]
+__getattr__ = lazy_exports(__name__, _HOMES)

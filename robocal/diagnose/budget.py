@@ -30,9 +30,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..effects import effect_regressor
-from ..elastic import design_array, pose_clusters
-from ..kinematics import identification_jacobian
+from robocal.effects.bases import effect_regressor
+from robocal.effects.cv import design_array, pose_clusters
+from robocal.kinematics.models import identification_jacobian
 from .jsonable import json_float
 
 EXACT_MAX = 8            # exact Shapley values up to this many effects (2^K subset fits), sampled orders above
@@ -266,8 +266,8 @@ def model_budget(kin_geo, geo_cols: np.ndarray, q_fit: np.ndarray, p_fit: np.nda
     effects fitted on the fit rows (``q_fit``, ``p_fit``, ``cov_fit``, ``meta_fit`` of the geometric model
     ``kin_geo`` with identified columns ``geo_cols``) evaluated at the held-out rows; the noise share from the
     nugget of the final model's fit residuals ``r_final_fit`` (N, 3) mm (``n_params`` fitted)."""
-    from ..elastic import BlockedCV, Blocking, pose_blocks
-    from ..identify import whitening
+    from robocal.effects.cv import BlockedCV, Blocking, pose_blocks
+    from robocal.identify.identification import whitening
     from .remainder import nugget
 
     p0, A, _, cols = linear_design(kin_geo, geo_cols, q_fit, meta_fit, effects)

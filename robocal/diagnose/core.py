@@ -1,6 +1,6 @@
 """``diagnose``: the effect engine's answer on one dataset, and what only the diagnosis adds to it.
 
-The engine (``robocal.elastic``) decides which effects the data support and fits them with the geometry; the
+The engine (``robocal.effects``) decides which effects the data support and fits them with the geometry; the
 calibration (``campaign reprocess``) uses the same answer. The diagnosis adds: how far each effect shrinks the
 error on held-out points (step by step), where the residual lies (``regions``), confusable classes and the
 experiment that separates them, confounds with the measurement order, consistency of each effect's parameters,
@@ -13,11 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..elastic import BlockedCV, Blocking, ElasticResult, EngineResult, calibrate_elastic, order_blocks, pose_blocks
-from ..elastic import run_engine
-from ..identify import CalibrationOptions, calibrate, whitening
-from ..kinematics import ParamLayout, smr_tracker
-from ..model import CalibratedModel
+from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks
+from robocal.effects.fit import ElasticResult, calibrate_elastic
+from robocal.effects.engine import EngineResult
+from robocal.effects.engine import run_engine
+from robocal.identify.identification import CalibrationOptions, calibrate, whitening
+from robocal.kinematics.models import ParamLayout, smr_tracker
+from robocal.layers.calibrated_model import CalibratedModel
 from .evidence import joints_following_order
 from .findings import accepted_findings, other_findings
 from .prose import DRIFT_EXPERIMENT

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..elastic import EngineResult, reading
-from ..elastic.select import alternatives
+from robocal.effects.engine import EngineResult
+from robocal.effects.physical import reading
+from robocal.effects.select import alternatives
 from .evidence import confound, consistency, rival_class, visible
 from .prose import REMEDY, best_available, separating_experiment
 from .records import DiagnosisOptions, Finding

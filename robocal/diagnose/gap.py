@@ -15,9 +15,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..identify import register
-from ..kinematics import smr_tracker
-from ..stats import SIGNIFICANT_GAIN
+from robocal.identify.identification import register
+from robocal.kinematics.models import smr_tracker
+from robocal.measure.stats import SIGNIFICANT_GAIN
 from .budget import BudgetTerms, ErrorBudget, SubsetErrors, error_budget, linear_design, shapley
 from .layer_terms import describe_layer
 from .leftover import best_layer, floor_scale, where_stages_of

@@ -15,12 +15,12 @@ import math
 
 import numpy as np
 
-from ..elastic import BlockedCV, Blocking, design_array
-from ..identify import whitening
-from ..joint_gp import fit_joint_gp, joint_directions
-from ..kinematics import ParamLayout, identification_jacobian
-from ..layers import layer_targets
-from ..stats import paired_gain
+from robocal.effects.cv import BlockedCV, Blocking, design_array
+from robocal.identify.identification import whitening
+from robocal.layers.joint_gp import fit_joint_gp, joint_directions
+from robocal.kinematics.models import ParamLayout, identification_jacobian
+from robocal.layers.choice import layer_targets
+from robocal.measure.stats import paired_gain
 from .budget import linear_design
 from .leftover import best_layer
 

@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
-from ..kinematics import identification_jacobian, joint_motion_columns
-from ..joint_gp import joint_directions
-from ..layers import fit_layer
-from ..stats import paired_gain
+from robocal.kinematics.models import identification_jacobian, joint_motion_columns
+from robocal.layers.joint_gp import joint_directions
+from robocal.layers.choice import fit_layer
+from robocal.measure.stats import paired_gain
 from .records import DiagnosisInput
 from .regions import structure_test, where_analysis
 from .remainder import RemainderEvidence, classify, noise_shape, nugget, readback_jitter
@@ -63,7 +63,7 @@ def where_stages_of(inp, opt, rows, kin, held, n_params: int, n_fit: int, meta, 
 def _layer_heldout(opt, model, q, p, fit, test, fold, meta, kind: str = "gpr", floor_mm: float | None = None
                    ) -> tuple[np.ndarray, str, object]:
     """(residual vectors (M, 3) mm left on held-out points once a non-parametric layer of the calibration
-    (``kind``: GPR over the joints, or the joint-error GP; ``robocal.layers.fit_layer``) is fitted on the final
+    (``kind``: GPR over the joints, or the joint-error GP; ``robocal.layers.choice.fit_layer``) is fitted on the final
     model's calibration residuals (at most ``layer_max_points`` of them, a seeded subset): on the test rows, or
     over the fit rows' pose blocks; "test" | "cv"; the layer fitted on all fit rows, or None in cv)."""
     kin = model.kinematics

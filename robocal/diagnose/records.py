@@ -6,10 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..approach import approach_signs, moves_from_order
-from ..effects import GravityModel
-from ..elastic import EngineOptions
-from ..kinematics import Kinematics
+from robocal.measure.approach import approach_signs, moves_from_order
+from robocal.kinematics.gravity import GravityModel
+from robocal.effects.engine import EngineOptions
+from robocal.kinematics.models import Kinematics
 from .budget import ErrorBudget
 from .jsonable import json_float, plain
 from .next_steps import NextStep
@@ -42,7 +42,7 @@ class DiagnosisOptions:
     nonphysical_split: float = 1.0    # ... and so are parameters that differ between near/far reach or the halves
     nonphysical_split_z: float = 3.0  #     of the run by more than the effect itself, and by this x their noise
     term_t: float = 3.0               # a named term outside the model predicting held-out points at this paired t
-    #                                   (and > 2 %: the claim standard of robocal.stats): unexplained structure
+    #                                   (and > 2 %: the claim standard of robocal.measure.stats): unexplained structure
     budget_boot: int = 400            # bootstrap resamples of the error budget's intervals
     seed: int = 0
 
@@ -161,7 +161,7 @@ class Diagnosis:
     kinematics: Kinematics
     effects: tuple                  # FittedEffect of the final model
     stages: tuple[dict, ...]        # test/CV RMS after each accepted step (step 0 = geometric)
-    selection: dict                 # the engine's selection (robocal.elastic.EffectSelection.to_dict)
+    selection: dict                 # the engine's selection (robocal.effects.select.EffectSelection.to_dict)
     budget: ErrorBudget | None = None
     remainder: Remainder | None = None
     layer: dict = field(default_factory=dict)          # what the residual layer removes (``layer_terms``)

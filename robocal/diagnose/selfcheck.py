@@ -18,11 +18,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from robocal.approach import approach_signs, moves_from_order
-from . import DiagnosisInput, DiagnosisOptions, diagnose
-from robocal.effects import EFFECT_NAMES
-from robocal.noise import TrackerUncertainty, noise_floor_mm
-from robocal.repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
+from robocal.measure.approach import approach_signs, moves_from_order
+from .records import DiagnosisInput, DiagnosisOptions
+from .core import diagnose
+from robocal.effects.bases import EFFECT_NAMES
+from robocal.measure.noise import TrackerUncertainty, noise_floor_mm
+from robocal.measure.repeats import noise_floor_from_repeats as repeat_floor, repeat_dof
 from robocal.simulation.truth_cell import LIBRARY_TRUTHS, TruthCampaign, TruthProtocol, simulate, small_arm_nominal
 
 LABELS = ("none",) + EFFECT_NAMES

@@ -25,10 +25,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from robocal.kinematics import identification_jacobian, smr_tracker
+from robocal.kinematics.models import identification_jacobian, smr_tracker
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 
-from . import DiagnosisOptions, diagnose
+from .records import DiagnosisOptions
+from .core import diagnose
 from .selfcheck import trial_setting, truth_input
 
 BUDGET_FORMS = {"jitter": ("joint_jitter",), "j2_sag": ("reach_sag_j2",),

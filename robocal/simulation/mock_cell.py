@@ -10,9 +10,9 @@ from typing import Mapping
 
 import numpy as np
 
-from ..effects import apply_effects
-from ..kinematics import Kinematics
-from ..noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
+from robocal.effects.bases import apply_effects
+from robocal.kinematics.models import Kinematics
+from robocal.measure.noise import TrackerUncertainty, noise_floor_mm, repeatability_sigma_mm
 
 # seed 000 Table 2: identified D-H errors of an IRB 2600 (alpha deg, a mm, d mm, theta deg), joints 1..6
 SEED000_TABLE2 = np.array([

@@ -1,9 +1,9 @@
 """Independent truth generator for testing the diagnosis: a simulated robot cell written from the physics.
 
-Nothing here uses the diagnosis (``robocal.diagnose``), the effect engine (``robocal.elastic``) or the effect
+Nothing here uses the diagnosis (``robocal.diagnose``), the effect engine (``robocal.effects``) or the effect
 bases of ``robocal.effects``, not even through a package ``__init__`` (``tests/robocal/test_diagnose_truth.py``
 checks what importing this module loads): every effect is modelled as what happens in the machine, then the laser
-tracker measures the SMR. Only the forward kinematics (``robocal.kinematics.chain``), the frames and the tracker
+tracker measures the SMR. Only the forward kinematics (``robocal.kinematics.models.chain``), the frames and the tracker
 noise model are shared.
 
 Physics (lengths mm, angles rad, torques N*m, time s):
@@ -43,9 +43,9 @@ from typing import Sequence
 
 import numpy as np
 
-from robocal.frames import make_T, rotvec_to_matrix, skew
-from robocal.kinematics import Kinematics, chain
-from robocal.noise import TrackerUncertainty, repeatability_sigma_mm
+from robocal.kinematics.frames import make_T, rotvec_to_matrix, skew
+from robocal.kinematics.models import Kinematics, chain
+from robocal.measure.noise import TrackerUncertainty, repeatability_sigma_mm
 
 G_M_S2 = 9.80665
 ARCMIN = np.pi / 180.0 / 60.0

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from campaign.cli import main
-from robocal.kinematics import Kinematics, fk
+from robocal.kinematics.models import Kinematics, fk
 
 JOINT_KINDS = ("theta", "d", "a", "alpha", "beta")
 DH_VALUE_COLUMNS = ("theta_deg", "d_mm", "a_mm", "alpha_deg", "beta_deg")

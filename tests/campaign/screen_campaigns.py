@@ -13,9 +13,9 @@ from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_config
 from campaign.data.dataset import Dataset
 from campaign.plan.build import build_plan
-from robocal.effects import joint_compliance
-from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import smr_base, smr_tracker
+from robocal.effects.bases import joint_compliance
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.kinematics.models import smr_base, smr_tracker
 from robocal.simulation.mock_cell import random_geometric_errors
 from tests.campaign.helpers import ROOT
 

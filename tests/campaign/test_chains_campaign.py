@@ -12,7 +12,7 @@ import yaml
 from campaign.cli import main
 from campaign.config.load import load_cell
 from campaign.run.log_reader import read_log
-from robocal.chains import arm_angle_rad, branch_signs
+from robocal.kinematics.chains import arm_angle_rad, branch_signs
 from tests.campaign.helpers import ROOT, read_report, read_verify
 
 

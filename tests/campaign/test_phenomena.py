@@ -246,7 +246,7 @@ class _AimByPosition:
         self.mock.select_nest(near[0])
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_nests_with_a_position_only_tracker(tmp_path):
     from drivers.base import DriverError
     from campaign.run.devices import mock_world

@@ -9,8 +9,8 @@ from campaign.config.load import load_cell
 from campaign.data.interchange_csv import read_csv
 from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
-from robocal.ik import branch_signature
-from robocal.kinematics import smr_base, within_limits
+from robocal.kinematics.ik import branch_signature
+from robocal.kinematics.models import smr_base, within_limits
 from tests.campaign.helpers import ROOT, read_report, small_config
 
 pytestmark = pytest.mark.system

@@ -221,10 +221,21 @@ def test_forced_version_mismatch(make_emu, make_robot):
 
 
 def test_forced_version_and_scheme(make_emu, make_robot, version):
+    """The forced RWS version and scheme are the ones used: one probe of ``/``, on the forced scheme, then every
+    request in the forced flavour's grammar (1.0: ``json=1``; 2.0: without it, and never refused for its media
+    type, 406); a forced scheme the controller does not serve is not replaced by the other one."""
     emu = make_emu(version)
     robot = make_robot(emu, rws_version=version, scheme=emu.scheme)
     robot.connect()
     robot.move_joints([5, 5, 5, 5, 5, 5])
+    assert robot.session.version == version and robot.session.client.base_url.scheme == emu.scheme
+    api = [(q, status) for _, path, q, status in emu.requests if path.startswith("/rw/")]
+    assert emu.count("GET", "/") == 1 and api and all(status != 406 for _, status in api)
+    assert all(("json=1" in q) == (version == 1) for q, _ in api)
+    other = "http" if emu.scheme == "https" else "https"
+    with pytest.raises(ConnectionLost, match="no RWS server found"):
+        make_robot(emu, rws_version=version, scheme=other).connect()
+    assert emu.count("GET", "/") == 1
 
 
 # --------------------------------------------------------------------------- preflight

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from drivers import registry
-from drivers.abb_axes import abb_axes
+from drivers.abb_axes import axes_layout
 from drivers.abb_rws import validate_options
 from drivers.base import DriverError, RobotNotReady
 from drivers.emulators.rws_server import parse_literal
@@ -82,8 +82,8 @@ def test_abb_robot_client_reads_the_external_axes(make_emu, open_driver):
 
 
 def test_layouts_and_refusals():
-    assert abb_axes(7).split([1, 2, 3, 4, 5, 6, 7]) == ([1, 2, 4, 5, 6, 7], [3])
-    assert abb_axes(7, track=True).join([1, 2, 3, 4, 5, 6], [900]) == (900, 1, 2, 3, 4, 5, 6)
+    assert axes_layout(7).split([1, 2, 3, 4, 5, 6, 7]) == ([1, 2, 4, 5, 6, 7], [3])
+    assert axes_layout(7, track=True).join([1, 2, 3, 4, 5, 6], [900]) == (900, 1, 2, 3, 4, 5, 6)
     validate_options("abb-rws://10.0.0.1", {}, n_joints=7)
     validate_options("abb-rws://10.0.0.1", {}, n_joints=7, track_unit="TRACK_1")
     for context, words in (({"n_joints": 8}, "1 to 7 axes"), ({"n_joints": 6, "track_unit": "T"}, "plus the track")):

@@ -26,7 +26,7 @@ from drivers.emulators.rtde_controller import JointMove
 from drivers.emulators.rtde_launch import start_emulator
 from drivers.registry import open_robot
 from drivers.ur import InvalidTarget, URRobot
-from robocal.kinematics import fk
+from robocal.kinematics.models import fk
 from tests.cells import ur10
 
 pytest.importorskip("rtde_control")

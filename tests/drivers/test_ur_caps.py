@@ -3,29 +3,30 @@ the tool (the TCP and points ``tool_radius_mm`` from it) moves faster than the T
 import numpy as np
 import pytest
 
-from drivers.ur import UR_DH, UROptions, _dh_points, _Worker
+from drivers.ur import UR_DH, UROptions, dh_points, Worker
 
 
-def _worker(model: str, tcp_m, tool_radius_mm: float) -> _Worker:
-    w = _Worker(None, "unused", UROptions(tool_radius_mm=tool_radius_mm))
+def _worker(model: str, tcp_m, tool_radius_mm: float) -> Worker:
+    w = Worker(None, "unused", UROptions(tool_radius_mm=tool_radius_mm))
     w.dh, w.tcp_offset, w.rated_rad_s = UR_DH[model], [*tcp_m, 0.0, 0.0, 0.0], np.radians(120)
     return w
 
 
-def _peak_speed(w: _Worker, q0, q1, omega: float, radius_m: float) -> float:
+def _peak_speed(w: Worker, q0, q1, omega: float, radius_m: float) -> float:
     """Highest point speed (m/s) on a dense path with the leading joint at omega (the trapezoid's cruise)."""
     s = np.linspace(0.0, 1.0, 1201)[:, None]
     q = q0 + s * (q1 - q0)
     dt = np.max(np.abs(q1 - q0)) / omega / (len(s) - 1)
     peak = 0.0
     for d in [np.zeros(3)] + [sign * radius_m * a for a in np.eye(3) for sign in (1, -1)]:
-        p = _dh_points(q, w.dh, np.asarray(w.tcp_offset[:3]) + d)
+        p = dh_points(q, w.dh, np.asarray(w.tcp_offset[:3]) + d)
         peak = max(peak, float(np.linalg.norm(np.diff(p, axis=0), axis=1).max()) / dt)
     return peak
 
 
-@pytest.mark.unit
-@pytest.mark.parametrize("model", ["UR10", "UR5e", "UR16e"])
+@pytest.mark.parametrize("model", [pytest.param("UR10", marks=pytest.mark.system),      # one model in the unit tier
+                                   pytest.param("UR5e", marks=pytest.mark.unit),
+                                   pytest.param("UR16e", marks=pytest.mark.system)])
 def test_no_point_of_the_tool_exceeds_the_tcp_cap(model):
     rng = np.random.default_rng(13)
     w = _worker(model, (0.0, 0.02, 0.12), tool_radius_mm=150.0)

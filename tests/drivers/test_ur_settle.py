@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from drivers.ur import UROptions, _Settle
+from drivers.ur import UROptions, Settle
 
 
 @pytest.mark.unit
@@ -20,7 +20,7 @@ def test_settle_window_rejects_ringing_and_accepts_noise():
                 return 0.0
 
     def run(ring_rad: float) -> float | None:
-        settle = _Settle(_W(), [0.0] * 6)
+        settle = Settle(_W(), [0.0] * 6)
         for k in range(1500):
             t = k / 500.0
             q = rng.normal(0, 2e-5, 6) + ring_rad * np.cos(2 * np.pi * 7 * t)

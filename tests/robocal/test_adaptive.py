@@ -1,11 +1,11 @@
-"""robocal.adaptive against direct computations: the variance each candidate removes at the task poses and the
+"""robocal.design.adaptive against direct computations: the variance each candidate removes at the task poses and the
 information it brings, before and after rank updates, for the linear and the kernel terms."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from robocal.adaptive import KernelTerm, LinearTerm, choose_batch
+from robocal.design.adaptive import KernelTerm, LinearTerm, choose_batch
 
 pytestmark = pytest.mark.unit
 

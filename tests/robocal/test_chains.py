@@ -1,15 +1,15 @@
-"""Chains other than 6R (robocal.chains, the redundancy of robocal.ik): spherical joints, branch signs, the arm angle
+"""Chains other than 6R (robocal.kinematics.chains, the redundancy of robocal.kinematics.ik): spherical joints, branch signs, the arm angle
 of a seven-axis arm held by the IK, the solution nearest a rest pose, default link masses of any count."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from robocal.chains import (alignments, arm_angle_rad, branch_signs, spherical_joints, wrist_joints)
-from robocal.effects import DEFAULT_LINK_MASSES_KG, GravityModel, default_link_masses
-from robocal.elastic import candidates
-from robocal.ik import solve_ik
-from robocal.kinematics import Kinematics, chain, fk
+from robocal.kinematics.chains import (alignments, arm_angle_rad, branch_signs, spherical_joints, wrist_joints)
+from robocal.kinematics.gravity import DEFAULT_LINK_MASSES_KG, GravityModel, default_link_masses
+from robocal.effects.library import candidates
+from robocal.kinematics.ik import solve_ik
+from robocal.kinematics.models import Kinematics, chain, fk
 from tests.cells import irb2600, ur10
 
 IIWA = Kinematics.from_table("dh", [-90, 90, 90, -90, -90, 90, 0], [0] * 7, [360, 0, 420, 0, 400, 0, 126], [0] * 7,
@@ -139,7 +139,7 @@ def test_hayati_beta_tilts_the_parallel_pair_in_either_convention(convention):
 def test_the_retry_rows_keep_the_flange_point_with_three_targets():
     """solve_on_branch re-seeds failed targets with their rows of the per-target options; the flange point (3,) is
     one for all, also when there are exactly three targets (it was sliced like a row: a crash of correct)."""
-    from robocal.ik import _rows
+    from robocal.kinematics.ik import _rows
 
     kw = {"point_mm": np.array([0.0, 0.0, 150.0]), "q_rest_rad": np.zeros((3, 7)), "arm_angle_rad": np.arange(3.0)}
     rows = _rows(kw, np.array([0, 2]), 3)

@@ -3,8 +3,11 @@ block size is forced down to a few rows on small seeded data and compared with t
 import numpy as np
 import pytest
 
-from robocal import gp, kinematics, screen
-from robocal.elastic import BlockedCV, Blocking, cv, design_array, pose_blocks
+from robocal.identify import screening as screen
+from robocal.kinematics import models as kinematics
+from robocal.layers import gp
+from robocal.effects.cv import BlockedCV, Blocking, design_array, pose_blocks
+from robocal.effects import cv
 from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit

@@ -3,9 +3,9 @@ import pytest
 
 from robocal.correct import (GENERATORS, correct, correct_ensemble, matrix_to_quat, next_pseudo_target, pose_errors,
                              project_so3, quat_mul, quat_to_matrix, tool_transform)
-from robocal.effects import joint_compliance
-from robocal.frames import make_T, rotvec_to_matrix
-from robocal.kinematics import fk
+from robocal.effects.bases import joint_compliance
+from robocal.kinematics.frames import make_T, rotvec_to_matrix
+from robocal.kinematics.models import fk
 from robocal.simulation.mock_cell import random_geometric_errors
 from tests.cells import irb2600
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from robocal.correct import closed_loop_step, tool_transform
-from robocal.ik import solve_ik
-from robocal.kinematics import fk
+from robocal.kinematics.ik import solve_ik
+from robocal.kinematics.models import fk
 from tests.cells import irb2600
 
 

@@ -6,12 +6,12 @@ import itertools
 import numpy as np
 import pytest
 
-from robocal.design import (_Design, blocked_cv, criterion, d_optimal, farthest_first, forecast, greedy_order,
+from robocal.design.optimal import (_Design, blocked_cv, criterion, d_optimal, farthest_first, forecast, greedy_order,
                             move_cost, predict_rms, short_tour, space_filling, whiten_rows)
-from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import ParamLayout, smr_tracker
-from robocal.pool import incidence_rad, tilted_rotations, wrist_flipped
-from robocal.kinematics import fk
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.kinematics.models import ParamLayout, smr_tracker
+from robocal.design.pool import incidence_rad, tilted_rotations, wrist_flipped
+from robocal.kinematics.models import fk
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 
@@ -172,7 +172,7 @@ def _irb2600_criterion():
     return kin, qc, criterion(kin, qc, np.broadcast_to(np.eye(3) * 1e-3, (len(qc), 3, 3)))
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_criterion_counts_the_parameters_a_pose_set_identifies():
     kin, qc, c = _irb2600_criterion()
     layout = ParamLayout.of(kin)
@@ -193,7 +193,7 @@ def test_farthest_first_takes_the_farthest_point_at_every_step():
         assert d[chosen[t]] == pytest.approx(d.max())
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_space_filling_keeps_the_geometry_determined_or_falls_back_to_d_optimal():
     from dataclasses import replace
     kin, qc, c = _irb2600_criterion()

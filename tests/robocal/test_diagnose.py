@@ -7,9 +7,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal.diagnose import diagnose, structure_test, where_analysis
+from robocal.diagnose.core import diagnose
+from robocal.diagnose.regions import structure_test, where_analysis
 from robocal.diagnose.evidence import follows_order, rival_class
-from robocal.elastic import EffectChoice, Step
+from robocal.effects.model import EffectChoice
+from robocal.effects.select import Step
 from robocal.diagnose.selfcheck import truth_input
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 

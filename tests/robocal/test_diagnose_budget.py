@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from robocal.diagnose import diagnose
+from robocal.diagnose.core import diagnose
 from robocal.diagnose.budget import BudgetTerms, ErrorBudget, error_budget, per_point, shapley
 from robocal.diagnose.remainder import Remainder, noise_shape, nugget
 from robocal.diagnose.selfcheck import truth_input

@@ -6,8 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from robocal.diagnose import DiagnosisOptions, diagnose
-from robocal.elastic import EngineOptions
+from robocal.diagnose.records import DiagnosisOptions
+from robocal.diagnose.core import diagnose
+from robocal.effects.engine import EngineOptions
 from robocal.diagnose.selfcheck import truth_input
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 
@@ -42,7 +43,7 @@ def test_pinned_diagnosis_of_a_seeded_campaign(inp):
                                                 "J2 approach direction (+ vs -), shift -0.415 mm"]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_options_reach_the_engine(inp):
     d = diagnose(replace(inp, t_s=None), DiagnosisOptions(engine=EngineOptions(max_effects=1)))
     assert len([f for f in d.findings if f.accepted]) == 1

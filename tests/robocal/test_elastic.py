@@ -1,4 +1,4 @@
-"""The one effect engine (robocal.elastic): blocked cross-validation, candidates and what cannot be told, forward
+"""The one effect engine (robocal.effects): blocked cross-validation, candidates and what cannot be told, forward
 selection on independent truth campaigns (robocal/simulation/truth_cell.py), the joint fit, the physical reading, the model."""
 import json
 from dataclasses import replace
@@ -6,13 +6,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal.effects import GravityModel, apply_effects, effect_regressor, gear_cyclic, joint_compliance
-from robocal.elastic import (BlockedCV, Blocking, EffectChoice, FittedEffect, calibrate_elastic, candidates,
-                             order_blocks, pose_blocks, reading, run_engine, select)
-from robocal.elastic.library import LibraryOptions, scan_families, scan_orders
-from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import ParamLayout, smr_tracker
-from robocal.model import CalibratedModel
+from robocal.kinematics.gravity import GravityModel
+from robocal.effects.bases import apply_effects, effect_regressor, gear_cyclic, joint_compliance
+from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks
+from robocal.effects.model import EffectChoice, FittedEffect
+from robocal.effects.fit import calibrate_elastic
+from robocal.effects.library import candidates
+from robocal.effects.physical import reading
+from robocal.effects.engine import run_engine
+from robocal.effects.engine import select_candidates
+from robocal.effects.library import LibraryOptions, scan_families, scan_orders
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.kinematics.models import ParamLayout, smr_tracker
+from robocal.layers.calibrated_model import CalibratedModel
 from robocal.diagnose.selfcheck import truth_input
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 from tests.cells import T_SEED000, irb2600
@@ -274,12 +280,12 @@ def test_identifiability_reports_an_effect_parameter_the_poses_cannot_separate()
     assert el.effects[0].values[0] == pytest.approx(1e-6, rel=0.05)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_select_is_deterministic():
     camp = simulate(["backlash"], 61, TruthProtocol(n_calib=120, n_test=20, check_poses=4, check_repeats=3))
     inp, geo, cols, meta, eng = engine_on(camp)
     cal = np.flatnonzero(inp.calib)
-    again = select(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], meta)
+    again = select_candidates(geo.kinematics, cols, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], meta)
     assert again.selection.to_dict() == eng.selection.to_dict()
 
 

@@ -9,15 +9,15 @@ import yaml
 from campaign.cli import main
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.calibrate.outputs import load_model
-from robocal.effects import joint_compliance
-from robocal.gp import GaussianProcess, MultiOutputGP, neg_log_marginal_likelihood, se_ard
-from robocal.gp_layer import GPRResidual, fit_gpr_layer, gp_inputs
-from robocal.identify import calibrate
-from robocal.kinematics import fk, smr_tracker
-from robocal.model import CalibratedModel
-from robocal.payload import DeflectionModel, HeavyPayloadCell, deflected_flange, irb4600, random_configurations
-from robocal.rbf import RBFNetwork
-from robocal.stats import error_stats
+from robocal.effects.bases import joint_compliance
+from robocal.layers.gp import GaussianProcess, MultiOutputGP, neg_log_marginal_likelihood, se_ard
+from robocal.layers.gp_layer import GPRResidual, fit_gpr_layer, gp_inputs
+from robocal.identify.identification import calibrate
+from robocal.kinematics.models import fk, smr_tracker
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.simulation.payload import DeflectionModel, HeavyPayloadCell, deflected_flange, irb4600, random_configurations
+from robocal.layers.rbf import RBFNetwork
+from robocal.measure.stats import error_stats
 from tests.campaign.helpers import read_report, small_config
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
@@ -106,7 +106,7 @@ def test_gpr_layer_reduces_held_out_rms_and_round_trips_through_json():
     np.testing.assert_allclose(back.residual.predict_std(qt), layer.predict_std(qt), atol=1e-12)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_payload_as_an_input_and_the_deflection_grows_with_payload():
     kin = irb4600()
     q = random_configurations(40, seed=0)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor
 
-from robocal.gp import MultiOutputGP, cholesky_inverse, nlml_shared, se_ard, unpack
+from robocal.layers.gp import MultiOutputGP, cholesky_inverse, nlml_shared, se_ard, unpack
 
 pytestmark = pytest.mark.unit
 

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from robocal.frames import fit_rigid, transform_points
-from robocal.identify import CalibrationOptions, calibrate, igg3_weight, register
-from robocal.kinematics import ParamLayout, smr_base, smr_tracker
-from robocal.stats import error_stats
+from robocal.kinematics.frames import fit_rigid, transform_points
+from robocal.identify.identification import CalibrationOptions, calibrate, igg3_weight, register
+from robocal.kinematics.models import ParamLayout, smr_base, smr_tracker
+from robocal.measure.stats import error_stats
 from tests.cells import T_SEED000, irb2600, irb2600_poses, make_cell, measure, ur10, ur10_poses
 
 
@@ -117,7 +117,7 @@ def test_igg3_weight_function_segments():
 def test_nominal_smr_on_the_j6_axis_does_not_hide_wrist_parameters():
     """The config's SMR guess sits on the J6 axis (theta6, a5, alpha5 degenerate there) while the real SMR is
     67 mm off it: identifiability is re-analysed at the solution, so the full set is identified."""
-    from robocal.frames import make_T, rotvec_to_matrix
+    from robocal.kinematics.frames import make_T, rotvec_to_matrix
     rng = np.random.default_rng(42)
     T = make_T(rotvec_to_matrix(np.radians([3, -2, 140])), [3500, -3200, -600])
     cell = make_cell(ur10(), rng, T_tracker_base=T, smr=(60.0, -30.0, 90.0), scale=2.0)

@@ -4,7 +4,7 @@ import pytest
 
 from robocal.iso9283 import (characteristics, cube_poses, distance_characteristics, largest_cube,
                              pose_characteristics, rp_uncertainty_mm, split_rp, tracker_rp_mm)
-from robocal.noise import RP_PER_SIGMA, TrackerUncertainty, repeatability_sigma_mm
+from robocal.measure.noise import RP_PER_SIGMA, TrackerUncertainty, repeatability_sigma_mm
 
 pytestmark = pytest.mark.unit
 

@@ -1,13 +1,13 @@
-"""The joint-error GP layer (robocal.joint_gp): per-joint angle-error curves through the Jacobian, reduced-rank GP,
+"""The joint-error GP layer (robocal.layers.joint_gp): per-joint angle-error curves through the Jacobian, reduced-rank GP,
 hyperparameters by marginal likelihood, CV from Gram differences. Independent references: finite differences of
 the likelihood, a direct fit on the training rows, a brute-force exact GP with the same kernel."""
 import numpy as np
 import pytest
 
-import robocal.joint_gp as jg
-from robocal.elastic import kfold
-from robocal.layers import choose_layer
-from robocal.model import CalibratedModel
+import robocal.layers.joint_gp as jg
+from robocal.effects.cv import kfold
+from robocal.layers.choice import choose_layer
+from robocal.layers.calibrated_model import CalibratedModel
 from tests.cells import irb2600
 
 LO, HI = np.radians([-60, -40, -60, -90, -60, -90]), np.radians([60, 60, 30, 90, 60, 90])
@@ -55,7 +55,7 @@ def test_reduced_rank_kernel_approaches_the_exact_kernel():
     np.testing.assert_allclose(P @ np.diag(lam) @ P.T, exact, atol=2e-3 * 4.0)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_recovers_per_joint_cyclic_errors_and_predicts_new_poses():
     kin = irb2600()
     rng = np.random.default_rng(1)
@@ -74,7 +74,7 @@ def test_recovers_per_joint_cyclic_errors_and_predicts_new_poses():
     assert layer.noise_mm >= NOISE_AXIS_MM * (1 - 1e-9)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_cv_from_gram_differences_equals_a_fit_on_the_training_rows():
     kin = irb2600()
     rng = np.random.default_rng(3)
@@ -135,7 +135,7 @@ def test_not_kept_on_pure_noise():
     assert kept == 0
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_diagnosis_names_the_joint_whose_curve_is_left_over():
     """Residuals from a J3 angle error of 9 periods per revolution only (plus noise): the diagnosis' joint curves put
     J3 first, with about the simulated amplitude (RMS of 0.75e-4 rad sin: 10.9 arcsec)."""

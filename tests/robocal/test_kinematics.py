@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from robocal.kinematics import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian, joint_jacobian,
+from robocal.kinematics.models import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian, joint_jacobian,
                                 smr_tracker)
 from tests.cells import T_SEED000, irb2600, ur10
 

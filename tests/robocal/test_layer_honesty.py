@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from robocal.effects import joint_compliance
-from robocal.elastic import kfold
-from robocal.gp import MultiOutputGP
-from robocal.identify import calibrate
-from robocal.layers import choose_layer, layer_summary
-from robocal.model import CalibratedModel
-from robocal.stats import error_stats, paired_gain
+from robocal.effects.bases import joint_compliance
+from robocal.effects.cv import kfold
+from robocal.layers.gp import MultiOutputGP
+from robocal.identify.identification import calibrate
+from robocal.layers.choice import choose_layer, layer_summary
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.measure.stats import error_stats, paired_gain
 from tests.cells import irb2600, irb2600_poses, make_cell, measure
 
 LO, HI = np.radians([-100, -60, -100, -150, -100, -150]), np.radians([100, 90, 40, 150, 100, 150])

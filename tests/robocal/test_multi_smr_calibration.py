@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from robocal.frames import make_T
-from robocal.kinematics import Kinematics
-from robocal.multi_smr_calibration import calibrate_multi_smr, orientation_errors_arcsec, predict_multi
-from robocal.noise import TrackerUncertainty
+from robocal.kinematics.frames import make_T
+from robocal.kinematics.models import Kinematics
+from robocal.multi_smr.calibration import calibrate_multi_smr, orientation_errors_arcsec, predict_multi
+from robocal.measure.noise import TrackerUncertainty
 from robocal.simulation.mock_cell import random_geometric_errors
 from tests.cells import T_SEED000, irb2600
 

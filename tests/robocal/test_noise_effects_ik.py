@@ -1,13 +1,14 @@
 import numpy as np
 import pytest
 
-from robocal import gravity
-from robocal.effects import apply_effects, effect_regressor, gravity_torques, library
-from robocal.ik import branch_signature, solve_ik, solve_on_branch
-from robocal.kinematics import fk, smr_base
-from robocal.noise import (TrackerUncertainty, cartesian_to_spherical, noise_floor_mm, repeatability_sigma_mm,
+from robocal.kinematics import gravity
+from robocal.effects.bases import apply_effects, effect_regressor, every_effect
+from robocal.kinematics.gravity import gravity_torques
+from robocal.kinematics.ik import branch_signature, solve_ik, solve_on_branch
+from robocal.kinematics.models import fk, smr_base
+from robocal.measure.noise import (TrackerUncertainty, cartesian_to_spherical, noise_floor_mm, repeatability_sigma_mm,
                            spherical_to_cartesian)
-from robocal.stats import error_stats
+from robocal.measure.stats import error_stats
 from tests.cells import T_SEED000, irb2600, tool_frame
 
 pytestmark = pytest.mark.unit
@@ -48,7 +49,7 @@ def test_repeatability_conversion_against_monte_carlo():
     assert repeatability_sigma_mm(l.mean() + 3 * l.std()) == pytest.approx(1.0, rel=0.01)
 
 
-@pytest.mark.parametrize("effect", library(6), ids=lambda e: e.name + "".join(map(str, e.joints)))
+@pytest.mark.parametrize("effect", every_effect(6), ids=lambda e: e.name + "".join(map(str, e.joints)))
 def test_effect_regressor_is_the_linearisation_of_the_simulation(effect):
     kin = irb2600().with_(T_tracker_base=T_SEED000, p_flange_smr_mm=[40.0, 30.0, 60.0])
     rng = np.random.default_rng(3)
@@ -108,7 +109,7 @@ def test_gravity_torques_equal_an_independent_reference_in_one_block_and_in_row_
     tau = gravity_torques(kin, q, masses, pay, cog, g_base)
     np.testing.assert_allclose(tau, _gravity_torques_reference(kin, q, masses, pay, cog, g_base), rtol=1e-10,
                                atol=1e-9)
-    monkeypatch.setattr(gravity, "CHAIN_ROWS", 7)      # the torque model lives in robocal.gravity
+    monkeypatch.setattr(gravity, "CHAIN_ROWS", 7)      # the torque model lives in robocal.kinematics.gravity
     np.testing.assert_array_equal(gravity_torques(kin, q, masses, pay, cog, g_base), tau)
 
 

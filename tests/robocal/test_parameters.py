@@ -1,4 +1,4 @@
-"""The parameter record of a calibrated model (robocal.parameters): its JSON form, and the std of the geometry
+"""The parameter record of a calibrated model (robocal.identify.parameters): its JSON form, and the std of the geometry
 that the joint fit of geometry + effects reports (checked against a finite-difference covariance)."""
 import json
 
@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from robocal.diagnose.selfcheck import truth_input
-from robocal.elastic import EffectChoice, calibrate_elastic, elastic_smr_tracker
-from robocal.identify import CalibrationOptions, calibrate, whiten, whitening
-from robocal.kinematics import ParamLayout, apply_update
-from robocal.model import CalibratedModel
-from robocal.parameters import GEOMETRY, GEOMETRY_AND_EFFECTS, ParameterTable
+from robocal.effects.model import EffectChoice, elastic_smr_tracker
+from robocal.effects.fit import calibrate_elastic
+from robocal.identify.identification import CalibrationOptions, calibrate, whiten, whitening
+from robocal.kinematics.models import ParamLayout, apply_update
+from robocal.layers.calibrated_model import CalibratedModel
+from robocal.identify.parameters import GEOMETRY, GEOMETRY_AND_EFFECTS, ParameterTable
 from robocal.simulation.truth_cell import TruthProtocol, simulate
 
 

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from robocal.drift import fit_drift
-from robocal.readback import prefer_commanded, readback_statistics
+from robocal.measure.drift import fit_drift
+from robocal.measure.readback import prefer_commanded, readback_statistics
 
 NESTS_MM = np.array([[1000.0, -2000.0, -1000.0], [3000.0, 500.0, -1100.0], [-500.0, 1500.0, -1050.0]])
 

@@ -1,11 +1,11 @@
-"""Registration of the base frame and the SMR offsets together (robocal.identify.register_tool): a rough SMR offset
+"""Registration of the base frame and the SMR offsets together (robocal.identify.identification.register_tool): a rough SMR offset
 is a registration quantity, recovered from any start when the poses turn the flange, kept when they do not."""
 import numpy as np
 import pytest
 
-from robocal.frames import make_T, rotvec_to_matrix, transform_points
-from robocal.identify import register_tool
-from robocal.kinematics import fk, smr_base
+from robocal.kinematics.frames import make_T, rotvec_to_matrix, transform_points
+from robocal.identify.identification import register_tool
+from robocal.kinematics.models import fk, smr_base
 from tests.cells import T_SEED000, measure, make_cell, ur10, ur10_poses
 
 pytestmark = pytest.mark.unit

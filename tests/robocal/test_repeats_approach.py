@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.approach import approach_signs, next_approach
-from robocal.repeats import noise_floor_from_repeats, repeat_dof, repeat_groups
+from robocal.measure.approach import approach_signs, next_approach
+from robocal.measure.repeats import noise_floor_from_repeats, repeat_dof, repeat_groups
 
 
 def _approach_loop(q, tol):

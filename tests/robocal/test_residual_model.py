@@ -2,12 +2,12 @@ import json
 
 import numpy as np
 
-from robocal.effects import joint_compliance
-from robocal.identify import calibrate
-from robocal.kinematics import smr_tracker
-from robocal.model import CalibratedModel, fit_idw_layer
-from robocal.residual import IDWResidual, idw, infer_lattice
-from robocal.stats import error_stats
+from robocal.effects.bases import joint_compliance
+from robocal.identify.identification import calibrate
+from robocal.kinematics.models import smr_tracker
+from robocal.layers.calibrated_model import CalibratedModel, fit_idw_layer
+from robocal.layers.idw import IDWResidual, idw, infer_lattice
+from robocal.measure.stats import error_stats
 from tests.cells import grid, irb2600, irb2600_poses, make_cell, measure
 
 import pytest

@@ -1,11 +1,11 @@
-"""The measurement-fault screens of robocal.screen on synthetic data: near neighbours only, SMR triangle, nests."""
+"""The measurement-fault screens of robocal.identify.screening on synthetic data: near neighbours only, SMR triangle, nests."""
 import numpy as np
 import pytest
 
-from robocal.kinematics import Kinematics
-from robocal.multi_smr_calibration import predict_multi
-from robocal.noise import TrackerUncertainty
-from robocal.screen import joint_levers_mm, nest_misreads, reach_mm, screen, smr_triangle
+from robocal.kinematics.models import Kinematics
+from robocal.multi_smr.calibration import predict_multi
+from robocal.measure.noise import TrackerUncertainty
+from robocal.identify.screening import joint_levers_mm, nest_misreads, reach_mm, screen, smr_triangle
 from robocal.simulation.truth_cell import irb2600_nominal
 
 pytestmark = pytest.mark.unit
@@ -34,7 +34,7 @@ def test_a_residual_is_judged_against_near_neighbours_only():
 def test_neighbours_in_another_configuration_are_not_near():
     """Same SMR position, wrist flipped and J1 on the other side of the base axis: near in position, far in joint
     motion (the levers of J1-J3 are long)."""
-    from robocal.screen import near_neighbours
+    from robocal.identify.screening import near_neighbours
     q = np.radians([[0, 20, -10, 0, 45, 0], [0, 20, -10, 0, 45, 1], [0, 21, -10, 0, 45, 0], [0, 20, -11, 0, 45, 0],
                     [0, 20, -10, 1, 45, 0], [100, 20, -10, 0, 45, 0]])
     p = np.zeros((len(q), 3))                                 # all at the same position: only joints tell them apart

@@ -1,4 +1,4 @@
-"""Inducing-point GP (robocal/sparse_gp.py): equal to the exact GP when the inducing inputs are the training inputs,
+"""Inducing-point GP (robocal/layers/sparse_gp.py): equal to the exact GP when the inducing inputs are the training inputs,
 close to it with few inducing inputs, bounded memory on many points, JSON round trip."""
 import json
 import tracemalloc
@@ -6,11 +6,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from robocal.elastic import kfold
-from robocal.gp_layer import GPRResidual
-from robocal.gp import MultiOutputGP
-from robocal.layers import fit_gp, gp_cv_errors
-from robocal.sparse_gp import EXACT_MAX_POINTS, INDUCING_POINTS, SparseGP
+from robocal.effects.cv import kfold
+from robocal.layers.gp_layer import GPRResidual
+from robocal.layers.gp import MultiOutputGP
+from robocal.layers.choice import fit_gp, gp_cv_errors
+from robocal.layers.sparse_gp import EXACT_MAX_POINTS, INDUCING_POINTS, SparseGP
 
 LO, HI = np.radians([-100, -60, -100, -150, -100, -150]), np.radians([100, 90, 40, 150, 100, 150])
 
@@ -31,7 +31,7 @@ def rms(e):
     return float(np.sqrt(np.mean(np.sum(np.square(e), axis=1))))
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_inducing_inputs_at_the_training_inputs_give_the_exact_gp():
     X, Y = data(250, 0)
     Xt, _ = data(400, 1)
@@ -44,7 +44,7 @@ def test_inducing_inputs_at_the_training_inputs_give_the_exact_gp():
     np.testing.assert_allclose(s_sparse, s_exact, rtol=1e-3)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_few_inducing_inputs_agree_with_the_exact_gp_within_a_tenth_of_its_error():
     """1500 points, 300 inducing inputs: the two predictions differ by less than 10 % of the exact GP's own
     held-out error (stated tolerance of the approximation), and both learn the field."""

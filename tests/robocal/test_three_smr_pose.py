@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from robocal.frames import make_T, rotvec_to_matrix, transform_points
-from robocal.three_smr_pose import (MultiSMRPoseEstimator, adjust_points, conditions, euler_xyz_deg, fit_points_pose,
+from robocal.kinematics.frames import make_T, rotvec_to_matrix, transform_points
+from robocal.multi_smr.three_smr_pose import (MultiSMRPoseEstimator, adjust_points, conditions, euler_xyz_deg, fit_points_pose,
                                     measured_covariance, nominal_points, orientation_error_deg, pair_distances,
                                     seed003_tool, spherical_covariance, spherical_jacobian, tracker_spherical_sigmas,
                                     weight_matrix_inverse)
-from robocal.noise import TrackerUncertainty, cartesian_to_spherical, spherical_to_cartesian
-from robocal.payload import HeavyPayloadCell, irb4600, random_configurations
+from robocal.measure.noise import TrackerUncertainty, cartesian_to_spherical, spherical_to_cartesian
+from robocal.simulation.payload import HeavyPayloadCell, irb4600, random_configurations
 from robocal.simulation.mock_cell import random_geometric_errors
 
 pytestmark = pytest.mark.unit

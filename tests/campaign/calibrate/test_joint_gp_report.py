@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import robocal.joint_gp as jg
+import robocal.layers.joint_gp as jg
 from campaign.calibrate.report_sections import LayerSummary
 from campaign.report.terminal import layer_line
-from robocal.layers import LayerChoice, layer_summary
+from robocal.layers.choice import LayerChoice, layer_summary
 from tests.cells import irb2600
 
 
@@ -42,7 +42,7 @@ def test_residual_joint_gp_in_the_config_forces_the_layer_and_the_model_reloads(
 
     from campaign.calibrate.stages import calibrate_dataset
     from campaign.config.load import load_cell
-    from robocal.model import CalibratedModel
+    from robocal.layers.calibrated_model import CalibratedModel
     from tests.campaign.helpers import ROOT, simulated_campaign
 
     d = yaml.safe_load((ROOT / "configs" / "ur10.yaml").read_text())

@@ -14,7 +14,7 @@ from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import write_csv
 from campaign.calibrate.stages import calibrate_dataset
-from robocal.multi_smr_calibration import predict_multi
+from robocal.multi_smr.calibration import predict_multi
 from tests.campaign.helpers import ROOT, read_verify, small_config
 from tests.campaign.config.test_multi_smr_section import SMR1, SMR2, SMR3
 
@@ -37,7 +37,7 @@ def dataset(q, P, sets, source="sim3"):
                    p3_tracker_mm=P[2], source=source)
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_corrupted_smr_readings_are_set_aside_on_calib_and_test_rows():
     cfg = replace(CFG, tool=replace(CFG.tool, p_flange_smr2_mm=tuple(OFFSETS[1]), p_flange_smr3_mm=tuple(OFFSETS[2])))
     _, q, P, sets = three_smr_dataset()
@@ -104,7 +104,7 @@ def test_verify_with_three_smrs_reports_the_tool_orientation(tmp_path, capsys):
     from campaign.calibrate.multi_smr import measured_flange_poses, pose_estimator
     from campaign.calibrate.outputs import load_model
     from campaign.run.log_reader import read_log
-    from robocal.frames import matrix_to_rotvec
+    from robocal.kinematics.frames import matrix_to_rotvec
     records = read_log(run).records()
     est = pose_estimator(load_cell(cfg), load_model(run / "model.json"), records)
     tests = [r for r in records if r.set == "test"]

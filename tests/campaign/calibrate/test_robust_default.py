@@ -9,8 +9,8 @@ from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.calibrate.stages import geometric_fit, calibrate_dataset
-from robocal.identify import CalibrationOptions, calibrate
-from robocal.kinematics import smr_tracker
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.kinematics.models import smr_tracker
 from tests.campaign.helpers import ROOT
 
 CELL = load_cell(ROOT / "configs/irb2600.yaml")
@@ -102,10 +102,10 @@ def test_structure_is_kept_and_faults_found_under_strong_compliance():
         assert final < 0.7 * kinematic
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_three_smr_dataset_reports_offsets_and_orientation():
     from dataclasses import replace
-    from robocal.multi_smr_calibration import predict_multi
+    from robocal.multi_smr.calibration import predict_multi
     offsets = np.array([[0.36, 0.28, 39.43], [90.0, 0.0, 50.0], [0.0, 90.0, 50.0]])
     cfg = replace(CFG, tool=replace(CFG.tool, p_flange_smr2_mm=tuple(offsets[1] + 0.4),
                                     p_flange_smr3_mm=tuple(offsets[2] - 0.4)))

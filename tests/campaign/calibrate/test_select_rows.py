@@ -9,8 +9,8 @@ import pytest
 from campaign.config.load import load_cell
 from campaign.data.dataset import Dataset
 from campaign.data.interchange_csv import read_csv, write_csv
-from robocal.design import criterion, d_optimal
-from robocal.identify import register
+from robocal.design.optimal import criterion, d_optimal
+from robocal.identify.identification import register
 from tests.campaign.helpers import ROOT
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 from tests.cells import irb2600, irb2600_poses, make_cell, measure

@@ -23,8 +23,8 @@ def test_a_refit_too_early_for_a_prediction_is_logged_not_a_run_failure(tmp_path
                       "too few points for a prediction yet")
     late = StopCheck(60, 0.035, 0.0001, 0.001, 0.03, 0.0, 0.05, 1.0, ((60, 0.035),), 3.0, "stop", "gain too small")
     with RunLog.create(tmp_path / "run", START) as log:
-        log.append_event(early.to_event())
-        log.append_event(late.to_event())
+        log.append_event(early)
+        log.append_event(late)
         log.close("success", "done")
     contents = read_log(tmp_path / "run")
     first = contents.events[0]

@@ -7,7 +7,7 @@ from campaign.calibrate.report_sections import ErrorFigures
 from campaign.calibrate.summary import FAIL, PASS, Summary, Verdict, verdict
 from campaign.config.schema import AcceptanceConfig
 from campaign.report.summary_text import lookup, verdict_line
-from robocal.noise import noise_max_mm
+from robocal.measure.noise import noise_max_mm
 
 HELD = ErrorFigures(max_mm=0.077, mean_mm=0.029, rms_mm=0.032, n=94)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -37,7 +38,13 @@ def reference_text() -> str:
 
 
 def reference_dict() -> dict[str, Any]:
-    return yaml.safe_load(reference_text())
+    """A fresh copy of the reference config as a dict (parsed once: most bad-config cases edit it)."""
+    return copy.deepcopy(_reference_data(reference_text()))
+
+
+@functools.lru_cache(maxsize=1)
+def _reference_data(text: str) -> dict[str, Any]:
+    return yaml.safe_load(text)
 
 
 # --------------------------------------------------------------------------- good configs
@@ -125,7 +132,7 @@ def minimal_dict() -> dict[str, Any]:
 @pytest.mark.unit
 def test_tracker_uncertainty_is_robocals_model_with_the_file_terms(tmp_path: Path) -> None:
     """One TrackerUncertainty: the config section is robocal's class, carrying the YAML terms (not its defaults)."""
-    from robocal.noise import TrackerUncertainty
+    from robocal.measure.noise import TrackerUncertainty
 
     terms = {"transverse_a_um": 20.0, "transverse_b_um_per_m": 8.0, "range_a_um": 12.0, "range_b_um_per_m": 0.5,
              "coverage_k": 3.0}

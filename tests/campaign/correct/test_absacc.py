@@ -9,7 +9,7 @@ from campaign.config.load import load_cell
 from campaign.correct.targets import AbsAccRobot, absacc_guard, recorded_identity
 from campaign.errors import DataError
 from campaign.run.log_writer import RunLog
-from robocal.model import CalibratedModel
+from robocal.layers.calibrated_model import CalibratedModel
 from tests.campaign.helpers import ROOT
 
 CONFIG = str(ROOT / "configs/irb2600.yaml")

@@ -13,10 +13,10 @@ from campaign.correct.bounds import CorrectedTarget
 from campaign.correct.configuration import configuration_reasons
 from campaign.correct.rapid_module import render_rapid_module
 from campaign.correct.ur_program import render_ur_json
-from drivers.abb_axes import abb_axes
+from drivers.abb_axes import axes_layout
 from drivers.emulators.rws_server import parse_literal, parse_module
-from robocal.chains import arm_angle_rad
-from robocal.kinematics import Kinematics
+from robocal.kinematics.chains import arm_angle_rad
+from robocal.kinematics.models import Kinematics
 
 pytestmark = pytest.mark.unit
 LO, HI = (-170.0,) * 7, (170.0,) * 7
@@ -35,18 +35,18 @@ def _arrays(text: str) -> tuple[list, list]:
 def test_track_carriage_is_eax_a_of_both_targets():
     q = (4321.5, 10.0, -20.0, 30.0, 40.0, 50.0, 60.0)
     text = render_rapid_module([_target(q)], q_min_deg=(0.0,) + LO[1:], q_max_deg=(6000.0,) + HI[1:],
-                               axes=abb_axes(7, track=True))
+                               axes=axes_layout(7, track=True))
     (jt,), (rt,) = _arrays(text)
     assert jt == [[10, -20, 30, 40, 50, 60], [4321.5] + [9e9] * 5] and rt[3] == [4321.5] + [9e9] * 5
 
 
 def test_seven_axis_jointtarget_and_robtarget_carry_axis_7_and_the_arm_angle():
     q = (10.0, -20.0, 35.5, 30.0, 40.0, 50.0, 60.0)            # physical order: joint 3 is ABB's axis 7
-    text = render_rapid_module([_target(q, arm_angle=-12.25)], q_min_deg=LO, q_max_deg=HI, axes=abb_axes(7))
+    text = render_rapid_module([_target(q, arm_angle=-12.25)], q_min_deg=LO, q_max_deg=HI, axes=axes_layout(7))
     (jt,), (rt,) = _arrays(text)
     assert jt == [[10, -20, 30, 40, 50, 60], [35.5] + [9e9] * 5] and rt[3] == [-12.25] + [9e9] * 5
     with pytest.raises(ValueError, match="needs the arm angle"):
-        render_rapid_module([_target(q)], q_min_deg=LO, q_max_deg=HI, axes=abb_axes(7))
+        render_rapid_module([_target(q)], q_min_deg=LO, q_max_deg=HI, axes=axes_layout(7))
 
 
 def test_ur_refuses_seven_joints_in_one_line():
@@ -70,5 +70,5 @@ def test_a_configuration_change_is_refused_naming_the_joint():
 
 def test_rapid_refuses_fewer_than_six_axes_in_one_line():
     with pytest.raises(ValueError) as err:
-        render_rapid_module([_target((0.0,) * 5)], q_min_deg=LO[:5], q_max_deg=HI[:5], axes=abb_axes(5))
+        render_rapid_module([_target((0.0,) * 5)], q_min_deg=LO[:5], q_max_deg=HI[:5], axes=axes_layout(5))
     assert "5-axis" in str(err.value) and "\n" not in str(err.value)

@@ -9,8 +9,8 @@ from campaign.config.load import load_cell
 from campaign.plan.adaptive import seed_size, task_poses
 from campaign.plan.build import build_plan
 from campaign.plan.motion_safety import PathGuard
-from robocal.kinematics import smr_base
-from robocal.sweep import flange_points_base, sample_segments
+from robocal.kinematics.models import smr_base
+from robocal.kinematics.sweep import flange_points_base, sample_segments
 from tests.campaign.helpers import small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 

@@ -13,7 +13,7 @@ from campaign.run.log_reader import read_log
 from campaign.run.runner import Runner
 from drivers.base import MotionError, MotionLimits
 from drivers.mock import MockRobot, MockTracker
-from robocal.sweep import Boxes, check_segments, flange_points_base, sample_segments
+from robocal.kinematics.sweep import Boxes, check_segments, flange_points_base, sample_segments
 from tests.campaign.helpers import small_config
 
 
@@ -39,7 +39,7 @@ def _mock_run(tmp_path, cell, robot_hook=None):
     return runner.execute(plan.points, log), robot, stops, plan
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_no_command_above_the_caps_reaches_the_mock_controller(tmp_path):
     cell = _cell(tmp_path, **{"robot.max_tcp_speed_mm_s": 120, "robot.max_joint_speed_pct": 40})
     outcome, robot, stops, plan = _mock_run(tmp_path, cell)
@@ -52,7 +52,7 @@ def test_no_command_above_the_caps_reaches_the_mock_controller(tmp_path):
     print(f"commands {len(peak)}: peak TCP max {peak.max():.1f} mm/s (cap 120), joint max {pct.max():.1f} % (cap 40)")
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_a_too_fast_command_is_refused_and_the_run_stops(tmp_path):
     cell = _cell(tmp_path)
 
@@ -83,7 +83,7 @@ def test_a_cap_above_the_datasheet_maximum_is_refused(tmp_path):
     assert _cell(tmp_path, **{"robot.max_tcp_speed_mm_s": 7000}).config.robot.max_tcp_speed_mm_s == 7000
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_first_pass_traverses_the_plan_at_reduced_caps_before_measuring(tmp_path):
     cell = _cell(tmp_path, **{"robot.first_pass_speed_pct": 25})
     cfg = cell.config

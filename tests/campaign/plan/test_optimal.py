@@ -6,7 +6,7 @@ import pytest
 
 from campaign.config.load import load_cell, load_config
 from campaign.plan.build import build_plan
-from robocal.design import move_cost
+from robocal.design.optimal import move_cost
 from tests.campaign.helpers import small_config
 from tests.campaign.hostile import assert_one_line, cli, snapshot
 
@@ -95,7 +95,7 @@ def test_stop_rule_decisions(tmp_path):
     budget, the last block."""
     from campaign.calibrate.adaptive_stop import _decide
     from campaign.plan.points import Plan
-    from robocal.design import Prediction
+    from robocal.design.optimal import Prediction
 
     cfg = load_config(_config(tmp_path, **{"plan.stop": "auto", "plan.max_minutes": 30.0}))
     plan = Plan((), (), "x", (60, 80, 100))

@@ -44,7 +44,7 @@ def _curves(ax) -> list[str]:
     return [line.get_label() for line in ax.get_lines() if not line.get_label().startswith(("noise", "repeat", "_"))]
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_no_accepted_effect_draws_geometric_equals_final_once(monkeypatch, tmp_path):
     figs = _figures(monkeypatch, _report(accepted=False), tmp_path)
     assert "shrinkage.png" not in figs
@@ -58,7 +58,7 @@ def test_no_accepted_effect_draws_geometric_equals_final_once(monkeypatch, tmp_p
     assert _curves(time_ax) == ["geometric = final (no effect accepted)"] and "= final" in time_ax.get_title()
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_an_accepted_effect_draws_both_curves_and_the_shrinkage(monkeypatch, tmp_path):
     figs = _figures(monkeypatch, _report(accepted=True), tmp_path)
     assert "shrinkage.png" in figs

@@ -6,13 +6,12 @@ import pytest
 
 from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
-from campaign.report.export import UrdfLimits, export, robodk_text, urdf_text
-from robocal.kinematics import Kinematics, fk, smr_base
-from robocal.model import CalibratedModel
+from campaign.report.export import UrdfLimits, export_model, robodk_text, urdf_text
+from robocal.kinematics.models import Kinematics, fk, smr_base
+from robocal.layers.calibrated_model import CalibratedModel
 from robocal.simulation.mock_cell import random_geometric_errors
 
 yourdfpy = pytest.importorskip("yourdfpy")
-pytestmark = pytest.mark.unit
 ROOT = Path(__file__).resolve().parents[3]
 CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
 
@@ -44,6 +43,7 @@ def _max_error_um(kin: Kinematics, tmp_path: Path, n: int = 1000, seed: int = 0)
     return worst * 1000.0
 
 
+@pytest.mark.system
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_urdf_of_each_shipped_cell_matches_fk(config, tmp_path):
     err = _max_error_um(load_cell(config).kinematics, tmp_path)
@@ -51,6 +51,7 @@ def test_urdf_of_each_shipped_cell_matches_fk(config, tmp_path):
     assert err <= 1.0
 
 
+@pytest.mark.system
 @pytest.mark.parametrize("convention", ["dh", "mdh"])
 def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
     truth = simulated_cell(load_cell(ROOT / "configs" / "irb2600.yaml")).truth    # DH + errors + Hayati beta on J2
@@ -62,6 +63,7 @@ def test_urdf_of_a_calibrated_hayati_model_matches_fk(convention, tmp_path):
     assert err <= 1.0
 
 
+@pytest.mark.unit
 def test_urdf_of_a_calibrated_track_model_matches_fk(tmp_path):
     """A robot on a track: the URDF's prismatic joint along the identified direction, travel scaled, reproduces the
     chain (the simulated truth has the track's direction and scale off)."""
@@ -73,6 +75,7 @@ def test_urdf_of_a_calibrated_track_model_matches_fk(tmp_path):
     assert 'type="prismatic"' in (tmp_path / "robot.urdf").read_text()
 
 
+@pytest.mark.unit
 def test_robodk_refuses_a_track_in_one_line():
     from campaign.errors import DataError
     with pytest.raises(DataError) as err:
@@ -80,6 +83,7 @@ def test_robodk_refuses_a_track_in_one_line():
     assert "prismatic" in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.unit
 def test_wrong_origin_would_be_caught(tmp_path):
     """The comparison is sensitive: a 0.01 deg change of one alpha moves the tool by far more than 1 um."""
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
@@ -92,13 +96,14 @@ def test_wrong_origin_would_be_caught(tmp_path):
     assert np.max(np.abs(robot.get_transform("tool", "base_link")[:3, 3] * 1000 - smr_base(kin, q[None])[0])) > 0.01
 
 
+@pytest.mark.unit
 def test_export_files_and_residual_note(tmp_path):
     cell = load_cell(ROOT / "configs" / "irb2600.yaml")
-    from robocal.residual import IDWResidual
+    from robocal.layers.idw import IDWResidual
     layer = IDWResidual.fit(np.random.default_rng(0).normal(size=(20, 3)) * 100, np.zeros((20, 3)), 2.0, 4)
     model = CalibratedModel(simulated_cell(cell).truth, layer)
-    files = export(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
-                   limits=UrdfLimits.of_config(cell.config))
+    files = export_model(model, tmp_path / "r.urdf", tmp_path / "dh.csv", tmp_path / "robodk.txt",
+                         limits=UrdfLimits.of_config(cell.config))
     assert [f.name for f in files] == ["r.urdf", "dh.csv", "robodk.txt"]
     assert "NOT exported: the non-kinematic residual layer" in (tmp_path / "r.urdf").read_text()
     rows = (tmp_path / "dh.csv").read_text().splitlines()
@@ -106,6 +111,7 @@ def test_export_files_and_residual_note(tmp_path):
     assert "beta_deg" in (tmp_path / "robodk.txt").read_text()     # Hayati beta: the table keeps the beta column
 
 
+@pytest.mark.unit
 def test_robodk_dhm_conversion_is_exact():
     """Standard DH without beta -> DHM rows; rebuilding the chain from the DHM rows gives the same FK."""
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
@@ -122,8 +128,9 @@ def test_robodk_dhm_conversion_is_exact():
     assert np.max(np.abs(T[:, :3, 3] - fk(kin, q)[:, :3, 3])) < 1e-3
 
 
+@pytest.mark.unit
 def test_physical_effects_are_noted_not_exported(tmp_path):
-    from robocal.elastic import EffectChoice
+    from robocal.effects.model import EffectChoice
     kin = load_cell(ROOT / "configs" / "irb2600.yaml").kinematics
     fake = type("FittedEffectStub", (), {"choice": EffectChoice("joint_compliance", (("joints", (2, 3)),))})()
     text = urdf_text(CalibratedModel(kin, None, None, (fake,)), _limits(kin))
@@ -138,6 +145,7 @@ def _model_json(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.unit
 def test_urdf_joint_limits_come_from_the_config(tmp_path, capsys):
     """campaign export --urdf --config: velocity = robot.max_joint_speed_deg_s in rad/s and the config's position
     limits, as yourdfpy reads them; effort omitted without --effort-nm, never a zero limit."""
@@ -164,6 +172,7 @@ def test_urdf_joint_limits_come_from_the_config(tmp_path, capsys):
     assert [robot.joint_map[f"j{i + 1}"].limit.effort for i in range(6)] == [float(e) for e in efforts.split(",")]
 
 
+@pytest.mark.unit
 def test_urdf_without_config_or_with_bad_torques_is_one_line_exit_2(tmp_path, capsys):
     from campaign.cli import main
 
@@ -184,8 +193,8 @@ def _recorded_model(tmp_path: Path, kin: Kinematics, record: bool = True) -> Pat
     joint's identified, std 0.001 * (1 + column)); ``record`` False: a model.json of an earlier version."""
     import json
 
-    from robocal.kinematics import ParamLayout
-    from robocal.parameters import GEOMETRY, ParameterTable
+    from robocal.kinematics.models import ParamLayout
+    from robocal.identify.parameters import GEOMETRY, ParameterTable
 
     layout = ParamLayout.of(kin)
     cal = kin.with_(a_mm=kin.a_mm + 0.3, alpha_rad=kin.alpha_rad + 1e-4, theta_rad=kin.theta_rad - 2e-4)
@@ -198,6 +207,7 @@ def _recorded_model(tmp_path: Path, kin: Kinematics, record: bool = True) -> Pat
     return tmp_path
 
 
+@pytest.mark.unit
 def test_every_export_carries_the_records_values_and_std(tmp_path):
     """DH CSV, RoboDK table (the exact DHM form: std of alpha, a from the previous DH joint) and URDF comments of a
     standard-DH model without beta print its record's values and std (the same checks as the campaign runs)."""
@@ -211,6 +221,7 @@ def test_every_export_carries_the_records_values_and_std(tmp_path):
     assert check_urdf(files["urdf"], out) < 1e-9
 
 
+@pytest.mark.unit
 def test_a_model_json_without_a_record_still_exports(tmp_path):
     """model.json of an earlier version (no ``parameters``): loaded, exported with the std left empty and said so."""
     config = ROOT / "configs" / "irb2600.yaml"

@@ -13,9 +13,9 @@ from campaign.io.terminal_text import SafeConsole
 from campaign.plan.iso9283 import iso_cube
 from campaign.report.iso9283 import NO_SPEC, UNDECIDED, iso_report, rp_verdict
 from campaign.report.terminal import render_iso
-from robocal.frames import transform_points
+from robocal.kinematics.frames import transform_points
 from robocal.iso9283 import CYCLE_ORDER, POSE_NAMES, RepeatabilitySplit, tracker_rp_mm
-from robocal.noise import repeatability_sigma_mm
+from robocal.measure.noise import repeatability_sigma_mm
 from tests.campaign.helpers import small_config
 
 IDENT = {"simulated_devices": ["robot", "tracker"], "config_sha256": "c" * 64, "plan_sha256": "p" * 64}
@@ -110,7 +110,7 @@ def test_terminal_summary_units_and_the_verdict_at_80_columns(tmp_path, rp_robot
     assert f"RD ±{rep['runs'][0]['distance']['rd_mm']:.4f} mm" in flat and "+-" not in flat
 
 
-@pytest.mark.unit
+@pytest.mark.system
 def test_html_table_units_verdict_and_3d_scatter(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     from campaign.report import html_figures

@@ -10,7 +10,7 @@ from drivers.registry import CellContext, open_robot, open_tracker
 def _world_builder(calls):
     from tests.cells import irb2600
     from drivers.mock import MockWorld
-    from robocal.noise import TrackerUncertainty
+    from robocal.measure.noise import TrackerUncertainty
     from robocal.simulation.mock_cell import SimulatedCell
 
     def build():

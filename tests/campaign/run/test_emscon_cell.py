@@ -10,7 +10,7 @@ from campaign.config.simulation import simulated_cell
 from campaign.run.devices import mock_world
 from drivers.emulators.rws_server import RwsEmulator
 from drivers.registry import open_tracker
-from robocal.kinematics import smr_tracker
+from robocal.kinematics.models import smr_tracker
 from tests.campaign.helpers import small_config
 from tests.drivers.helpers import served_port
 

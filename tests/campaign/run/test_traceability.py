@@ -14,7 +14,7 @@ from campaign.plan.build import build_plan
 from campaign.run.log_reader import read_log
 from campaign.run.traceability import simulated_devices
 from drivers.mock import MockRobot
-from robocal.sweep import Boxes, flange_points_base, sample_segments
+from robocal.kinematics.sweep import Boxes, flange_points_base, sample_segments
 from tests.campaign.helpers import read_report, small_config
 
 SMALL = {"plan.grid.step_mm": 600, "plan.test.count": 6, "plan.check_poses": {"count": 0, "every_n_points": 50},
@@ -127,7 +127,7 @@ def test_a_robot_standing_inside_the_clearance_is_told_to_jog_clear(tmp_path):
     guard = PathGuard.for_cell(cell)
     q_ref = np.asarray(cfg.plan.q_ref_deg, float)
     centre = (np.array(KEEP_OUT["min_mm"]) + np.array(KEEP_OUT["max_mm"])) / 2
-    from robocal.ik import solve_ik
+    from robocal.kinematics.ik import solve_ik
     from campaign.plan.poses import tool_rotation
     res = solve_ik(kin, centre[None], tool_rotation(cfg.plan.tool_direction), np.radians(q_ref))
     inside_q = np.degrees(res.q_rad[0])

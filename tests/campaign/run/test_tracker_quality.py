@@ -6,7 +6,7 @@ from campaign.config.simulation import simulated_cell
 from campaign.config.load import load_cell
 from campaign.run.tracker_quality import SmrPredictor, check_device_stability, device_covariance
 from drivers.base import TrackerReading, Unstable
-from robocal.kinematics import smr_tracker
+from robocal.kinematics.models import smr_tracker
 from tests.campaign.helpers import small_config
 
 

@@ -1,0 +1,313 @@
+"""Which effects the data support: forward selection by blocked cross-validation around the geometric solution.
+
+Every round tries each remaining candidate on top of the geometry + the effects taken so far (linearised at the
+geometric solution) and takes the one with the lowest held-out error, if its gain is significant: one-sided paired t
+of the per-point squared errors > 3 and held-out RMS lower by > 2 % (``robocal.measure.stats.paired_gain``), or t > 2 and >
+10 % lower, the per-point errors being the mean over the blockings (pose blocks and, when the measurement order is
+known, order blocks), and the gain positive under each blocking on its own. An effect just taken loses the parts the
+data do not need (a joint, a harmonic, a memory term: removing the part must cost t >= 2); refinements of it
+(compliance's free mass distribution) join the candidates. A joint's cyclic errors of a higher order (an encoder's
+track, a gear's teeth: two periods over the joint's span up to 40 per revolution) are one candidate per joint, a
+scan: in every fold the order that fits the training rows best predicts the held-out rows, so the pick among many
+orders is cross-validated too (nested); the order taken is the one that fits all rows best. At the end every taken
+effect must still be needed given the others (removing it costs t >= 2 and >= 1 % of RMS), else it is dropped.
+Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a plausible
+one before an implausible best), and never drops an effect; consistency is reported, never used here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bases import effect_regressor
+from robocal.identify.identification import whitening
+from robocal.kinematics.models import Kinematics, identification_jacobian
+from robocal.measure.stats import paired_gain
+from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
+from .library import parts, refinements
+from .model import EffectChoice
+
+TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a held-out RMS gain > 2 % ...
+LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain concentrated on few poses has a
+#                                    heavy-tailed per-point difference: its t understates how unlikely it is)
+SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) lies >= 90 % inside a taken effect's
+#                         span cannot be told from that effect: one class
+SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
+KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
+KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One candidate tried in one round: held-out RMS (mm, mean over the blockings and per blocking) against the
+    model so far, relative gain, paired t, whether it was taken; ``candidate`` the candidate it was tried as (a scan
+    family's label for the member the scan picked; else ``label``)."""
+    round: int
+    label: str
+    cv_rms_mm: float
+    by_blocking_mm: dict
+    base_cv_rms_mm: float
+    gain: float
+    t: float
+    taken: bool
+    candidate: str = ""
+
+    def to_dict(self) -> dict:
+        return {"round": self.round, "effect": self.label, "candidate": self.candidate or self.label,
+                "cv_rms_mm": self.cv_rms_mm, "cv_rms_by_blocking_mm": self.by_blocking_mm,
+                "base_cv_rms_mm": self.base_cv_rms_mm, "gain": self.gain, "t": self.t, "taken": self.taken}
+
+
+@dataclass(eq=False)
+class Step:
+    """A taken effect: the round, held-out RMS before/after (mean and per blocking), the rivals that predicted
+    as well (paired t of the winner over them < 2) and the parts pruned."""
+    choice: EffectChoice
+    round: int
+    before_mm: float
+    after_mm: float
+    by_blocking_mm: dict
+    t: float
+    gain: float
+    rivals: list = field(default_factory=list)      # [(label, name, cv_rms_mm, t_winner_over_it)]
+    pruned: list = field(default_factory=list)      # [(part label, t of removing it)]
+    note: str = ""                                  # why it was taken before a slightly better predictor
+
+    def to_dict(self) -> dict:
+        return {"effect": self.choice.label, "name": self.choice.name, "round": self.round,
+                "cv_rms_before_mm": self.before_mm, "cv_rms_after_mm": self.after_mm,
+                "cv_rms_by_blocking_mm": self.by_blocking_mm, "t": self.t, "gain": self.gain,
+                "rivals": [{"effect": lb, "name": nm, "cv_rms_mm": r, "t_over": t} for lb, nm, r, t in self.rivals],
+                "pruned": [{"part": lb, "t": t} for lb, t in self.pruned], "note": self.note}
+
+
+@dataclass(frozen=True, eq=False)
+class EffectSelection:
+    taken: tuple[EffectChoice, ...]
+    steps: tuple[Step, ...]
+    trials: tuple[Trial, ...]
+    dropped: tuple[tuple[str, float], ...]     # (label, t of removing it) dropped in the final check
+    geometric_cv_rms_mm: float
+    final_cv_rms_mm: float
+    folds: int
+    blockings: tuple[str, ...]
+    candidates: tuple[str, ...]
+    absorbed: dict = field(default_factory=dict)     # label -> share of the candidate inside the geometry's span
+    offered: tuple[str, ...] = ()                    # per taken effect: the candidate it was offered as (unpruned)
+    shadowed: dict = field(default_factory=dict)     # label -> (taken label, share of the candidate's visible part
+    #                                                  inside the taken effect's span): one class with it
+
+    def to_dict(self) -> dict:
+        return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
+                          f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
+                          "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
+                          "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking; "
+                          "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
+                          "every fold (nested)",
+                "taken": [c.label for c in self.taken], "geometric_cv_rms_mm": self.geometric_cv_rms_mm,
+                "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
+                "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
+                "dropped": [{"effect": lb, "t": t} for lb, t in self.dropped], "absorbed_by_geometry": self.absorbed,
+                "shadowed": {k: {"by": v[0], "share": v[1]} for k, v in self.shadowed.items()},
+                "trials": [t.to_dict() for t in self.trials]}
+
+
+class _Design:
+    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement),
+    written into one (N, 3, P) array ``A`` (no list of blocks to concatenate)."""
+
+    def __init__(self, kin, geo_cols, q, meta, choices):
+        p, J = identification_jacobian(kin, q)
+        self.p0 = p
+        built = [c.build(kin.n) for c in choices]
+        self.A = design_array(len(q), len(geo_cols) + sum(eff.k for eff in built))
+        self.A[:, :, :len(geo_cols)] = J[:, :, geo_cols]
+        self.cols: dict[EffectChoice, np.ndarray] = {}
+        self.names: dict[EffectChoice, tuple[str, ...]] = {}
+        at = len(geo_cols)
+        self.geo = np.arange(at)
+        for c, eff in zip(choices, built):
+            self.A[:, :, at:at + eff.k] = effect_regressor(kin, q, meta, eff, jacobian=(p, J))
+            self.cols[c] = np.arange(at, at + eff.k)
+            self.names[c] = eff.param_names
+            at += eff.k
+
+    def sub(self, full: EffectChoice, reduced: EffectChoice, n: int) -> np.ndarray:
+        """Columns of ``reduced`` (a part of ``full`` removed) among ``full``'s columns."""
+        keep = set(reduced.build(n).param_names)
+        return np.array([c for c, nm in zip(self.cols[full], self.names[full]) if nm in keep], int)
+
+
+def _mean(se: dict) -> np.ndarray:
+    return np.mean(np.stack(list(se.values())), axis=0)
+
+
+def _rms(se) -> float:
+    return float(np.sqrt(np.mean(se)))
+
+
+def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
+                   cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
+                   max_effects: int = 6, plausible=None, scans=()) -> EffectSelection:
+    """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
+    columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
+    values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
+    over them < 2) a plausible one is preferred to an implausible best. ``scans``: families of alternatives
+    (``library.scan_families``: one joint's cyclic errors of every higher order); each family is one candidate
+    per round, its member chosen inside every fold of the cross-validation (nested: the scan's pick among many
+    orders does not make its held-out errors optimistic) and, to be taken, on all rows."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    n = kin.n
+    pool = list(dict.fromkeys(candidates))
+    extra = [r for c in pool for r in refinements(c, n) if r not in pool]
+    families = [tuple(f) for f in scans if len(f)]
+    design = _Design(kin, geo_cols, q, meta, pool + extra + [c for f in families for c in f if c not in pool + extra])
+    r0 = np.asarray(p_tracker_mm, float) - design.p0
+    blockings = [Blocking("pose blocks", pose_blocks(q, folds, seed))]
+    if meta.get("order") is not None:
+        blockings.append(Blocking("order blocks", order_blocks(meta["order"], folds)))
+    cv = BlockedCV(design.A, r0, whitening(cov_mm2, len(q)), blockings, copy=False)     # whitened in place
+    design.A = None
+    model: list[tuple[EffectChoice, np.ndarray, EffectChoice]] = []   # taken (choice, its columns, as offered)
+
+    def errors(entries, extra_cols=()):
+        return cv.squared_errors(np.concatenate([design.geo] + [e[1] for e in entries] + [np.asarray(extra_cols, int)]))
+
+    base = errors(model)
+    geo_rms = _rms(_mean(base))
+    trials, steps = [], []
+    for rnd in range(1, max_effects + 1):
+        scored = []
+        tried = [(c, c.label, errors(model, design.cols[c])) for c in pool]
+        in_model = np.concatenate([design.geo] + [e[1] for e in model])
+        for family in families:
+            live = [c for c in family if not any(c in (e[0], e[2]) for e in model)]
+            if live:
+                alts = [design.cols[c] for c in live]
+                tried.append((live[cv.scan_pick(in_model, alts)], _family_label(family),
+                              {b.name: np.sum(cv.scan_errors(in_model, alts, i) ** 2, axis=1)
+                               for i, b in enumerate(cv.blockings)}))
+        for c, as_candidate, se in tried:
+            g = paired_gain(_mean(base), _mean(se))
+            each = all(_rms(se[b]) < _rms(base[b]) for b in se)
+            trials.append(Trial(rnd, c.label, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.rms_base_mm,
+                                g.gain, g.t, False, as_candidate))
+            if _supported(g) and each:
+                scored.append((g.rms_cand_mm, len(trials) - 1, c, se, g))
+        if not scored:
+            break
+        scored.sort(key=lambda s: (s[0], s[1]))
+        pick = _plausible_pick(scored, cv, design, model, plausible) if plausible else 0
+        note = "" if pick == 0 else (f"taken before {scored[0][2].label} (held-out RMS {scored[0][0]:.4f} mm, as "
+                                     "good): its values are outside their physical range")
+        scored.insert(0, scored.pop(pick))
+        _, i, c, se, g = scored[0]
+        trials[i] = Trial(**{**trials[i].__dict__, "taken": True})
+        rivals = [(o.label, o.name, r, paired_gain(_mean(s), _mean(se)).t) for r, _, o, s, _ in scored[1:]]
+        step = Step(c, rnd, g.rms_base_mm, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.t, g.gain,
+                    [rv for rv in rivals if rv[3] < KEEP_T], note=note)
+        pool = [o for o in pool if not alternatives(o, c)]
+        reduced, base = _prune(errors, design, model, c, c, step, n)
+        model.append((reduced, design.sub(c, reduced, n), c))
+        step.choice = reduced
+        steps.append(step)
+        pool += [r for r in refinements(c, n) if r in design.cols and r not in pool]
+    dropped = _final_check(errors, model, steps)
+    for i, (c, _, full) in enumerate(model):            # parts the later effects made unnecessary
+        step = next(s for s in steps if s.choice is c)
+        reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], c, full, step, n)
+        model[i] = (reduced, design.sub(full, reduced, n), full)
+        step.choice = reduced
+    absorbed = {c.label: cv.absorbed(design.cols[c], design.geo) for c in candidates}
+    shadowed = {}
+    for c in candidates:
+        if any(c is e[2] or c.label == e[0].label for e in model):
+            continue
+        for taken, cols, _ in model:
+            share = cv.absorbed(design.cols[c], np.concatenate([design.geo, cols]))
+            geo = absorbed[c.label]
+            visible = (share - geo) / max(1.0 - geo, 1e-12)      # of what the geometry leaves visible
+            if visible >= SHADOW_SHARE and 1.0 - geo >= SHADOW_MIN_VISIBLE:
+                shadowed[c.label] = (taken.label, visible)
+                break
+    return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
+                           _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
+                           tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
+                           tuple(e[2].label for e in model), shadowed)
+
+
+def _family_label(family) -> str:
+    """``gear_cyclic(J1 h9-40)``: a scan family by its joint and range of orders."""
+    hs = [h for c in family for h in dict(c.options)["harmonics"]]
+    return family[0].with_options(harmonics=(min(hs),)).label.replace(f"h{min(hs)}", f"h{min(hs)}-{max(hs)}")
+
+
+def _plausible_pick(scored, cv, design, model, plausible) -> int:
+    """Index of the candidate to take: the best held-out one, unless its values are outside their physical range
+    and another that predicts as well (the best one's paired t over it < KEEP_T) is inside."""
+    def values(c):
+        cols = np.concatenate([design.geo] + [e[1] for e in model] + [design.cols[c]])
+        return cv.fit(cols)[-len(design.cols[c]):]
+    best = scored[0]
+    if plausible(best[2], values(best[2])):
+        return 0
+    for k, s in enumerate(scored[1:], start=1):
+        if paired_gain(_mean(s[3]), _mean(best[3])).t < KEEP_T and plausible(s[2], values(s[2])):
+            return k
+    return 0
+
+
+def _supported(g) -> bool:
+    return (g.t > TAKE_T and g.gain > TAKE_GAIN) or (g.t > LARGE_T and g.gain > LARGE_GAIN)
+
+
+def alternatives(a: EffectChoice, b: EffectChoice) -> bool:
+    """Two candidates for the same physical effect (another warm-up time constant, another drift degree, the
+    same joint's effect; for a cyclic error, the same joint and a common order): once one is taken the other is no
+    longer tried (refinements are)."""
+    if a.name != b.name:
+        return False
+    if a.name in ("thermal_drift", "registration_drift"):
+        return True
+    oa, ob = dict(a.options), dict(b.options)
+    if a.name == "gear_cyclic" and not set(oa.get("harmonics", (1, 2))) & set(ob.get("harmonics", (1, 2))):
+        return False                     # other orders of the same joint's cyclic error: a low and a high one
+    return oa.get("joint") == ob.get("joint")
+
+
+def _prune(errors, design, model, choice, full, step, n):
+    """``choice`` (a part of the offered ``full``) without the parts whose removal costs less than KEEP_T /
+    KEEP_GAIN given the other effects ``model`` (the cheapest first, until every part left is needed). Returns
+    (the pruned choice, the per-point errors of the model with it)."""
+    se = errors(model, design.sub(full, choice, n))
+    while True:
+        best = None
+        for label, reduced in parts(choice):
+            s = errors(model, design.sub(full, reduced, n))
+            g = paired_gain(_mean(s), _mean(se))             # what keeping the part gains
+            if (g.t < KEEP_T or g.gain < KEEP_GAIN) and (best is None or g.t < best[0]):
+                best = (g.t, label, reduced, s)
+        if best is None:
+            return choice, se
+        t, label, choice, se = best
+        step.pruned.append((label, t))
+
+
+def _final_check(errors, model, steps) -> list[tuple[str, float]]:
+    """Drop taken effects that the others made unnecessary (removing one costs t < KEEP_T or < 2 KEEP_GAIN),
+    the cheapest first, until every one left is needed."""
+    dropped = []
+    while len(model) > 1:
+        se = errors(model)
+        worst = None
+        for i in range(len(model)):
+            g = paired_gain(_mean(errors(model[:i] + model[i + 1:])), _mean(se))
+            if (g.t < KEEP_T or g.gain < 2 * KEEP_GAIN) and (worst is None or g.t < worst[0]):
+                worst = (g.t, i)
+        if worst is None:
+            break
+        c = model.pop(worst[1])[0]
+        dropped.append((c.label, worst[0]))
+        steps[:] = [s for s in steps if s.choice is not c]
+    return dropped
