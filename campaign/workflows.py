@@ -33,7 +33,7 @@ from campaign.run.eta import RunEta, point_times_s
 from campaign.run.log_events import ExitStatus
 from campaign.run.log_reader import completed_point_ids, read_log
 from campaign.run.log_writer import RunLog
-from campaign.run.output_dirs import RUN, Claim, check_dir, check_finished_run, source_key
+from campaign.run.output_dirs import RUN, Claim, check_dir, check_finished_run, not_started, source_key
 from campaign.run.resume_checks import check_resume
 from campaign.run.runner import RunOutcome, closing_on_error, pending
 from campaign.run.session import (RunProgress, continue_clock, default_run_dir, make_runner, observe_points, open_log,
@@ -72,6 +72,10 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
     ``iso_model`` (the calibrated model and its file) when given."""
     cfg = cell.config
     console = console or stdout_console()
+    if resume is not None and not_started(resume):          # stopped before its log: nothing was measured
+        run_dir, resume, overwrite = Path(resume), None, True
+        console.print(f"{run_dir} stopped before its first record (nothing was measured): starting it there again",
+                      markup=False)
     if resume is not None:
         check_resume(resume, cfg)                           # every record's content vs plan.csv, fast
     else:

@@ -22,6 +22,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from campaign.errors import DataError
+from campaign.io.csv_cells import neutralise, restore
 from campaign.io.durable import atomic_write
 
 POINTS_INLINE_MAX = 10_000           # rows inline in report.json; more go to points.csv
@@ -75,7 +76,7 @@ class PointTable:
         """points.csv (atomic): header, then one row per point (a formatted line per row: no per-value calls)."""
         names, values = self._columns()
         fmt = ",".join(["%.10g"] * values.shape[1])
-        ids = self.point_id
+        ids = [neutralise(pid) for pid in self.point_id]               # spreadsheet-safe text cells
         if any(c in "\x00".join(ids) for c in ',"\r\n'):              # quote only when some id needs it
             ids = [_csv_text(pid) for pid in ids]
         lines = [",".join(["set", *names, "point_id"])]
@@ -107,7 +108,7 @@ class PointTable:
         at = {c: i for i, c in enumerate(names)}
         nq = sum(1 for c in names if c[0] == "q" and c[1:].isdigit())
         err = {s: values[:, [at[f"{s}_ex"], at[f"{s}_ey"], at[f"{s}_ez"]]] for s in ref["stages"]}
-        return cls(tuple(r[-1] for r in body), tuple(r[0] for r in body), values[:, at["q1"]:at["q1"] + nq],
+        return cls(tuple(restore(r[-1]) for r in body), tuple(r[0] for r in body), values[:, at["q1"]:at["q1"] + nq],
                    values[:, [at["x"], at["y"], at["z"]]], err, values[:, at["used"]],
                    values[:, at["t_s"]] if ref.get("t_s") else None,
                    values[:, at["pred_std_mm"]] if "pred_std_mm" in at else None)

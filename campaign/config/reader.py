@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from campaign.errors import ConfigError
-from drivers.redaction import has_userinfo, redact_url
+from drivers.redaction import has_userinfo, redact_url, register_userinfo
 from campaign.config.bounded_yaml import load_limited, read_limited
 
 from campaign.config.values import FrozenMap
@@ -147,15 +147,16 @@ class Reader:
     def url(self, key: str, schemes: Iterable[str]) -> str:
         """A driver URL ``scheme://...`` whose scheme is one of ``schemes``."""
         value = self.string(key)
+        if has_userinfo(value):                 # first: no later message may show the URL
+            register_userinfo(value)
+            raise self.error(key, "credentials in the URL are refused (the URL is written to logs and reports): "
+                                  "remove 'user:password@'; credentials go in the environment (RWS_USER, RWS_PASSWORD) "
+                                  "or a file named by options.credentials.file (docs/drivers_abb.md)")
         known = ", ".join(sorted(schemes))
         scheme, sep, _ = value.partition("://")
         if not sep:
             raise self.error(key, f"expected a driver URL like 'mock://...' (drivers: {known}), got "
                                   f"{describe(redact_url(value))}")
-        if has_userinfo(value):
-            raise self.error(key, "credentials in the URL are refused (the URL is written to logs and reports): "
-                                  "remove 'user:password@'; credentials go in the environment (RWS_USER, RWS_PASSWORD) "
-                                  "or a file named by options.credentials.file (docs/drivers_abb.md)")
         if scheme not in schemes:
             raise self.error(key, f"unknown driver {describe(scheme[:40])} (expected one of: {known})")
         return value

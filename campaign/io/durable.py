@@ -1,11 +1,16 @@
 """Durable file writes shared by the log, the reports and the write-back files."""
 from __future__ import annotations
 
+import glob
 import json
 import os
+import re
+import secrets
+import stat
 from pathlib import Path
 from typing import Any
 
+from campaign.errors import DataError
 from drivers.redaction import redact
 
 
@@ -31,19 +36,85 @@ def remove_quietly(path: Path) -> None:
         pass
 
 
-def temp_name(path: Path) -> Path:
-    """The hidden temporary name beside ``path`` used while it is written (``.NAME.PID.tmp``)."""
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+TEMP_SUFFIX = ".tmp"
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+
+
+def refuse_special(path: Path, what: str = "the output") -> None:
+    """DataError unless ``path`` is absent or a regular file (not followed: a link, device node, FIFO, socket or
+    directory there is never replaced, with or without --overwrite)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise DataError(str(path), f"{what} cannot be inspected: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a directory" if stat.S_ISDIR(mode) else
+                "a device, FIFO or socket")
+        raise DataError(str(path), f"{what} is {kind}, not a regular file: it is never replaced (not even with "
+                                   "--overwrite); give the path of a regular file")
+
+
+def create_temp(path: Path, mode: int = 0o666) -> tuple[int, Path]:
+    """``(fd, name)`` of a new hidden temporary file beside ``path``, ``.NAME.PID.RANDOM.tmp``, created with
+    ``O_EXCL | O_NOFOLLOW`` (a planted file or link of that name is never opened; a fresh name is drawn)."""
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(6)}{TEMP_SUFFIX}")
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, mode), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{path.parent}: no free temporary name")   # pragma: no cover - 100 collisions
+
+
+_TEMP_RE = re.compile(r"\.(?P<name>.+)\.(?P<pid>[0-9]+)(?:\.[0-9a-f]+)*\.tmp")
+
+
+def stale_temp(entry: Path) -> bool:
+    """True for a temporary file of ours left by a process that is gone (``.NAME.PID[.X].tmp``, a regular file of
+    this user whose PID no longer runs): safe to remove, and no reason to call a directory foreign."""
+    m = _TEMP_RE.fullmatch(entry.name)
+    if m is None:
+        return False
+    try:
+        st = os.lstat(entry)
+    except OSError:
+        return False
+    if not stat.S_ISREG(st.st_mode) or st.st_uid != os.getuid():
+        return False
+    pid = int(m["pid"])
+    if pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, OverflowError):
+        return False
+    return False
+
+
+def remove_stale_temps(path: Path) -> None:
+    """Remove the stale temporaries of ``path`` (:func:`stale_temp`) left beside it by killed writers."""
+    try:
+        entries = list(path.parent.glob(f".{glob.escape(path.name)}.*{TEMP_SUFFIX}"))
+    except OSError:
+        return
+    for entry in entries:
+        if stale_temp(entry):
+            remove_quietly(entry)
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically: temp file, fsync, os.replace, directory fsync.
-    A reader sees the old file or the new one, never a mix; the temporary file is removed on every exit path
-    (error, signal, a directory in the way)."""
+    """Write ``data`` to ``path`` atomically: a new temporary file (:func:`create_temp`), fsync, os.replace,
+    directory fsync. A reader sees the old file or the new one, never a mix; the temporary file is removed on
+    every exit path (error, signal, a directory in the way); an existing ``path`` that is not a regular file is
+    refused (:func:`refuse_special`); stale temporaries of ``path`` left by killed writers are removed."""
     path = Path(path)
-    tmp = temp_name(path)
+    refuse_special(path)
+    fd, tmp = create_temp(path)
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
         try:
             view = memoryview(data)
             while view:
@@ -51,11 +122,13 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
             os.fsync(fd)
         finally:
             os.close(fd)
+        refuse_special(path)                    # again: nothing may have been planted there meanwhile
         os.replace(tmp, path)
     except BaseException:
         remove_quietly(tmp)
         raise
     fsync_dir(path.parent)
+    remove_stale_temps(path)
     return path
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import signal
 import threading
 
-from campaign.io.durable import fsync_dir, remove_quietly
+from campaign.io.durable import create_temp, fsync_dir, remove_quietly
 
 from .log_reader import EXIT_STATUSES, LOG_NAME, LogContents, RunLogError, RunLogExistsError, encode_record, parse_log
 from .log_events import ExitStatus, LogEvent, ResumeEvent
@@ -91,9 +91,8 @@ def _create_with_start(path: Path, first_line: bytes) -> None:
     (``link`` fails if ``path`` exists).  Falls back to ``O_EXCL`` create +
     write where hard links are unsupported.
     """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    fd, tmp = create_temp(path, 0o644)      # O_EXCL | O_NOFOLLOW, a random name: never a planted file
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         try:
             _write_all(fd, first_line)
             os.fsync(fd)

@@ -17,18 +17,29 @@ Every directory a command creates carries a marker, ``.campaign-owner.json`` (``
   ``plan --csv``, ``select --out``, ``import --out``) is refused unless ``--overwrite``; one of a run directory's
   own files (its log, model, data) is refused even with ``--overwrite``: a run's files are its evidence.
 
-:meth:`Claim.take` creates the directory and writes the marker just before the first output is written.
+:meth:`Claim.take` creates the directory and writes the marker just before the first output is written. The claim
+holds under races: it takes the directory's lock (an flock on the directory, held until the process ends; a second
+writer is refused with one line), checks the directory again under that lock (a writer that finished meanwhile, or
+a file dropped there, is seen), and creates a new marker with ``O_EXCL``. A run holds the lock of its directory while
+it measures, so ``report`` and ``diagnose`` never write into a live run (:func:`check_campaign_dir`). Stale
+temporaries of killed writers (``campaign.io.durable.stale_temp``) never make a directory foreign.
 """
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
 from campaign.errors import DataError
-from campaign.io.durable import write_json
+from campaign.io.durable import create_temp, fsync_dir, remove_quietly, stale_temp, write_json
 from .log_reader import LOG_NAME
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
 
 MARKER = ".campaign-owner.json"
 FORMAT = "campaign-owner/1"
@@ -38,21 +49,76 @@ OVERWRITE_HINT = "give a new path, or --overwrite to write there anyway"
 
 @dataclass(frozen=True)
 class Claim:
-    """A checked output directory: ``take()`` creates it (with parents) and writes its marker."""
+    """A checked output directory: ``take()`` creates it (with parents), locks it and writes its marker."""
     path: Path
     kind: str
     source: str | None = None
+    overwrite: bool = False
+    option: str = "--out"
 
     def take(self) -> Path:
-        """Create the directory if needed and mark it as ``kind``'s (re-checked: nothing may have moved in)."""
+        """Create the directory if needed, take its lock, check it again under the lock (nothing may have moved in
+        since :func:`check_dir`) and mark it as ``kind``'s (a new marker with ``O_EXCL``)."""
         try:
             self.path.mkdir(parents=True, exist_ok=True)
         except FileExistsError:
-            raise DataError(str(self.path), "exists and is not a directory") from None
-        if read_marker(self.path) != _marker_fields(self.kind, self.source):
-            write_json(self.path / MARKER, {"format": FORMAT, "kind": self.kind, "source": self.source,
-                                            "created_utc": datetime.now(timezone.utc).isoformat()})
+            raise DataError(str(self.path), f"{self.option} exists and is not a directory") from None
+        hold_lock(self.path, self.option)
+        check_dir(self.path, self.kind, self.overwrite, self.source, self.option)      # under the lock
+        for entry in self.path.iterdir():
+            if stale_temp(entry):
+                remove_quietly(entry)
+        marker = read_marker(self.path)
+        if marker != _marker_fields(self.kind, self.source):
+            doc = {"format": FORMAT, "kind": self.kind, "source": self.source,
+                   "created_utc": datetime.now(timezone.utc).isoformat()}
+            if marker is None and not (self.path / MARKER).exists():
+                _create_marker(self.path / MARKER, doc)
+            else:
+                write_json(self.path / MARKER, doc)
         return self.path
+
+
+_held: dict[str, int] = {}     # directory -> descriptor of its lock, held until the process ends
+
+
+def hold_lock(directory: Path, option: str = "--out") -> None:
+    """Take the lock of ``directory`` for the rest of this process (an exclusive flock on the directory itself);
+    DataError when another process holds it (a run measuring there, or another command writing its outputs)."""
+    key = str(Path(directory).resolve())
+    if key in _held or fcntl is None:
+        return
+    try:
+        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_NOFOLLOW", 0))
+    except OSError as exc:
+        raise DataError(str(directory), f"{option}: cannot open the directory: {exc.strerror or exc}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise DataError(str(directory), f"{option} is in use by another campaign command right now (a run measuring, "
+                                        "or another command writing there): wait for it to end, or give another "
+                                        "path") from None
+    _held[key] = fd
+
+
+def _create_marker(path: Path, doc: dict) -> None:
+    """A new marker: written to a temporary file and hard-linked into place (fails if one appeared meanwhile)."""
+    fd, tmp = create_temp(path)
+    try:
+        try:
+            os.write(fd, json.dumps(doc, indent=1).encode())
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise DataError(str(path.parent), "another campaign command marked this directory at the same moment: "
+                                              "give another path") from None
+    finally:
+        remove_quietly(tmp)
+    fsync_dir(path.parent)
 
 
 def _marker_fields(kind: str, source: str | None) -> dict:
@@ -103,33 +169,44 @@ def check_finished_run(path: str | Path, command: str) -> Path:
     return directory
 
 
+def not_started(directory: str | Path) -> bool:
+    """A run's directory that holds no log yet (stopped between its marker and its first record): nothing was
+    measured, so ``run --resume`` and ``run --overwrite`` start the run there again."""
+    directory = Path(directory)
+    marker = read_marker(directory) if directory.is_dir() else None
+    return marker is not None and marker["kind"] == RUN and not (directory / LOG_NAME).exists()
+
+
 def check_dir(path: str | Path, kind: str, overwrite: bool = False, source: str | None = None,
               option: str = "--out") -> Claim:
     """Check that ``kind`` may write into ``path`` (see module doc); DataError (nothing written) otherwise."""
     path = Path(path)
+    claim = Claim(path, kind, source, overwrite, option)
+    if path.is_symlink():
+        raise DataError(str(path), f"{option} is a symbolic link: outputs never follow a link; give the directory "
+                                   "it points to")
     if not path.exists():
-        if path.is_symlink():
-            raise DataError(str(path), f"{option} is a dangling symbolic link")
-        return Claim(path, kind, source)
+        return claim
     if not path.is_dir():
         raise DataError(str(path), f"{option} exists and is not a directory")
     try:
-        entries = [p.name for p in path.iterdir()]
+        entries = [p.name for p in path.iterdir() if not stale_temp(p)]
     except OSError as exc:
         raise DataError(str(path), f"{option} is not readable: {exc.strerror or exc}") from None
     if not entries:
-        return Claim(path, kind, source)
+        return claim
     marker = read_marker(path)
     if is_run_dir(path) and kind != RUN:
         raise DataError(str(path), f"{option} is a run directory (another run's data): {kind} writes into a new "
                                    "directory and never replaces a run's model or report; give a new path")
-    if is_run_dir(path):
+    if is_run_dir(path) and (path / LOG_NAME).exists():
         raise DataError(str(path), f"{option} is another run's directory (it has a run log): continue it with "
                                    "--resume, or give a new path")
-    if marker == _marker_fields(kind, source):
-        return Claim(path, kind, source)
-    if overwrite:
-        return Claim(path, kind, source)
+    if is_run_dir(path) and not overwrite:        # stopped before its log: nothing was measured
+        raise DataError(str(path), f"{option} is a run that stopped before it measured anything (no {LOG_NAME}): "
+                                   "continue it with --resume, or start it again with --overwrite")
+    if marker == _marker_fields(kind, source) or overwrite:
+        return claim
     what = (f"holds the outputs of another {marker['kind']}" + (f" (of {marker['source']})" if marker["source"]
                                                                  else "")
             if marker is not None else f"is not empty and was not written by campaign {kind} ({_few(entries)})")
@@ -145,6 +222,12 @@ def check_campaign_dir(path: str | Path, what: str) -> Path:
     if read_marker(path) is None and not (path / LOG_NAME).exists():
         raise DataError(str(path), f"not a directory written by campaign (no {MARKER} or {LOG_NAME}): {what} does "
                                    "not write into it; name the output file, or give --overwrite to write there anyway")
+    try:
+        hold_lock(path, what)                   # held until this command ends: no run resumes under it
+    except DataError:
+        raise DataError(str(path), f"is in use by a live campaign command (a run measuring, or another command "
+                                   f"writing there): {what} does not write into it now; write elsewhere "
+                                   "(--out/--html/--json FILE) or wait for it to end") from None
     return path
 
 

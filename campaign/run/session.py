@@ -23,9 +23,9 @@ from .eta import RunEta
 from .log_reader import read_log
 from .log_records import PointRecord
 from .log_writer import RunLog
-from .output_dirs import RUN, Claim, check_dir
+from .output_dirs import RUN, Claim, check_dir, hold_lock
 from .resume_checks import check_unchanged
-from .runner import Runner, closing_on_error, start_record
+from .runner import Runner, start_record
 from .traceability import software_version
 from .tracker_quality import SmrPredictor
 
@@ -80,18 +80,20 @@ def open_log(cfg: CampaignConfig, plan: Plan, run_dir: Path | Claim | None, resu
     with its log, owner marker, config copy and plan CSV (its sha256 in the start record); or the resumed one
     after checking that neither the config nor the plan changed."""
     if resume is not None:
+        hold_lock(Path(resume), "--resume")                # one process at a time in a run's directory
         check_unchanged(resume, read_log(resume).start, cfg, plan)      # before touching the log
         return RunLog.open_for_resume(resume), Path(resume)
     claim = run_dir if isinstance(run_dir, Claim) else check_dir(run_dir or default_run_dir(cfg), RUN)
     run_dir = claim.path
     plan_text = plan_csv_text(plan).encode("utf-8")
+    # marker (and lock), config and plan first, the log last: a run stopped at any instant before its log holds
+    # nothing measured, and --resume or --overwrite starts it again there
+    claim.take()
+    copy_config(cfg, run_dir / "config.yaml")
+    atomic_write(run_dir / "plan.csv", plan_text)
     log = RunLog.create(run_dir, start_record(cfg.to_dict(), cfg.sha256, plan.sha256, software_version(),
                                               datetime.now(timezone.utc).isoformat())
                         | {"plan_csv_sha256": hashlib.sha256(plan_text).hexdigest()} | (identity or {}))
-    with closing_on_error(log):                             # the log never stays open without a stop record
-        claim.take()
-        copy_config(cfg, run_dir / "config.yaml")
-        atomic_write(run_dir / "plan.csv", plan_text)
     return log, run_dir
 
 
