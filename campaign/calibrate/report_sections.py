@@ -105,22 +105,55 @@ class LayerSummary:
 
 
 @dataclass(frozen=True)
+class HeldOutPoint:
+    """A held-out point whose error is absurd against the noise floor: its id and 3-D error (mm)."""
+    point_id: str
+    error_mm: float
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "HeldOutPoint":
+        return cls(text_field(d, "point_id"), figure_field(d, "error_mm"))
+
+
+@dataclass(frozen=True)
+class HeldOutOutliers:
+    """The final model's held-out points with an absurd error (``rule`` in words, e.g. a misread), named, and the
+    held-out figures ``without`` them. They stay in every other figure: never silently dropped."""
+    rule: str
+    points: tuple[HeldOutPoint, ...]
+    without: ErrorFigures
+
+    def to_dict(self) -> dict:
+        return record_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "HeldOutOutliers":
+        return cls(text_field(d, "rule"), records_field(d, "points", HeldOutPoint.from_dict),
+                   record_field(d, "without", ErrorFigures.from_dict))
+
+
+@dataclass(frozen=True)
 class StageResult:
     """One calibration stage evaluated on the ``test`` and ``calib`` rows; the final stage also carries the GPR
-    predictive spread and the residual layer's summary when it has them."""
+    predictive spread, the residual layer's summary and its absurd held-out points when it has them."""
     test: ErrorFigures
     calib: ErrorFigures
     test_pred_std_mm: PredictiveStd | None = None
     layer: LayerSummary | None = None
+    test_outliers: HeldOutOutliers | None = None
 
     def to_dict(self) -> dict:
-        return record_dict(self, omit_none=("test_pred_std_mm", "layer"))
+        return record_dict(self, omit_none=("test_pred_std_mm", "layer", "test_outliers"))
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "StageResult":
         return cls(record_field(d, "test", ErrorFigures.from_dict), record_field(d, "calib", ErrorFigures.from_dict),
                    record_field(d, "test_pred_std_mm", PredictiveStd.from_dict, True),
-                   record_field(d, "layer", LayerSummary.from_dict, True))
+                   record_field(d, "layer", LayerSummary.from_dict, True),
+                   record_field(d, "test_outliers", HeldOutOutliers.from_dict, True))
 
 
 @dataclass(frozen=True)

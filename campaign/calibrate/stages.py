@@ -39,8 +39,9 @@ from .multi_smr import multi_smr_report, screen_smrs
 from .plausibility import check_dataset, check_deltas, registered_kinematics, start_kinematics, start_smr_offsets_mm
 from .prepare import MIN_CALIB_ROWS, prepare
 from .report_points import PointTable, cell_summary, point_table, report_points_value
-from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, LayerSummary, MethodChoice,
-                              PredictiveStd, ResidualChoice, ResidualCV, RowCounts, StageResult, parameter_rows)
+from .report_sections import (NO_POINTS, EffectsReport, ErrorFigures, ExcludedPoint, HeldOutOutliers, HeldOutPoint,
+                              LayerSummary, MethodChoice, PredictiveStd, ResidualChoice, ResidualCV, RowCounts,
+                              StageResult, parameter_rows)
 
 
 REPORT_FORMAT = "campaign-report/1"
@@ -338,6 +339,10 @@ def evaluate_stages(ds: Dataset, cell: CellModel, *, force: bool = False) -> Eva
     stages[COMPENSATED] = _final_stage(stages[COMPENSATED], choice, spread, points)
     budget = calibration_budget(predict, stage_models, geo, stage.elastic, choice.kind, q, p, cell.weights(ds)[0],
                                 cell.covariance(p), meta_all, kept_rows, test, fl.floor_mm, subset, c.cv_folds)
+    if test.any():
+        outliers = held_out_outliers(np.array(ds.point_id)[test], table.err_base_mm[COMPENSATED][test],
+                                     fl.floor_mm)
+        stages[COMPENSATED] = replace(stages[COMPENSATED], test_outliers=outliers)
     return Evaluation(fitted, ds, plaus, fl, model, stage_models, stages, table, points, excluded, rejected_ids,
                       multi, budget)
 
@@ -385,6 +390,25 @@ def calibration_report(ev: Evaluation, cell: CellModel) -> CalibrationReport:
         multi_smr=ev.multi, cell=cell_summary(cfg), points=ev.points, parameters_fit=model.parameters.fit,
         parameters_sigma0=model.parameters.sigma0,
         parameters_geometry_only=None if stage.elastic is None else parameter_rows(result.table()), budget=ev.budget)
+
+
+ABSURD_OVER_FLOOR = 100.0     # a held-out error this many noise floors ...
+ABSURD_OVER_MEDIAN = 10.0     # ... and this many times the median held-out error: a misread, not an accuracy
+
+
+def held_out_outliers(point_ids: np.ndarray, err_mm: np.ndarray, floor_mm: float) -> HeldOutOutliers | None:
+    """The held-out points (ids (M,), errors (M, 3) mm) whose 3-D error exceeds both ABSURD_OVER_FLOOR x the
+    noise floor and ABSURD_OVER_MEDIAN x the median held-out error, with the figures without them; None when
+    there is none (or every point would be one)."""
+    e = np.linalg.norm(err_mm, axis=1)
+    absurd = (e > ABSURD_OVER_FLOOR * floor_mm) & (e > ABSURD_OVER_MEDIAN * np.median(e))
+    if not absurd.any() or absurd.all():
+        return None
+    order = np.flatnonzero(absurd)[np.argsort(-e[absurd])]
+    return HeldOutOutliers(f"error > {ABSURD_OVER_FLOOR:g} x the noise floor ({floor_mm:.3g} mm) and > "
+                           f"{ABSURD_OVER_MEDIAN:g} x the median held-out error",
+                           tuple(HeldOutPoint(str(point_ids[i]), float(e[i])) for i in order),
+                           ErrorFigures.of(error_stats(err_mm[~absurd])))
 
 
 def _final_stage(stage: StageResult, choice: LayerChoice, spread: PredictiveStd | None, points: dict) -> StageResult:

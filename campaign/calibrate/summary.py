@@ -17,7 +17,7 @@ from campaign.io.json_fields import (count_field, figure_field, get_field, list_
 
 from robocal.measure.noise import noise_max_mm
 
-from .report_sections import ErrorFigures
+from .report_sections import ErrorFigures, HeldOutOutliers
 
 PASS, FAIL, NO_CRITERION, NO_TEST_SET = "pass", "fail", "no acceptance criterion", "no held-out test set"
 
@@ -137,13 +137,14 @@ class Summary:
     rms_over_floor: float | None
     verdict: Verdict
     provenance: str | None = None
+    held_out_outliers: HeldOutOutliers | None = None   # absurd held-out errors, named, and the figures without
 
     @property
     def simulated(self) -> bool:
         return bool(self.simulated_devices)
 
     def to_dict(self) -> dict:
-        return record_dict(self)
+        return record_dict(self, omit_none=("held_out_outliers",))
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Summary":
@@ -152,7 +153,8 @@ class Summary:
                    record_field(d, "reasons", Reasons.from_dict),
                    record_field(d, "held_out", ErrorFigures.from_dict, True), figure_field(d, "noise_floor_mm"),
                    figure_field(d, "rms_over_floor"), record_field(d, "verdict", Verdict.from_dict),
-                   text_field(d, "provenance", True))
+                   text_field(d, "provenance", True),
+                   record_field(d, "held_out_outliers", HeldOutOutliers.from_dict, True))
 
 
 def summarize(report, acceptance=None) -> Summary:
@@ -165,7 +167,8 @@ def summarize(report, acceptance=None) -> Summary:
     ident = dict(report.identification)
     sim = ident.get("simulated_devices")
     return Summary(None if sim is None else tuple(sim), _model(report), _reasons(report), held, floor, ratio,
-                   verdict(held, acceptance, floor), ident.get("provenance"))
+                   verdict(held, acceptance, floor), ident.get("provenance"),
+                   None if held is None else final.test_outliers)
 
 
 def verdict(held: ErrorFigures | None, acceptance, floor_mm: float | None = None) -> Verdict:

@@ -68,7 +68,11 @@ def _load(text: str, loader_cls: type, file: str) -> Any:
         if size > MAX_EXPANDED_NODES:
             raise ConfigError(file, "", f"YAML expands to more than {MAX_EXPANDED_NODES} nodes through aliases "
                                         "(alias bomb?): write the values out")
-        return loader.construct_document(node)
+        try:
+            return loader.construct_document(node)
+        except ValueError:              # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+            raise ConfigError(file, _long_number_at(node), "a number with too many digits to read: not a "
+                                                            "campaign config value") from None
     except RecursionError:
         raise ConfigError(file, "", "YAML nested too deeply") from None
     finally:
@@ -111,3 +115,22 @@ def _iterative_guard(size, root) -> int:
         return size(root)
     except RecursionError:
         raise ConfigError("", "", "YAML nested too deeply") from None
+
+
+def _long_number_at(root: yaml.Node) -> str:
+    """``line L, column C`` of the first scalar too long to be a number ('' when none is found)."""
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.ScalarNode):
+            if len(node.value) > 1000 and node.value.lstrip("+-").replace("_", "")[:1].isdigit():
+                return f"line {node.start_mark.line + 1}, column {node.start_mark.column + 1}"
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(reversed(node.value))
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(n for pair in reversed(node.value) for n in reversed(pair))
+    return ""

@@ -39,7 +39,7 @@ from .glossary import GLOSSARY, UNCORRECTED_VS_NOMINAL
 from campaign.io.quantities import FLOOR_FMT, condition_meaning, condition_scale
 from .diagnosis_text import effect_label
 from .summary_text import (FORMATS, banner, diagnosis_line, held_out_line, iso_ap_line, iso_rp_line, iso_targets_line,
-                           iso_verdict_line, model_line, origin, reason_lines, simulated_banner, verdict_line,
+                           iso_verdict_line, model_line, origin, outliers_line, reason_lines, simulated_banner, verdict_line,
                            verified_line)
 
 CALIBRATION, ISO, DIAGNOSIS, VERIFY = "campaign-report/1", "campaign-iso9283/1", "campaign-diagnosis/1", "campaign-verify/1"
@@ -210,7 +210,8 @@ def summary_markup(src: ReportSources, num) -> dict | None:
     verified = [verified_line(v, of(f"verify{i}"), t) for i, v in enumerate(src.verify)]
     diagnosis = diagnosis_line(src.diagnosis, of("diagnosis"), effect_label, t) if src.diagnosis else None
     return {"banner": banner(s), "origin": origin(s), "model": model_line(s, n, t), "reasons": reason_lines(s, t),
-            "held_out": held_out_line(s, n, t), "verdict": verdict_line(s, n, t), "result": s.verdict.result,
+            "held_out": held_out_line(s, n, t), "outliers": outliers_line(s, n, t),
+            "verdict": verdict_line(s, n, t), "result": s.verdict.result,
             "verified": verified, "diagnosis": diagnosis}
 
 

@@ -72,6 +72,23 @@ def held_out_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str
             + text(" x the noise floor ") + num("noise_floor_mm", "floor") + text(" mm"))
 
 
+def outliers_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str | None:
+    """The held-out points with an absurd error, named, and the held-out figures without them (None: none)."""
+    o = s.held_out_outliers
+    if o is None:
+        return None
+    named = text(", ").join(text(f"{pt.point_id} ") + num(f"held_out_outliers.points.{i}.error_mm", "mm")
+                            + text(" mm") for i, pt in enumerate(o.points[:5]))
+    more = text(f" and {len(o.points) - 5} more") if len(o.points) > 5 else text("")
+    it = "them" if len(o.points) > 1 else "it"
+    return (text(f"{len(o.points)} held-out point{'s' if len(o.points) > 1 else ''} with an absurd error (a misread? "
+                 f"{o.rule}): ") + named + more + text(f"; the figures above include {it}; without {it}: mean ")
+            + num("held_out_outliers.without.mean_mm", "mm") + text(", RMS ")
+            + num("held_out_outliers.without.rms_mm", "mm") + text(", max ")
+            + num("held_out_outliers.without.max_mm", "mm") + text(" mm (n = ")
+            + num("held_out_outliers.without.n", "count") + text(")"))
+
+
 def verdict_line(s: Summary, num: Num, text: Callable[[str], str] = str) -> str:
     """PASS / FAIL against the configured acceptance bounds, or why there is no verdict."""
     v = s.verdict
@@ -164,6 +181,7 @@ def summary_lines(s: Summary) -> list[tuple[str, str]]:
     out = [(line, "bold red") for line in (banner(s), origin(s)) if line]
     out += [(model_line(s, num), "bold")] + [("  " + line, "") for line in reason_lines(s)]
     out.append((held_out_line(s, num), "bold"))
+    out += [(line, "bold red") for line in (outliers_line(s, num),) if line]
     style = {PASS: "bold green", FAIL: "bold red"}.get(s.verdict.result, "yellow")
     return out + [(verdict_line(s, num), style)]
 

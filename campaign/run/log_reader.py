@@ -161,8 +161,8 @@ def _decode_line(raw: bytes) -> tuple[dict | None, str]:
         obj = json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
         return None, "not valid UTF-8"
-    except ValueError as exc:
-        return None, f"not valid JSON ({exc.msg})"
+    except ValueError as exc:           # JSONDecodeError, or an integer of more digits than Python converts
+        return None, f"not valid JSON ({getattr(exc, 'msg', None) or 'a number too long to read'})"
     if not isinstance(obj, dict) or set(obj) != _RECORD_KEYS:
         return None, "not a record (expected keys kind, seq, data, crc)"
     kind, seq, data, crc = obj["kind"], obj["seq"], obj["data"], obj["crc"]

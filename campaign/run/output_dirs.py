@@ -33,7 +33,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from campaign.errors import DataError
-from campaign.io.durable import create_temp, fsync_dir, remove_quietly, stale_temp, write_json
+from campaign.io.durable import create_temp, fsync_dir, refuse_special, remove_quietly, stale_temp, write_json
 from .log_reader import LOG_NAME
 
 try:
@@ -245,6 +245,7 @@ def check_file(path: str | Path, overwrite: bool = False, option: str = "--out",
                                    "replaced, even with --overwrite; give a new path")
     if (path.exists() or path.is_symlink()) and not overwrite:
         raise DataError(str(path), f"{option}: the file exists: {OVERWRITE_HINT}")
+    refuse_special(path, option)                    # --overwrite replaces a regular file only, never through a link
     return path
 
 
