@@ -29,7 +29,7 @@ from campaign.errors import DataError
 from drivers.redaction import redact
 
 from campaign.io.durable import atomic_write
-from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file
+from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file, live_check
 from campaign.calibrate.calibration_report import COMPENSATED, ELASTIC, IDENTIFICATION_KEYS, KINEMATIC, STAGES, CalibrationReport
 from campaign.io.json_fields import RecordError
 from campaign.correct.verify_report import VerifyReport
@@ -279,6 +279,8 @@ def report_targets(directory: str | os.PathLike, out: str | os.PathLike | None =
     if out is None or Path(out).resolve() == default.resolve():
         if not overwrite:
             check_campaign_dir(directory, "report")
+        elif directory.is_dir():
+            live_check(directory, "report")                  # --overwrite never writes into a live run either
         html = check_file(default, overwrite=True, own=True)  # the directory's own report, written again
     else:
         html = check_file(out, overwrite)
@@ -290,8 +292,8 @@ def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = N
     """Write DIRECTORY/report.html (or ``out``) from the documents in DIRECTORY (or ``sources``), and its figures as
     PNG in the directory named after it (:func:`figures_dir`); every file atomically, after
     :func:`report_targets` accepted the paths."""
-    src = sources if sources is not None else collect(directory)
     html, figures_claim = report_targets(directory, out, overwrite)
+    src = sources if sources is not None else collect(directory)
     figures = build_figures(src)
     png_dir = figures_claim.take()
     for fs in figures.values():

@@ -222,13 +222,19 @@ def check_campaign_dir(path: str | Path, what: str) -> Path:
     if read_marker(path) is None and not (path / LOG_NAME).exists():
         raise DataError(str(path), f"not a directory written by campaign (no {MARKER} or {LOG_NAME}): {what} does "
                                    "not write into it; name the output file, or give --overwrite to write there anyway")
+    live_check(path, what)
+    return path
+
+
+def live_check(path: Path, what: str) -> None:
+    """Take the lock of a directory ``what`` adds its files to (held until this command ends, so no run resumes
+    under it); DataError when a live campaign command holds it: nothing is written into a live run."""
     try:
-        hold_lock(path, what)                   # held until this command ends: no run resumes under it
+        hold_lock(path, what)
     except DataError:
         raise DataError(str(path), f"is in use by a live campaign command (a run measuring, or another command "
                                    f"writing there): {what} does not write into it now; write elsewhere "
                                    "(--out/--html/--json FILE) or wait for it to end") from None
-    return path
 
 
 def check_file(path: str | Path, overwrite: bool = False, option: str = "--out", own: bool = False) -> Path:
