@@ -216,10 +216,10 @@ def verify(run_dir: Path, console: Console | None = None, *, force: bool = False
         continue_clock(devices.clock, contents)             # a simulated cell's time (and drift) goes on from the run
         identity = device_identity(robot, tracker)
         identity["identity_check"] = check_identity(cfg, identity, force)   # before the log and any move
+        claim.take()                                        # the marker (and lock) before the log
         log = RunLog.create(out_dir, {"config_sha256": cfg.sha256, "plan_sha256": "verify", "run": str(run_dir),
                                       "software_version": software_version()} | identity)
         stack.enter_context(closing_on_error(log))           # the runner closes it from execute_passes on
-        claim.take()
         logging_.to_file(out_dir)
         runner = make_runner(cell, devices, records=records, smr1_only=True)
 

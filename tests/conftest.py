@@ -24,6 +24,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
                                 + (f" (+{len(bad) - 10} more)" if len(bad) > 10 else ""))
 
 
+@pytest.fixture(autouse=True)
+def _directory_locks_end_with_the_test():
+    """A workflow called in-process holds its directories' locks until its command ends; a test is one command:
+    the locks end with it, so a later subprocess of the same test session may use those directories."""
+    yield
+    import sys
+    dirs = sys.modules.get("campaign.run.output_dirs")
+    if dirs is not None:
+        dirs.release_locks()
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     """``-n auto``: one worker more than the usable cores. About 40 % of the suite's wall time is spent waiting

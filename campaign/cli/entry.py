@@ -55,9 +55,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from campaign.cli.boundary import guarded
     from campaign.io.terminal_text import set_width
 
+    from campaign.run.output_dirs import release_locks
+
     set_width(getattr(args, "width", None))          # --width N of the table commands (None: the terminal's)
     argv_text = list(argv) if argv is not None else sys.argv[1:]
-    return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
+    try:
+        return guarded(lambda: args.func(args), argv_text, lambda: _run_dir_hint(args), _fail)
+    finally:
+        release_locks()                              # a command's directory locks end with it (also in-process)
 
 
 def _run_dir_hint(args: argparse.Namespace) -> Path | None:

@@ -102,6 +102,17 @@ def hold_lock(directory: Path, option: str = "--out") -> None:
     _held[key] = fd
 
 
+def release_locks() -> None:
+    """Release every directory lock this process holds (the end of a command run in-process; a process that
+    ends releases them anyway)."""
+    while _held:
+        _, fd = _held.popitem()
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+
+
 def _create_marker(path: Path, doc: dict) -> None:
     """A new marker: written to a temporary file and hard-linked into place (fails if one appeared meanwhile)."""
     fd, tmp = create_temp(path)

@@ -319,6 +319,10 @@ def test_diagnosis_with_an_effect_in_headless_chromium(tmp_path, capsys):
 
 @pytest.mark.system
 def test_report_command_errors_are_one_line(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2                     # the output is checked before any input
+    assert "not a directory written by campaign" in capsys.readouterr().err
+    (tmp_path / ".campaign-owner.json").write_text(json.dumps({"format": "campaign-owner/1", "kind": "reprocess",
+                                                                 "source": "x.csv", "created_utc": "2026-01-01"}))
     assert main(["report", str(tmp_path)]) == 2
     assert "no report.json" in capsys.readouterr().err
     (tmp_path / "report.json").write_text("{not json")
