@@ -26,7 +26,7 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from markupsafe import Markup
 
 from campaign.errors import DataError
-from drivers.redaction import redact
+from drivers.redaction import redact, redact_url
 
 from campaign.io.durable import atomic_write
 from campaign.run.output_dirs import Claim, check_campaign_dir, check_dir, check_file, live_check
@@ -250,6 +250,7 @@ def iso_summary_markup(doc: dict | None, num) -> dict | None:
 def render_html(src: ReportSources, figures: dict[str, list], figures_name: str = "report_figures") -> str:
     env = Environment(loader=PackageLoader("campaign.report", "templates"), autoescape=select_autoescape(["html", "j2"]),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    env.filters["url"] = lambda value: redact_url(str(value))    # a device URL: its user-info masked whole
     b64 = {f.name: base64.b64encode(f.png).decode() for fs in figures.values() for f in fs}
     num = _num_factory(src.docs())
     ident = dict(src.calibration.identification) if src.calibration else {
