@@ -17,6 +17,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from tests.campaign.kill_study import study, summary  # noqa: E402
+from tests.campaign.helpers import small_config  # noqa: E402
 from tests.campaign.test_hostile_harms import few_point_doc  # noqa: E402
 
 
@@ -25,14 +26,20 @@ def main() -> int:
     parser.add_argument("--kills", type=int, default=100)
     parser.add_argument("--seed", type=int, default=36)
     parser.add_argument("--keep", type=Path, help="keep the runs in this directory")
+    parser.add_argument("--small", action="store_true",
+                        help="the tests' 21-point cell (default: the 90-point reduced demo cell, whose measuring "
+                             "lasts longer, so that more kills land while it measures)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = args.keep or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
-        doc = few_point_doc()
-        doc["output"] = {"dir": str(work / "runs")}
-        cfg = work / "small.yaml"
-        cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
+        if args.small:
+            doc = few_point_doc()
+            doc["output"] = {"dir": str(work / "runs")}
+            cfg = work / "small.yaml"
+            cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
+        else:
+            cfg = small_config(work)
         trials = study(cfg, work, args.kills, args.seed)
     for k, t in enumerate(trials):
         print(f"{k:3d} kill at {t.delay_s:6.2f} s  {t.phase:18s} recovery {t.recovery:9s} exit {t.exit_code}  "
