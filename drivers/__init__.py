@@ -48,7 +48,7 @@ _HOMES = {                      # module -> the public names it holds
                         "decode_command", "encode_error", "encode_meas_result", "encode_reply",
                         "encode_status_change"),
     "mock": ("MockTracker", "MockWorld"),
-    "redaction": ("has_userinfo", "redact", "redact_url"),
+    "redaction": ("has_userinfo", "redact", "redact_url", "register_userinfo"),
     "registry": ("CellContext", "ROBOT_SCHEMES", "TRACKER_SCHEMES", "check_options", "open_robot", "open_tracker"),
     "ur_options": ("ROBOT_MODES", "SAFETY_MODES"),
 }

@@ -14,7 +14,7 @@ _HOMES = {                      # module -> the public names it holds
     "log_records": ("NestRecord", "OPTIONAL_FIELDS", "PointRecord", "Record", "SETS", "check_records"),
     "log_writer": ("RunLog",),
     "output_dirs": ("Claim", "RUN", "check_campaign_dir", "check_dir", "check_file", "check_finished_run",
-                    "is_run_dir", "read_marker", "source_key"),
+                    "is_run_dir", "live_check", "not_started", "read_marker", "release_locks", "source_key"),
     "resume_checks": ("check_resume",),
     "runner": ("RunOutcome", "closing_on_error", "pending"),
     "session": ("RunProgress", "continue_clock", "default_run_dir", "make_runner", "observe_points", "open_log",
