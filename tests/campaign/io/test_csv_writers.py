@@ -35,7 +35,8 @@ JOINS = re.compile(r'",".join\(|csv\.writer|render_rows')
 @pytest.mark.unit
 def test_every_module_that_writes_csv_text_is_an_enumerated_writer():
     found = {str(p.relative_to(ROOT)) for pkg in ("campaign", "drivers", "robocal") for p in (ROOT / pkg).rglob("*.py")
-             if WRITES.search(p.read_text()) and JOINS.search(p.read_text())}
+             if p.name != "__init__.py"                     # a room's door: names, no code
+             and WRITES.search(p.read_text()) and JOINS.search(p.read_text())}
     assert found == set(WRITERS) | set(NOT_CSV), found ^ (set(WRITERS) | set(NOT_CSV))
 
 
