@@ -298,6 +298,16 @@ def identification_jacobian_t(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.nd
     return p_tracker, Jt
 
 
+def jacobian_blocks(kin: Kinematics, q_rad: np.ndarray, rows: int):
+    """``identification_jacobian_t`` of consecutive row blocks of ``rows`` poses: (rows slice, p_tracker_mm (b, 3),
+    Jt (P, b, 3)), one block at a time (the fits that accumulate their normal equations never hold all rows' Jacobian)."""
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+    layout = ParamLayout.of(kin)
+    for s in range(0, len(q), rows):
+        b = slice(s, min(s + rows, len(q)))
+        yield (b, *_jacobian_block(kin, layout, q[b]))
+
+
 def _jacobian_block(kin: Kinematics, layout: ParamLayout, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(p_tracker_mm (N, 3), Jt (P, N, 3)) of one block of poses."""
     c = chain(kin, q_rad)

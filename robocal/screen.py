@@ -85,11 +85,13 @@ def near_neighbours(q_rad: np.ndarray, p_mm: np.ndarray, lever_mm: np.ndarray, n
     levers averaged over the two poses: a neighbour in another configuration or far in one joint is not near)."""
     n = len(p_mm)
     k = min(k_max, n - 1)
-    dist, idx = cKDTree(p_mm).query(p_mm, k=k + 1, distance_upper_bound=near_mm)
-    valid = np.isfinite(dist) & (idx != np.arange(n)[:, None])       # not the point itself (ties: any column)
-    idx = np.where(valid, idx, 0)
-    for b in _blocks(n):                               # row blocks: no (N, K, n) temporaries
-        nb = idx[b]
+    tree = cKDTree(p_mm)
+    idx, valid = np.empty((n, k + 1), np.int32 if n < 2**31 else np.intp), np.empty((n, k + 1), bool)
+    for b in _blocks(n):                               # row blocks: no (N, K) distances, no (N, K, n) temporaries
+        dist, nb = tree.query(p_mm[b], k=k + 1, distance_upper_bound=near_mm)
+        dist, nb = dist.reshape(len(dist), -1), nb.reshape(len(nb), -1)
+        valid[b] = np.isfinite(dist) & (nb != np.arange(b.start, b.start + len(nb))[:, None])   # not the point itself
+        idx[b] = nb = np.where(valid[b], nb, 0)
         lever = 0.5 * (lever_mm[b, None, :] + lever_mm[nb])
         d_joint = np.sqrt(np.sum(((q_rad[b, None, :] - q_rad[nb]) * lever) ** 2, axis=2))
         valid[b] &= d_joint <= JOINT_FACTOR * near_mm

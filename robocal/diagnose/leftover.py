@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..kinematics import ParamLayout, identification_jacobian
+from ..kinematics import JACOBIAN_ROWS, ParamLayout, jacobian_blocks
 from ..joint_gp import joint_directions
 from ..layers import fit_layer
 from .records import DiagnosisInput
@@ -30,6 +30,16 @@ def _base(kin, p_tracker):
     return (np.asarray(p_tracker, float) - T[:3, 3]) @ T[:3, :3]
 
 
+def _zero_columns(kin, q) -> tuple[np.ndarray, np.ndarray]:
+    """(SMR positions (N, 3) mm, tracker frame; their Jacobian columns of the joint zeros (N, 3, n)), in row blocks
+    (the Jacobian of the other parameters is not kept)."""
+    jc = [c for c, i, k in ParamLayout.of(kin).joint_cols if k == 0]
+    p, J = np.empty((len(q), 3)), np.empty((len(q), 3, len(jc)))
+    for b, pb, Jt in jacobian_blocks(kin, q, JACOBIAN_ROWS):
+        p[b], J[b] = pb, Jt[jc].transpose(1, 2, 0)
+    return p, J
+
+
 def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
     """(regions of the geometric model, maps of both) from held-out residuals: cross-validated on the fit rows,
     plus the test rows. The final model's regions are in ``maps["_final_regions"]``."""
@@ -40,11 +50,10 @@ def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
         held = np.concatenate([cv, r[test]]) if len(test) else cv
         inflate = 1.0 + opt.cv_param_inflation * stage["n_params"] / (3.0 * len(fit))
         cov = inp.cov_mm2[rows] * _floor_scale(inp) * inflate
-        p_model, J = identification_jacobian(kin, inp.q_rad[rows])
-        jc = [c for c, i, k in ParamLayout.of(kin).joint_cols if k == 0]
+        p_model, Jq = _zero_columns(kin, inp.q_rad[rows])
         sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
         regs, mp = where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base,
-                                  sub("t_s"), sub("approach"), sub("payload_kg"), J[:, :, jc], opt)
+                                  sub("t_s"), sub("approach"), sub("payload_kg"), Jq, opt)
         maps[name] = mp
         if name == "geometric":
             out += regs

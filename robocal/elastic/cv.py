@@ -13,6 +13,16 @@ import numpy as np
 
 RIDGE = 1e-9          # on unit-norm columns: directions the data cannot tell apart get no weight
 CHUNK_ROWS = 8192     # rows per block of the in-place whitening
+CV_MAX_ROWS = 200_000  # the cross-validated choices (effects, residual layer) and the diagnosis's analyses work on at
+#                        most this many rows: a seeded subset beyond (their memory and time stay bounded at any size)
+
+
+def capped_rows(n: int, max_rows: int = CV_MAX_ROWS, seed: int = 0) -> np.ndarray | None:
+    """Sorted indices of a seeded random subset of ``max_rows`` of ``n`` rows (measurement order kept), or None
+    when ``n <= max_rows`` (all rows)."""
+    if n <= max_rows:
+        return None
+    return np.sort(np.random.default_rng(seed).choice(n, max_rows, replace=False))
 
 
 def kfold(n: int, folds: int, seed: int = 0) -> np.ndarray:

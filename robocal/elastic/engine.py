@@ -14,9 +14,10 @@ from typing import Mapping
 
 import numpy as np
 
-from ..effects import GravityModel
+from ..effects import GravityModel, meta_rows
 from ..identify import CalibrationOptions
 from ..kinematics import Kinematics
+from .cv import CV_MAX_ROWS, capped_rows
 from .fit import ElasticResult, calibrate_elastic
 from .library import LibraryOptions, candidates, scan_families
 from .model import EffectChoice, FittedEffect
@@ -26,11 +27,13 @@ from .select import EffectSelection, select_effects
 
 @dataclass(frozen=True)
 class EngineOptions:
-    """Cross-validation folds and seed, at most ``max_effects`` effects, and the library's options."""
+    """Cross-validation folds and seed, at most ``max_effects`` effects, the library's options, and at most
+    ``max_rows`` rows in the selection (a seeded subset of the rows beyond: the choice needs no more)."""
     folds: int = 5
     seed: int = 0
     max_effects: int = 6
     library: LibraryOptions = field(default_factory=LibraryOptions)
+    max_rows: int = CV_MAX_ROWS
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,7 +53,9 @@ class EngineResult:
 def select(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
            cov_mm2: np.ndarray | None, meta: Mapping, gravity: GravityModel = GravityModel(),
            options: EngineOptions = EngineOptions()) -> EngineResult:
-    """Candidates + selection on the calibration rows (no fit yet): what ``effects: auto`` takes."""
+    """Candidates + selection on the calibration rows (no fit yet): what ``effects: auto`` takes. Beyond
+    ``options.max_rows`` rows the selection cross-validates a seeded subset of that many (the candidates, what the
+    data can reveal and the physical readings stay those of all rows)."""
     cands, cannot = candidates(kin_geo, q_rad, meta, gravity, options.library)
     scans, not_scanned = scan_families(q_rad, options.library)
 
@@ -58,8 +63,13 @@ def select(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_track
         eff = choice.build(kin_geo.n)
         fe = FittedEffect(choice, values, np.full(eff.k, np.nan), eff.param_names, eff.unit)
         return reading(fe, kin_geo, q_rad, meta, gravity, options.library)["plausible"]
-    sel = select_effects(kin_geo, geo_cols, q_rad, p_tracker_mm, cov_mm2, meta, cands, options.folds, options.seed,
-                         options.max_effects, plausible, scans)
+    rows = capped_rows(len(q_rad), options.max_rows, options.seed)
+    q, p, cov, m = q_rad, p_tracker_mm, cov_mm2, meta
+    if rows is not None:
+        q, p, m = np.asarray(q_rad)[rows], np.asarray(p_tracker_mm)[rows], meta_rows(meta, rows)
+        cov = None if cov_mm2 is None else np.asarray(cov_mm2)[rows]
+    sel = select_effects(kin_geo, geo_cols, q, p, cov, m, cands, options.folds, options.seed, options.max_effects,
+                         plausible, scans, of_rows=len(q_rad))
     return EngineResult(sel, tuple(cannot + not_scanned), tuple(cands))
 
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..effects import effect_regressor
-from ..identify import whitening
+from ..whitened import whitening
 from ..kinematics import Kinematics, identification_jacobian
 from ..stats import paired_gain
 from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
@@ -95,14 +95,20 @@ class EffectSelection:
     offered: tuple[str, ...] = ()                    # per taken effect: the candidate it was offered as (unpruned)
     shadowed: dict = field(default_factory=dict)     # label -> (taken label, share of the candidate's visible part
     #                                                  inside the taken effect's span): one class with it
+    rows: tuple[int, int] = (0, 0)                   # (rows cross-validated, calibration rows): a seeded subset when
+    #                                                  fewer
 
     def to_dict(self) -> dict:
+        sub = self.rows[0] < self.rows[1]
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
                           f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
                           "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
                           "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking; "
                           "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
-                          "every fold (nested)",
+                          "every fold (nested)" + (f"; on a seeded subset of {self.rows[0]} of the {self.rows[1]} "
+                                                   "calibration rows (the taken effects are fitted on all)" if sub
+                                                   else ""),
+                **({"rows": self.rows[0], "of_rows": self.rows[1]} if sub else {}),
                 "taken": [c.label for c in self.taken], "geometric_cv_rms_mm": self.geometric_cv_rms_mm,
                 "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
@@ -147,14 +153,15 @@ def _rms(se) -> float:
 
 def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
                    cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
-                   max_effects: int = 6, plausible=None, scans=()) -> EffectSelection:
+                   max_effects: int = 6, plausible=None, scans=(), of_rows: int | None = None) -> EffectSelection:
     """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
     columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
     values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
     over them < 2) a plausible one is preferred to an implausible best. ``scans``: families of alternatives
     (``library.scan_families``: one joint's cyclic errors of every higher order); each family is one candidate
     per round, its member chosen inside every fold of the cross-validation (nested: the scan's pick among many
-    orders does not make its held-out errors optimistic) and, to be taken, on all rows."""
+    orders does not make its held-out errors optimistic) and, to be taken, on all rows. ``of_rows``: the rows these
+    are a subset of (reported)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     pool = list(dict.fromkeys(candidates))
@@ -232,7 +239,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
                            tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
-                           tuple(e[2].label for e in model), shadowed)
+                           tuple(e[2].label for e in model), shadowed, (len(q), of_rows or len(q)))
 
 
 def _family_label(family) -> str:
