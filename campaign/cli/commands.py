@@ -155,6 +155,7 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
          _select_arguments)
 def cmd_select(args: argparse.Namespace) -> int:
     from campaign.data.interchange_csv import write_csv
+    from campaign.data.memory_check import SELECT
     from campaign.data.source import load_source
     from campaign.calibrate.select_rows import select_rows
     from campaign.report.terminal import render_selection
@@ -167,7 +168,7 @@ def cmd_select(args: argparse.Namespace) -> int:
     from campaign.run.output_dirs import check_file
 
     check_file(args.out, args.overwrite)
-    ds = load_source(args.data).dataset
+    ds = load_source(args.data, SELECT).dataset
     with forced(args.force):
         sel = select_rows(ds, cell, args.points)
     write_csv(args.out, ds.with_order_context().subset(sel.keep))   # each kept row: how the robot reached it
