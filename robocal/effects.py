@@ -389,7 +389,7 @@ def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) ->
     given ``[(Effect, params (K,)), ...]``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     dq, scale, dp = effect_state(kin, q, meta, effects)
-    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False)
+    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False, axes=False)
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     return transform_points(kin.T_tracker_base, p_base) + dp
 

@@ -73,8 +73,11 @@ def reach_mm(kin: Kinematics) -> float:
 
 def joint_levers_mm(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """(N, n) lever arm of every joint to the SMR (mm per rad of that joint): |axis_j x (p_smr - o_j)|."""
-    c = chain(kin, np.atleast_2d(q_rad), full=False)
-    p = smr_base(kin, q_rad, c.T_base_flange)
+    q = np.atleast_2d(q_rad)
+    if len(q) > CHUNK_ROWS:                         # row blocks: no (N, n, 3) frames
+        return np.concatenate([joint_levers_mm(kin, q[b]) for b in _blocks(len(q))])
+    c = chain(kin, q, full=False)
+    p = smr_base(kin, q, c.T_base_flange)
     return np.linalg.norm(np.cross(c.axis, p[:, None, :] - c.origin), axis=2)
 
 

@@ -52,10 +52,11 @@ class EngineResult:
 
 def select(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
            cov_mm2: np.ndarray | None, meta: Mapping, gravity: GravityModel = GravityModel(),
-           options: EngineOptions = EngineOptions()) -> EngineResult:
+           options: EngineOptions = EngineOptions(), of_rows: int | None = None) -> EngineResult:
     """Candidates + selection on the calibration rows (no fit yet): what ``effects: auto`` takes. Beyond
     ``options.max_rows`` rows the selection cross-validates a seeded subset of that many (the candidates, what the
-    data can reveal and the physical readings stay those of all rows)."""
+    data can reveal and the physical readings are those of all the rows given); ``of_rows``: the calibration rows
+    these rows already are a subset of (the caller gathered only them), reported with the selection."""
     cands, cannot = candidates(kin_geo, q_rad, meta, gravity, options.library)
     scans, not_scanned = scan_families(q_rad, options.library)
 
@@ -69,7 +70,7 @@ def select(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_track
         q, p, m = np.asarray(q_rad)[rows], np.asarray(p_tracker_mm)[rows], meta_rows(meta, rows)
         cov = None if cov_mm2 is None else np.asarray(cov_mm2)[rows]
     sel = select_effects(kin_geo, geo_cols, q, p, cov, m, cands, options.folds, options.seed, options.max_effects,
-                         plausible, scans, of_rows=len(q_rad))
+                         plausible, scans, of_rows=of_rows or len(q_rad))
     return EngineResult(sel, tuple(cannot + not_scanned), tuple(cands))
 
 

@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..effects import effect_regressor
+from ..effects import effect_regressor, meta_rows
 from ..whitened import whitening
-from ..kinematics import Kinematics, identification_jacobian
+from ..kinematics import JACOBIAN_ROWS, Kinematics, identification_jacobian
 from ..stats import paired_gain
 from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
 from .library import parts, refinements
@@ -122,17 +122,23 @@ class _Design:
     written into one (N, 3, P) array ``A`` (no list of blocks to concatenate)."""
 
     def __init__(self, kin, geo_cols, q, meta, choices):
-        p, J = identification_jacobian(kin, q)
-        self.p0 = p
         built = [c.build(kin.n) for c in choices]
-        self.A = design_array(len(q), len(geo_cols) + sum(eff.k for eff in built))
-        self.A[:, :, :len(geo_cols)] = J[:, :, geo_cols]
+        G = len(geo_cols)
+        self.A = design_array(len(q), G + sum(eff.k for eff in built))
+        self.p0 = np.empty((len(q), 3))
+        for s in range(0, len(q), JACOBIAN_ROWS):            # row blocks: no Jacobian or basis of every row
+            b = slice(s, s + JACOBIAN_ROWS)
+            p, J = identification_jacobian(kin, q[b])
+            self.p0[b], self.A[b, :, :G] = p, J[:, :, geo_cols]
+            at, mb = G, meta_rows(meta, b)
+            for eff in built:
+                self.A[b, :, at:at + eff.k] = effect_regressor(kin, q[b], mb, eff, jacobian=(p, J))
+                at += eff.k
         self.cols: dict[EffectChoice, np.ndarray] = {}
         self.names: dict[EffectChoice, tuple[str, ...]] = {}
-        at = len(geo_cols)
+        at = G
         self.geo = np.arange(at)
         for c, eff in zip(choices, built):
-            self.A[:, :, at:at + eff.k] = effect_regressor(kin, q, meta, eff, jacobian=(p, J))
             self.cols[c] = np.arange(at, at + eff.k)
             self.names[c] = eff.param_names
             at += eff.k
