@@ -24,7 +24,7 @@ from ..effects import effect_regressor, meta_rows
 from ..whitened import whitening
 from ..kinematics import JACOBIAN_ROWS, Kinematics, identification_jacobian
 from ..stats import paired_gain
-from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
+from .cv import BlockedCV, Blocking, order_blocks, pose_blocks
 from .library import parts, refinements
 from .model import EffectChoice
 
@@ -118,30 +118,36 @@ class EffectSelection:
 
 
 class _Design:
-    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement),
-    written into one (N, 3, P) array ``A`` (no list of blocks to concatenate)."""
+    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement).
+    ``blocks()`` computes the design (N, 3, P) and the residuals of the geometric solution row block by row block
+    (``BlockedCV.of_blocks`` keeps it whitened, in float32)."""
 
-    def __init__(self, kin, geo_cols, q, meta, choices):
-        built = [c.build(kin.n) for c in choices]
-        G = len(geo_cols)
-        self.A = design_array(len(q), G + sum(eff.k for eff in built))
-        self.p0 = np.empty((len(q), 3))
-        for s in range(0, len(q), JACOBIAN_ROWS):            # row blocks: no Jacobian or basis of every row
-            b = slice(s, s + JACOBIAN_ROWS)
-            p, J = identification_jacobian(kin, q[b])
-            self.p0[b], self.A[b, :, :G] = p, J[:, :, geo_cols]
-            at, mb = G, meta_rows(meta, b)
-            for eff in built:
-                self.A[b, :, at:at + eff.k] = effect_regressor(kin, q[b], mb, eff, jacobian=(p, J))
-                at += eff.k
+    def __init__(self, kin, geo_cols, q, p_meas, meta, choices):
+        self._args = (kin, np.asarray(geo_cols, int), q, p_meas, meta, [c.build(kin.n) for c in choices])
         self.cols: dict[EffectChoice, np.ndarray] = {}
         self.names: dict[EffectChoice, tuple[str, ...]] = {}
-        at = G
+        at = len(geo_cols)
         self.geo = np.arange(at)
-        for c, eff in zip(choices, built):
+        for c, eff in zip(choices, self._args[5]):
             self.cols[c] = np.arange(at, at + eff.k)
             self.names[c] = eff.param_names
             at += eff.k
+        self.P = at
+
+    def blocks(self):
+        """(rows slice, A_b (b, 3, P), measured - geometric model (b, 3) mm) of consecutive row blocks."""
+        kin, geo_cols, q, p_meas, meta, built = self._args
+        G = len(geo_cols)
+        for s in range(0, len(q), JACOBIAN_ROWS):            # row blocks: no Jacobian or basis of every row
+            b = slice(s, min(s + JACOBIAN_ROWS, len(q)))
+            p, J = identification_jacobian(kin, q[b])
+            A = np.empty((len(p), 3, self.P))
+            A[:, :, :G] = J[:, :, geo_cols]
+            at, mb = G, meta_rows(meta, b)
+            for eff in built:
+                A[:, :, at:at + eff.k] = effect_regressor(kin, q[b], mb, eff, jacobian=(p, J))
+                at += eff.k
+            yield b, A, p_meas[b] - p
 
     def sub(self, full: EffectChoice, reduced: EffectChoice, n: int) -> np.ndarray:
         """Columns of ``reduced`` (a part of ``full`` removed) among ``full``'s columns."""
@@ -173,13 +179,14 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     pool = list(dict.fromkeys(candidates))
     extra = [r for c in pool for r in refinements(c, n) if r not in pool]
     families = [tuple(f) for f in scans if len(f)]
-    design = _Design(kin, geo_cols, q, meta, pool + extra + [c for f in families for c in f if c not in pool + extra])
-    r0 = np.asarray(p_tracker_mm, float) - design.p0
+    design = _Design(kin, geo_cols, q, np.asarray(p_tracker_mm, float), meta,
+                     pool + extra + [c for f in families for c in f if c not in pool + extra])
     blockings = [Blocking("pose blocks", pose_blocks(q, folds, seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], folds)))
-    cv = BlockedCV(design.A, r0, whitening(cov_mm2, len(q)), blockings, copy=False)     # whitened in place
-    design.A = None
+    W = whitening(cov_mm2, len(q))
+    W = np.broadcast_to(np.eye(3), (len(q), 3, 3)) if W is None else W
+    cv = BlockedCV.of_blocks(design.blocks(), len(q), design.P, W, blockings)
     model: list[tuple[EffectChoice, np.ndarray, EffectChoice]] = []   # taken (choice, its columns, as offered)
 
     def errors(entries, extra_cols=()):

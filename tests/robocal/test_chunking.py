@@ -181,3 +181,28 @@ def test_elastic_fit_and_effects_in_row_blocks_equal_one_block(monkeypatch):
         np.testing.assert_allclose(b.std, a.std, rtol=1e-6)
     assert blocked.sigma0 == pytest.approx(one.sigma0, rel=1e-9) and blocked.iterations == one.iterations
     np.testing.assert_allclose(blocked.residual_tracker_mm, one.residual_tracker_mm, atol=1e-9)
+
+
+def test_blocked_cv_built_from_row_blocks_keeps_float64_fits_and_float32_columns():
+    """``BlockedCV.of_blocks``: the design whitened and added to the folds' Gram matrices block by block (fits:
+    the whole-design numbers to rounding), the columns kept in float32 (held-out errors to ~1e-7 of the size of
+    the predictions they are the difference of)."""
+    rng = np.random.default_rng(3)
+    N, P = 90, 6
+    A = rng.normal(size=(N, 3, P)) * [1.0, 10.0, 0.1, 1.0, 100.0, 1.0]
+    y = A @ rng.normal(size=P) + rng.normal(0, 0.1, (N, 3))
+    W = np.linalg.inv(np.tril(rng.normal(0, 0.1, (N, 3, 3))) + np.eye(3))
+    blockings = [Blocking("pose", pose_blocks(rng.normal(size=(N, 6)), 4, seed=1)),
+                 Blocking("order", np.arange(N) * 4 // N)]
+    one = BlockedCV(A, y, W, blockings)
+    blocks = [(slice(s, min(s + 13, N)), A[s:s + 13], y[s:s + 13]) for s in range(0, N, 13)]
+    built = BlockedCV.of_blocks(iter(blocks), N, P, W, blockings)
+    assert built.Aw.dtype == np.float32
+    np.testing.assert_allclose(built.Aw, one.Aw, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(built.scale, one.scale, rtol=1e-12)
+    for cols in ([0, 1, 2], [0, 2, 4, 5], list(range(P))):
+        np.testing.assert_allclose(built.fit(cols), one.fit(cols), rtol=1e-9)
+        for i in range(len(blockings)):
+            err = one.errors(cols, i)
+            assert np.abs(built.errors(cols, i) - err).max() < 1e-6 * np.abs(y - err).max()
+    np.testing.assert_allclose(built.absorbed([4, 5], [0, 1]), one.absorbed([4, 5], [0, 1]), rtol=1e-9)

@@ -323,8 +323,8 @@ def test_beyond_max_rows_the_choices_are_those_of_a_seeded_subset_and_say_so():
                     options=EngineOptions(library=lib))                                        # warm-up's reference
     assert capped.selection.rows == (150, len(cal)) and direct.selection.rows == (150, 150)
     assert [t.label for t in capped.selection.trials] == [t.label for t in direct.selection.trials]
-    assert [t.cv_rms_mm for t in capped.selection.trials] == pytest.approx(      # (a drift's clock span: all rows')
-        [t.cv_rms_mm for t in direct.selection.trials], rel=1e-9)
+    assert [t.cv_rms_mm for t in capped.selection.trials] == pytest.approx(      # (a drift's clock span: all rows';
+        [t.cv_rms_mm for t in direct.selection.trials], rel=1e-6)                 # the CV keeps float32)
     assert [c.label for c in capped.taken] == [c.label for c in direct.taken]
     d = capped.selection.to_dict()
     assert (d["rows"], d["of_rows"]) == (150, len(cal)) and "seeded subset of 150" in d["method"]
