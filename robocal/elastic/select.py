@@ -36,6 +36,7 @@ SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) l
 SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
+BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
 
 @dataclass(frozen=True)
@@ -138,8 +139,9 @@ class _Design:
         """(rows slice, A_b (b, 3, P), measured - geometric model (b, 3) mm) of consecutive row blocks."""
         kin, geo_cols, q, p_meas, meta, built = self._args
         G = len(geo_cols)
-        for s in range(0, len(q), JACOBIAN_ROWS):            # row blocks: no Jacobian or basis of every row
-            b = slice(s, min(s + JACOBIAN_ROWS, len(q)))
+        rows = int(np.clip(BLOCK_VALUES // self.P, 256, JACOBIAN_ROWS))     # blocks of ~12 MB whatever the columns
+        for s in range(0, len(q), rows):                     # row blocks: no Jacobian or basis of every row
+            b = slice(s, min(s + rows, len(q)))
             p, J = identification_jacobian(kin, q[b])
             A = np.empty((len(p), 3, self.P))
             A[:, :, :G] = J[:, :, geo_cols]
