@@ -4,7 +4,9 @@ A command's peak memory grows with the rows of its data: ``campaign reprocess`` 
 ``CALIBRATE.row_bytes`` per row (the dataset, the per-row arrays of the fits and predictions, the per-point
 report) on top of ``CALIBRATE.base_bytes``, and, up to ``CV_MAX_ROWS`` rows, by ``CALIBRATE.capped_row_bytes`` more
 per row (the cross-validated choices work on at most that many rows); ``campaign select`` by its own ``SELECT``.
-The figures are the peaks ``bench/bench_scale.py`` measured, with a margin. Where the need exceeds what this
+The figures are the line through the peaks ``bench/bench_scale.py`` measured at 20 000, 200 000 and
+1 000 000 rows (docs/results.md; for ``CALIBRATE`` the larger of reprocess and diagnose), each constant
+raised by 15 % and rounded up. Where the need exceeds what this
 process may still use (the memory available on the machine, the address-space limit ``ulimit -v`` and the
 control group's limit, whichever is least), the command stops with one line saying how many rows fit and what to
 do, instead of running out of memory part-way.
@@ -45,9 +47,11 @@ class Need:
         return int(CV_MAX_ROWS + (budget - self.bytes(CV_MAX_ROWS)) // self.row_bytes)
 
 
-CALIBRATE = Need(300 * MIB, 1100, 3500, "calibrate a subset (`campaign select DATA --points N --out SUBSET.csv` keeps N "
+# measured peaks (MiB) at 20k / 200k / 1M rows: diagnose 410 / 929 / 1651 (reprocess 325 / 676 / 1463): the line
+# 352 MiB + 946 B/row + 2077 B/row up to CV_MAX_ROWS; select 203 / 873 / 1303: 129 MiB + 564 + 3339 B/row; + 15 %
+CALIBRATE = Need(410 * MIB, 1100, 2400, "calibrate a subset (`campaign select DATA --points N --out SUBSET.csv` keeps N "
                  "calibration rows and every test and check row) or use a machine with more memory")
-SELECT = Need(250 * MIB, 700, 3500, "split the data into parts of at most that many rows, or use a machine with more "
+SELECT = Need(150 * MIB, 650, 3850, "split the data into parts of at most that many rows, or use a machine with more "
               "memory")
 
 

@@ -2,6 +2,10 @@
 the command with one line saying how many rows fit and what to do, before anything is read."""
 from __future__ import annotations
 
+import resource
+import subprocess
+import sys
+
 import pytest
 
 from campaign.cli import main
@@ -44,3 +48,22 @@ def test_data_too_large_for_the_memory_stops_early_with_one_line(tmp_path, monke
     assert err[0].startswith(f"error: {csv}: 5000 rows need about ") and f"at most {fits} rows fit" in err[0]
     assert ("campaign select" in err[0]) == (command != "select")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.csv"]        # nothing written
+
+
+@pytest.mark.system
+def test_under_a_real_address_space_limit_the_command_stops_before_reading(tmp_path):
+    """No patch: ``diagnose`` of 300 000 rows in a child limited to 1 GiB of address space (``ulimit -v``) stops at
+    the check with one line naming that limit, exit 2 (read, the rows would end in a MemoryError or another error)."""
+    csv = _csv(tmp_path, 300_000)
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))
+
+    proc = subprocess.run([sys.executable, "-m", "campaign", "diagnose", str(csv), "--config",
+                           str(ROOT / "configs" / "irb2600.yaml"), "--json", str(tmp_path / "d.json")],
+                          cwd=ROOT, capture_output=True, text=True, preexec_fn=limit, timeout=120)
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(err) == 1, proc.stderr
+    assert err[0].startswith(f"error: {csv}: 300000 rows need about ") and "the address-space limit" in err[0]
+    fit = int(err[0].split("at most ")[1].split()[0])
+    assert 0 < fit < 300_000 and not (tmp_path / "d.json").exists()
