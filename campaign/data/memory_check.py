@@ -69,19 +69,10 @@ def count_rows(source: str | os.PathLike) -> int:
     return lines
 
 
-def _status_kib(key: str) -> int | None:
+def _proc_kib(path: str, key: str) -> int | None:
+    """The KiB value of ``key`` in a /proc file of ``key: value kB`` lines (None when absent or unreadable)."""
     try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith(key + ":"):
-                return int(line.split()[1])
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def _meminfo_kib(key: str) -> int | None:
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
+        for line in Path(path).read_text().splitlines():
             if line.startswith(key + ":"):
                 return int(line.split()[1])
     except (OSError, ValueError, IndexError):
@@ -104,11 +95,11 @@ def available_bytes() -> tuple[int, str] | None:
     machine's available memory, the address-space limit (``ulimit -v``) less what the process already maps, and
     the control group's memory limit less its use."""
     out = []
-    avail = _meminfo_kib("MemAvailable")
+    avail = _proc_kib("/proc/meminfo", "MemAvailable")
     if avail is not None:
         out.append((avail * 1024, "available memory"))
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    mapped = _status_kib("VmSize")
+    mapped = _proc_kib("/proc/self/status", "VmSize")
     if soft != resource.RLIM_INFINITY and mapped is not None:
         out.append((soft - mapped * 1024, "the address-space limit (ulimit -v)"))
     cg = _cgroup_free()
