@@ -19,6 +19,7 @@ from rich.console import Console
 from campaign.config.cell_model import CellModel
 from campaign.config.load import load_cell
 from campaign.data.interchange_csv import write_csv
+from campaign.data.memory_check import SELECT
 from campaign.data.source import csv_provenance, load_source
 from campaign.io.terminal_text import stdout_console
 from campaign.plan.build import build_plan
@@ -278,7 +279,7 @@ def select(data: Path, cell: CellModel, n: int, out: Path, *, adaptive: bool = F
     if out.resolve() == data.resolve():
         raise DataError(str(out), "the subset would overwrite its source; choose another --out")
     check_file(out, overwrite)
-    ds = load_source(data).dataset
+    ds = load_source(data, SELECT).dataset
     if adaptive:
         from campaign.calibrate.select_adaptive import adaptive_selection
         sel = adaptive_selection(ds, cell, n, force=force)

@@ -13,6 +13,7 @@ import numpy as np
 
 from robocal.measure.approach import approach_signs, moves_from_order
 from robocal.effects.model import EffectChoice
+from robocal.effects.cv import capped_rows
 from robocal.effects.engine import EngineOptions, EngineResult, select_candidates
 from robocal.effects.fit import calibrate_elastic
 from robocal.kinematics.models import ParamLayout
@@ -44,26 +45,34 @@ def order_meta(ds: Dataset) -> dict:
 def effect_meta(ds: Dataset, cell: CellModel, rows=None, order: dict | None = None) -> dict:
     """Per-row metadata of the physical effects of the rows ``rows`` (default all): payload (kg; the tool's when
     the data has none), time (s) and temperature (deg C), and the ``order_meta`` (given, or from ``ds``)."""
-    rows = np.arange(len(ds)) if rows is None else np.asarray(rows)
     n = len(ds)
     pay = ds.payload_kg if ds.payload_kg is not None else np.full(n, cell.payload_kg)
     meta = {"payload_kg": np.asarray(pay, float), "t_s": None if ds.t_s is None else np.asarray(ds.t_s, float),
             "temp_c": None if ds.temp_c is None else np.asarray(ds.temp_c, float),
             **(order_meta(ds) if order is None else order)}
-    return subset(meta, rows)
+    return meta if rows is None else subset(meta, np.asarray(rows))
 
 
-def effect_choices(cell: CellModel, kin, cols, q, p, cov, meta) -> tuple[list[EffectChoice], object]:
+def effect_choices(cell: CellModel, kin, cols, q, p, cov, meta, rows=None) -> tuple[list[EffectChoice], object]:
     """(choices, selection or None) of ``calibration.effects`` around the geometric solution ``kin`` (identified
     ParamLayout columns ``cols``) of the points q (N, n) rad, p (N, 3) mm, cov (N, 3, 3) mm^2, ``meta``: the
-    configured list, or what the effect engine takes under ``auto``."""
+    configured list, or what the effect engine takes under ``auto``. ``rows``: the rows of those arrays to choose
+    on (default all); beyond the engine's ``max_rows`` only a seeded subset of them is gathered, the one the
+    selection cross-validates (robocal.effects.select)."""
     spec = cell.config.calibration.effects
     if spec == "none":
         return [], None
     if spec != "auto":
         return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                            for k, v in s.params.items())) for s in spec], None
-    eng = select_candidates(kin, cols, q, p, cov, meta, cell.gravity, EngineOptions(folds=cell.config.calibration.cv_folds))
+    opts = EngineOptions(folds=cell.config.calibration.cv_folds)
+    of_rows = None
+    if rows is not None:
+        of_rows = len(rows)
+        few = capped_rows(of_rows, opts.max_rows, opts.seed)
+        rows = np.asarray(rows) if few is None else np.asarray(rows)[few]
+        q, p, cov, meta = q[rows], p[rows], cov[rows], subset(meta, rows)
+    eng = select_candidates(kin, cols, q, p, cov, meta, cell.gravity, opts, of_rows=of_rows)
     return list(eng.taken), eng
 
 
@@ -98,8 +107,7 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
     kept = geo.rows[geo.keep]
     payload = cell.payload_kg
     cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified], int)
-    choices, engine = effect_choices(cell, result.kinematics, cols, q[kept], p[kept], cov_all[kept],
-                                     subset(meta_all, kept))
+    choices, engine = effect_choices(cell, result.kinematics, cols, q, p, cov_all, meta_all, kept)
     model = CalibratedModel(result.kinematics, None, None, (), payload, result.table())
     if not choices:
         return ElasticStage((), engine, None, model, kept, geo.screen, meta_all)

@@ -15,6 +15,7 @@ rows go to ``points.csv`` beside it: one row per point, columns ``set, used, t_s
 from __future__ import annotations
 
 import csv
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Mapping
@@ -28,6 +29,7 @@ from campaign.io.durable import atomic_write
 POINTS_INLINE_MAX = 10_000           # rows inline in report.json; more go to points.csv
 POINTS_FILE = "points.csv"
 POINTS_FORMAT = "campaign-points/1"
+CSV_ROWS = 20_000                    # rows of points.csv formatted or parsed at a time
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,56 +55,60 @@ class PointTable:
                 "err_base_mm": {k: _rounded(v, 4) for k, v in self.err_base_mm.items()},
                 "used": _rounded(self.used, 0), "t_s": None if self.t_s is None else _rounded(self.t_s, 3)}
 
-    def _columns(self) -> tuple[list[str], np.ndarray]:
+    def _columns(self, rows: slice = slice(None)) -> tuple[list[str], np.ndarray]:
         n = self.q_deg.shape[1]
         names = ["used", "t_s", *(f"q{j + 1}" for j in range(n)), "x", "y", "z"]
-        blocks = [self.used[:, None], (self.t_s if self.t_s is not None else np.full(len(self), np.nan))[:, None],
-                  np.round(self.q_deg, 4), np.round(self.p_base_mm, 4)]
+        t_s = self.t_s[rows] if self.t_s is not None else np.full(len(self.used[rows]), np.nan)
+        blocks = [self.used[rows, None], t_s[:, None], np.round(self.q_deg[rows], 4), np.round(self.p_base_mm[rows], 4)]
         for stage, e in self.err_base_mm.items():
             names += [f"{stage}_ex", f"{stage}_ey", f"{stage}_ez"]
-            blocks.append(np.round(e, 4))
+            blocks.append(np.round(e[rows], 4))
         if self.pred_std_mm is not None:
             names.append("pred_std_mm")
-            blocks.append(np.round(self.pred_std_mm, 6)[:, None])
+            blocks.append(np.round(self.pred_std_mm[rows], 6)[:, None])
         return names, np.hstack(blocks)
 
     def reference(self) -> dict:
         """report.json's ``points`` value when the rows are in points.csv."""
         return {"file": POINTS_FILE, "format": POINTS_FORMAT, "n": len(self),
-                "columns": ["set", *self._columns()[0], "point_id"], "t_s": self.t_s is not None,
+                "columns": ["set", *self._columns(slice(0))[0], "point_id"], "t_s": self.t_s is not None,
                 "stages": list(self.err_base_mm)}
 
     def write_csv(self, path: str | Path) -> Path:
-        """points.csv (atomic): header, then one row per point (a formatted line per row: no per-value calls)."""
-        names, values = self._columns()
-        fmt = ",".join(["%.10g"] * values.shape[1])
+        """points.csv (atomic): header, then one row per point (a formatted line per row: no per-value calls),
+        formatted ``CSV_ROWS`` rows at a time."""
+        names = self._columns(slice(0))[0]
+        fmt = ",".join(["%.10g"] * len(names))
         ids = [neutralise(pid) for pid in self.point_id]               # spreadsheet-safe text cells
         if any(c in "\x00".join(ids) for c in ',"\r\n'):              # quote only when some id needs it
             ids = [_csv_text(pid) for pid in ids]
-        lines = [",".join(["set", *names, "point_id"])]
-        lines += [f"{s},{fmt % tuple(row)},{pid}" for s, row, pid in zip(self.set, values.tolist(), ids)]
-        return atomic_write(path, ("\n".join(lines) + "\n").encode())
+        parts = [(",".join(["set", *names, "point_id"]) + "\n").encode()]
+        for start in range(0, len(self), CSV_ROWS):
+            b = slice(start, start + CSV_ROWS)
+            parts.append("".join(f"{s},{fmt % tuple(row)},{pid}\n" for s, row, pid in
+                                 zip(self.set[b], self._columns(b)[1].tolist(), ids[b])).encode())
+        return atomic_write(path, b"".join(parts))
 
     @classmethod
     def read_csv(cls, path: str | Path, ref: Mapping) -> "PointTable":
-        """The table a ``reference()`` points at (DataError when the file is missing or does not match it)."""
+        """The table a ``reference()`` points at (DataError when the file is missing or does not match it), read
+        ``CSV_ROWS`` lines at a time."""
         cols = list(ref["columns"])
+        head, values, body = None, [], []
         try:
             with open(path, newline="") as f:
-                text = f.read()
-            values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(1, len(cols) - 1), quotechar='"',
-                                dtype=float, ndmin=2)
+                head = f.readline()
+                while lines := _records(f):
+                    values.append(np.loadtxt(lines, delimiter=",", usecols=range(1, len(cols) - 1), quotechar='"',
+                                             dtype=float, ndmin=2))
+                    body += _set_and_id(lines)
         except OSError as exc:
             raise DataError(str(path), f"cannot read the report's per-point file: {exc.strerror}") from None
         except ValueError:
             raise DataError(str(path), "a value is not a number") from None
-        if '"' in text:                                  # quoted ids: the csv module's parser
-            rows = list(csv.reader(text.splitlines(keepends=True)))
-        else:                                            # only set (first) and point_id (last) are text
-            rows = [[ln.split(",", 1)[0], ln.rsplit(",", 1)[-1]] for ln in text.split("\n") if ln]
-            rows[0] = text.split("\n", 1)[0].split(",")
-        body = rows[1:]
-        if not rows or rows[0] != cols or len(body) != int(ref["n"]) or len(values) != len(body):
+        values = np.concatenate(values) if values else np.zeros((0, len(cols) - 2))
+        header = next(csv.reader([head])) if head and '"' in head else (head or "").rstrip("\r\n").split(",")
+        if not head or header != cols or len(body) != int(ref["n"]) or len(values) != len(body):
             raise DataError(str(path), f"does not match report.json (expected {ref['n']} rows of {cols})")
         names = cols[1:-1]
         at = {c: i for i, c in enumerate(names)}
@@ -160,6 +166,22 @@ def report_points_value(table: PointTable) -> dict:
     """report.json's ``points``: the inline table up to ``POINTS_INLINE_MAX`` rows, else the side-file reference
     (``write_outputs`` writes the file)."""
     return table.to_json() if len(table) <= POINTS_INLINE_MAX else table.reference()
+
+
+def _records(f) -> list[str]:
+    """The next ``CSV_ROWS`` lines of ``f``, and more until no quoted cell is left open (an id with a line break)."""
+    lines = list(itertools.islice(f, CSV_ROWS))
+    while sum(ln.count('"') for ln in lines) % 2 and (more := f.readline()):
+        lines.append(more)
+    return lines
+
+
+def _set_and_id(lines: list[str]) -> list[list[str]]:
+    """[set, point_id] of data lines of points.csv (only the first and the last cell are text; the csv module's
+    parser when an id is quoted)."""
+    if any('"' in ln for ln in lines):
+        return [[r[0], r[-1]] for r in csv.reader(lines) if r]
+    return [[ln.split(",", 1)[0], ln.rsplit(",", 1)[-1].rstrip("\r\n")] for ln in lines if ln.strip("\r\n")]
 
 
 def _csv_text(text: str) -> str:

@@ -7,7 +7,9 @@ and the pose-dependent effects, whitened by the calibration weights, with the ma
 calibration has non-parametric layers (the joint-error GP, the GPR) that need the poses spread, not pushed to the
 extremes that D-optimality favours; the choice was made by held-out prediction over a real and four simulated
 campaigns (``bench/bench_select.py``). The subset keeps every row that is not a calibration row (test, check,
-nest) and the chosen calibration rows, all in their original (measurement) order.
+nest) and the chosen calibration rows, all in their original (measurement) order. Beyond ``CV_MAX_ROWS`` (200 000)
+calibration rows they are chosen among a seeded subset of that many (memory and time bounded at any size), and the
+forecast is judged at up to that many test rows.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.design.optimal import Forecast, criterion, forecast, space_filling
+from robocal.effects.cv import capped_rows
 from robocal.identify.identification import IdentificationError, register
 
 from campaign.config.cell_model import CellModel
@@ -65,18 +68,25 @@ def select_rows(ds: Dataset, cell: CellModel, n: int, *, force: bool = False) ->
         raise DataError(ds.source, f"cannot register the calibration rows: {exc}") from None
     payload = float(np.mean(ds.payload_kg[cal])) if ds.payload_kg is not None else cell.payload_kg
     cov = cell.weights(ds)[0]
-    crit = criterion(kin, q, cov[cal], payload)
+    pool = capped_rows(len(cal))                 # beyond CV_MAX_ROWS rows, chosen among a seeded subset of them
+    pool = np.arange(len(cal)) if pool is None else pool
+    crit = criterion(kin, q[pool], cov[cal[pool]], payload)
     need = math.ceil(1.1 * crit.identifiable_geometric)
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
                                    f"parameters these rows determine: at least {need} (identifiable + 10 %)")
-    chosen, filled = space_filling(kin, crit, q, n)
+    chosen, filled = space_filling(kin, crit, q[pool], n)
+    chosen, crit_identifiable = pool[chosen], crit.identifiable
+    del crit
     keep = ~ds.mask("calib")
     keep[cal[chosen]] = True
     test = np.flatnonzero(ds.mask("test") & np.all(np.isfinite(ds.q_deg), axis=1))
     at = test if len(test) else cal                       # judged at the test rows, else at the calibration rows
+    at = at if (few := capped_rows(len(at))) is None else at[few]
     q_at, cov_at = np.radians(ds.q_deg[at]), cov[at]
     sub = forecast(kin, q[chosen], cov[cal][chosen], q_at, cov_at, payload)
     every = forecast(kin, q, cov[cal], q_at, cov_at, payload) if len(cal) <= FORECAST_MAX_ROWS else None
+    how = (SPACE_FILLING if filled else D_FALLBACK) + ("" if len(pool) == len(cal) else
+                                                         f", among a seeded subset of {len(pool)} of them")
     return Selection(keep, n, len(cal), sub, every, "test rows" if len(test) else "calibration rows",
-                     math.ceil(1.1 * crit.identifiable), SPACE_FILLING if filled else D_FALLBACK)
+                     math.ceil(1.1 * crit_identifiable), how)

@@ -5,6 +5,8 @@
   not a directory, no permission, read-only file system), exit 1 when the system failed underneath a valid
   path (disk full, I/O error, quota)
 * other ``CampaignError``, ``DriverError`` -> exit 1 (run or device failure)
+* ``MemoryError`` -> exit 2 with one line (the data is too large for this machine; ``campaign.data.memory_check``
+  refuses it before reading when it can tell)
 * Ctrl-C, SIGTERM, SIGHUP -> exit 130 with one line, also when the signal arrives while the command finishes
   (the runner stops the robot and closes the log ``abort``; see :mod:`campaign.cli.signals`)
 * anything else -> a crash report (traceback, versions, command) in the run directory or a temporary file,
@@ -58,6 +60,9 @@ def classify(exc: BaseException) -> tuple[str, int] | None:
         return f"{exc if isinstance(exc, Terminated) else 'interrupted'}", EXIT_INTERRUPTED
     if isinstance(exc, OSError):
         return os_error_line(exc)
+    if isinstance(exc, MemoryError):            # the early size check (campaign.data.memory_check) missed it
+        return ("error: out of memory: the data needs more memory than this machine allows; calibrate a subset "
+                "(`campaign select`) or use a machine with more memory"), EXIT_BAD_INPUT
     return None
 
 

@@ -14,9 +14,16 @@ SCALAR_COLUMNS = ("t_s", "temp_c", "payload_kg")  # optional per-row scalars, in
 ENV_COLUMNS = ("env_temp_c", "env_pressure_hpa", "env_humidity_pct")  # optional, empty cell = not read (NaN)
 
 
+def _frozen(value: Any) -> bool:
+    """A float64 array nothing can write to (read-only, over read-only memory): shared, not copied."""
+    return (isinstance(value, np.ndarray) and value.dtype == np.float64 and not value.flags.writeable
+            and (value.base is None or not getattr(value.base, "flags", value.flags).writeable))
+
+
 def _float_array(value: Any, name: str, shape: tuple) -> np.ndarray:
-    """Read-only float64 copy of ``value`` checked against ``shape`` (-1 = any)."""
-    arr = np.array(value, dtype=np.float64)
+    """Read-only float64 copy of ``value`` checked against ``shape`` (-1 = any); another dataset's read-only array is
+    shared (a dataset derived from another holds no second copy of what it did not change)."""
+    arr = value if _frozen(value) else np.array(value, dtype=np.float64)
     ok = arr.ndim == len(shape) and all(s in (-1, a) for s, a in zip(shape, arr.shape))
     if not ok:
         raise ValueError(f"Dataset.{name}: expected shape {shape}, got {arr.shape}")

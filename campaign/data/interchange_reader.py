@@ -5,11 +5,10 @@ here is shared with :mod:`campaign.data.interchange_writer`."""
 from __future__ import annotations
 
 import csv
+import itertools
 import math
-import os
 import re
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -36,7 +35,7 @@ def _show(text: str, limit: int = 40) -> str:
 
 
 @dataclass
-class _Layout:
+class Layout:
     """What the header says: separator, column names and their positions."""
 
     sep: str
@@ -54,19 +53,6 @@ class _Layout:
         return self.names.index(name)
 
 
-def read_lines(path: str | os.PathLike) -> list[str]:
-    """The file's lines (BOM and ``\\r`` removed); DataError on bad UTF-8."""
-    blob = Path(path).read_bytes()
-    try:
-        text = blob.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        offset = exc.start + (3 if blob.startswith(b"\xef\xbb\xbf") else 0)
-        line = blob.count(b"\n", 0, offset) + 1
-        raise DataError(str(path), "not valid UTF-8 text", line=line) from None
-    lines = text.split("\n")
-    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-
-
 def is_skipped(line: str) -> bool:
     """Blank lines and ``#`` comment lines are ignored."""
     stripped = line.strip()
@@ -82,7 +68,7 @@ def _split(line: str, sep: str) -> list[str]:
     return [p.strip() for p in parts]
 
 
-def parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
+def parse_header(line: str, src: str, line_no: int | None = None) -> Layout:
     """Validate the header line and return the column layout."""
     sep = ";" if line.count(";") > line.count(",") else ","
     shown = _split(line, sep)
@@ -100,7 +86,7 @@ def parse_header(line: str, src: str, line_no: int | None = None) -> _Layout:
     has_qc = _check_qc_columns(names, shown, n_joints, src, line_no)
     env = tuple(e for e in ENV_COLUMNS if e in seen)
     has_order = _check_order_columns(names, n_joints, src, line_no)
-    return _Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no, has_order)
+    return Layout(sep, names, shown, n_joints, smr, scalars, has_qc, env, line_no, has_order)
 
 
 def order_columns(n_joints: int) -> list[str]:
@@ -173,7 +159,7 @@ def _check_smr_groups(present: set[str], src: str, line_no: int | None = None) -
 
 
 class _Table:
-    """Data cells of a CSV as one flat row-major list (``width`` cells per row)."""
+    """Data cells of a block of CSV rows as one flat row-major list (``width`` cells per row)."""
 
     def __init__(self, flat: list[str], width: int, line_nos: list[int]) -> None:
         self.flat, self.width, self.line_nos = flat, width, line_nos
@@ -183,18 +169,13 @@ class _Table:
         return self.flat[pos :: self.width]
 
 
-def data_table(lines: list[str], start: int, layout: _Layout, src: str) -> _Table:
-    """Split the data lines after the header into cells (bulk, then checked)."""
-    line_nos = [i + 1 for i in range(start, len(lines)) if not is_skipped(lines[i])]
-    if not line_nos:
-        raise DataError(src, "no data rows")
-    data = [lines[n - 1] for n in line_nos]
+def data_table(data: list[str], line_nos: list[int], layout: Layout, src: str) -> _Table:
+    """Split data lines (on physical lines ``line_nos``) into cells (bulk, then checked)."""
     width, sep = len(layout.names), layout.sep
+    _check_field_counts(data, line_nos, width, sep, src)
     block = sep.join(data)
     if '"' in block:  # quoted fields: let the csv module split each line
-        _check_field_counts(data, line_nos, width, sep, src)
         return _Table([cell for line in data for cell in _split(line, sep)], width, line_nos)
-    _check_field_counts(data, line_nos, width, sep, src)
     flat = block.split(sep)
     if " " in block or "\t" in block:
         flat = [cell.strip() for cell in flat]
@@ -232,8 +213,9 @@ def _first_bad_cell(table: _Table, positions: Sequence[int], decimal_comma: bool
     raise AssertionError("no malformed cell found")  # pragma: no cover
 
 
-def numeric_columns(table: _Table, layout: _Layout, names: Sequence[str], src: str) -> np.ndarray:
-    """(N, len(names)) float64 from the named columns; strict, vectorised."""
+def numeric_columns(table: _Table, layout: Layout, names: Sequence[str], src: str) -> np.ndarray:
+    """(N, len(names)) float64 from the named columns; strict, vectorised: DataError at the first cell (in reading
+    order) that is not a plain decimal number. Values out of range are inf here (``check_range``)."""
     positions = [layout.index(n) for n in names]
     cells = [cell for pos in positions for cell in table.column(pos)]  # column-major
     joined = "\n".join(cells) + "\n"
@@ -244,43 +226,64 @@ def numeric_columns(table: _Table, layout: _Layout, names: Sequence[str], src: s
     if not _COLUMN_RE.fullmatch(joined):
         row, pos = _first_bad_cell(table, positions, decimal_comma)
         raise _number_error(table.column(pos)[row], layout.shown[pos], table.line_nos[row], src)
-    values = np.array(cells, dtype=np.float64).reshape(len(positions), -1).T
+    return np.array(cells, dtype=np.float64).reshape(len(positions), -1).T
+
+
+def check_range(values: np.ndarray, table: _Table, layout: Layout, names: Sequence[str], src: str) -> None:
+    """DataError at the first value of ``numeric_columns`` (row by row) that overflowed to inf."""
     bad = np.argwhere(~np.isfinite(values))
     if bad.size:
         row, k = (int(v) for v in bad[0])
-        pos = positions[k]
-        raise DataError(
-            src,
-            f"number out of range: {_show(table.column(pos)[row])}",
-            line=table.line_nos[row],
-            column=f"'{layout.shown[pos]}'",
-        )
-    return values
+        pos = layout.index(names[k])
+        raise DataError(src, f"number out of range: {_show(table.column(pos)[row])}", line=table.line_nos[row],
+                        column=f"'{layout.shown[pos]}'")
 
 
 def check_ids(
     ids: Sequence[str], sets: Sequence[str], fail: Callable[[int, str], DataError], ref: Callable[[int], str]
 ) -> None:
-    """Unique non-empty point ids; ``check`` rows may repeat among themselves.
+    """Unique non-empty point ids of at most ``MAX_ID_CHARS``; ``check`` rows may repeat an id among themselves
+    (and ``nest`` rows). ``fail(i, what)`` builds the error for row i; ``ref(k)`` names row k. Vectorised: the first
+    occurrence of every id from a sort of the ids' hashes (equal hashes compared as text)."""
+    n = len(ids)
+    length = np.fromiter(map(len, ids), np.int64, n)
+    first = _first_occurrence(ids)
+    codes = np.fromiter(map(_SET_CODES.get, sets, itertools.repeat(-1)), np.int8, n)
+    repeat_ok = np.isin(codes, (SETS.index("check"), SETS.index("nest"))) & (codes[first] == codes)
+    bad = np.flatnonzero((length == 0) | (length > MAX_ID_CHARS) | ((first != np.arange(n)) & ~repeat_ok))
+    if not bad.size:
+        return
+    i = int(bad[0])
+    pid = ids[i]
+    if not pid:
+        raise fail(i, "point_id is empty")
+    if len(pid) > MAX_ID_CHARS:
+        raise fail(i, f"point_id {pid[:40]!r}... is {len(pid)} characters long (at most {MAX_ID_CHARS})")
+    raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(int(first[i]))})")
 
-    ``fail(i, what)`` builds the error for row i; ``ref(k)`` names row k.
-    """
-    first: dict[str, int] = {}
-    for i, (pid, set_name) in enumerate(zip(ids, sets)):
-        if not pid:
-            raise fail(i, "point_id is empty")
-        if len(pid) > MAX_ID_CHARS:
-            raise fail(i, f"point_id {pid[:40]!r}... is {len(pid)} characters long (at most {MAX_ID_CHARS})")
-        k = first.setdefault(pid, i)
-        if k != i and not (set_name in ("check", "nest") and sets[k] == set_name):
-            raise fail(i, f"duplicate point_id {_show(pid)} (first {ref(k)})")
+
+def _first_occurrence(ids: Sequence[str]) -> np.ndarray:
+    """(N,) index of the first row holding each row's id."""
+    n = len(ids)
+    h = np.fromiter(map(hash, ids), np.int64, n)
+    order = np.argsort(h, kind="stable")
+    hs = h[order]
+    start = np.flatnonzero(np.concatenate([[True], hs[1:] != hs[:-1]]))      # runs of equal hashes
+    first = np.empty(n, np.intp)
+    first[order] = order[np.repeat(start, np.diff(np.append(start, n)))]
+    for run in np.flatnonzero(np.diff(np.append(start, n)) > 1):            # equal hashes: compare the texts
+        rows = order[start[run]:(start[run + 1] if run + 1 < len(start) else n)]
+        seen: dict[str, int] = {}
+        for r in rows:                                                      # rows in reading order (stable sort)
+            first[r] = seen.setdefault(ids[r], r)
+    return first
 
 
-def check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -> None:
+def check_scalars(extra: dict, layout: Layout, line_nos: list[int], src: str) -> None:
     """What the config would refuse or the physics cannot be: a negative ``payload_kg``; a negative ``t_s``, or
     one that goes back in time (rows are in measurement order)."""
     def where(name: str, i: int) -> dict:
-        return {"line": line_nos[i], "column": f"'{layout.shown[layout.index(name)]}'"}
+        return {"line": int(line_nos[i]), "column": f"'{layout.shown[layout.index(name)]}'"}
 
     payload = extra.get("payload_kg")
     if payload is not None and (bad := np.flatnonzero(payload < 0)).size:   # NaN (nest rows) compares False
@@ -298,23 +301,23 @@ def check_scalars(extra: dict, layout: _Layout, line_nos: list[int], src: str) -
                              "rows must be in measurement order", **where("t_s", i))
 
 
-def check_order_columns(approach: np.ndarray, order: np.ndarray, layout: _Layout, line_nos: list[int],
+def check_order_columns(approach: np.ndarray, order: np.ndarray, layout: Layout, line_nos: list[int],
                         src: str) -> None:
     """An approach is -1, 0 or +1; ``order`` is >= 0 and never decreases (rows are in measurement order)."""
     if (bad := np.argwhere(~np.isin(approach, (-1.0, 0.0, 1.0)))).size:
         i, j = bad[0]
-        raise DataError(src, f"approach{j + 1} {approach[i, j]:g}: an approach is -1, 0 or +1", line=line_nos[i],
+        raise DataError(src, f"approach{j + 1} {approach[i, j]:g}: an approach is -1, 0 or +1", line=int(line_nos[i]),
                         column=f"'{layout.shown[layout.index(f'approach{j + 1}')]}'")
     column = f"'{layout.shown[layout.index('order')]}'"
     if (bad := np.flatnonzero(order < 0)).size:
-        raise DataError(src, f"order {order[bad[0]]:g} is negative", line=line_nos[bad[0]], column=column)
+        raise DataError(src, f"order {order[bad[0]]:g} is negative", line=int(line_nos[bad[0]]), column=column)
     if (back := np.flatnonzero(np.diff(order) < 0)).size:
         i = back[0] + 1
         raise DataError(src, f"order goes back ({order[i]:g} after {order[i - 1]:g}): rows must be in measurement "
-                             "order", line=line_nos[i], column=column)
+                             "order", line=int(line_nos[i]), column=column)
 
 
-def read_nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
+def read_nest_ids(table: _Table, layout: Layout, sets: list[str], src: str) -> tuple[str, ...] | None:
     """The ``nest_id`` column: required (non-empty) on nest rows, empty elsewhere; nest rows need ``t_s``."""
     first = next((i for i, s in enumerate(sets) if s == "nest"), None)
     if "nest_id" not in layout.names:
@@ -337,7 +340,7 @@ def read_nest_ids(table: _Table, layout: _Layout, sets: list[str], src: str) -> 
     return tuple(col)
 
 
-def blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np.ndarray]:
+def blank_cells(table: _Table, layout: Layout, sets: list[str]) -> dict[str, np.ndarray]:
     """Empty cells that are allowed (joints, extra SMRs, temp_c, payload_kg on nest rows; environment and move
     columns anywhere): set to "0" in ``table`` for the strict parser; returns {column: row indices} to become NaN."""
     nest_rows = [i for i, s in enumerate(sets) if s == "nest"]
@@ -358,11 +361,17 @@ def blank_cells(table: _Table, layout: _Layout, sets: list[str]) -> dict[str, np
     return out
 
 
+_SET_NAMES = {name: name for name in SETS}      # one string object per set name (no copy per row)
+_SET_CODES = {name: k for k, name in enumerate(SETS)}
+
+
 def parse_sets(raw: list[str], line_nos: list[int], src: str) -> list[str]:
-    """Lower-cased set names; DataError for anything but calib/test/check."""
-    sets = [s.lower() for s in raw]
+    """Lower-cased set names; DataError for anything but calib/test/check/nest."""
+    sets = [_SET_NAMES.get(s.lower()) for s in raw]
+    if None not in sets:
+        return sets
     for i, s in enumerate(sets):
-        if s not in SETS:
+        if s is None:
             raise DataError(
                 src, f"expected calib, test, check or nest, got {_show(raw[i])}", line=line_nos[i], column="'set'"
             )

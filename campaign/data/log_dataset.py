@@ -11,7 +11,7 @@ from campaign.run.log_reader import LogContents
 from campaign.run.log_records import OPTIONAL_FIELDS, PointRecord, Record, check_records
 
 from .dataset import Dataset
-from .interchange_csv import check_ids
+from .interchange_reader import check_ids
 
 _ENV_KEYS = {"env_temp_c": "temp_c", "env_pressure_hpa": "pressure_hpa", "env_humidity_pct": "humidity_pct"}
 

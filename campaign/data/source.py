@@ -12,6 +12,7 @@ from campaign.run.log_reader import LogContents, read_log
 from .dataset import Dataset
 from .interchange_csv import read_csv
 from .log_dataset import dataset_from_log
+from .memory_check import CALIBRATE, Need, check_memory
 
 
 @dataclass(frozen=True, eq=False)
@@ -22,12 +23,15 @@ class Source:
     contents: LogContents | None = None
 
 
-def load_source(source: str | os.PathLike) -> Source:
+def load_source(source: str | os.PathLike, need: Need = CALIBRATE) -> Source:
     """A run directory (its log.jsonl, converted by :func:`dataset_from_log`) or an interchange CSV; DataError
-    when the path does not exist, a FileNotFoundError naming log.jsonl for a directory without a log."""
+    when the path does not exist, or when its rows need more memory than this machine allows the command (``need``,
+    :mod:`campaign.data.memory_check`: checked before anything is read), a FileNotFoundError naming log.jsonl for a
+    directory without a log."""
     path = Path(source)
     if not path.exists():
         raise DataError(str(path), "no such file or run directory")
+    check_memory(path, need)
     if not path.is_dir():
         return Source(read_csv(path))
     contents = read_log(path)

@@ -267,7 +267,7 @@ def model_budget(kin_geo, geo_cols: np.ndarray, q_fit: np.ndarray, p_fit: np.nda
     ``kin_geo`` with identified columns ``geo_cols``) evaluated at the held-out rows; the noise share from the
     nugget of the final model's fit residuals ``r_final_fit`` (N, 3) mm (``n_params`` fitted)."""
     from robocal.effects.cv import BlockedCV, Blocking, pose_blocks
-    from robocal.identify.identification import whitening
+    from robocal.identify.whitened import whitening
     from .remainder import nugget
 
     p0, A, _, cols = linear_design(kin_geo, geo_cols, q_fit, meta_fit, effects)

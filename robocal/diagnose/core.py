@@ -13,11 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks
+from robocal.effects.cv import BlockedCV, Blocking, capped_rows, order_blocks, pose_blocks
 from robocal.effects.fit import ElasticResult, calibrate_elastic
 from robocal.effects.engine import EngineResult
 from robocal.effects.engine import run_engine
-from robocal.identify.identification import CalibrationOptions, calibrate, whitening
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.identify.whitened import whitening
 from robocal.kinematics.models import ParamLayout, smr_tracker
 from robocal.layers.calibrated_model import CalibratedModel
 from .evidence import joints_following_order
@@ -76,8 +77,8 @@ def _rms(r) -> float:
 
 
 def _step_models(kin_geo, cols, q, p, cov, meta, effects, elastic) -> list[CalibratedModel]:
-    """The geometric model, then the taken effects added one at a time (exact joint fits of the prefixes; the last
-    is the engine's own fit)."""
+    """The geometric model, then the taken effects added one at a time (exact joint fits of the prefixes on the
+    rows given; the last is the engine's own fit)."""
     models = [CalibratedModel(kin_geo)]
     for k in range(1, len(effects)):
         el = calibrate_elastic(kin_geo, cols, q, p, cov, meta, [fe.choice for fe in effects[:k]])
@@ -146,15 +147,18 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
     kin_geo, cols = _baseline(inp)
     meta = inp.meta() if stage is None else stage.meta
     stage = _own_stage(inp, opt, kin_geo, cols, meta) if stage is None else stage
-    fit, test = np.asarray(stage.fit_rows, int), np.flatnonzero(inp.test)
+    fit_all, test_all = np.asarray(stage.fit_rows, int), np.flatnonzero(inp.test)
+    fit_sub, test_sub = (capped_rows(len(rows), opt.engine.max_rows, opt.seed) for rows in (fit_all, test_all))
+    fit, test = (rows if sub is None else rows[sub]          # the analyses: at most max_rows of each (a seeded subset)
+                 for rows, sub in ((fit_all, fit_sub), (test_all, test_sub)))
     effects = () if stage.elastic is None else stage.elastic.effects
     m_fit = _sub(meta, fit)
     models = _step_models(kin_geo, cols, q[fit], p[fit], cov[fit], m_fit, effects, stage.elastic)
     resid = [p - m.smr_tracker(q, meta) for m in models]
     cv, R, J_geo, p0, eff_cols = _linear_design(kin_geo, cols, q[fit], p[fit], cov[fit], m_fit, effects, opt)
-    evaluation = "test" if len(test) else "cv"
+    evaluation = "test" if len(test_all) else "cv"
     key = "test_rms_mm" if evaluation == "test" else "cv_rms_mm"
-    stages = _stages(models, resid, cv, eff_cols, len(cols), fit, test, effects)
+    stages = _stages(models, resid, cv, eff_cols, len(cols), fit_all, test_all, effects)
     ctx = {"floor": inp.noise_floor_mm, "n": kin_geo.n, "kin": models[-1].kinematics, "kin_geo": kin_geo,
            "q": q[fit], "meta": m_fit, "gravity": inp.gravity, "R": R, "J_geo": J_geo, "A_w": cv.Aw, "y_w": cv.yw,
            "cols": eff_cols, "geo_cols": np.arange(len(cols)), "halves": _halves(kin_geo, p0, m_fit)}
@@ -164,8 +168,10 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
     cv_vec = [cv.errors(np.concatenate([np.arange(len(cols))] + eff_cols[:k])) for k in (0, len(effects))]
     where, maps = where_stages(inp, opt, fit, test, (kin_geo, models[-1]), (resid[0], resid[-1]), cv_vec,
                                (stages[0], stages[-1]), meta)
-    unexplained, structure, notes, rem, held_err = leftover(inp, opt, fit, test, models[-1], resid[-1], cv_vec[-1],
-                                                          stages[-1], cv.blockings[0].fold, meta)
+    unexplained, structure, notes, rem, held_err = leftover(inp, opt, fit, test_all, models[-1], resid[-1],
+                                                          cv_vec[-1], stages[-1], cv.blockings[0].fold, meta)
+    if len(test) < len(test_all):        # the budget's analyses: the held-out errors of the test subset
+        held_err = {k: v[test_sub] for k, v in held_err.items()}
     for f in findings:
         notes += [f"{f.evidence['label']}: {f.evidence[k]}" for k in ("description", "consistency_note")
                   if k in f.evidence]
@@ -179,10 +185,10 @@ def diagnose(inp: DiagnosisInput, options: DiagnosisOptions = DiagnosisOptions()
         notes.append(gap.verdict_text)
     if unexplained["unexplained"]:
         where += gap.ranked or [r for r in final_regions if r.kind != "all"]
-    outliers = tuple(int(i) for i in np.setdiff1d(np.flatnonzero(inp.calib), fit))
+    outliers = tuple(int(i) for i in np.setdiff1d(np.flatnonzero(inp.calib), fit_all))
     return Diagnosis(float(inp.noise_floor_mm), inp.noise_floor_source, stages[0][key], stages[-1][key],
                      unexplained["unexplained"], tuple(findings + others), tuple(where), tuple(cannot), evaluation,
-                     unexplained, structure, maps, tuple(notes), int(inp.calib.sum()), len(test), outliers,
+                     unexplained, structure, maps, tuple(notes), int(inp.calib.sum()), len(test_all), outliers,
                      models[-1].kinematics, tuple(effects), tuple(stages), stage.engine.selection.to_dict(),
                      gap.budget, gap.remainder, gap.layer,
                      tuple(next_steps(gap.budget, gap.remainder, findings, unexplained, gap.layer, cannot)))

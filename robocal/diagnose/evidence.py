@@ -7,9 +7,11 @@ import math
 
 import numpy as np
 
+from robocal.identify.whitened import DesignFactor
 from .prose import DRIFT_EXPERIMENT, separating_experiment
 
 DRIFT = "registration_drift"
+FACTOR_ROWS = 4096      # fit rows per block of the consistency's triangular factors
 
 
 def _project_out(X: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -89,32 +91,48 @@ def consistency(A_w: np.ndarray, y_w: np.ndarray, cols: np.ndarray, halves: dict
     on each half and compare the effect's parameters (``cols``) by the visible displacement of their difference,
     as a share of the effect's own visible displacement (a physical effect has one set of parameters). Returns
     (those shares, the difference in units of what noise alone would give: the residual scatter of the whole
-    fit propagated through both halves' fits)."""
+    fit propagated through both halves' fits). Every fit, norm and covariance is that of the triangular factor of
+    [A_w y_w] (``_factor``: row blocks, no copy of the design)."""
     M, _, P = A_w.shape
-    nrm = np.sqrt(np.einsum("mip,mip->p", A_w, A_w))
+    nrm = np.sqrt(np.einsum("mip,mip->p", A_w, A_w, dtype=float))
     nrm[nrm == 0] = 1.0
-    As = np.divide(A_w, nrm, order="C").reshape(3 * M, P)     # one copy, whatever the memory order of A_w
-    full = np.linalg.lstsq(As, y_w.reshape(-1), rcond=1e-10)[0]
-    s2 = float(np.sum((y_w.reshape(-1) - As @ full) ** 2)) / max(3 * M - P, 1)
-    Xv = _project_out(As[:, cols], As[:, geo_cols])
+    R = _factor(A_w, y_w, nrm)
+    full = np.linalg.lstsq(R[:, :P], R[:, P], rcond=1e-10)[0]
+    s2 = float(np.sum((R[:, P] - R[:, :P] @ full) ** 2)) / max(3 * M - P, 1)    # |y - A x| = |R_y - R_A x|
+    Xv = _project_out(R[:, cols], R[:, geo_cols])          # |Xv x| is the visible displacement of x (A_w = Q R)
     own = float(np.linalg.norm(Xv @ full[cols]))
     XtX = Xv.T @ Xv
     out, noise = {}, {}
     for name, mask in halves.items():
         est, var = [], 0.0
         for half in (mask, ~mask):
-            r3 = np.repeat(half, 3)
             if half.sum() < max(10, P // 3 + 1):
                 break
-            Ah = As[r3]
-            est.append(np.linalg.lstsq(Ah, y_w.reshape(-1)[r3], rcond=1e-10)[0][cols])
-            C = np.linalg.pinv(Ah.T @ Ah, rcond=1e-10)[np.ix_(cols, cols)] * s2
+            Rh = _factor(A_w, y_w, nrm, half)
+            est.append(np.linalg.lstsq(Rh[:, :P], Rh[:, P], rcond=1e-10)[0][cols])
+            C = np.linalg.pinv(Rh[:, :P].T @ Rh[:, :P], rcond=1e-10)[np.ix_(cols, cols)] * s2
             var += float(np.sum(C * XtX))
         if len(est) == 2 and own > 0:
             diff = float(np.linalg.norm(Xv @ (est[0] - est[1])))
             out[name] = diff / own
             noise[name] = diff / math.sqrt(var) if var > 0 else math.inf
     return out, noise
+
+
+def _factor(A_w: np.ndarray, y_w: np.ndarray, nrm: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+    """Triangular factor of [A_w / nrm  y_w] (3M rows, P + 1 columns) over the rows ``rows`` (M,) bool (default all),
+    gathered over row blocks of ``FACTOR_ROWS``."""
+    P = A_w.shape[2]
+
+    def blocks():
+        for s in range(0, len(A_w), FACTOR_ROWS):
+            b = slice(s, s + FACTOR_ROWS)
+            A, y = np.asarray(A_w[b], float) / nrm, y_w[b]
+            if rows is not None:
+                A, y = A[rows[b]], y[rows[b]]
+            if len(A):
+                yield np.column_stack([A.reshape(-1, P), y.reshape(-1)])
+    return np.linalg.qr(DesignFactor(blocks()).R, mode="r")
 
 
 def rival_class(step, later=()) -> list[dict]:

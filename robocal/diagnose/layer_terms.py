@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from robocal.effects.cv import BlockedCV, Blocking, design_array
-from robocal.identify.identification import whitening
+from robocal.identify.whitened import whitening
 from robocal.layers.joint_gp import fit_joint_gp, joint_directions
 from robocal.kinematics.models import ParamLayout, identification_jacobian
 from robocal.layers.choice import layer_targets

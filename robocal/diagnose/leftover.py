@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from robocal.kinematics.models import identification_jacobian, joint_motion_columns
+from robocal.kinematics.models import JACOBIAN_ROWS, jacobian_blocks, joint_motion_columns
 from robocal.layers.joint_gp import joint_directions
 from robocal.layers.choice import fit_layer
 from robocal.measure.stats import paired_gain
@@ -30,6 +30,18 @@ def floor_scale(inp: DiagnosisInput) -> float:
 def _base(kin, p_tracker):
     T = kin.T_tracker_base
     return (np.asarray(p_tracker, float) - T[:3, 3]) @ T[:3, :3]
+
+
+def _motion_columns(kin, q) -> tuple[np.ndarray, np.ndarray]:
+    """(SMR positions (N, 3) mm, tracker frame; their ``joint_motion_columns`` (N, 3, n)), in row blocks (the
+    Jacobian of the other parameters is not kept)."""
+    p, J = np.empty((len(q), 3)), None
+    for b, pb, Jt in jacobian_blocks(kin, q, JACOBIAN_ROWS):
+        Jb = joint_motion_columns(kin, Jt.transpose(1, 2, 0))
+        if J is None:
+            J = np.empty((len(q), 3, Jb.shape[2]))
+        p[b], J[b] = pb, Jb
+    return p, J
 
 
 def where_stages(inp, opt, fit, test, models, resid, cv_vec, stages, meta):
@@ -54,10 +66,10 @@ def where_stages_of(inp, opt, rows, kin, held, n_params: int, n_fit: int, meta, 
     parameters fitted on ``n_fit`` rows (``every``: all regions, not only those flagged above the floor)."""
     inflate = 1.0 + opt.cv_param_inflation * n_params / (3.0 * n_fit)
     cov = inp.cov_mm2[rows] * floor_scale(inp) * inflate
-    p_model, J = identification_jacobian(kin, inp.q_rad[rows])
+    p_model, Jq = _motion_columns(kin, inp.q_rad[rows])
     sub = lambda key: None if meta.get(key) is None else np.asarray(meta[key])[rows]  # noqa: E731
     return where_analysis(name, held, cov, _base(kin, p_model), inp.q_rad[rows], kin.T_tracker_base, sub("t_s"),
-                          sub("approach"), sub("payload_kg"), joint_motion_columns(kin, J), opt, every)
+                          sub("approach"), sub("payload_kg"), Jq, opt, every)
 
 
 def _layer_heldout(opt, model, q, p, fit, test, fold, meta, kind: str = "gpr", floor_mm: float | None = None
@@ -188,8 +200,7 @@ def _remainder(inp, opt, model, r_rows, rows, cov_rows, R, F, flagged, held_err,
     gain = paired_gain(np.sum(held_err["final"] ** 2, axis=1), np.sum(lay**2, axis=1))
     q = np.asarray(inp.q_rad, float)[rows]
     kin = model.kinematics
-    _, J = identification_jacobian(kin, q)
-    Jq = joint_motion_columns(kin, J)
+    _, Jq = _motion_columns(kin, q)
     dof = stage["n_params"] / (3.0 * len(fit))
     S = max([tests[s]["S"] for s in along] or [0.0])
     jitter = None

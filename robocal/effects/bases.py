@@ -187,11 +187,12 @@ def readback_lag(joints=(1, 2, 3), memory_joints=()) -> Effect:
 
 
 def warmup(meta, n, tau_s):
-    """Thermal state u in [0, 1): from temperature rise when logged (per K), else 1 - exp(-t/tau)."""
+    """Thermal state u in [0, 1): from temperature rise when logged (per K: from the first row's temperature, or
+    ``temp_ref_c`` in a block of rows, ``meta_rows``), else 1 - exp(-t/tau)."""
     temp = meta.get("temp_c")
     if temp is not None:
         temp = np.asarray(temp, float)
-        return temp - temp[0]
+        return temp - meta.get("temp_ref_c", temp[0])
     return 1.0 - np.exp(-_meta(meta, "t_s", n) / tau_s)
 
 
@@ -288,6 +289,18 @@ def track_across(track: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------- use of the bases
+EFFECT_ROWS = 8192      # rows per block of ``effect_state`` (the bases (N, n, K) of one block at a time)
+
+
+def meta_rows(meta: Mapping, rows: slice) -> dict:
+    """The metadata of the rows ``rows`` of ``meta`` (per-row arrays sliced) as the effects see them among all
+    rows: the warm-up's reference temperature (the first row's) is kept (``temp_ref_c``)."""
+    out = {k: v if v is None or np.ndim(v) == 0 else np.asarray(v)[rows] for k, v in meta.items()}
+    if meta.get("temp_c") is not None and "temp_ref_c" not in meta:
+        out["temp_ref_c"] = float(np.asarray(meta["temp_c"], float)[0])
+    return out
+
+
 def combine(q_rad: np.ndarray, bases, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint deviation dq (N, n) rad, link-length scale (N,) and tracker-frame displacement dp (N, 3) mm of
     effect bases [Basis, ...] at the points ``q_rad`` (N, n) with their parameter values [(K,), ...]."""
@@ -307,9 +320,15 @@ def combine(q_rad: np.ndarray, bases, values) -> tuple[np.ndarray, np.ndarray, n
 def effect_state(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``combine`` of ``effects`` [(Effect, values (K,)), ...] at the points ``q_rad`` with their metadata: dq
-    (robot), scale (links), dp (a drift of the measurement, not of the robot)."""
+    (robot), scale (links), dp (a drift of the measurement, not of the robot). In row blocks of ``EFFECT_ROWS``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    return combine(q, [eff.basis(kin, q, meta) for eff, _ in effects], [v for _, v in effects])
+    if len(q) <= EFFECT_ROWS:
+        return combine(q, [eff.basis(kin, q, meta) for eff, _ in effects], [v for _, v in effects])
+    dq, scale, dp = np.empty(q.shape), np.empty(len(q)), np.empty((len(q), 3))
+    for s in range(0, len(q), EFFECT_ROWS):
+        b = slice(s, s + EFFECT_ROWS)
+        dq[b], scale[b], dp[b] = effect_state(kin, q[b], meta_rows(meta, b), effects)
+    return dq, scale, dp
 
 
 def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
@@ -317,7 +336,7 @@ def apply_effects(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) ->
     given ``[(Effect, params (K,)), ...]``."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     dq, scale, dp = effect_state(kin, q, meta, effects)
-    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False)
+    c = chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False, axes=False)
     p_base = transform_points(c.T_base_flange, kin.p_flange_smr_mm)
     return transform_points(kin.T_tracker_base, p_base) + dp
 

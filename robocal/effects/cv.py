@@ -13,6 +13,16 @@ import numpy as np
 
 RIDGE = 1e-9          # on unit-norm columns: directions the data cannot tell apart get no weight
 CHUNK_ROWS = 8192     # rows per block of the in-place whitening
+CV_MAX_ROWS = 200_000  # the cross-validated choices (effects, residual layer) and the diagnosis's analyses work on at
+#                        most this many rows: a seeded subset beyond (their memory and time stay bounded at any size)
+
+
+def capped_rows(n: int, max_rows: int = CV_MAX_ROWS, seed: int = 0) -> np.ndarray | None:
+    """Sorted indices of a seeded random subset of ``max_rows`` of ``n`` rows (measurement order kept), or None
+    when ``n <= max_rows`` (all rows)."""
+    if n <= max_rows:
+        return None
+    return np.sort(np.random.default_rng(seed).choice(n, max_rows, replace=False))
 
 
 def kfold(n: int, folds: int, seed: int = 0) -> np.ndarray:
@@ -129,6 +139,41 @@ class BlockedCV:
                 del Af
             self._gram.append((sum(p[1] for p in per), sum(p[2] for p in per), per))
             self._fold_at.append(np.searchsorted(np.unique(b.fold), b.fold))     # (N,) index of each row's fold
+
+    @classmethod
+    def of_blocks(cls, blocks, n: int, P: int, W: np.ndarray, blockings: list[Blocking],
+                  dtype=np.float32) -> "BlockedCV":
+        """The same cross-validation from a design given as row blocks (rows slice, A_b (b, 3, P) mm per unit
+        parameter, y_b (b, 3) mm): each block is whitened and added to every fold's Gram matrix in float64, then
+        kept in ``dtype``. Every fit reads the float64 Gram matrices; only the held-out predictions read the kept
+        columns, which float32 rounds to 6e-8 of their size (half the memory of the design)."""
+        self = cls.__new__(cls)
+        At, yw, ss = np.empty((P, n, 3), dtype), np.empty((n, 3)), np.zeros(P)
+        folds = [np.searchsorted(np.unique(b.fold), b.fold) for b in blockings]
+        G = [np.zeros((int(f.max()) + 1, P, P)) for f in folds]
+        c = [np.zeros((int(f.max()) + 1, P)) for f in folds]
+        for b, A_b, y_b in blocks:
+            Aw = np.einsum("nij,njk->kni", W[b], A_b)                            # (P, b, 3) whitened
+            yw[b] = np.einsum("nij,nj->ni", W[b], y_b)
+            ss += np.einsum("knj,knj->k", Aw, Aw)
+            for f, Gf, cf in zip(folds, G, c):
+                for k in np.unique(f[b]):
+                    m = f[b] == k
+                    Af = Aw[:, m].reshape(P, -1)
+                    Gf[k] += Af @ Af.T
+                    cf[k] += Af @ yw[b][m].reshape(-1)
+            At[:, b] = Aw
+        self.scale = np.sqrt(ss)
+        self.scale[self.scale == 0] = 1.0
+        for s in range(0, n, CHUNK_ROWS):
+            At[:, s:s + CHUNK_ROWS] /= self.scale[:, None, None].astype(dtype)
+        self._At, self.yw, self.L, self.blockings, self.P = At, yw, np.linalg.inv(W), blockings, P
+        outer = np.outer(self.scale, self.scale)
+        self._gram = [(Gf.sum(axis=0) / outer, cf.sum(axis=0) / self.scale,
+                       [(np.flatnonzero(f == k), Gf[k] / outer, cf[k] / self.scale) for k in range(len(Gf))])
+                      for f, Gf, cf in zip(folds, G, c)]
+        self._fold_at = folds
+        return self
 
     @property
     def Aw(self) -> np.ndarray:

@@ -9,10 +9,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .bases import combine, effect_regressor
-from robocal.identify.identification import CalibrationOptions, Unidentifiable, analyse_identifiability, whiten, whitening
+from .bases import combine, effect_regressor, meta_rows
+from robocal.identify.identification import CalibrationOptions, Unidentifiable, analyse_identifiability
+from robocal.identify.whitened import DESIGN_ROWS, DesignFactor, whiten, whitening
 from robocal.kinematics.models import Kinematics, ParamLayout, apply_update, identification_jacobian
-from robocal.identify.lm import levenberg_marquardt
+from robocal.identify.lm import Normal, levenberg_marquardt
 from robocal.identify.parameters import GEOMETRY_AND_EFFECTS, ParameterTable
 from .model import FittedEffect, elastic_smr_tracker
 
@@ -31,25 +32,38 @@ def _jacobian(kin, q, meta, built, values):
     return p + dp, J, R
 
 
-DESIGN_ROWS = 4096     # points per block of ``_whitened_design``
-
-
 def _whitened_design(W, J: np.ndarray, geo_cols: np.ndarray, R: np.ndarray, eff_cols: np.ndarray,
                      D: np.ndarray) -> np.ndarray:
-    """Whitened design (3N, P) = W [J[:, :, geo_cols] R[:, :, eff_cols]] / D, gathered and whitened in row blocks
-    into one array (no gathered or concatenated copies: at 10^5 points every (N, 3, P) temporary costs its page
-    faults)."""
+    """Whitened design (3N, P) = W [J[:, :, geo_cols] R[:, :, eff_cols]] / D of one block of rows, gathered and
+    whitened into one array (no gathered or concatenated copies)."""
     G = len(geo_cols)
     A = np.empty((len(J), 3, G + np.arange(R.shape[2])[eff_cols].size))
-    for s in range(0, len(J), DESIGN_ROWS):
-        b = slice(s, s + DESIGN_ROWS)
-        if W is None:
-            A[b, :, :G], A[b, :, G:] = J[b][:, :, geo_cols], R[b][:, :, eff_cols]
-        else:
-            np.matmul(W[b], J[b][:, :, geo_cols], out=A[b, :, :G])
-            np.matmul(W[b], R[b][:, :, eff_cols], out=A[b, :, G:])
+    if W is None:
+        A[:, :, :G], A[:, :, G:] = J[:, :, geo_cols], R[:, :, eff_cols]
+    else:
+        np.matmul(W, J[:, :, geo_cols], out=A[:, :, :G])
+        np.matmul(W, R[:, :, eff_cols], out=A[:, :, G:])
     A /= D
     return A.reshape(len(A) * 3, -1)
+
+
+def _design_blocks(kin, x, split, q, p_meas, W, meta, built, geo_cols, eff_cols, D):
+    """(r (3b,), A (3b, P)) whitened residual and design of consecutive row blocks of ``DESIGN_ROWS`` points at the
+    model (kin, effect values x): the normal equations are sums over blocks, the design is never held for all rows."""
+    values = np.split(x, split)
+    for s in range(0, len(q), DESIGN_ROWS):
+        b = slice(s, s + DESIGN_ROWS)
+        p, J, R = _jacobian(kin, q[b], meta_rows(meta, b), built, values)
+        Wb = None if W is None else W[b]
+        yield whiten(Wb, p_meas[b] - p).reshape(-1), _whitened_design(Wb, J, geo_cols, R, eff_cols, D)
+
+
+def _normal(blocks) -> Normal:
+    out = None
+    for r, A in blocks:
+        ne = Normal.of(r, A)
+        out = ne if out is None else out + ne
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,21 +109,18 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
     kin = kin_geo
     x = np.zeros(K)
     split = np.cumsum([e.k for e in built])[:-1]
-    _, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-    A_full = _whitened_design(W, J, geo_cols, R, np.arange(K), np.ones(len(geo_cols) + K))
+    design = dict(split=split, q=q, p_meas=p_meas, W=W, meta=meta, built=built, geo_cols=geo_cols)
+    full = DesignFactor(A for _, A in _design_blocks(kin, x, **design, eff_cols=np.arange(K),
+                                                     D=np.ones(len(geo_cols) + K)))
     names = tuple(layout.names[c] for c in geo_cols) + eff_names
-    ident = analyse_identifiability(A_full, names, list(range(len(names))), options.rank_tol)
+    ident = analyse_identifiability(full.R, names, list(range(len(names))), options.rank_tol)
     keep = ident.keep.copy()
     keep[: len(geo_cols)] = True                       # the geometry stays as identified
     eff_keep = keep[len(geo_cols):]
-    D = np.linalg.norm(A_full[:, keep], axis=0)
+    D = full.norms(keep)
     D[D == 0] = 1.0
     P = int(keep.sum())
-
-    def residual_and_A(kin, x):
-        p, J, R = _jacobian(kin, q, meta, built, np.split(x, split))
-        r = whiten(W, p_meas - p).reshape(-1)
-        return r, _whitened_design(W, J, geo_cols, R, eff_keep, D)
+    del full
 
     def step(state, dx_scaled):
         kin, x = state
@@ -120,12 +131,11 @@ def calibrate_elastic(kin_geo: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarr
         x_new[eff_keep] += dx[len(geo_cols):]
         return (apply_update(kin, full), x_new), dx
 
-    fit = levenberg_marquardt((kin, x), lambda s: residual_and_A(*s), step, options.ridge_mu, max_iter,
-                              options.step_tol)
-    (kin, x), r, A, cost, it, converged = fit.state, fit.r, fit.A, fit.cost, fit.iterations, fit.converged
-    m = len(r)
-    sigma0 = float(np.sqrt(cost / max(m - P, 1)))
-    cov = sigma0**2 * np.linalg.pinv(A.T @ A)
+    fit = levenberg_marquardt((kin, x), lambda s: _normal(_design_blocks(*s, **design, eff_cols=eff_keep, D=D)),
+                              step, options.ridge_mu, max_iter, options.step_tol)
+    (kin, x), cost, it, converged = fit.state, fit.cost, fit.iterations, fit.converged
+    sigma0 = float(np.sqrt(cost / max(fit.normal.m - P, 1)))
+    cov = sigma0**2 * np.linalg.pinv(fit.normal.H)
     std_all = np.sqrt(np.maximum(np.diag(cov), 0.0)) / D
     std_eff = np.full(K, np.nan)
     std_eff[eff_keep] = std_all[len(geo_cols):]

@@ -99,8 +99,9 @@ class FittedEffect:
 
 def _flange(kin, q, dq, scale) -> np.ndarray:
     if np.all(scale == 1.0):
-        return chain(kin, q + dq, full=False).T_base_flange
-    return chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False).T_base_flange
+        return chain(kin, q + dq, full=False, axes=False).T_base_flange
+    return chain(kin, q + dq, a=kin.a_mm * scale[:, None], d=kin.d_mm * scale[:, None], full=False,
+                 axes=False).T_base_flange
 
 
 def elastic_flange(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -> np.ndarray:
@@ -108,7 +109,7 @@ def elastic_flange(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effects) -
     of the measurement does not move the robot)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     if not effects:
-        return chain(kin, q, full=False).T_base_flange
+        return chain(kin, q, full=False, axes=False).T_base_flange
     dq, scale, _ = effect_state(kin, q, meta, effects)
     return _flange(kin, q, dq, scale)
 

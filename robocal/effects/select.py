@@ -20,11 +20,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bases import effect_regressor
-from robocal.identify.identification import whitening
-from robocal.kinematics.models import Kinematics, identification_jacobian
+from .bases import effect_regressor, meta_rows
+from robocal.identify.whitened import whitening
+from robocal.kinematics.models import JACOBIAN_ROWS, Kinematics, identification_jacobian
 from robocal.measure.stats import paired_gain
-from .cv import BlockedCV, Blocking, design_array, order_blocks, pose_blocks
+from .cv import BlockedCV, Blocking, order_blocks, pose_blocks
 from .library import parts, refinements
 from .model import EffectChoice
 
@@ -36,6 +36,7 @@ SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) l
 SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
+BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
 
 @dataclass(frozen=True)
@@ -97,14 +98,20 @@ class EffectSelection:
     offered: tuple[str, ...] = ()                    # per taken effect: the candidate it was offered as (unpruned)
     shadowed: dict = field(default_factory=dict)     # label -> (taken label, share of the candidate's visible part
     #                                                  inside the taken effect's span): one class with it
+    rows: tuple[int, int] = (0, 0)                   # (rows cross-validated, calibration rows): a seeded subset when
+    #                                                  fewer
 
     def to_dict(self) -> dict:
+        sub = self.rows[0] < self.rows[1]
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
                           f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
                           "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
                           "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking; "
                           "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
-                          "every fold (nested)",
+                          "every fold (nested)" + (f"; on a seeded subset of {self.rows[0]} of the {self.rows[1]} "
+                                                   "calibration rows (the taken effects are fitted on all)" if sub
+                                                   else ""),
+                **({"rows": self.rows[0], "of_rows": self.rows[1]} if sub else {}),
                 "taken": [c.label for c in self.taken], "geometric_cv_rms_mm": self.geometric_cv_rms_mm,
                 "final_cv_rms_mm": self.final_cv_rms_mm, "blockings": list(self.blockings),
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
@@ -114,24 +121,37 @@ class EffectSelection:
 
 
 class _Design:
-    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement),
-    written into one (N, 3, P) array ``A`` (no list of blocks to concatenate)."""
+    """Column blocks of the linearised design: the identified geometry and every candidate (and refinement).
+    ``blocks()`` computes the design (N, 3, P) and the residuals of the geometric solution row block by row block
+    (``BlockedCV.of_blocks`` keeps it whitened, in float32)."""
 
-    def __init__(self, kin, geo_cols, q, meta, choices):
-        p, J = identification_jacobian(kin, q)
-        self.p0 = p
-        built = [c.build(kin.n) for c in choices]
-        self.A = design_array(len(q), len(geo_cols) + sum(eff.k for eff in built))
-        self.A[:, :, :len(geo_cols)] = J[:, :, geo_cols]
+    def __init__(self, kin, geo_cols, q, p_meas, meta, choices):
+        self._args = (kin, np.asarray(geo_cols, int), q, p_meas, meta, [c.build(kin.n) for c in choices])
         self.cols: dict[EffectChoice, np.ndarray] = {}
         self.names: dict[EffectChoice, tuple[str, ...]] = {}
         at = len(geo_cols)
         self.geo = np.arange(at)
-        for c, eff in zip(choices, built):
-            self.A[:, :, at:at + eff.k] = effect_regressor(kin, q, meta, eff, jacobian=(p, J))
+        for c, eff in zip(choices, self._args[5]):
             self.cols[c] = np.arange(at, at + eff.k)
             self.names[c] = eff.param_names
             at += eff.k
+        self.P = at
+
+    def blocks(self):
+        """(rows slice, A_b (b, 3, P), measured - geometric model (b, 3) mm) of consecutive row blocks."""
+        kin, geo_cols, q, p_meas, meta, built = self._args
+        G = len(geo_cols)
+        rows = int(np.clip(BLOCK_VALUES // self.P, 256, JACOBIAN_ROWS))     # blocks of ~12 MB whatever the columns
+        for s in range(0, len(q), rows):                     # row blocks: no Jacobian or basis of every row
+            b = slice(s, min(s + rows, len(q)))
+            p, J = identification_jacobian(kin, q[b])
+            A = np.empty((len(p), 3, self.P))
+            A[:, :, :G] = J[:, :, geo_cols]
+            at, mb = G, meta_rows(meta, b)
+            for eff in built:
+                A[:, :, at:at + eff.k] = effect_regressor(kin, q[b], mb, eff, jacobian=(p, J))
+                at += eff.k
+            yield b, A, p_meas[b] - p
 
     def sub(self, full: EffectChoice, reduced: EffectChoice, n: int) -> np.ndarray:
         """Columns of ``reduced`` (a part of ``full`` removed) among ``full``'s columns."""
@@ -149,26 +169,28 @@ def _rms(se) -> float:
 
 def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
                    cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
-                   max_effects: int = 6, plausible=None, scans=()) -> EffectSelection:
+                   max_effects: int = 6, plausible=None, scans=(), of_rows: int | None = None) -> EffectSelection:
     """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
     columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
     values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
     over them < 2) a plausible one is preferred to an implausible best. ``scans``: families of alternatives
     (``library.scan_families``: one joint's cyclic errors of every higher order); each family is one candidate
     per round, its member chosen inside every fold of the cross-validation (nested: the scan's pick among many
-    orders does not make its held-out errors optimistic) and, to be taken, on all rows."""
+    orders does not make its held-out errors optimistic) and, to be taken, on all rows. ``of_rows``: the rows these
+    are a subset of (reported)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     pool = list(dict.fromkeys(candidates))
     extra = [r for c in pool for r in refinements(c, n) if r not in pool]
     families = [tuple(f) for f in scans if len(f)]
-    design = _Design(kin, geo_cols, q, meta, pool + extra + [c for f in families for c in f if c not in pool + extra])
-    r0 = np.asarray(p_tracker_mm, float) - design.p0
+    design = _Design(kin, geo_cols, q, np.asarray(p_tracker_mm, float), meta,
+                     pool + extra + [c for f in families for c in f if c not in pool + extra])
     blockings = [Blocking("pose blocks", pose_blocks(q, folds, seed))]
     if meta.get("order") is not None:
         blockings.append(Blocking("order blocks", order_blocks(meta["order"], folds)))
-    cv = BlockedCV(design.A, r0, whitening(cov_mm2, len(q)), blockings, copy=False)     # whitened in place
-    design.A = None
+    W = whitening(cov_mm2, len(q))
+    W = np.broadcast_to(np.eye(3), (len(q), 3, 3)) if W is None else W
+    cv = BlockedCV.of_blocks(design.blocks(), len(q), design.P, W, blockings)
     model: list[tuple[EffectChoice, np.ndarray, EffectChoice]] = []   # taken (choice, its columns, as offered)
 
     def errors(entries, extra_cols=()):
@@ -234,7 +256,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     return EffectSelection(tuple(e[0] for e in model), tuple(steps), tuple(trials), tuple(dropped), geo_rms,
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
                            tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
-                           tuple(e[2].label for e in model), shadowed)
+                           tuple(e[2].label for e in model), shadowed, (len(q), of_rows or len(q)))
 
 
 def _family_label(family) -> str:

@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lm import levenberg_marquardt
+from .lm import Normal, levenberg_marquardt
+from .whitened import DESIGN_ROWS, DesignFactor, r_factor, whiten, whiten_t, whitening
 from robocal.kinematics.frames import fit_rigid, make_T, rotvec_to_matrix, skew
-from robocal.kinematics.models import (Kinematics, ParamLayout, apply_update, fk, identification_jacobian_t, parameter_difference,
-                         smr_base, smr_tracker)
+from robocal.kinematics.models import (Kinematics, ParamLayout, apply_update, fk, jacobian_blocks,
+                                       parameter_difference, smr_base, smr_tracker)
 from .parameters import GEOMETRY, ParameterTable
 
 
@@ -136,29 +137,35 @@ def register_tool(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, 
     k, N = P.shape[0], P.shape[1]
     offs = np.array(kin.p_flange_smr_mm if p_flange_smr_mm is None else p_flange_smr_mm, float).reshape(k, 3)
     T_flange = fk(kin, q)
-    Rf, tf = T_flange[:, :3, :3], T_flange[:, :3, 3]
+    Rf, tf = T_flange[:, :3, :3].copy(), T_flange[:, :3, 3].copy()
+    del T_flange
     a = np.einsum("nij,kj->kni", Rf, offs) + tf
     if N < 3 or np.linalg.matrix_rank(a[0] - a[0].mean(0), tol=1.0) < 2:
         raise IdentificationError("registration needs at least 3 non-collinear points")
     T = fit_rigid(a.reshape(-1, 3), P.reshape(-1, 3))
+    del a
     R, t = T[:3, :3], T[:3, 3]
     w = np.ones(N)
     basis = None
     for _ in range(max_iter):
-        pred = _registered_points(Rf, tf, offs, R, t)
-        r = P - pred                                                         # (k, N, 3)
-        J = np.zeros((k, N, 3, 6 + 3 * k))
-        J[..., :3] = -skew(pred - t)
-        J[..., 3:6] = np.eye(3)
-        for s in range(k):
-            J[s, :, :, 6 + 3 * s:9 + 3 * s] = R @ Rf
-        sw = np.sqrt(np.broadcast_to(w[None, :, None], r.shape)).reshape(-1)
-        A, b = J.reshape(-1, 6 + 3 * k) * sw[:, None], r.reshape(-1) * sw
-        if basis is None:                                                    # fixed at the start offsets
-            basis = _determined_tool_directions(A, np.sqrt(np.sum(w)))
-        A = np.column_stack([A[:, :6], A[:, 6:] @ basis])
-        D = np.maximum(np.linalg.norm(A, axis=0), 1e-12)
-        x = np.linalg.lstsq(A / D, b, rcond=None)[0] / D
+        if N <= DESIGN_ROWS:
+            A, b = _tool_design(Rf, tf, offs, R, t, P, w)
+            if basis is None:                                                # fixed at the start offsets
+                basis = _determined_tool_directions(A, np.sqrt(np.sum(w)))
+            A = np.column_stack([A[:, :6], A[:, 6:] @ basis])
+            D = np.maximum(np.linalg.norm(A, axis=0), 1e-12)
+            x = np.linalg.lstsq(A / D, b, rcond=None)[0] / D
+        else:                                      # the same least squares from the factor of [A b] over row blocks
+            Ab = DesignFactor(np.column_stack(_tool_design(Rf[r], tf[r], offs, R, t, P[:, r], w[r]))
+                              for r in _blocks(N)).R
+            if basis is None:
+                basis = _determined_tool_directions(Ab[:, :-1], np.sqrt(np.sum(w)))
+            m = 6 + basis.shape[1]
+            M = np.zeros((Ab.shape[1], m + 1))
+            M[:6, :6], M[6:-1, 6:m], M[-1, m] = np.eye(6), basis, 1.0
+            Rr = np.linalg.qr(Ab @ M, mode="r")
+            D = np.maximum(np.linalg.norm(Rr[:, :m], axis=0), 1e-12)
+            x = np.linalg.lstsq(Rr[:m, :m] / D, Rr[:m, m], rcond=None)[0] / D
         R, t = rotvec_to_matrix(x[:3]) @ R, t + x[3:6]
         offs = offs + (basis @ x[6:]).reshape(k, 3)
         e = np.linalg.norm(P - _registered_points(Rf, tf, offs, R, t), axis=2).max(axis=0)     # (N,)
@@ -169,6 +176,20 @@ def register_tool(kin: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, 
         if done:
             break
     return ToolRegistration(make_T(R, t), offs, int(basis.shape[1]), w)
+
+
+def _tool_design(Rf, tf, offs, R, t, P, w) -> tuple[np.ndarray, np.ndarray]:
+    """(A (3kN, 6 + 3k), b (3kN,)) of one Gauss-Newton step of ``register_tool``, weighted by sqrt(w) (N,)."""
+    k, N = P.shape[0], P.shape[1]
+    pred = _registered_points(Rf, tf, offs, R, t)
+    r = P - pred                                                         # (k, N, 3)
+    J = np.zeros((k, N, 3, 6 + 3 * k))
+    J[..., :3] = -skew(pred - t)
+    J[..., 3:6] = np.eye(3)
+    for s in range(k):
+        J[s, :, :, 6 + 3 * s:9 + 3 * s] = R @ Rf
+    sw = np.sqrt(np.broadcast_to(w[None, :, None], r.shape)).reshape(-1)
+    return J.reshape(-1, 6 + 3 * k) * sw[:, None], r.reshape(-1) * sw
 
 
 def _determined_tool_directions(A: np.ndarray, tool_norm: float) -> np.ndarray:
@@ -182,54 +203,6 @@ def _determined_tool_directions(A: np.ndarray, tool_norm: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- weighting
-def whitening(cov_mm2: np.ndarray | None, n: int) -> np.ndarray | None:
-    """Matrices W (N, 3, 3) with W^T W = cov^-1, or None for unit weights."""
-    if cov_mm2 is None:
-        return None
-    L = np.linalg.cholesky(np.asarray(cov_mm2, float))
-    return np.linalg.inv(L)
-
-
-def whiten(W, x):
-    """Apply per-point whitening to (N, 3) or (N, 3, P) arrays (batched 3x3 products: matmul, not einsum, which
-    is several times slower at 10^5 points)."""
-    if W is None:
-        return x
-    x = np.asarray(x, float)
-    if x.ndim == 2:
-        return np.matmul(W, x[:, :, None])[:, :, 0]
-    if x.ndim == 3:
-        return np.matmul(W, x)
-    return np.einsum("nij,nj...->ni...", W, x)
-
-
-WHITEN_ROWS = 4096     # points per block of ``_whiten_t``
-
-
-def _whiten_t(W, Jt, cols=None):
-    """Per-point whitening of parameter-major Jacobian columns Jt[cols] (K, N, 3) -> a new (K, N, 3) array
-    (``cols`` None: all), gathered and whitened in row blocks (no gathered copy of the whole Jacobian)."""
-    cols = np.arange(len(Jt)) if cols is None else np.asarray(cols, int)
-    if W is None:
-        return Jt[cols]
-    out = np.empty((len(cols),) + Jt.shape[1:])
-    W_t = np.swapaxes(W, 1, 2)
-    for s in range(0, Jt.shape[1], WHITEN_ROWS):
-        b = slice(s, s + WHITEN_ROWS)
-        out[:, b] = np.matmul(Jt[cols, b][:, :, None, :], W_t[b])[:, :, 0, :]
-    return out
-
-
-def r_factor(A: np.ndarray, chunk: int = 2048) -> np.ndarray:
-    """Triangular factor R (P, P) of A (m, P) = Q R by QR of row blocks, then of their stacked factors: every
-    norm, projection, least-squares fit and singular value of A's columns is R's, at O(m P^2) time in cache-sized
-    blocks (a single QR of a 10^5-row A is several times slower). A itself when it has few rows."""
-    if len(A) <= 4 * A.shape[1] + chunk:
-        return A
-    blocks = [np.linalg.qr(A[i:i + chunk], mode="r") for i in range(0, len(A), chunk)]
-    return np.linalg.qr(np.vstack(blocks), mode="r")
-
-
 def igg3_weight(v_std: np.ndarray, k0: float = 1.5, k1: float = 2.5) -> np.ndarray:
     """IGG3 equivalent-weight factor of seed 000 eq. 12 for standardized residuals."""
     a = np.abs(v_std)
@@ -268,8 +241,19 @@ def observability_indices(A: np.ndarray) -> dict:
     (s1 s2 ... sL)^(1/L) / sqrt(m) (Borm & Menq 1991), O2 = sL / s1 (Driels & Pathre 1990), O3 = sL (Nahvi,
     Hollerbach & Hayward 1994), O4 = sL^2 / s1 (Nahvi & Hollerbach 1996), O5 = 1 / sum(1 / s) (Sun & Hollerbach
     2008)."""
-    s = np.linalg.svd(A, compute_uv=False)
-    m, L = A.shape
+    return _indices(np.linalg.svd(A, compute_uv=False), *A.shape)
+
+
+def observability_of_normal(N: np.ndarray, m: int) -> dict:
+    """``observability_indices`` of the column-normalised A (m, L) from its normal matrix N = A^T A (L, L) alone:
+    its singular values are the square roots of the eigenvalues of D^-1 N D^-1, D = sqrt(diag N)."""
+    d = np.sqrt(np.maximum(np.diag(N), 1e-300))
+    ev = np.linalg.eigvalsh(N / np.outer(d, d))[::-1]
+    return _indices(np.sqrt(np.maximum(ev, 0.0)), m, len(N))
+
+
+def _indices(s: np.ndarray, m: int, L: int) -> dict:
+    """The indices of the singular values s (L,), descending, of a column-normalised A with m rows."""
     if L == 0 or s[-1] <= 0:
         return {"O1": 0.0, "O2": 0.0, "O3": 0.0, "O4": 0.0, "O5": 0.0, "condition_number": float("inf")}
     return {"O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(m)), "O2": float(s[-1] / s[0]), "O3": float(s[-1]),
@@ -312,14 +296,53 @@ def analyse_identifiability(A: np.ndarray, names: tuple[str, ...], order: list[i
 
 
 # ---------------------------------------------------------------- estimation
-def _linearise(kin, q, p_meas, W, cols, D):
-    """(r (3N,), A (3N, P)) whitened, A column-scaled by D; A is the transpose of a C-ordered (P, 3N) array (the
-    parameter-major Jacobian: A^T A and A^T r are single BLAS calls on it)."""
-    p, Jt = identification_jacobian_t(kin, q)
-    r = whiten(W, p_meas - p).reshape(-1)
-    At = _whiten_t(W, Jt, cols)                       # a fresh (P, N, 3) array: scaled in place
-    At /= D[:, None, None]
-    return r, At.reshape(len(cols), -1).T
+def _blocks(n: int) -> list[slice]:
+    """Row blocks of ``DESIGN_ROWS`` poses."""
+    return [slice(s, min(s + DESIGN_ROWS, n)) for s in range(0, n, DESIGN_ROWS)]
+
+
+class _Design:
+    """The whitened, column-scaled identification design of the columns ``cols`` at one model: A (3N, P) kept as
+    the transpose of a C-ordered (P, 3N) array (A^T A and A^T r are single BLAS calls on each block) and the
+    whitened residual r (3N,), computed in row blocks of ``DESIGN_ROWS`` poses (the Jacobian of every candidate
+    is never held for all rows); its products (normal equations, A x, leverages) are sums over the same blocks."""
+
+    def __init__(self, kin, q, p_meas, W, cols, D):
+        n = len(q)
+        At, r = np.empty((len(cols), n, 3)), np.empty((n, 3))
+        for b, p, Jt in jacobian_blocks(kin, q, DESIGN_ROWS):
+            Wb = None if W is None else W[b]
+            r[b] = whiten(Wb, p_meas[b] - p)
+            At[:, b] = whiten_t(Wb, Jt, cols)
+        At /= D[:, None, None]
+        self.A, self.r = At.reshape(len(cols), -1).T, r.reshape(-1)
+        self.rows = [slice(3 * b.start, 3 * b.stop) for b in _blocks(n)]
+
+    def gram(self, w_rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(A^T P A, A^T P r) with the row weights P = diag(w_rows) (3N,) (None: unit weights)."""
+        A, r = self.A, self.r
+        if w_rows is None:
+            return sum(A[b].T @ A[b] for b in self.rows), sum(A[b].T @ r[b] for b in self.rows)
+        return (sum(A[b].T @ (w_rows[b, None] * A[b]) for b in self.rows),
+                sum(A[b].T @ (w_rows[b] * r[b]) for b in self.rows))
+
+    def normal(self) -> Normal:
+        H, g = self.gram()
+        return Normal(H, g, float(self.r @ self.r), len(self.r))
+
+    def times(self, x: np.ndarray) -> np.ndarray:
+        """A x (3N,)."""
+        return np.concatenate([self.A[b] @ x for b in self.rows])
+
+    def leverage(self, M: np.ndarray) -> np.ndarray:
+        """diag(A M A^T) (3N,) of a (P, P) matrix M."""
+        return np.concatenate([np.einsum("ij,jk,ik->i", self.A[b], M, self.A[b]) for b in self.rows])
+
+
+def _full_design(kin, q, W):
+    """Row blocks (3b, P) of the whitened design of every candidate parameter (unit scale) at ``kin``."""
+    for b, _, Jt in jacobian_blocks(kin, q, DESIGN_ROWS):
+        yield whiten_t(None if W is None else W[b], Jt).reshape(len(Jt), -1).T
 
 
 def _apply(kin, layout, cols, dx_scaled, D):
@@ -328,18 +351,44 @@ def _apply(kin, layout, cols, dx_scaled, D):
     return apply_update(kin, full), full[cols]
 
 
+def _normal(kin, q, p_meas, W, cols, D) -> Normal:
+    """``_Design(...).normal()`` accumulated block by block, the design of each block dropped once added."""
+    if len(q) <= DESIGN_ROWS:
+        return _Design(kin, q, p_meas, W, cols, D).normal()
+    out = None
+    for b, p, Jt in jacobian_blocks(kin, q, DESIGN_ROWS):
+        Wb = None if W is None else W[b]
+        At = whiten_t(Wb, Jt, cols)
+        At /= D[:, None, None]
+        ne = Normal.of(whiten(Wb, p_meas[b] - p).reshape(-1), At.reshape(len(cols), -1).T)
+        out = ne if out is None else out + ne
+    return out
+
+
+def _weighted_normal(kin, q, p_meas, W, cols, D, w) -> tuple[np.ndarray, np.ndarray, float]:
+    """(A^T A, A^T P A, r^T P r) of ``_Design`` with the point weights w (N,) (P = w per row), block by block."""
+    N0, N, wrr = 0.0, 0.0, 0.0
+    for b in _blocks(len(q)) if len(q) > DESIGN_ROWS else [slice(0, len(q))]:
+        design = _Design(kin, q[b], p_meas[b], None if W is None else W[b], cols, D)
+        w_rows = np.repeat(w[b], 3)
+        N0 = N0 + design.gram()[0]
+        N = N + design.gram(w_rows)[0]
+        wrr = wrr + np.sum(w_rows * design.r**2)
+    return N0, N, float(wrr)
+
+
 def _levenberg_marquardt(kin, q, p_meas, W, cols, D, layout, opt):
-    fit = levenberg_marquardt(kin, lambda k: _linearise(k, q, p_meas, W, cols, D),
+    fit = levenberg_marquardt(kin, lambda k: _normal(k, q, p_meas, W, cols, D),
                               lambda k, dx: _apply(k, layout, cols, dx, D), opt.ridge_mu, opt.max_iter, opt.step_tol)
     return fit.state, np.ones(len(q)), fit.iterations, fit.converged
 
 
-def _standardized(A, v, w_rows, Ninv, p, sigma0_mode):
+def _standardized(design, v, w_rows, Ninv, p, sigma0_mode):
     """Standardized residuals v / (sigma0 sqrt(q_v)), q_v = 1/P - a N^-1 a^T on the original unit weights
     (1/P + a N^-1 a^T for rejected rows). sigma0 is the a-posteriori unit-weight error of the weighted fit
     (``posterior``, seed 000) or its robust MAD estimate (``mad``), which does not shrink as IGG3 trims the
     tails and so cannot cascade into rejecting good points."""
-    h = np.einsum("ij,jk,ik->i", A, Ninv, A)
+    h = design.leverage(Ninv)
     qv = np.where(w_rows > 0, np.maximum(1.0 - w_rows * h, 1e-6), 1.0 + h)
     u = v / np.sqrt(qv)
     if sigma0_mode == "mad":
@@ -357,16 +406,17 @@ def _robust_ridge(kin, q, p_meas, W, cols, D, layout, opt):
     w = np.ones(n)
     converged = False
     for it in range(1, opt.max_iter + 1):
-        r, A = _linearise(kin, q, p_meas, W, cols, D)
+        design = _Design(kin, q, p_meas, W, cols, D)
         w_rows = np.repeat(w, 3)
-        N = A.T @ (w_rows[:, None] * A) + opt.ridge_mu * np.eye(p)
-        dx = np.linalg.solve(N, A.T @ (w_rows * r))
+        N, g = design.gram(w_rows)
+        N = N + opt.ridge_mu * np.eye(p)
+        dx = np.linalg.solve(N, g)
         kin, step = _apply(kin, layout, cols, dx, D)
         if opt.weights == "none":
             w_new = w
         else:
-            v = A @ dx - r                          # seed 000 eq. 10
-            v_std, _ = _standardized(A, v, w_rows, np.linalg.inv(N), p, opt.sigma0)
+            v = design.times(dx) - design.r         # seed 000 eq. 10
+            v_std, _ = _standardized(design, v, w_rows, np.linalg.inv(N), p, opt.sigma0)
             v_pt = np.sqrt(np.mean(v_std.reshape(n, 3) ** 2, axis=1))   # one statistic per point (x, y, z)
             w_new = igg3_weight(v_pt, opt.k0, opt.k1) if opt.weights == "igg3" else huber_weight(v_pt, opt.k0)
         small = np.max(np.abs(step)) < opt.step_tol
@@ -398,9 +448,8 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
         # identifiability depends on where the model is (theta6, a5, alpha5 are degenerate while the SMR estimate
         # sits on the J6 axis): re-analyse at the solution and re-solve when a parameter became clearly
         # identifiable (10x the rank tolerance, so a borderline column never enters on the way)
-        _, Jt = identification_jacobian_t(kin, q)
-        A_full = _whiten_t(W, Jt).reshape(layout.size, -1).T
-        ident = analyse_identifiability(A_full, layout.names, priority_order(layout), options.rank_tol,
+        full = DesignFactor(_full_design(kin, q, W))
+        ident = analyse_identifiability(full.R, layout.names, priority_order(layout), options.rank_tol,
                                         options.fixed)
         if cols is None:
             cols = np.flatnonzero(ident.keep)
@@ -411,7 +460,7 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
             cols = np.array([c for c in np.flatnonzero(ident.keep) if c in set(cols) | strong])
         if 3 * len(q) <= len(cols):
             raise IdentificationError(f"{len(q)} points cannot determine {len(cols)} parameters")
-        D = np.linalg.norm(A_full[:, cols], axis=0)
+        D = full.norms(cols)
         kin, w, it, converged = solver(kin, q, p_meas, W, cols, D, layout, options)
         iters += it
     identified = set(cols)
@@ -421,14 +470,12 @@ def calibrate(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.ndarray, cov
                                                    "kept at its start value") for c in np.flatnonzero(ident.keep)
                                     if c not in identified),
                             ident.condition_number, ident.observability, ident.rel)
-    r, A = _linearise(kin, q, p_meas, W, cols, D)
+    N0, N, wrr = _weighted_normal(kin, q, p_meas, W, cols, D, w)
     # the identified columns only: a column admitted only marginally at the solution is kept at its start value
     # and amplifies no noise into the identified ones (it would turn a good condition number into a poor one)
-    obs = observability_indices(A / np.linalg.norm(A, axis=0))
-    w_rows = np.repeat(w, 3)
-    N = A.T @ (w_rows[:, None] * A)
-    n_eff = np.count_nonzero(w_rows)
-    sigma0 = float(np.sqrt(np.sum(w_rows * r**2) / max(n_eff - len(cols), 1)))
+    obs = observability_of_normal(N0, 3 * len(q))
+    n_eff = 3 * np.count_nonzero(w)
+    sigma0 = float(np.sqrt(wrr / max(n_eff - len(cols), 1)))
     cov_scaled = sigma0**2 * np.linalg.pinv(N)
     std = np.full(layout.size, np.nan)
     std[cols] = np.sqrt(np.diag(cov_scaled)) / D

@@ -73,8 +73,11 @@ def reach_mm(kin: Kinematics) -> float:
 
 def joint_levers_mm(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """(N, n) lever arm of every joint to the SMR (mm per rad of that joint): |axis_j x (p_smr - o_j)|."""
-    c = chain(kin, np.atleast_2d(q_rad), full=False)
-    p = smr_base(kin, q_rad, c.T_base_flange)
+    q = np.atleast_2d(q_rad)
+    if len(q) > CHUNK_ROWS:                         # row blocks: no (N, n, 3) frames
+        return np.concatenate([joint_levers_mm(kin, q[b]) for b in _blocks(len(q))])
+    c = chain(kin, q, full=False)
+    p = smr_base(kin, q, c.T_base_flange)
     return np.linalg.norm(np.cross(c.axis, p[:, None, :] - c.origin), axis=2)
 
 
@@ -85,11 +88,13 @@ def near_neighbours(q_rad: np.ndarray, p_mm: np.ndarray, lever_mm: np.ndarray, n
     levers averaged over the two poses: a neighbour in another configuration or far in one joint is not near)."""
     n = len(p_mm)
     k = min(k_max, n - 1)
-    dist, idx = cKDTree(p_mm).query(p_mm, k=k + 1, distance_upper_bound=near_mm)
-    valid = np.isfinite(dist) & (idx != np.arange(n)[:, None])       # not the point itself (ties: any column)
-    idx = np.where(valid, idx, 0)
-    for b in _blocks(n):                               # row blocks: no (N, K, n) temporaries
-        nb = idx[b]
+    tree = cKDTree(p_mm)
+    idx, valid = np.empty((n, k + 1), np.int32 if n < 2**31 else np.intp), np.empty((n, k + 1), bool)
+    for b in _blocks(n):                               # row blocks: no (N, K) distances, no (N, K, n) temporaries
+        dist, nb = tree.query(p_mm[b], k=k + 1, distance_upper_bound=near_mm)
+        dist, nb = dist.reshape(len(dist), -1), nb.reshape(len(nb), -1)
+        valid[b] = np.isfinite(dist) & (nb != np.arange(b.start, b.start + len(nb))[:, None])   # not the point itself
+        idx[b] = nb = np.where(valid[b], nb, 0)
         lever = 0.5 * (lever_mm[b, None, :] + lever_mm[nb])
         d_joint = np.sqrt(np.sum(((q_rad[b, None, :] - q_rad[nb]) * lever) ** 2, axis=2))
         valid[b] &= d_joint <= JOINT_FACTOR * near_mm

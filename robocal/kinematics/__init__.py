@@ -14,9 +14,9 @@ _HOMES = {                      # module -> the public names it holds
     "frames": ("fit_rigid", "inv_T", "make_T", "matrix_to_rotvec", "rotvec_to_matrix", "skew", "transform_points"),
     "gravity": ("G_MM_S2", "GravityModel", "default_link_masses", "gravity_torques", "lever_torques", "link_masses"),
     "ik": ("branch_signature", "reachable", "solve_ik", "solve_on_branch"),
-    "models": ("JOINT_PARAMS", "Kinematics", "ParamLayout", "apply_update", "chain", "fk", "identification_jacobian",
-               "identification_jacobian_t", "joint_motion_columns", "parameter_difference", "smr_base", "smr_tracker",
-               "within_limits"),
+    "models": ("JACOBIAN_ROWS", "JOINT_PARAMS", "Kinematics", "ParamLayout", "apply_update", "chain", "fk",
+               "identification_jacobian", "identification_jacobian_t", "jacobian_blocks", "joint_motion_columns",
+               "parameter_difference", "smr_base", "smr_tracker", "within_limits"),
     "sweep": ("Boxes", "check_segments", "clearances_mm", "flange_points_base", "move_durations_s",
               "peak_speed_per_unit_s"),
 }

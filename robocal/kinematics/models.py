@@ -169,7 +169,7 @@ def _col(x):
 
 
 def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, theta=None, beta=None,
-          full: bool = True) -> Chain:
+          full: bool = True, axes: bool = True) -> Chain:
     """Forward kinematics with all intermediate frames. q_rad (N, n). Optional per-pose (N, n) overrides
     of the DH arrays (used by effect models such as thermal growth). ``full=False`` skips the per-parameter
     directions (``dirs``/``pts`` are then None), which IK does not need.
@@ -186,7 +186,7 @@ def chain(kin: Kinematics, q_rad: np.ndarray, *, alpha=None, a=None, d=None, the
     theta = kin.theta_rad if theta is None else theta
     beta = kin.beta_rad if beta is None else beta
     if not full and N > CHAIN_ROWS:
-        return _chain_blocks(kin, q, dict(alpha=alpha, a=a, d=d, theta=theta, beta=beta))
+        return _chain_blocks(kin, q, dict(alpha=alpha, a=a, d=d, theta=theta, beta=beta), axes)
     o = np.zeros((N, 3))
     x, y, z = list(np.broadcast_to(np.eye(3), (N, 3, 3)).transpose(1, 0, 2))
     axis = np.empty((N, n, 3)); origin = np.empty((N, n, 3))
@@ -236,15 +236,18 @@ def track_mm(q_rad_track: np.ndarray) -> np.ndarray:
     return np.degrees(q_rad_track)
 
 
-def _chain_blocks(kin: Kinematics, q: np.ndarray, dh: dict) -> Chain:
+def _chain_blocks(kin: Kinematics, q: np.ndarray, dh: dict, axes: bool = True) -> Chain:
     """``chain(full=False)`` in row blocks of ``CHAIN_ROWS`` poses (per-pose (N, n) DH overrides sliced along):
-    the same numbers, computed in cache."""
+    the same numbers, computed in cache; ``axes`` False keeps the flange poses only (axis, origin None)."""
     N = len(q)
-    T, axis, origin = np.empty((N, 4, 4)), np.empty((N, kin.n, 3)), np.empty((N, kin.n, 3))
+    T = np.empty((N, 4, 4))
+    axis, origin = (np.empty((N, kin.n, 3)), np.empty((N, kin.n, 3))) if axes else (None, None)
     for s in range(0, N, CHAIN_ROWS):
         b = slice(s, s + CHAIN_ROWS)
         c = chain(kin, q[b], full=False, **{k: v[b] if np.ndim(v) == 2 else v for k, v in dh.items()})
-        T[b], axis[b], origin[b] = c.T_base_flange, c.axis, c.origin
+        T[b] = c.T_base_flange
+        if axes:
+            axis[b], origin[b] = c.axis, c.origin
     return Chain(T, axis, origin, None, None)
 
 
@@ -255,7 +258,7 @@ def _append(lists: list, arrays: tuple) -> None:
 
 def fk(kin: Kinematics, q_rad: np.ndarray) -> np.ndarray:
     """T_base_flange (N, 4, 4) for joint angles (N, n) rad."""
-    return chain(kin, q_rad, full=False).T_base_flange
+    return chain(kin, q_rad, full=False, axes=False).T_base_flange
 
 
 def smr_base(kin: Kinematics, q_rad: np.ndarray, T_base_flange: np.ndarray | None = None) -> np.ndarray:
@@ -366,6 +369,16 @@ def identification_jacobian_t(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.nd
     for s in range(0, len(q), JACOBIAN_ROWS):
         p_tracker[s:s + JACOBIAN_ROWS], Jt[:, s:s + JACOBIAN_ROWS] = _jacobian_block(kin, layout, q[s:s + JACOBIAN_ROWS])
     return p_tracker, Jt
+
+
+def jacobian_blocks(kin: Kinematics, q_rad: np.ndarray, rows: int):
+    """``identification_jacobian_t`` of consecutive row blocks of ``rows`` poses: (rows slice, p_tracker_mm (b, 3),
+    Jt (P, b, 3)), one block at a time (the fits that accumulate their normal equations never hold all rows' Jacobian)."""
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+    layout = ParamLayout.of(kin)
+    for s in range(0, len(q), rows):
+        b = slice(s, min(s + rows, len(q)))
+        yield (b, *_jacobian_block(kin, layout, q[b]))
 
 
 def _jacobian_block(kin: Kinematics, layout: ParamLayout, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

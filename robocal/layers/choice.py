@@ -20,7 +20,8 @@ from typing import Mapping
 
 import numpy as np
 
-from robocal.effects.cv import kfold
+from robocal.effects.bases import meta_rows
+from robocal.effects.cv import CV_MAX_ROWS, capped_rows, kfold
 from .gp_layer import GPRResidual, gp_inputs
 from .gp import MultiOutputGP
 from .joint_gp import JointGPResidual, fit_joint_gp
@@ -81,12 +82,14 @@ class LayerChoice:
     layer: object
     cv: dict
     folds: int
+    rows: tuple[int, int] = (0, 0)      # (rows cross-validated and fitted, calibration rows): a seeded subset if fewer
 
     def to_dict(self) -> dict:
+        sub = self.rows[0] < self.rows[1]
         return {"chosen": self.kind, "folds": self.folds,
                 "test": "one-standard-error rule: one-sided paired t of per-point held-out squared errors vs none > 1 "
                         "and CV RMS gain > 2 % ('significant': the same with t > 3)",
-                "candidates": self.cv}
+                "candidates": self.cv, **({"rows": self.rows[0], "of_rows": self.rows[1]} if sub else {})}
 
 
 def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fold, meta=None, payload_kg=None,
@@ -115,15 +118,23 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
 
 def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None,
                  payload_kg: np.ndarray | None = None, candidates=None, folds: int = 5, seed: int = 0,
-                 idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None) -> LayerChoice:
+                 idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None,
+                 max_rows: int = CV_MAX_ROWS) -> LayerChoice:
     """none / IDW / GPR / joint GP (``candidates``, default ``LAYER_KINDS``) by k-fold CV on the calibration points:
     the candidate with the lowest CV RMS among those
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
-    bound). Each candidate's figures record also whether its gain is significant (t > 3)."""
+    bound). Each candidate's figures record also whether its gain is significant (t > 3). Beyond ``max_rows``
+    points, a seeded subset of that many is cross-validated and the chosen layer fitted on it."""
     q = np.atleast_2d(np.asarray(q_rad, float))
+    of_rows = len(q)
+    sub = capped_rows(len(q), max_rows, seed)
+    if sub is not None:
+        q, p_tracker_mm = q[sub], np.asarray(p_tracker_mm)[sub]
+        meta = None if meta is None else meta_rows(meta, sub)
+        payload_kg = None if payload_kg is None else np.asarray(payload_kg)[sub]
     candidates = LAYER_KINDS if candidates is None else candidates
     if len(q) < 4 * folds:
-        return LayerChoice("none", None, {}, folds)
+        return LayerChoice("none", None, {}, folds, (len(q), of_rows))
     fold = kfold(len(q), folds, seed)
     kw = dict(meta=meta, payload_kg=payload_kg, idw_power=idw_power, idw_k_nearest=idw_k_nearest, seed=seed,
               noise_floor_mm=noise_floor_mm)
@@ -137,7 +148,7 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
                     "kept": g.beats_one_se}
         if g.beats_one_se and g.rms_cand_mm < best[2]:
             best = (kind, layer, g.rms_cand_mm)
-    return LayerChoice(best[0], best[1], cv, folds)
+    return LayerChoice(best[0], best[1], cv, folds, (len(q), of_rows))
 
 
 def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:

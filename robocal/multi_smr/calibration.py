@@ -18,8 +18,8 @@ import numpy as np
 
 from robocal.identify.lm import levenberg_marquardt
 from robocal.kinematics.frames import fit_rigid, transform_points
-from robocal.identify.identification import (CalibrationOptions, IdentificationError, Unidentifiable, analyse_identifiability, priority_order,
-                       whiten, whitening)
+from robocal.identify.identification import (CalibrationOptions, IdentificationError, Unidentifiable, analyse_identifiability, priority_order)
+from robocal.identify.whitened import whiten, whitening
 from robocal.kinematics.models import Kinematics, ParamLayout, apply_update, fk, identification_jacobian, smr_base
 from .three_smr_pose import fit_points_pose
 
@@ -114,10 +114,10 @@ def calibrate_multi_smr(kin0: Kinematics, q_rad: np.ndarray, p_tracker_mm: np.nd
         return (apply_update(kin, geo), offsets + full[nj + 6:].reshape(S, 3)), full[cols]
 
     fit = levenberg_marquardt((kin, offsets), lambda s: lin(*s), step, options.ridge_mu, max_iter, options.step_tol)
-    (kin, offsets), r, cost, it, converged = fit.state, fit.r, fit.cost, fit.iterations, fit.converged
+    (kin, offsets), m, cost, it, converged = fit.state, fit.normal.m, fit.cost, fit.iterations, fit.converged
     kin = kin.with_(p_flange_smr_mm=offsets[0])
     res = P - predict_multi(kin, offsets, q)
-    sigma0 = float(np.sqrt(cost / max(len(r) - len(cols), 1)))
+    sigma0 = float(np.sqrt(cost / max(m - len(cols), 1)))
     return MultiSMRResult(kin, offsets, tuple(names[c] for c in cols), ident.unidentifiable, res, sigma0, it,
                           converged, ident.condition_number)
 

@@ -302,3 +302,42 @@ def test_the_scan_takes_nothing_on_sparse_geometric_only_campaigns():
         assert high == [], f"seed {300 + seed}, {n} poses: {high}"
         tried += sum(1 for lb in eng.selection.candidates if "-" in lb)
     assert tried >= 40                                   # the scan ran (families on most joints)
+
+
+@pytest.mark.system
+def test_beyond_max_rows_the_choices_are_those_of_a_seeded_subset_and_say_so():
+    """The selection and the residual-layer choice on more rows than ``max_rows``: exactly their answer on a seeded
+    subset of ``max_rows`` rows (the rows kept in order), reported as such; the taken effects fitted on all rows."""
+    from robocal.effects.bases import meta_rows
+    from robocal.effects.cv import capped_rows
+    from robocal.effects.engine import EngineOptions
+    from robocal.layers.choice import choose_layer
+    assert capped_rows(100, 100) is None
+    sub = capped_rows(200, 120, seed=3)
+    assert len(sub) == 120 and np.all(np.diff(sub) > 0) and np.array_equal(sub, capped_rows(200, 120, seed=3))
+    camp = simulate(["joint_compliance"], 11, SMALL)
+    inp = truth_input(camp)
+    cal = np.flatnonzero(inp.calib)
+    geo = calibrate(inp.kin, inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal], CalibrationOptions(method="lm"))
+    cols = np.array([ParamLayout.of(inp.kin).index(n) for n in geo.identified])
+    meta = {k: (None if v is None else np.asarray(v)[cal]) for k, v in inp.meta().items()}
+    q, p, cov = inp.q_rad[cal], inp.p_mm[cal], inp.cov_mm2[cal]
+    rows = capped_rows(len(cal), 150)
+    lib = LibraryOptions(scan_max_rows=100)            # no scan (its orders depend on the rows' distinct angles)
+    capped = run_engine(geo.kinematics, cols, q, p, cov, meta, options=EngineOptions(max_rows=150, library=lib))
+    direct = select_candidates(geo.kinematics, cols, q[rows], p[rows], cov[rows], meta_rows(meta, rows),  # meta_rows:
+                               options=EngineOptions(library=lib))                             # the warm-up's reference
+    assert capped.selection.rows == (150, len(cal)) and direct.selection.rows == (150, 150)
+    assert [t.label for t in capped.selection.trials] == [t.label for t in direct.selection.trials]
+    assert [t.cv_rms_mm for t in capped.selection.trials] == pytest.approx(      # (a drift's clock span: all rows';
+        [t.cv_rms_mm for t in direct.selection.trials], rel=1e-6)                 # the CV keeps float32)
+    assert [c.label for c in capped.taken] == [c.label for c in direct.taken]
+    d = capped.selection.to_dict()
+    assert (d["rows"], d["of_rows"]) == (150, len(cal)) and "seeded subset of 150" in d["method"]
+    assert "rows" not in direct.selection.to_dict()
+    assert len(capped.elastic.residual_tracker_mm) == len(cal)                 # fitted on every row
+    model = CalibratedModel(capped.elastic.kinematics, None, None, capped.elastic.effects)
+    lay = choose_layer(model, q, p, meta, max_rows=100)
+    few = capped_rows(len(cal), 100)
+    same = choose_layer(model, q[few], p[few], meta_rows(meta, few))
+    assert lay.rows == (100, len(cal)) and lay.cv == same.cv and lay.to_dict()["of_rows"] == len(cal)

@@ -8,7 +8,8 @@ import pytest
 from robocal.diagnose.selfcheck import truth_input
 from robocal.effects.model import EffectChoice, elastic_smr_tracker
 from robocal.effects.fit import calibrate_elastic
-from robocal.identify.identification import CalibrationOptions, calibrate, whiten, whitening
+from robocal.identify.identification import CalibrationOptions, calibrate
+from robocal.identify.whitened import whiten, whitening
 from robocal.kinematics.models import ParamLayout, apply_update
 from robocal.layers.calibrated_model import CalibratedModel
 from robocal.identify.parameters import GEOMETRY, GEOMETRY_AND_EFFECTS, ParameterTable

@@ -62,8 +62,11 @@ def test_points_beyond_the_inline_size_go_to_points_csv_and_read_back_identicall
 
 
 @pytest.mark.unit
-def test_point_ids_with_separators_quotes_and_line_breaks_round_trip(tmp_path):
-    """Ids from a run log may hold any text: points.csv quotes them, the reader gets them back."""
+@pytest.mark.parametrize("rows", [rp.CSV_ROWS, 1, 2])
+def test_point_ids_with_separators_quotes_and_line_breaks_round_trip(tmp_path, monkeypatch, rows):
+    """Ids from a run log may hold any text: points.csv quotes them, the reader gets them back (also when the file
+    is written and read a row or two at a time)."""
+    monkeypatch.setattr(rp, "CSV_ROWS", rows)
     ids = ("a,b", 'say "hi"', "two\nlines", "plain", "=1+2")
     n = len(ids)
     q = np.arange(n * 6, dtype=float).reshape(n, 6)

@@ -9,6 +9,7 @@ import pytest
 
 from campaign.errors import DataError
 from campaign.data.dataset import Dataset
+from campaign.data import interchange_blocks
 from campaign.data.interchange_csv import read_csv, write_csv
 from campaign.data.log_dataset import dataset_from_log
 from campaign.run.log_writer import RunLog
@@ -444,3 +445,55 @@ def test_order_context_skips_nest_readings_as_the_calibration_does(tmp_path):
     back = read_csv(path).order_context
     np.testing.assert_allclose(np.degrees(back.move_rad[[0, 2]]), [[1, 2], [2, -1]])
     assert np.isnan(back.move_rad[1]).all()
+
+
+# ---------------------------------------------------------------- read in blocks
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
+def test_blocks_of_a_few_lines_give_the_same_errors(tmp_path, monkeypatch, case):
+    """The file is read a few lines at a time: every error is the whole-file one (line, column, message)."""
+    monkeypatch.setattr(interchange_blocks, "READ_BYTES", 50)
+    text, expected = BAD_CASES[case]
+    path = write(tmp_path, text)
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    assert str(info.value) == f"{path}: {expected}"
+
+
+@pytest.mark.unit
+def test_the_earliest_kind_of_problem_wins_across_blocks(tmp_path, monkeypatch):
+    """Problems in several blocks: a whole-file read checks field counts before sets, sets before ids, ids before
+    numbers, whatever their lines; read in blocks, the same problem is reported."""
+    monkeypatch.setattr(interchange_blocks, "READ_BYTES", 60)
+    rows = [f"P{i},calib,0,10,20,30,40,50,1,2,3" for i in range(40)]
+    rows[3] = "P3,calib,0,10,20,30,40,50,1,2,x"              # number syntax
+    rows[9] = "P1,calib,0,10,20,30,40,50,1,2,3"              # duplicate id
+    rows[20] = "P20,train,0,10,20,30,40,50,1,2,3"            # bad set
+    rows[30] = "P30,calib,0,10,20,30,40,50,1,2"              # field count
+    cases = [(30, "line 32: expected 11 fields, got 10"),
+             (20, "line 22, column 'set': expected calib, test, check or nest, got 'train'"),
+             (9, "line 11: duplicate point_id 'P1' (first on line 3)"),
+             (3, "line 5, column 'z': expected a number, got 'x'")]
+    for fixed, expected in cases:
+        path = write(tmp_path, "\n".join([HEADER6, *rows]) + "\n")
+        with pytest.raises(DataError) as info:
+            read_csv(path)
+        assert str(info.value) == f"{path}: {expected}"
+        rows[fixed] = f"P{fixed},calib,0,10,20,30,40,50,1,2,3"
+    path = write(tmp_path, "\n".join([HEADER6, *rows]) + "\n")
+    assert len(read_csv(path)) == 40
+
+
+@pytest.mark.unit
+def test_a_file_read_in_blocks_is_the_file_read_whole(tmp_path, monkeypatch):
+    rng = np.random.default_rng(3)
+    n = 300
+    ds = random_dataset(rng, n, 6, t_s=np.arange(n) * 2.0, temp_c=20 + rng.normal(size=n))
+    path = tmp_path / "rt.csv"
+    write_csv(path, ds)
+    whole = read_csv(path)
+    monkeypatch.setattr(interchange_blocks, "READ_BYTES", 333)
+    assert_same(whole, read_csv(path))
+    assert_same(ds, whole)
