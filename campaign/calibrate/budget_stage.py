@@ -3,9 +3,12 @@ on the test rows, split by cause with ``robocal.diagnose.budget`` (the same attr
 diagnose``)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from robocal.diagnose.budget import ErrorBudget, HeldOut, model_budget
+from robocal.effects.cv import CV_MAX_ROWS, capped_rows
 from robocal.kinematics.models import ParamLayout
 
 
@@ -17,7 +20,9 @@ def calibration_budget(predict, stage_models: list, geo, elastic, layer_kind: st
     [elastic], compensated); ``geo`` the geometric fit; ``elastic`` the elastic fit or None; ``layer_kind`` the
     residual layer chosen ("none": no layer); ``cov`` (N, 3, 3) the fit's weights (covariance), ``cov_floor`` the
     measurement covariance (the floor's shape); ``meta`` the effects' metadata of every row, ``sub(meta, rows)``
-    its rows; ``floor_mm`` the report's noise floor."""
+    its rows; ``floor_mm`` the report's noise floor. Beyond ``CV_MAX_ROWS`` fit rows, the linearised subset fits
+    and the noise share use the seeded subset of that many the other cross-validated choices use (said in the
+    budget's ``attribution``): their memory and time stay bounded at any size."""
     rows = np.flatnonzero(test)
     if len(rows) < 5:
         return None
@@ -33,7 +38,13 @@ def calibration_budget(predict, stage_models: list, geo, elastic, layer_kind: st
     cols = np.array([layout.index(n) for n in geo.result.identified], int)
     effects = () if elastic is None else tuple(elastic.effects)
     k = np.asarray(kept_rows)
+    few = capped_rows(len(k), CV_MAX_ROWS)
+    k = k if few is None else k[few]
     r_fit = p[k] - predict(final, k)
     n_params = len(cols) + sum(fe.values.size for fe in effects)
-    return model_budget(geo.result.kinematics, cols, q[k], p[k], cov[k], sub(meta, k), effects, r_fit, n_params,
-                        held, folds)
+    budget = model_budget(geo.result.kinematics, cols, q[k], p[k], cov[k], sub(meta, k), effects, r_fit, n_params,
+                          held, folds)
+    if few is None:
+        return budget
+    return replace(budget, attribution=f"{budget.attribution}; fitted on a seeded subset of {len(k)} of the "
+                                       f"{len(kept_rows)} calibration rows in the fit")
