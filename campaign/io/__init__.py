@@ -5,8 +5,8 @@ from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "csv_cells": ("neutralise", "render_rows", "restore"),
-    "durable": ("atomic_write", "create_temp", "fsync_dir", "refuse_special", "remove_quietly", "stale_temp",
-                "write_json"),
+    "durable": ("atomic_write", "create_new", "create_temp", "fsync_dir", "refuse_special", "remove_quietly",
+                "stale_temp", "write_all", "write_json"),
     "json_fields": ("RecordError", "check_field", "count_field", "figure_field", "float_list", "float_rows", "get_field",
                     "json_value", "list_field", "mat3_field", "number_field", "object_field", "record_dict",
                     "record_field", "record_map_field", "records_field", "text_field", "vector_field"),

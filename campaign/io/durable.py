@@ -106,6 +106,49 @@ def remove_stale_temps(path: Path) -> None:
             remove_quietly(entry)
 
 
+def write_all(fd: int, data: bytes) -> None:
+    """``os.write`` all of ``data`` to ``fd`` (one call unless the kernel writes short)."""
+    view = memoryview(data)
+    while view:
+        n = os.write(fd, view)
+        if n <= 0:  # pragma: no cover - defensive
+            raise OSError("os.write wrote nothing")
+        view = view[n:]
+
+
+def create_new(path: Path, data: bytes, mode: int = 0o644) -> None:
+    """Make the new file ``path`` appear already holding ``data``, fsynced, never replacing anything: a temporary
+    file (:func:`create_temp`) hard-linked into place, or where hard links are unsupported (FAT, some network
+    mounts) an ``O_EXCL`` create, write and fsync. FileExistsError when ``path`` exists (another writer won); the
+    temporary file is removed on every exit path; the directory is fsynced."""
+    fd, tmp = create_temp(path, mode)
+    try:
+        try:
+            write_all(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise
+        except OSError:
+            _create_exclusive(path, data, mode)
+    finally:
+        remove_quietly(tmp)
+    fsync_dir(path.parent)
+
+
+def _create_exclusive(path: Path, data: bytes, mode: int) -> None:
+    """The fallback of :func:`create_new`: ``O_EXCL`` create, then write and fsync."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, mode)
+    try:
+        write_all(fd, data)
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically: a new temporary file (:func:`create_temp`), fsync, os.replace,
     directory fsync. A reader sees the old file or the new one, never a mix; the temporary file is removed on
@@ -116,9 +159,7 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     fd, tmp = create_temp(path)
     try:
         try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view):]
+            write_all(fd, data)
             os.fsync(fd)
         finally:
             os.close(fd)

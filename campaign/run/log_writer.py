@@ -13,7 +13,7 @@ from pathlib import Path
 import signal
 import threading
 
-from campaign.io.durable import create_temp, fsync_dir, remove_quietly
+from campaign.io.durable import create_new, fsync_dir, write_all
 
 from .log_reader import EXIT_STATUSES, LOG_NAME, LogContents, RunLogError, RunLogExistsError, encode_record, parse_log
 from .log_events import ExitStatus, LogEvent, ResumeEvent
@@ -22,16 +22,6 @@ from .log_records import NestRecord, PointRecord
 
 # --------------------------------------------------------------------------
 # low-level file helpers
-
-
-def _write_all(fd: int, payload: bytes) -> None:
-    """``os.write`` the whole payload (one call unless the kernel writes short)."""
-    view = memoryview(payload)
-    while view:
-        n = os.write(fd, view)
-        if n <= 0:  # pragma: no cover - defensive
-            raise OSError("os.write wrote nothing")
-        view = view[n:]
 
 
 def _finite_json(value):
@@ -84,43 +74,6 @@ def _read_fd(fd: int) -> bytes:
     return b"".join(chunks)
 
 
-def _create_with_start(path: Path, first_line: bytes) -> None:
-    """Make ``path`` appear atomically, already holding ``first_line``.
-
-    Writes a private temporary file, fsyncs it and hard-links it into place
-    (``link`` fails if ``path`` exists).  Falls back to ``O_EXCL`` create +
-    write where hard links are unsupported.
-    """
-    fd, tmp = create_temp(path, 0o644)      # O_EXCL | O_NOFOLLOW, a random name: never a planted file
-    try:
-        try:
-            _write_all(fd, first_line)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        try:
-            os.link(tmp, path)
-        except FileExistsError:
-            raise RunLogExistsError(str(path), "run log already exists") from None
-        except OSError:  # no hard links here (e.g. FAT, some network mounts)
-            _create_exclusive(path, first_line)
-    finally:
-        remove_quietly(tmp)
-
-
-def _create_exclusive(path: Path, first_line: bytes) -> None:
-    """Fallback create: ``O_EXCL`` then write + fsync the start record."""
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
-    except FileExistsError:
-        raise RunLogExistsError(str(path), "run log already exists") from None
-    try:
-        _write_all(fd, first_line)
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 # --------------------------------------------------------------------------
 # writer
 
@@ -168,8 +121,10 @@ class RunLog:
             fsync_dir(run_dir.resolve().parent)
         path = run_dir / LOG_NAME
         line = encode_record("start", 0, start)
-        _create_with_start(path, line)
-        fsync_dir(run_dir)
+        try:
+            create_new(path, line)      # appears atomically, already holding its start record
+        except FileExistsError:
+            raise RunLogExistsError(str(path), "run log already exists") from None
         fd = os.open(path, os.O_WRONLY | os.O_APPEND)
         try:
             _lock(fd, path)
@@ -277,7 +232,7 @@ class RunLog:
                 raise RunLogError(str(self.path), f"record not storable: {exc}") from None
             with _signals_deferred():          # Ctrl-C/SIGTERM/SIGHUP land after the record, never inside it
                 try:
-                    _write_all(self._fd, line)
+                    write_all(self._fd, line)
                     os.fsync(self._fd)
                 except BaseException:
                     self._recover()

@@ -33,7 +33,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from campaign.errors import DataError
-from campaign.io.durable import create_temp, fsync_dir, refuse_special, remove_quietly, stale_temp, write_json
+from campaign.io.durable import create_new, refuse_special, remove_quietly, stale_temp, write_json
 from .log_reader import LOG_NAME
 
 try:
@@ -114,22 +114,12 @@ def release_locks() -> None:
 
 
 def _create_marker(path: Path, doc: dict) -> None:
-    """A new marker: written to a temporary file and hard-linked into place (fails if one appeared meanwhile)."""
-    fd, tmp = create_temp(path)
+    """A new marker (fails if one appeared meanwhile: :func:`campaign.io.durable.create_new`)."""
     try:
-        try:
-            os.write(fd, json.dumps(doc, indent=1).encode())
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        try:
-            os.link(tmp, path)
-        except FileExistsError:
-            raise DataError(str(path.parent), "another campaign command marked this directory at the same moment: "
-                                              "give another path") from None
-    finally:
-        remove_quietly(tmp)
-    fsync_dir(path.parent)
+        create_new(path, json.dumps(doc, indent=1).encode(), 0o666)
+    except FileExistsError:
+        raise DataError(str(path.parent), "another campaign command marked this directory at the same moment: "
+                                          "give another path") from None
 
 
 def _marker_fields(kind: str, source: str | None) -> dict:

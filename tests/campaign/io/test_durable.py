@@ -71,3 +71,41 @@ def test_create_temp_names_are_random_hidden_and_beside_the_target(tmp_path):
         names.add(tmp.name)
         assert tmp.parent == tmp_path and tmp.name.startswith(f".a.csv.{os.getpid()}.") and tmp.suffix == ".tmp"
     assert len(names) == 5
+
+
+def _no_hard_links(monkeypatch):
+    def refuse(src, dst, *args, **kwargs):
+        raise OSError(1, "Operation not permitted")         # what FAT and some network mounts answer
+    monkeypatch.setattr(durable.os, "link", refuse)
+
+
+@pytest.mark.parametrize("links", [True, False], ids=["hard-link", "no-hard-links"])
+def test_create_new_makes_the_file_whole_and_never_replaces_one(tmp_path, monkeypatch, links):
+    if not links:
+        _no_hard_links(monkeypatch)
+    path = tmp_path / "log.jsonl"
+    durable.create_new(path, b"first\n")
+    assert path.read_bytes() == b"first\n"
+    with pytest.raises(FileExistsError):
+        durable.create_new(path, b"second\n")
+    assert path.read_bytes() == b"first\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.jsonl"]      # no temporary file left
+
+
+def test_a_run_log_and_a_directory_marker_are_created_where_hard_links_are_unsupported(tmp_path, monkeypatch):
+    from campaign.run.log_reader import RunLogExistsError
+    from campaign.run.log_writer import RunLog
+    from campaign.run.output_dirs import Claim, read_marker, release_locks
+
+    _no_hard_links(monkeypatch)
+    log = RunLog.create(tmp_path / "run", {"created_utc": "2026-11-29T00:00:00+00:00"})
+    log.close("success")
+    assert (tmp_path / "run" / "log.jsonl").read_bytes().startswith(b'{"')
+    with pytest.raises(RunLogExistsError):
+        RunLog.create(tmp_path / "run", {"created_utc": "2026-11-29T00:00:00+00:00"})
+    try:
+        Claim(tmp_path / "out", "reprocess", source="data.csv").take()
+    finally:
+        release_locks()
+    assert read_marker(tmp_path / "out") == {"kind": "reprocess", "source": "data.csv"}
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [".campaign-owner.json"]
