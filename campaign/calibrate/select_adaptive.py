@@ -18,14 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.design.adaptive import choose_batch
-from robocal.design.optimal import criterion, d_optimal
+from robocal.design.optimal import criterion
 from robocal.identify.identification import IdentificationError
 from robocal.kinematics.models import smr_base, smr_tracker
 
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, one_line
-from campaign.plan.adaptive import seed_size, task_poses
+from campaign.plan.adaptive import SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
 from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
@@ -71,9 +71,11 @@ def adaptive_selection(ds: Dataset, cell: CellModel, n: int, *, force: bool = Fa
 
 
 def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
-                  task_q_rad: np.ndarray | None = None, *, force: bool = False) -> AdaptiveSelection:
-    """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring); DataError as for
-    ``select_rows``; ``force`` overrides failed plausibility checks (here and in every refit)."""
+                  task_q_rad: np.ndarray | None = None, *, force: bool = False, seed_design: str = SEED_DESIGN,
+                  seed_points: str = SEED_SIZE) -> AdaptiveSelection:
+    """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring; the seed by
+    ``campaign.plan.adaptive.seed_rows`` / ``seed_size``); DataError as for ``select_rows``; ``force`` overrides
+    failed plausibility checks (here and in every refit)."""
     check_dataset(ds, cell, force=force)
     cal = np.flatnonzero(ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1))
     if len(cal) < n:
@@ -87,8 +89,8 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
     if n < need:
         raise DataError(ds.source, f"--points {n} cannot identify the {crit.identifiable_geometric} geometric "
                                    f"parameters these rows determine: at least {need} (identifiable + 10 %)")
-    n0 = seed_size(crit.identifiable_geometric, n, cell.config.calibration.cv_folds)
-    chosen = list(d_optimal(crit.A, n0, crit.spread).chosen)
+    n0 = seed_size(crit.identifiable_geometric, n, cell.config.calibration.cv_folds, seed_points)
+    chosen = [int(i) for i in seed_rows(kin_t, crit, q, n0, seed_design)]
     meta = effect_meta(ordered, cell, cal)
     task = q if task_q_rad is None else np.atleast_2d(task_q_rad)
     q_task = task[task_sample(len(task))]

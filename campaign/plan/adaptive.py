@@ -19,22 +19,45 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.design.optimal import d_optimal, short_tour
+from robocal.design.optimal import Criterion, d_optimal, short_tour, space_filling
 from robocal.correct import quat_to_matrix
 from robocal.kinematics.ik import solve_on_branch
+from robocal.kinematics.models import Kinematics
 
 from campaign.config.cell_model import CellModel
 from campaign.errors import ConfigError
 from .motion_safety import PathGuard
-from .optimal import Pool, candidate_pool, test_set
+from .optimal import Pool, candidate_pool, test_set, tracker_kinematics
 from .points import Plan, PlanPoint
 from .poses import finish_plan, tool_rotation
 
 
-def seed_size(identifiable_geometric: int, n_max: int, folds: int) -> int:
-    """Points of the D-optimal seed: the identifiable geometric parameters + 10 %, at least 4 per CV fold (the
-    layer's cross-validation), at most ``n_max``."""
-    return min(n_max, max(math.ceil(1.1 * identifiable_geometric), 4 * folds))
+SEED_DESIGNS = ("d_optimal", "space_filling")   # how the seed's poses are chosen (``seed_rows``)
+SEED_SIZES = ("geometric", "folds")             # how many (``seed_size``)
+SEED_DESIGN, SEED_SIZE = "d_optimal", "geometric"   # the seed of plan.kind: adaptive and select --adaptive
+
+
+def seed_size(identifiable_geometric: int, n_max: int, folds: int, size: str = SEED_SIZE) -> int:
+    """Points of the seed, at most ``n_max``: ``geometric``, the identifiable geometric parameters + 10 %, at least
+    4 per CV fold (the layer's cross-validation); ``folds``, 4 per CV fold, at least the points whose three
+    coordinates give the identifiable geometric parameters + 10 %."""
+    if size == "geometric":
+        return min(n_max, max(math.ceil(1.1 * identifiable_geometric), 4 * folds))
+    if size == "folds":
+        return min(n_max, max(4 * folds, math.ceil(1.1 * identifiable_geometric / 3)))
+    raise ValueError(f"unknown seed size {size!r} (expected one of {SEED_SIZES})")
+
+
+def seed_rows(kin: Kinematics, crit: Criterion, q_rad: np.ndarray, n: int, design: str = SEED_DESIGN) -> np.ndarray:
+    """The seed's ``n`` candidate indices among q_rad (M, n_joints) rad with criterion ``crit``: ``d_optimal``, the
+    D-optimal criterion of optimal plans with the joints spread; ``space_filling``, farthest-first in joint space
+    scaled by the levers (``robocal.design.space_filling``, the D-optimal choice when those leave a geometric
+    parameter undetermined)."""
+    if design == "d_optimal":
+        return d_optimal(crit.A, n, crit.spread).chosen
+    if design == "space_filling":
+        return space_filling(kin, crit, q_rad, n)[0]
+    raise ValueError(f"unknown seed design {design!r} (expected one of {SEED_DESIGNS})")
 
 
 def adaptive_plan(cell: CellModel) -> Plan:
@@ -53,7 +76,7 @@ def adaptive_plan(cell: CellModel) -> Plan:
                           f"geometric parameters the candidate poses determine: at least {need} (identifiable + 10 %)")
     task_poses(cell, pool.q_rad, pool.p_base_mm)          # a task that gives no pose stops here, before anything moves
     n0 = seed_size(geo, n_max, cfg.calibration.cv_folds)
-    seed = d_optimal(pool.criterion.A, n0, pool.criterion.spread).chosen
+    seed = seed_rows(tracker_kinematics(cell), pool.criterion, pool.q_rad, n0)
     seed = seed[short_tour(pool.q_rad[seed], np.radians(pl.q_ref_deg))]
     p_test, test_ids, q_test, test_ok, skipped = test_set(cell, tool_rotation(pl.tool_direction), guard)
     calib = [_point(pool, i) for i in seed]
