@@ -3,7 +3,7 @@ measured calibration points (issue 32: <= 2 s on one core).
 
 The demo IRB 2600 cell of ``configs/irb2600.yaml`` (its simulated effects: gravity compliance, a J1 gear error, read
 -back lag and tracker drift are in the simulation; the mock measurement here uses the pose-dependent ones) with
-``plan.kind: adaptive``: 100 of the plan's candidates measured on the simulated cell (its D-optimal seed, then
+``plan.kind: adaptive``: 100 of the plan's candidates measured on the simulated cell (its seed, then
 random candidates), 3000 other candidates (a seeded sample of the pool). One round = ``adaptive_model.refit`` (the
 default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` + ``choose_batch`` (the
 campaign's rule, ``adaptive_model.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.

@@ -85,6 +85,14 @@ this paragraph is committed on its own, before the run). Everything above holds 
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select.py --adaptive --rules d
         --seed-designs D SF SF-small D-small --seeds 4 5 6 [--forms ... --json A.json] [--combine A.json B.json]
+
+Outcome of the revised protocol (run on main 5289e97 + the two commits above; two processes, --combine; the table
+is in docs/results.md): score over forms and sizes D 1.393, SF 1.161, SF-small 1.176, D-small 1.191. ``SF`` is
+chosen (17 % below D; D broke down at 50 poses on seed 4 of the sparse-far-pose form, 10.57 x) and is now the seed
+of ``campaign select --adaptive`` and ``plan.kind: adaptive``; ``--seed-designs`` defaults to it. The goals for it:
+NOT met at 50 poses (UR5 1.508, layer-only 1.482), NOT met at 100 on the UR5 (1.237; every simulated form <= 1.119).
+The first run's UR5 figure of D at 50 poses, 1.663, was of its branch (a2a2d03, which still gives it): the merge
+with that session's other work (d301216) already gives 1.450, as does the code this run started from.
 """
 from __future__ import annotations
 

@@ -18,6 +18,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from campaign.plan.adaptive import SEED_DESIGN, SEED_SIZE  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 
 SIZES = (50, 100)
@@ -27,6 +28,7 @@ N_RANDOM = 5
 SEEDS = {"D": ("d_optimal", "geometric"), "SF": ("space_filling", "geometric"),
          "SF-small": ("space_filling", "folds"), "D-small": ("d_optimal", "folds")}
 FIRST = "D"                      # the seed of the first protocol run (issue 32's text: a D-optimal seed)
+CHOSEN = next(k for k, v in SEEDS.items() if v == (SEED_DESIGN, SEED_SIZE))   # the campaign's seed today
 
 
 def held_out_rms(ds, cell) -> float:
@@ -46,7 +48,7 @@ def adaptive_methods(rules, seeds) -> list[str]:
     return [f"adaptive-{r}" if s == FIRST else f"{r}:{s}" for s in seeds for r in rules]
 
 
-def evaluate(ds, cell, rules=RULES, seeds=(FIRST,)) -> dict:
+def evaluate(ds, cell, rules=RULES, seeds=(CHOSEN,)) -> dict:
     """Ratios to all rows per method and size: adaptive rules x seeds (one replay to the largest size; its prefixes
     are the smaller selections), one-shot ``select``, random (median of ``N_RANDOM``); plus 'all_mm', 'M', timings."""
     cal = np.flatnonzero(ds.mask("calib"))
@@ -68,7 +70,7 @@ def evaluate(ds, cell, rules=RULES, seeds=(FIRST,)) -> dict:
     return out
 
 
-def summary(table: dict[str, list[dict]], rules, seeds=(FIRST,)) -> None:
+def summary(table: dict[str, list[dict]], rules, seeds=(CHOSEN,)) -> None:
     """Per form the mean ratio over its seeds (worst seed), the mean over forms, the method chosen by the protocol
     (lowest mean over forms and both sizes; the first run's seed kept unless another is more than 1 % lower) and
     whether the goals hold for it."""
@@ -107,7 +109,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--forms", nargs="+", default=["ur5-real", *ADAPTIVE_FORMS])
     ap.add_argument("--rules", nargs="+", default=list(RULES))
-    ap.add_argument("--seed-designs", nargs="+", choices=list(SEEDS), default=[FIRST],
+    ap.add_argument("--seed-designs", nargs="+", choices=list(SEEDS), default=[CHOSEN],
                     help="seeds of the adaptive replay (the revised protocol: D SF SF-small D-small)")
     ap.add_argument("--json", type=Path, help="also write every data set's figures here")
     ap.add_argument("--combine", type=Path, nargs="+", help="only print the summary of these --json files")

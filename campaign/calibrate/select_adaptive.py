@@ -1,8 +1,8 @@
 """``campaign select --adaptive``: the adaptive campaign replayed on a campaign already measured.
 
-The same loop as ``plan.kind: adaptive``, with the measured calibration rows as the candidates: a D-optimal seed
-(the plan's criterion, joints spread; the identifiable geometric parameters + 10 %, at least the rows the layer's
-cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
+The same loop as ``plan.kind: adaptive``, with the measured calibration rows as the candidates: the plan's seed
+(``campaign.plan.adaptive.seed_rows``: space-filling, the identifiable geometric parameters + 10 %, at least the rows
+the layer's cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
 nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
 where that model learns most about its parameters and its layer (``robocal.design.adaptive`` rule ``d``, the default:
 chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).

@@ -176,7 +176,7 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
     parser.add_argument("--adaptive", action="store_true",
-                        help="replay an adaptive campaign: a D-optimal seed, then batches chosen with the model "
+                        help="replay an adaptive campaign: a space-filling seed, then batches chosen with the model "
                              "refitted to the rows chosen so far (only their measurements)")
     overwrite_argument(parser)
     _force_argument(parser)

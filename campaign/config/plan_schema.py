@@ -119,7 +119,7 @@ class PlanConfig:
     ``check_poses`` are optional. ``keep_out`` (default none), ``envelope``
     (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     ``kind``: ``grid`` (default), ``optimal`` (``points`` calibration poses chosen from a candidate ``pool``
-    by a D-optimal criterion, measured in a short tour), ``adaptive`` (a D-optimal seed from the ``pool``, then
+    by a D-optimal criterion, measured in a short tour), ``adaptive`` (a space-filling seed from the ``pool``, then
     rounds of ``block_points`` poses (default 10) chosen with the model refitted to the points so far, up to
     ``max_points``; ``stop`` defaults to ``auto``; ``task``: where the robot works) or ``iso9283``. ``stop: auto`` (optimal plans; default
     ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS

@@ -1,8 +1,9 @@
-"""Adaptive plans (``plan.kind: adaptive``): a D-optimal seed, then rounds chosen while measuring.
+"""Adaptive plans (``plan.kind: adaptive``): a space-filling seed, then rounds chosen while measuring.
 
 The plan holds what is known before anything moves: the seed (the identifiable geometric parameters + 10 %, at
-least 4 points per CV fold, chosen from the candidate pool of ``plan.kind: optimal`` by its D-optimal criterion with
-the joints spread, measured in a short tour), the test set after it (measured once the rounds stop), the check
+least 4 points per CV fold, chosen from the candidate pool of ``plan.kind: optimal`` farthest-first in joint space
+scaled by the levers, or by its D-optimal criterion with the joints spread when those leave a geometric parameter
+undetermined: ``seed_rows``; measured in a short tour), the test set after it (measured once the rounds stop), the check
 poses and nest rounds, and the pool itself as the plan's ``candidates``: every candidate passed the checks a
 planned pose passes (IK inside the joint limits, off the wrist singularity, its stop outside the keep-out boxes
 and inside the envelope, visible to the tracker). The rounds (``campaign.calibrate.adaptive_rounds``) pick among
@@ -34,7 +35,8 @@ from .poses import finish_plan, tool_rotation
 
 SEED_DESIGNS = ("d_optimal", "space_filling")   # how the seed's poses are chosen (``seed_rows``)
 SEED_SIZES = ("geometric", "folds")             # how many (``seed_size``)
-SEED_DESIGN, SEED_SIZE = "d_optimal", "geometric"   # the seed of plan.kind: adaptive and select --adaptive
+SEED_DESIGN, SEED_SIZE = "space_filling", "geometric"   # of plan.kind: adaptive and select --adaptive
+# (bench/bench_select.py --adaptive, the revised protocol of issue 32: the D-optimal seed broke down on a form)
 
 
 def seed_size(identifiable_geometric: int, n_max: int, folds: int, size: str = SEED_SIZE) -> int:

@@ -20,7 +20,7 @@ def build_plan(cell: CellModel) -> Plan:
     if cfg.plan.kind == "optimal":                      # D-optimal poses from a candidate pool
         from .optimal import optimal_plan
         return optimal_plan(cell)
-    if cfg.plan.kind == "adaptive":                     # a D-optimal seed; the rounds choose while measuring
+    if cfg.plan.kind == "adaptive":                     # a space-filling seed; the rounds choose while measuring
         from .adaptive import adaptive_plan
         return adaptive_plan(cell)
     g, pl = cfg.plan.grid, cfg.plan

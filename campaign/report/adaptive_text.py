@@ -16,7 +16,7 @@ def render_adaptive_selection(console: Console, sel, n_other: int, out) -> None:
     """``campaign select --adaptive``: the seed, every round (rows before it, the layer the refit chose, its CV
     held-out RMS and the RMS predicted after the batch), and what was written."""
     n = len(sel.order)
-    console.print(f"selected {n} of {sel.n_calib} calibration rows ({sel.criterion}; a D-optimal seed of "
+    console.print(f"selected {n} of {sel.n_calib} calibration rows ({sel.criterion}; a space-filling seed of "
                   f"{sel.n_seed}, then {len(sel.rounds)} rounds, each chosen with only the rows chosen before it), "
                   f"kept the {n_other} other rows; wrote {out}", markup=False)
     if not sel.rounds:
