@@ -266,7 +266,7 @@ def _complete_once(run: Path, reference: Path) -> None:
 def test_a_run_killed_while_its_figures_directory_is_made_resumes(small, tmp_path):
     run = tmp_path / "run"
     kill = ("import os, signal, sys\n"
-            "import campaign.run.output_dirs as od\n"
+            "import campaign.io.durable as od\n"              # the marker's temporary file (create_new)
             "orig = od.create_temp\n"
             "def create_temp(path, *a, **k):\n"
             "    out = orig(path, *a, **k)\n"
