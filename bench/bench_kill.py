@@ -42,7 +42,7 @@ def main() -> int:
             cfg = small_config(work)
         trials = study(cfg, work, args.kills, args.seed)
     for k, t in enumerate(trials):
-        print(f"{k:3d} kill at {t.delay_s:6.2f} s  {t.phase:18s} recovery {t.recovery:9s} exit {t.exit_code}  "
+        print(f"{k:3d} kill at {t.delay_s:6.2f} s  aimed {t.aim:16s} landed {t.phase:18s} recovery {t.recovery:9s} exit {t.exit_code}  "
               f"lost {t.lost} duplicated {t.duplicated}" + (f"  torn {', '.join(t.torn_files)}" if t.torn_files else ""))
     s = summary(trials)
     print(f"{s['kills']} kills: phases {s['phases']}; recoveries {s['recoveries']}; failed {s['failed']}, "
