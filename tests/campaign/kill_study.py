@@ -87,13 +87,24 @@ def point_ids(run: Path) -> list[str]:
             if json.loads(line)["kind"] == "point"]
 
 
-def trial(config: Path, run: Path, target: str, offset_s: float, planned: list[str]) -> Trial:
+def points_logged(run: Path) -> int:
+    """Point records in a run's log so far (0 without a log)."""
+    try:
+        return (run / "log.jsonl").read_bytes().count(b'"kind":"point"')
+    except OSError:
+        return 0
+
+
+def trial(config: Path, run: Path, target: str, offset_s: float, planned: list[str], after_points: int = 0) -> Trial:
     """One kill ``offset_s`` s after the run is first seen in phase ``target`` or a later one (after its start for
-    the first phase), then the recovery; ``planned`` the point ids of a complete run. Anchoring the kill on the
-    phase, not on the time since the start, keeps the instants spread over the run whatever the load."""
+    the first phase; for ``measuring``, once ``after_points`` points are logged), then the recovery; ``planned`` the
+    point ids of a complete run. Anchoring the kill on the run's own progress, not on the time since its start,
+    keeps the instants spread over the run whatever the load."""
     proc = start(["run", config, "--out", run], run.parent)
     t0 = time.monotonic()
-    while proc.poll() is None and PHASES.index(phase_of(run)) < PHASES.index(target):
+    while proc.poll() is None and (PHASES.index(phase_of(run)) < PHASES.index(target)
+                                   or (target == "measuring" and phase_of(run) == target
+                                       and points_logged(run) < after_points)):
         time.sleep(0.005)
     time.sleep(offset_s)
     if proc.poll() is None:
@@ -147,15 +158,23 @@ def without_acceptance(config: Path, workdir: Path) -> Path:
 
 def study(config: Path, workdir: Path, kills: int, seed: int) -> list[Trial]:
     """``kills`` trials aimed in turn at each phase an uninterrupted run went through, each at an instant uniform
-    within that phase's time span in the reference run (widened by 50 ms) after the trial enters it, so that short
-    phases are hit as often as long ones."""
+    within that phase's time span in the reference run (widened by 50 ms) after the trial enters it (while
+    measuring: after a random number of logged points, within one point's time), so that short phases are hit as
+    often as long ones."""
     config = without_acceptance(config, workdir)
     spans, planned = phase_times(config, workdir)
     rng = np.random.default_rng(seed)
     order = [p for p in PHASES if p in spans]
     aims = [order[k % len(order)] for k in range(kills)]
-    offsets = [float(rng.uniform(0.0, spans[p][1] - spans[p][0] + 0.05)) for p in aims]
-    return [trial(config, workdir / f"run{k:03d}", p, o, planned) for k, (p, o) in enumerate(zip(aims, offsets))]
+    trials = []
+    for k, p in enumerate(aims):
+        span = spans[p][1] - spans[p][0]
+        if p == "measuring":            # after a random number of points, within one point's time
+            after, offset = int(rng.integers(0, len(planned))), float(rng.uniform(0.0, span / len(planned) + 0.02))
+        else:
+            after, offset = 0, float(rng.uniform(0.0, span + 0.05))
+        trials.append(trial(config, workdir / f"run{k:03d}", p, offset, planned, after))
+    return trials
 
 
 def summary(trials: list[Trial]) -> dict:
