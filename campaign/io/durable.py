@@ -116,6 +116,15 @@ def write_all(fd: int, data: bytes) -> None:
         view = view[n:]
 
 
+def _fill(fd: int, data: bytes) -> None:
+    """Write all of ``data`` to the new file ``fd``, fsync it and close it (closed on every path)."""
+    try:
+        write_all(fd, data)
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def create_new(path: Path, data: bytes, mode: int = 0o644) -> None:
     """Make the new file ``path`` appear already holding ``data``, fsynced, never replacing anything: a temporary
     file (:func:`create_temp`) hard-linked into place, or where hard links are unsupported (FAT, some network
@@ -123,11 +132,7 @@ def create_new(path: Path, data: bytes, mode: int = 0o644) -> None:
     temporary file is removed on every exit path; the directory is fsynced."""
     fd, tmp = create_temp(path, mode)
     try:
-        try:
-            write_all(fd, data)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        _fill(fd, data)
         try:
             os.link(tmp, path)
         except FileExistsError:
@@ -141,12 +146,7 @@ def create_new(path: Path, data: bytes, mode: int = 0o644) -> None:
 
 def _create_exclusive(path: Path, data: bytes, mode: int) -> None:
     """The fallback of :func:`create_new`: ``O_EXCL`` create, then write and fsync."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, mode)
-    try:
-        write_all(fd, data)
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    _fill(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, mode), data)
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
@@ -158,11 +158,7 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     refuse_special(path)
     fd, tmp = create_temp(path)
     try:
-        try:
-            write_all(fd, data)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        _fill(fd, data)
         refuse_special(path)                    # again: nothing may have been planted there meanwhile
         os.replace(tmp, path)
     except BaseException:
