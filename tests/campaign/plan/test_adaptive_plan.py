@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from campaign.config.load import load_cell
-from campaign.plan.adaptive import seed_size, task_poses
+from campaign.plan.adaptive import seed_rows, seed_size, task_poses
 from campaign.plan.build import build_plan
 from campaign.plan.motion_safety import PathGuard
 from robocal.kinematics.models import smr_base
@@ -116,3 +116,26 @@ def test_every_move_of_an_adaptive_run_stays_clear_of_the_keep_out_box(tmp_path,
     box = guard.keep_out.grown(cell.config.plan.clearance_mm - 1e-6)
     inside = np.all((pts[:, None] > box.lo) & (pts[:, None] < box.hi), axis=-1).any(axis=1)
     assert not inside.any()
+
+
+@pytest.mark.system
+def test_the_seed_is_spread_wider_than_a_d_optimal_one_and_determines_the_geometry():
+    """The campaign's seed (chosen by ``bench/bench_select.py --adaptive``, the revised protocol of issue 32):
+    farthest-first in lever-scaled joint space, its closest pair farther apart than in the D-optimal seed of the
+    same size, and every identifiable geometric parameter still determined."""
+    from scipy.spatial.distance import pdist
+
+    from robocal.design.optimal import criterion, space_filling
+    from tests.cells import irb2600, irb2600_poses
+
+    kin = irb2600()
+    qc, _ = irb2600_poses()
+    c = criterion(kin, qc, np.broadcast_to(np.eye(3) * 1e-3, (len(qc), 3, 3)))
+    n = seed_size(c.identifiable_geometric, 100, 5)
+    seed, d_seed = seed_rows(kin, c, qc, n), seed_rows(kin, c, qc, n, "d_optimal")
+    closest = lambda idx: pdist(qc[idx] * c.levers_mm_per_rad).min()     # noqa: E731
+    assert closest(seed) > 1.5 * closest(d_seed)
+    chosen, determined = space_filling(kin, c, qc, n)
+    assert determined and np.array_equal(seed, chosen)
+    with pytest.raises(ValueError, match="unknown seed design"):
+        seed_rows(kin, c, qc, n, "random")
