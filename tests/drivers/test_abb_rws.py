@@ -697,6 +697,15 @@ def test_abb_robot_client_rws1(make_emu):
     assert emu.counts["logouts"] == 1 and emu.counts["sessions"] == 1
 
 
+def wait_done(client, seq: str, timeout_s: float = 30.0) -> None:
+    """Poll CalServer/cal_done_seq through a third-party client until it reads ``seq`` (fails after ``timeout_s``:
+    a loaded machine slows the emulated move, never skips it)."""
+    deadline = time.monotonic() + timeout_s
+    while client.get_rapid_variable("CalServer/cal_done_seq") != seq:
+        assert time.monotonic() < deadline, f"CalServer did not report request {seq} done within {timeout_s} s"
+        time.sleep(0.01)
+
+
 def test_abb_robot_client_drives_calserver_handshake(make_emu):
     """The emulated CalServer loop answers the handshake written by an independent client."""
     rws = pytest.importorskip("abb_robot_client.rws")
@@ -706,10 +715,7 @@ def test_abb_robot_client_drives_calserver_handshake(make_emu):
     client.set_rapid_variable("CalServer/cal_settle_s", "0")
     client.set_rapid_variable("CalServer/cal_kind", "1")
     client.set_rapid_variable("CalServer/cal_req_seq", "1")
-    for _ in range(200):
-        if client.get_rapid_variable("CalServer/cal_done_seq") == "1":
-            break
-        time.sleep(0.01)
+    wait_done(client, "1")
     assert client.get_rapid_variable("CalServer/cal_ack_seq") == "1"
     assert client.get_jointtarget().robax.tolist() == [15, 25, 35, 45, 55, 65]
     client.logout()
@@ -734,10 +740,7 @@ def test_rw7_client_reads_state_and_writes_pers(make_emu, implicit):
     client.set_rapid_variable("CalServer/cal_settle_s", "0")
     client.set_rapid_variable("CalServer/cal_kind", "1")
     client.set_rapid_variable("CalServer/cal_req_seq", "1")                          # the CalServer handshake
-    for _ in range(300):
-        if client.get_rapid_variable("CalServer/cal_done_seq") == "1":
-            break
-        time.sleep(0.01)
+    wait_done(client, "1")
     assert client.get_jointtarget().robax.tolist() == [15, 25, 35, 45, 55, 65]
     assert client.get_mechunits() == ["ROB_1"] and "T_ROB1" in client.get_tasks()
     assert client.read_event_log()[0].seqnum == emu.elog[-1]["seqnum"]
