@@ -1,0 +1,65 @@
+"""Where an adaptive selection loses against the one-shot one (issue 32, after the revised protocol's run; it chose
+nothing): the held-out RMS by stage of the default process on the chosen rows, and the effect selection's trial of
+joint compliance.
+
+* The public UR5 campaign: kinematic / + effects / final (with the residual layer) for the adaptive replay (the
+  campaign's seed) and the one-shot ``campaign select`` at 50 and 100 rows, and for all rows.
+* Seed 4 of the sparse-far-pose form of ``bench_select.py --adaptive``: the D-optimal and the space-filling seed's
+  replays at 50 rows, the held-out RMS, and the compliance trial's CV RMS, gain and paired t.
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
+from campaign.calibrate.selection import select_rows  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
+
+
+def report(ds, cell, rows=None):
+    """The default process's report on the calibration rows ``rows`` (all when None) and every other row."""
+    if rows is not None:
+        keep = ~ds.mask("calib")
+        keep[np.asarray(rows, int)] = True
+        ds = ds.with_order_context().subset(keep)
+    return calibrate_dataset(ds, cell).report
+
+
+def stages(r) -> str:
+    return " / ".join(f"{v.test.rms_mm:.4f}" for v in r.stages.values() if v is not None) + \
+        f"  ({', '.join(r.effects.selection['taken']) or 'no effect'}; layer {r.method.residual})"
+
+
+def main() -> None:
+    ds, cell = ur5_dataset()
+    print("UR5 public campaign: held-out RMS by stage, mm (nominal / kinematic / + effects / final)")
+    print(f"  all {int(ds.mask('calib').sum())} rows: {stages(report(ds, cell))}")
+    sel = adaptive_rows(ds, cell, 100)
+    for n in (50, 100):
+        print(f"  adaptive {n}: {stages(report(ds, cell, sel.order[:n]))}")
+        one = np.flatnonzero(select_rows(ds, cell, n).keep & ds.mask("calib"))
+        print(f"  one-shot {n}: {stages(report(ds, cell, one))}")
+    with tempfile.TemporaryDirectory() as tmp:
+        ds, cell = ADAPTIVE_FORMS["strong compliance, sparse far"](Path(tmp), 4)
+        print("strong compliance, sparse far poses, seed 4, 50 rows: held-out RMS and the compliance trial")
+        for design in ("d_optimal", "space_filling"):
+            r = report(ds, cell, adaptive_rows(ds, cell, 50, seed_design=design).order[:50])
+            trial = next(t for t in r.effects.selection["trials"] if t["effect"].startswith("joint_compliance"))
+            print(f"  {design:14s} held-out {r.final.test.rms_mm:.4f} mm; {trial['effect']}: CV "
+                  f"{trial['base_cv_rms_mm']:.3f} -> {trial['cv_rms_mm']:.3f} mm (gain {100 * trial['gain']:.0f} %, "
+                  f"t {trial['t']:.2f}), taken: {', '.join(r.effects.selection['taken']) or 'none'}")
+
+
+if __name__ == "__main__":
+    main()
