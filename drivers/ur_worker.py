@@ -304,22 +304,28 @@ class Worker:
             raise _Failure("lost", "RTDE control connection closed")
         return self.rtde_c
 
-    def _check_motion_state(self, *, fresh: bool = False) -> None:
+    def _check_motion_state(self) -> None:
         """Raise MotionError-kind failures for safety stops, robot mode or a dead control script. The control
-        interface's stream can see the script end before the receive stream shows why: a dead script is
-        re-checked against one fresh receive sample."""
-        if fresh:
+        interface's stream can see the script end before the receive stream shows why, and under load the receive
+        side may still hold older samples: a dead script is explained from fresh samples for up to
+        ``stale_after_s`` before it is reported as such."""
+        self._check_modes()
+        if self._controller().isProgramRunning():
+            return
+        deadline = time.monotonic() + self.o.stale_after_s
+        while time.monotonic() < deadline:
             self._fresh_timestamp()
+            self._check_modes()
+        raise _Failure("motion", "the rtde_control script is not running")
+
+    def _check_modes(self) -> None:
+        """Raise for a safety mode other than NORMAL/REDUCED or a robot mode other than RUNNING."""
         status = self.op_status()
         self.pstop_seen = self.pstop_seen or status["safety_mode"] == PROTECTIVE_STOP
         if status["safety_mode"] not in (1, 2):
             raise _Failure("motion", f"safety mode {status['safety_mode']} ({status['safety_mode_name']})")
         if status["robot_mode"] != ROBOT_MODE_RUNNING:
             raise _Failure("motion", f"robot mode {status['robot_mode']} ({status['robot_mode_name']})")
-        if not self._controller().isProgramRunning():
-            if not fresh:
-                return self._check_motion_state(fresh=True)
-            raise _Failure("motion", "the rtde_control script is not running")
 
     def _motion_failure(self, what: str) -> _Failure:
         try:
