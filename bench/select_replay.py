@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from campaign.calibrate.adaptive_model import RULE  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
@@ -23,6 +24,7 @@ from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 
 SIZES = (50, 100)
 RULES = ("i", "d")               # robocal.design.adaptive criteria: integrated variance at the task poses; information
+#                                  (the third protocol adds "df": d and the farthest candidate in turn)
 N_RANDOM = 5
 # the seeds of the revised protocol (campaign.plan.adaptive.seed_rows / seed_size): (design, size)
 SEEDS = {"D": ("d_optimal", "geometric"), "SF": ("space_filling", "geometric"),
@@ -90,9 +92,14 @@ def summary(table: dict[str, list[dict]], rules, seeds=(CHOSEN,)) -> None:
     first = [m for m in adaptive if m.startswith("adaptive-") and score[m] <= 1.01 * score[best]]
     if len(seeds) > 1 and first:
         best = min(first, key=score.get)
+    today = adaptive_methods((RULE,), (CHOSEN,))[0]          # the third protocol: today's rule kept unless beaten
+    kept = len(rules) > 1 and len(seeds) == 1 and today in score and score[today] <= 1.01 * score[best]
+    best = today if kept else best
     print("adaptive method by the mean over forms and sizes: " + ", ".join(f"{m} {v:.3f}" for m, v in score.items())
           + f"; chosen: {best}" + (" (the first run's seed kept unless another is more than 1 % lower)"
-                                   if len(seeds) > 1 else ""))
+                                   if len(seeds) > 1 else "")
+          + (f" (today's {today} kept unless another is more than 1 % lower)" if len(rules) > 1 and len(seeds) == 1
+             and today in score else ""))
     for n, goal in zip(SIZES, (1.35, 1.2)):
         miss = [f for f in means if means[f][(best, n)] > goal]
         print(f"goal at {n} poses (<= {goal} x all rows on every form, mean over seeds): "

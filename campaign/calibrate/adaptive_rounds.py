@@ -22,8 +22,8 @@ from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from robocal.design.adaptive import choose_batch
-from robocal.design.optimal import short_tour
+from robocal.design.adaptive import Coverage, choose_batch
+from robocal.design.optimal import lever_scaled, short_tour
 from robocal.identify.identification import IdentificationError
 from robocal.kinematics.models import smr_tracker
 
@@ -33,6 +33,7 @@ from campaign.errors import DataError, one_line
 from campaign.io.quantities import floor_mm
 from campaign.plan.adaptive import task_poses
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
+from campaign.plan.optimal import tracker_kinematics
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_events import LogEvent
 from campaign.run.log_reader import LogContents, read_log
@@ -101,7 +102,8 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
     meta = lambda m: {"payload_kg": np.full(m, cell.payload_kg)}  # noqa: E731
     terms = design_terms(cur, q, meta(len(q)), cell.covariance(smr_tracker(cur.kinematics, q)), q_task,
                          meta(len(q_task)))
-    b = choose_batch(terms, k, np.ones(len(q), bool), RULE)
+    X = lever_scaled(tracker_kinematics(cell), np.vstack([q, np.radians(ds.q_deg[ds.mask("calib")])]), every)
+    b = choose_batch(terms, k, np.ones(len(q), bool), RULE, Coverage(X[:len(q)], X[len(q):]))
     floor = cur.floor_mm
     curve = predicted_curve(cur, b, n)
     now, gain = curve[0][1], curve[0][1] - curve[-1][1]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.design.adaptive import choose_batch
+from robocal.design.adaptive import Coverage, choose_batch
 from robocal.design.optimal import criterion
 from robocal.identify.identification import IdentificationError
 from robocal.kinematics.models import smr_base, smr_tracker
@@ -105,7 +105,8 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
         try:
             cur = refit(ordered.subset(keep), cell, force=force)
             cov = cell.covariance(smr_tracker(cur.kinematics, q))       # where the refit predicts the SMR
-            b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule)
+            X = q * crit.levers_mm_per_rad
+            b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule, Coverage(X, X[taken]))
             rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, predicted_curve(cur, b, 0)[-1][1],
                                 tuple(ds.point_id[cal[i]] for i in b.chosen)))
             chosen += [int(i) for i in b.chosen]
@@ -121,12 +122,4 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
 
 def _farthest(X: np.ndarray, taken: np.ndarray, k: int) -> list[int]:
     """k rows of X (M, d) not yet ``taken`` (M,) bool, each the farthest from every row taken before it."""
-    d = np.min(np.linalg.norm(X[:, None] - X[taken][None], axis=2), axis=1) if taken.any() else np.ones(len(X))
-    out = []
-    for _ in range(k):
-        i = int(np.argmax(np.where(taken, -np.inf, d)))
-        out.append(i)
-        taken = taken.copy()
-        taken[i] = True
-        d = np.minimum(d, np.linalg.norm(X - X[i], axis=1))
-    return out
+    return [int(i) for i in choose_batch([], k, ~taken, "f", Coverage(X, X[taken])).chosen]

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CRITERIA = ("i", "d")            # i: integrated variance at the task poses; d: information about the model
+CRITERIA = ("i", "d", "df", "f")  # i: integrated variance at the task poses; d: information about the model;
+#                                   f: the farthest candidate from every pose (``Coverage``); df: d and f in turn
 
 
 class LinearTerm:
@@ -121,6 +122,21 @@ def _se(Xa: np.ndarray, Xb: np.ndarray) -> np.ndarray:
     return np.exp(-0.5 * np.maximum(d2, 0.0))
 
 
+class Coverage:
+    """Distance (M,) of every candidate X_cand (M, d) to the nearest pose of X_done (N, d) and of the picks since:
+    the part of the design that asks nothing of the model (what no term describes is best found by spreading)."""
+
+    def __init__(self, X_cand: np.ndarray, X_done: np.ndarray) -> None:
+        self.X = np.asarray(X_cand, float)
+        D = np.asarray(X_done, float).reshape(-1, self.X.shape[1])
+        self.dist = np.full(len(self.X), np.inf)
+        for chunk in np.array_split(D, max(1, len(D) // 64)) if len(D) else []:
+            self.dist = np.minimum(self.dist, np.min(np.linalg.norm(self.X[:, None] - chunk[None], axis=2), axis=1))
+
+    def add(self, k: int) -> None:
+        self.dist = np.minimum(self.dist, np.linalg.norm(self.X - self.X[k], axis=1))
+
+
 @dataclass(frozen=True, eq=False)
 class Batch:
     """Candidates chosen (B,) in pick order; the mean predictive variance of the model at the task poses (mm^2,
@@ -129,19 +145,27 @@ class Batch:
     task_variance_mm2: np.ndarray
 
 
-def choose_batch(terms, n: int, available: np.ndarray, criterion: str = "i") -> Batch:
+def choose_batch(terms, n: int, available: np.ndarray, criterion: str = "i", cover: Coverage | None = None) -> Batch:
     """Greedy batch of ``n`` candidates among ``available`` (M,) bool: each pick the candidate with the largest
     sum over ``terms`` of the task variance it removes (``criterion`` "i") or of the information it brings ("d");
-    every term is updated before the next pick (the variances do not depend on what will be measured)."""
+    "f": the candidate farthest from every pose (``cover``); "df": the picks of "d" and "f" in turn, "d" first.
+    Every term is updated before the next pick (the variances do not depend on what will be measured)."""
     if criterion not in CRITERIA:
         raise ValueError(f"unknown criterion {criterion!r} (expected one of {CRITERIA})")
+    if "f" in criterion and cover is None:
+        raise ValueError(f"criterion {criterion!r} needs the candidates' coverage")
     free = np.asarray(available, bool).copy()
     chosen, curve = [], [sum(t.task_variance() for t in terms)]
-    for _ in range(min(n, int(free.sum()))):
-        g = sum((t.reduction() if criterion == "i" else t.information()) for t in terms)
+    for j in range(min(n, int(free.sum()))):
+        if criterion == "f" or (criterion == "df" and j % 2):
+            g = cover.dist
+        else:
+            g = sum((t.reduction() if criterion == "i" else t.information()) for t in terms)
         k = int(np.argmax(np.where(free, g, -np.inf)))
         for t in terms:
             t.add(k)
+        if cover is not None:
+            cover.add(k)
         free[k] = False
         chosen.append(k)
         curve.append(sum(t.task_variance() for t in terms))

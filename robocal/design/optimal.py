@@ -202,6 +202,14 @@ def joint_levers(J_theta: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(np.sum(np.asarray(J_theta, float) ** 2, axis=1), axis=0))
 
 
+def lever_scaled(kin: Kinematics, q_rad: np.ndarray, q_over: np.ndarray | None = None) -> np.ndarray:
+    """q (N, n) rad scaled by every joint's RMS lever (mm/rad) over the poses ``q_over`` (default q): the joint
+    space in which space-filling designs measure distance (mm)."""
+    q = np.atleast_2d(np.asarray(q_rad, float))
+    over = q if q_over is None else np.atleast_2d(np.asarray(q_over, float))
+    return q * joint_levers(joint_motion_columns(kin, identification_jacobian(kin, over)[1]))
+
+
 def spread_joints(J_theta: np.ndarray, fraction: float = 0.25) -> np.ndarray:
     """Indices of the joints whose angle moves the point most: RMS lever (``joint_levers``) at least ``fraction``
     of the largest (the arm's major axes)."""

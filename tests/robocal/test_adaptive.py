@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.design.adaptive import KernelTerm, LinearTerm, choose_batch
+from robocal.design.adaptive import Coverage, KernelTerm, LinearTerm, choose_batch
+from robocal.design.optimal import farthest_first
 
 pytestmark = pytest.mark.unit
 
@@ -80,3 +81,24 @@ def test_choose_batch_takes_the_largest_sum_and_reports_the_variance_it_leaves()
     assert b.task_variance_mm2[-1] == pytest.approx(var_after, rel=1e-8)
     with pytest.raises(ValueError):
         choose_batch([], 1, avail, "x")
+
+
+def test_coverage_picks_continue_farthest_first_and_df_alternates_with_d():
+    """"f" from the first pick of a farthest-first design continues that design; "df" takes the "d" pick, then the
+    candidate farthest from the measured poses and that pick, in turn."""
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(60, 4))
+    ff = farthest_first(X, 8)
+    done = np.zeros(len(X), bool)
+    done[ff[:2]] = True
+    b = choose_batch([], 6, ~done, "f", Coverage(X, X[done]))
+    np.testing.assert_array_equal(b.chosen, ff[2:])
+    A, done_rows, B = _linear(4, M=60)
+    d_only = choose_batch([LinearTerm(A, done_rows, B)], 1, np.ones(60, bool), "d").chosen[0]
+    cover = Coverage(X, X[:3])
+    b = choose_batch([LinearTerm(A, done_rows, B)], 2, np.ones(60, bool), "df", cover)
+    assert b.chosen[0] == d_only
+    dist = np.min(np.linalg.norm(X[:, None] - X[[0, 1, 2, d_only]][None], axis=2), axis=1)
+    assert b.chosen[1] == int(np.argmax(dist)) and dist[b.chosen[1]] > 0
+    with pytest.raises(ValueError, match="coverage"):
+        choose_batch([], 1, np.ones(60, bool), "df")
