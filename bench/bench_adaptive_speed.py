@@ -5,8 +5,8 @@ The demo IRB 2600 cell of ``configs/irb2600.yaml`` (its simulated effects: gravi
 -back lag and tracker drift are in the simulation; the mock measurement here uses the pose-dependent ones) with
 ``plan.kind: adaptive``: 100 of the plan's candidates measured on the simulated cell (its seed, then
 random candidates), 3000 other candidates (a seeded sample of the pool). One round = ``adaptive_model.refit`` (the
-default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` + ``choose_batch`` (the
-campaign's rule, ``adaptive_model.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
+default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` and the candidates'
+coverage + ``choose_batch`` (the campaign's rule, ``adaptive_model.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_adaptive_speed.py [--repeats 5]
 """
@@ -29,7 +29,9 @@ from campaign.config.load import load_cell  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402
 from campaign.plan.build import build_plan  # noqa: E402
-from robocal.design.adaptive import choose_batch  # noqa: E402
+from campaign.plan.optimal import tracker_kinematics  # noqa: E402
+from robocal.design.adaptive import Coverage, choose_batch  # noqa: E402
+from robocal.design.optimal import lever_scaled  # noqa: E402
 from robocal.kinematics.models import smr_tracker  # noqa: E402
 
 N_MEASURED, N_CANDIDATES, BATCH = 100, 3000, 10
@@ -64,8 +66,10 @@ def one_round(cell, ds, q_cand):
     task = q_cand[task_sample(len(q_cand))]
     terms = design_terms(cur, q_cand, meta, cell.covariance(smr_tracker(cur.kinematics, q_cand)), task,
                          {"payload_kg": np.full(len(task), cell.payload_kg)})
+    X = lever_scaled(tracker_kinematics(cell), np.vstack([q_cand, np.radians(ds.q_deg)]))
+    cover = Coverage(X[:len(q_cand)], X[len(q_cand):])     # as ``adaptive_rounds.decide_round`` builds it
     t2 = time.perf_counter()
-    b = choose_batch(terms, BATCH, np.ones(len(q_cand), bool), RULE)
+    b = choose_batch(terms, BATCH, np.ones(len(q_cand), bool), RULE, cover)
     t3 = time.perf_counter()
     return (t3 - t[0], time.process_time() - t[1], t1 - t[0], t2 - t1, t3 - t2), cur, b
 

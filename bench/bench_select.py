@@ -123,6 +123,13 @@ except what is named.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select.py --adaptive --rules d f df
         --seeds 7 8 9 [--forms ... --json A.json] [--combine A.json B.json --rules d f df]
+
+Outcome of the third protocol (run on cfbbaa5; two processes, --combine; the table is in docs/results.md): score
+over forms and sizes f 1.156, df 1.206, d 1.300. ``f`` is chosen (11 % below d) and is now ``RULE``; under it the
+replay's poses are the one-shot selection's. The goals for it: met on the UR5 (1.218 / 1.073); NOT met at 50 poses on
+the sparse-far-pose form (1.480) and the layer-only form (1.358), at 100 on the layer-only form (1.261). ``d`` broke
+down at 50 poses on seed 8 of the UR10-like form (5.03 x: a registration drift in measurement order taken on its
+rows; bench_select_stages.py).
 """
 from __future__ import annotations
 

@@ -3,9 +3,12 @@ nothing): the held-out RMS by stage of the default process on the chosen rows, a
 joint compliance.
 
 * The public UR5 campaign: kinematic / + effects / final (with the residual layer) for the adaptive replay (the
-  campaign's seed) and the one-shot ``campaign select`` at 50 and 100 rows, and for all rows.
+  campaign's seed, rule ``d``: the rule of that run) and the one-shot ``campaign select`` at 50 and 100 rows, and
+  for all rows.
 * Seed 4 of the sparse-far-pose form of ``bench_select.py --adaptive``: the D-optimal and the space-filling seed's
-  replays at 50 rows, the held-out RMS, and the compliance trial's CV RMS, gain and paired t.
+  replays (rule ``d``) at 50 rows, the held-out RMS, and the compliance trial's CV RMS, gain and paired t.
+* Seed 8 of the UR10-like form (the third protocol's run, where rule ``d`` broke down at 50 rows): rules ``d`` and
+  ``f`` at 50 rows, by stage, with the effects taken.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py
 """
@@ -45,7 +48,7 @@ def main() -> None:
     ds, cell = ur5_dataset()
     print("UR5 public campaign: held-out RMS by stage, mm (nominal / kinematic / + effects / final)")
     print(f"  all {int(ds.mask('calib').sum())} rows: {stages(report(ds, cell))}")
-    sel = adaptive_rows(ds, cell, 100)
+    sel = adaptive_rows(ds, cell, 100, rule="d")
     for n in (50, 100):
         print(f"  adaptive {n}: {stages(report(ds, cell, sel.order[:n]))}")
         one = np.flatnonzero(select_rows(ds, cell, n).keep & ds.mask("calib"))
@@ -54,11 +57,15 @@ def main() -> None:
         ds, cell = ADAPTIVE_FORMS["strong compliance, sparse far"](Path(tmp), 4)
         print("strong compliance, sparse far poses, seed 4, 50 rows: held-out RMS and the compliance trial")
         for design in ("d_optimal", "space_filling"):
-            r = report(ds, cell, adaptive_rows(ds, cell, 50, seed_design=design).order[:50])
+            r = report(ds, cell, adaptive_rows(ds, cell, 50, rule="d", seed_design=design).order[:50])
             trial = next(t for t in r.effects.selection["trials"] if t["effect"].startswith("joint_compliance"))
             print(f"  {design:14s} held-out {r.final.test.rms_mm:.4f} mm; {trial['effect']}: CV "
                   f"{trial['base_cv_rms_mm']:.3f} -> {trial['cv_rms_mm']:.3f} mm (gain {100 * trial['gain']:.0f} %, "
                   f"t {trial['t']:.2f}), taken: {', '.join(r.effects.selection['taken']) or 'none'}")
+        ds, cell = ADAPTIVE_FORMS["UR10-like (compliance + J2 gear)"](Path(tmp), 8)
+        print(f"UR10-like, seed 8, 50 rows: held-out RMS by stage, mm (all rows: {stages(report(ds, cell))})")
+        for rule in ("d", "f"):
+            print(f"  rule {rule}: {stages(report(ds, cell, adaptive_rows(ds, cell, 50, rule=rule).order[:50]))}")
 
 
 if __name__ == "__main__":

@@ -4,8 +4,9 @@ The same loop as ``plan.kind: adaptive``, with the measured calibration rows as 
 (``campaign.plan.adaptive.seed_rows``: space-filling, the identifiable geometric parameters + 10 %, at least the rows
 the layer's cross-validation needs), then batches. Before each batch the rows chosen so far, and only they (with the check and
 nest rows; never a test row), are calibrated as ``reprocess`` does (``adaptive_model.refit``), and the batch is
-where that model learns most about its parameters and its layer (``robocal.design.adaptive`` rule ``d``, the default:
-chosen by ``bench/bench_select.py --adaptive``) or where its predicted error at the task poses falls most (``i``).
+chosen by a rule of ``robocal.design.adaptive``: ``f``, the default (chosen by ``bench/bench_select.py --adaptive``),
+the rows farthest in lever-scaled joint space from every row chosen; ``d``, where that model learns most about its
+parameters and its layer; ``df``, the two in turn; ``i``, where its predicted error at the task poses falls most.
 The task poses (the calibration rows, i.e. the measured box, or ``task_q_rad``) weigh the predicted held-out RMS
 of every round, and the choice under rule ``i``. Each kept row carries how the robot reached it in the full campaign, as ``campaign select`` writes
 it.
@@ -33,7 +34,7 @@ from .effects_stage import effect_meta
 from .plausibility import check_dataset
 
 BATCH = 10
-ADAPTIVE = "adaptive: the refitted model's predicted error at the task poses"
+ADAPTIVE = "adaptive: farthest-first rounds, each judged by the refitted model's predicted error at the task poses"
 
 
 @dataclass(frozen=True)

@@ -27,23 +27,29 @@ def campaign(tmp_path_factory):
     return csv, cfg, load_source(csv).dataset, load_cell(cfg)
 
 
-def test_a_batch_never_sees_the_rows_it_has_not_chosen(campaign):
+@pytest.mark.parametrize("rule", ["f", "d"])
+def test_a_batch_never_sees_the_rows_it_has_not_chosen(campaign, rule):
+    """Under the default rule ``f`` the poses follow from the poses alone and the measurements of the chosen rows
+    judge every round (its predicted held-out RMS, hence the stop); under the model-driven ``d`` they also steer
+    the picks. Neither ever reads a row it has not chosen."""
     _, _, ds, cell = campaign
-    sel = adaptive_rows(ds, cell, N)
+    sel = adaptive_rows(ds, cell, N, rule=rule)
     assert len(sel.order) == len(set(sel.order)) == N and len(sel.rounds) == 2
     assert [len(r.added) for r in sel.rounds] == [10, N - sel.n_seed - 10]
     rng = np.random.default_rng(3)
     unseen = ~np.isin(np.arange(len(ds)), sel.order) & (ds.mask("calib") | ds.mask("test"))
     p = ds.p_tracker_mm.copy()
     p[unseen] += rng.normal(0.0, 0.3, (int(unseen.sum()), 3))      # other errors where it never looked
-    again = adaptive_rows(replace(ds, p_tracker_mm=p), cell, N)
+    again = adaptive_rows(replace(ds, p_tracker_mm=p), cell, N, rule=rule)
     np.testing.assert_array_equal(again.order, sel.order)
-    seen = sel.order[: sel.n_seed]                                  # the seed's own measurements do steer the rounds
+    assert [r.predicted_rms_mm for r in again.rounds] == [r.predicted_rms_mm for r in sel.rounds]
+    seen = sel.order[: sel.n_seed]                                  # the seed's own measurements judge the rounds
     p = ds.p_tracker_mm.copy()
     p[seen] += rng.normal(0.0, 0.3, (len(seen), 3))
-    moved = adaptive_rows(replace(ds, p_tracker_mm=p), cell, N)
+    moved = adaptive_rows(replace(ds, p_tracker_mm=p), cell, N, rule=rule)
     np.testing.assert_array_equal(moved.order[: sel.n_seed], sel.order[: sel.n_seed])
-    assert not np.array_equal(moved.order, sel.order)
+    assert moved.rounds[0].predicted_rms_mm != pytest.approx(sel.rounds[0].predicted_rms_mm, rel=1e-3)
+    assert np.array_equal(moved.order, sel.order) == (rule == "f")
 
 
 def test_select_adaptive_cli_writes_the_subset_and_its_rounds(campaign, tmp_path, capsys):
