@@ -24,8 +24,7 @@ from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from robocal.design.adaptive import Coverage, choose_batch
-from robocal.design.optimal import lever_scaled, short_tour
+from robocal.design import Coverage, choose_batch, lever_scaled, short_tour
 from robocal.identify.identification import IdentificationError
 from robocal.kinematics.models import smr_tracker
 

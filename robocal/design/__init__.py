@@ -6,9 +6,10 @@ adaptive batch chosen with the model fitted so far (``adaptive``). Imports ``kin
 from robocal import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
-    "adaptive": ("Batch", "KernelTerm", "LinearTerm", "choose_batch", "learning_curve"),
+    "adaptive": ("Batch", "Coverage", "KernelTerm", "LinearTerm", "choose_batch", "learning_curve"),
     "optimal": ("Criterion", "Forecast", "criterion", "criterion_effects", "d_optimal", "design_columns", "forecast",
-                "geometric_prior_sigma", "greedy_order", "prediction", "short_tour", "space_filling", "whiten_rows"),
+                "geometric_prior_sigma", "greedy_order", "lever_scaled", "prediction", "short_tour", "space_filling",
+                "whiten_rows"),
     "pool": ("candidate_poses", "incidence_rad", "smr_base_and_axis", "tilted_rotations"),
 }
 __all__ = [name for names in _HOMES.values() for name in names]
