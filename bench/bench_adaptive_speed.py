@@ -6,7 +6,7 @@ The demo IRB 2600 cell of ``configs/irb2600.yaml`` (its simulated effects: gravi
 ``plan.kind: adaptive``: 100 of the plan's candidates measured on the simulated cell (its seed, then
 random candidates), 3000 other candidates (a seeded sample of the pool). One round = ``adaptive_model.refit`` (the
 default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` and the candidates'
-coverage + ``choose_batch`` (the campaign's rule, ``adaptive_model.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
+coverage + ``choose_batch`` (the campaign's rule, ``campaign.plan.adaptive.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_adaptive_speed.py [--repeats 5]
 """
@@ -24,7 +24,8 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from campaign.calibrate.adaptive_model import RULE, design_terms, refit, task_sample  # noqa: E402
+from campaign.calibrate.adaptive_model import design_terms, refit, task_sample  # noqa: E402
+from campaign.plan.adaptive import RULE  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
 from campaign.config.simulation import simulated_cell  # noqa: E402
 from campaign.data.dataset import Dataset  # noqa: E402

@@ -125,7 +125,7 @@ except what is named.
         --seeds 7 8 9 [--forms ... --json A.json] [--combine A.json B.json --rules d f df]
 
 Outcome of the third protocol (run on cfbbaa5; two processes, --combine; the table is in docs/results.md): score
-over forms and sizes f 1.156, df 1.206, d 1.300. ``f`` is chosen (11 % below d) and is now ``RULE``; under it the
+over forms and sizes f 1.156, df 1.206, d 1.300. ``f`` is chosen (11 % below d) and is now ``RULE`` (since moved to ``campaign.plan.adaptive``, beside the seed); under it the
 replay's poses are the one-shot selection's. The goals for it: met on the UR5 (1.218 / 1.073); NOT met at 50 poses on
 the sparse-far-pose form (1.480) and the layer-only form (1.358), at 100 on the layer-only form (1.261). ``d`` broke
 down at 50 poses on seed 8 of the UR10-like form (5.03 x: a registration drift in measurement order taken on its

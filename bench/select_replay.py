@@ -15,11 +15,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from campaign.calibrate.adaptive_model import RULE  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
-from campaign.plan.adaptive import SEED_DESIGN, SEED_SIZE  # noqa: E402
+from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 
 SIZES = (50, 100)

@@ -30,9 +30,6 @@ from .plausibility import check_dataset
 from .stages import final_layer, fit_stages
 
 MAX_TASK_ROWS = 400             # the task poses the variance is averaged over (a seeded sample beyond)
-RULE = "f"                      # robocal.design.adaptive criterion of the rounds: chosen by bench/bench_select.py --adaptive
-#                                 (first protocol: d 1.168 against i 2.257; third, fresh seeds 7-9: f 1.156, df 1.206,
-#                                 d 1.300, mean over seven forms and both sizes)
 
 
 @dataclass(frozen=True, eq=False)

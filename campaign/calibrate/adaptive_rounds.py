@@ -3,7 +3,7 @@
 After the seed and after every batch the calibration points measured so far (read back from the durable log,
 with the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
 (``adaptive_model.refit``). The next ``plan.block_points`` poses are chosen among the plan's candidates (at most
-``MAX_CANDIDATES`` per round, a seeded sample of the pool) by rule ``adaptive_model.RULE`` of
+``MAX_CANDIDATES`` per round, a seeded sample of the pool) by rule ``campaign.plan.adaptive.RULE`` of
 ``robocal.design.adaptive``, chosen by held-out prediction: ``f``, each the candidate farthest, in joint space
 scaled by the levers, from every pose measured or picked (the rules that follow the model's own uncertainty, ``d``
 and ``i``, did worse held out). The refitted model judges the batch: predicted held-out RMS now, the larger of its
@@ -32,14 +32,14 @@ from campaign.config.cell_model import CellModel
 from campaign.data.log_dataset import dataset_from_log
 from campaign.errors import DataError, one_line
 from campaign.io.quantities import floor_mm
-from campaign.plan.adaptive import task_poses
+from campaign.plan.adaptive import RULE, task_poses
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.optimal import tracker_kinematics
 from campaign.plan.points import Plan, PlanPoint
 from campaign.run.log_events import LogEvent
 from campaign.run.log_reader import LogContents, read_log
 
-from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
+from .adaptive_model import design_terms, predicted_curve, refit, task_sample
 from .adaptive_stop import ROUND_EVENT
 
 logger = logging.getLogger(__name__)

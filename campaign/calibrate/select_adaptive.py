@@ -26,10 +26,10 @@ from robocal.kinematics.models import smr_base, smr_tracker
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, one_line
-from campaign.plan.adaptive import SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
+from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
-from .adaptive_model import RULE, design_terms, predicted_curve, refit, task_sample
+from .adaptive_model import design_terms, predicted_curve, refit, task_sample
 from .effects_stage import effect_meta
 from .plausibility import check_dataset
 

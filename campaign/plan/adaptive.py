@@ -37,6 +37,9 @@ SEED_DESIGNS = ("d_optimal", "space_filling")   # how the seed's poses are chose
 SEED_SIZES = ("geometric", "folds")             # how many (``seed_size``)
 SEED_DESIGN, SEED_SIZE = "space_filling", "geometric"   # of plan.kind: adaptive and select --adaptive
 # (bench/bench_select.py --adaptive, the revised protocol of issue 32: the D-optimal seed broke down on a form)
+RULE = "f"                      # robocal.design.adaptive criterion of the rounds, chosen by bench/bench_select.py --adaptive
+#                                 (first protocol: d 1.168 against i 2.257; third, fresh seeds 7-9: f 1.156, df 1.206,
+#                                 d 1.300, mean over seven forms and both sizes)
 
 
 def seed_size(identifiable_geometric: int, n_max: int, folds: int, size: str = SEED_SIZE) -> int:

@@ -5,19 +5,21 @@ plan's count (``robocal.design.adaptive.learning_curve``): the noise floor at th
 repeatability) and the parameter uncertainty of the geometry and the pose-dependent effects ``calibration.effects:
 auto`` may take, each with its prior (1 mm / 1 mrad, the effects' typical sizes), so that a parameter the first
 poses cannot determine still counts with its prior. The poses in the order the plan measures them: an optimal
-plan's order (its D-optimal greedy order); for an adaptive plan its seed, then the D-optimal order of the
-candidates (what the rounds choose depends on the measurements; the measured curve is in the run's report); for a
-grid plan the D-optimal order of its calibration points (any prefix of a grid's serpentine would be one corner of
+plan's order (its D-optimal greedy order); for an adaptive plan its seed, then the order its rounds take under
+rule ``f`` (farthest-first over the candidates; a round judges a seeded sample of at most 3000 of them, so a large
+pool's run differs in detail), or the D-optimal order of the candidates under a rule whose choice depends on the
+measurements (the measured curve is in the run's report); for a grid plan the D-optimal order of its calibration points (any prefix of a grid's serpentine would be one corner of
 the box). What the model cannot express (the residual layer's work) is not in the forecast.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from robocal.design.adaptive import learning_curve
-from robocal.design.optimal import criterion, criterion_effects, d_optimal, design_columns, greedy_order
+from robocal.design import (Coverage, choose_batch, criterion, criterion_effects, d_optimal, design_columns,
+                            greedy_order, learning_curve, lever_scaled)
 
 from campaign.config.cell_model import CellModel
+from .adaptive import RULE
 from .optimal import pose_covariance, tracker_kinematics
 from .points import Plan
 
@@ -34,9 +36,13 @@ def plan_order(cell: CellModel, plan: Plan) -> np.ndarray:
     if kind == "adaptive":
         q = np.radians([p.q_deg for p in plan.candidates])
         n = min(len(q), cell.config.plan.max_points)
-        crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cell.payload_kg)
-        rest = [i for i in d_optimal(crit.A, n, crit.spread).chosen
-                if not np.any(np.all(np.isclose(q[i], q_cal), axis=1))]
+        seen = np.any(np.all(np.isclose(q[:, None], q_cal[None]), axis=2), axis=1)         # the seed's poses
+        if RULE == "f":
+            X = lever_scaled(kin_t, q)
+            rest = choose_batch([], n - len(q_cal), ~seen, "f", Coverage(X, lever_scaled(kin_t, q_cal, q))).chosen
+        else:
+            crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cell.payload_kg)
+            rest = [i for i in d_optimal(crit.A, n, crit.spread).chosen if not seen[i]]
         return np.concatenate([q_cal, q[rest][: n - len(q_cal)]])
     crit = criterion(kin_t, q_cal, pose_covariance(cell, kin_t, q_cal), cell.payload_kg)
     return q_cal[greedy_order(crit.A, len(q_cal), spread=crit.spread)]

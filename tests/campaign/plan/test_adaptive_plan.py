@@ -62,6 +62,29 @@ def test_the_plan_holds_the_seed_the_candidates_and_the_test_set_last(tmp_path, 
 
 
 @pytest.mark.system
+def test_the_forecast_takes_the_poses_in_the_order_the_rounds_will(tmp_path):
+    """Under rule ``f`` the rounds continue the seed farthest-first in lever-scaled joint space: the forecast's
+    order is the seed, then that continuation up to the pose budget."""
+    from campaign.plan.adaptive import RULE
+    from campaign.plan.learning import plan_order
+    from campaign.plan.optimal import tracker_kinematics
+    from robocal.design import lever_scaled
+
+    assert RULE == "f"
+    cell = load_cell(_config(tmp_path, **{"plan.max_points": 40}))
+    plan = build_plan(cell)
+    n0 = sum(p.set == "calib" for p in plan.points)
+    order = plan_order(cell, plan)
+    qc = np.radians([p.q_deg for p in plan.candidates])
+    kin_t = tracker_kinematics(cell)
+    X = lever_scaled(kin_t, qc)
+    assert len(order) == 40 and len({tuple(np.round(q, 9)) for q in order}) == 40
+    for k in (n0, n0 + 1, 39):                                # each the farthest from every pose before it
+        gap = np.min(np.linalg.norm(X[:, None] - lever_scaled(kin_t, order[:k], qc)[None], axis=2), axis=1)
+        assert np.allclose(order[k], qc[np.argmax(gap)])
+
+
+@pytest.mark.system
 def test_task_box_and_targets_give_the_task_poses(tmp_path):
     box = {"box_mm": [[900, -400, 600], [1300, 400, 1000]]}
     cell = load_cell(_config(tmp_path, **{"plan.task": box}))
