@@ -14,7 +14,9 @@ Every term answers, for every candidate: how much measuring it lowers the mean p
 poses (``reduction``, mm^2; I-optimality) and how much it tells about the term (``information``, nats: D-optimality,
 "the parameters least determined"). ``choose_batch`` picks greedily by the sum over the terms; the variance is the
 model's own prediction variance (at the task poses, without the noise), so the sum of the terms' variances plus the
-noise floor and the part no term describes is the predicted held-out mean square error.
+noise floor and the part no term describes is the predicted held-out mean square error. ``Coverage`` asks nothing
+of the model: rule ``f`` picks the candidate farthest from every pose (a space-filling continuation), and the terms
+still say what each pick removes of the variance.
 
 Shapes: A (M, 3, L) whitened prior-scaled rows; B (T, 3, L) prior-scaled rows at the task poses (mm per unit);
 X (M, d) kernel inputs divided by the length scales.
