@@ -9,6 +9,8 @@ joint compliance.
   replays (rule ``d``) at 50 rows, the held-out RMS, and the compliance trial's CV RMS, gain and paired t.
 * Seed 8 of the UR10-like form (the third protocol's run, where rule ``d`` broke down at 50 rows): rules ``d`` and
   ``f`` at 50 rows, by stage, with the effects taken.
+* Seeds 7 and 9 of the sparse-far-pose form (where rule ``f`` misses the goal at 50 rows): all rows and ``f``'s 50,
+  by stage, with the layer chosen.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py
 """
@@ -66,6 +68,11 @@ def main() -> None:
         print(f"UR10-like, seed 8, 50 rows: held-out RMS by stage, mm (all rows: {stages(report(ds, cell))})")
         for rule in ("d", "f"):
             print(f"  rule {rule}: {stages(report(ds, cell, adaptive_rows(ds, cell, 50, rule=rule).order[:50]))}")
+        for seed in (7, 9):
+            ds, cell = ADAPTIVE_FORMS["strong compliance, sparse far"](Path(tmp), seed)
+            print(f"strong compliance, sparse far poses, seed {seed}: held-out RMS by stage, mm")
+            print(f"  all {int(ds.mask('calib').sum())} rows: {stages(report(ds, cell))}")
+            print(f"  rule f, 50 rows: {stages(report(ds, cell, adaptive_rows(ds, cell, 50, rule='f').order[:50]))}")
 
 
 if __name__ == "__main__":
