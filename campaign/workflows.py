@@ -124,7 +124,7 @@ def run_campaign(cell: CellModel, run_dir: Path | None = None, resume: Path | No
             runner.on_point = lambda point, record: (point.set == "nest" or predictor.observe(record.q_read_deg,
                                                                                           record.p_tracker_mm),
                                                      advance(record))
-            if plan.candidates:                         # plan.kind: adaptive: rounds chosen with the model refitted
+            if plan.candidates:                         # plan.kind: adaptive: rounds, the model refitted after each
                 from campaign.calibrate.adaptive_rounds import AdaptiveRounds
                 passes = AdaptiveRounds(cell, plan, run_dir, log, {p.point_id for p in plan.points} - {
                     p.point_id for p in todo}, on_skip=advance.skip, force=force)

@@ -176,8 +176,9 @@ def _select_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--points", required=True, type=int, metavar="N", help="calibration rows to keep")
     parser.add_argument("--out", required=True, type=Path, metavar="SUBSET.csv", help="the subset (interchange CSV)")
     parser.add_argument("--adaptive", action="store_true",
-                        help="replay an adaptive campaign: a space-filling seed, then batches chosen with the model "
-                             "refitted to the rows chosen so far (only their measurements)")
+                        help="replay an adaptive campaign: a space-filling seed, then batches continuing it "
+                             "farthest-first, each round judged by the model refitted to the rows chosen so far "
+                             "(only their measurements)")
     overwrite_argument(parser)
     _force_argument(parser)
 

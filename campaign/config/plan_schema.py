@@ -120,7 +120,8 @@ class PlanConfig:
     (default none) and ``clearance_mm`` (default 25): see ``BoxConfig``.
     ``kind``: ``grid`` (default), ``optimal`` (``points`` calibration poses chosen from a candidate ``pool``
     by a D-optimal criterion, measured in a short tour), ``adaptive`` (a space-filling seed from the ``pool``, then
-    rounds of ``block_points`` poses (default 10) chosen with the model refitted to the points so far, up to
+    rounds of ``block_points`` poses (default 10) continuing it farthest-first, the model refitted to the points so far
+    after each round deciding the stop, up to
     ``max_points``; ``stop`` defaults to ``auto``; ``task``: where the robot works) or ``iso9283``. ``stop: auto`` (optimal plans; default
     ``off``): refit after every ``block_points`` points (default 20) and stop when the predicted held-out RMS
     would improve by less than ``stop_gain_pct`` % of the noise floor (default 2) with the next block, or at
