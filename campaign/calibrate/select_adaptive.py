@@ -26,7 +26,7 @@ from robocal.kinematics.models import smr_base, smr_tracker
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, one_line
-from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
+from campaign.plan.adaptive import COVER_TASK, RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
 from .adaptive_model import design_terms, predicted_curve, refit, task_sample
@@ -73,7 +73,7 @@ def adaptive_selection(ds: Dataset, cell: CellModel, n: int, *, force: bool = Fa
 
 def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
                   task_q_rad: np.ndarray | None = None, *, force: bool = False, seed_design: str = SEED_DESIGN,
-                  seed_points: str = SEED_SIZE) -> AdaptiveSelection:
+                  seed_points: str = SEED_SIZE, cover_task: bool = COVER_TASK) -> AdaptiveSelection:
     """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring; the seed by
     ``campaign.plan.adaptive.seed_rows`` / ``seed_size``); DataError as for ``select_rows``; ``force`` overrides
     failed plausibility checks (here and in every refit)."""
@@ -107,7 +107,8 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
             cur = refit(ordered.subset(keep), cell, force=force)
             cov = cell.covariance(smr_tracker(cur.kinematics, q))       # where the refit predicts the SMR
             X = q * crit.levers_mm_per_rad
-            b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule, Coverage(X, X[taken]))
+            X_task = task * crit.levers_mm_per_rad if cover_task and task_q_rad is not None else None
+            b = choose_batch(design_terms(cur, q, meta, cov, q_task), k, ~taken, rule, Coverage(X, X[taken], X_task))
             rounds.append(Round(len(chosen), cur.layer_kind, cur.cv_rms_mm, predicted_curve(cur, b, 0)[-1][1],
                                 tuple(ds.point_id[cal[i]] for i in b.chosen)))
             chosen += [int(i) for i in b.chosen]

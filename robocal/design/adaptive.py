@@ -126,17 +126,38 @@ def _se(Xa: np.ndarray, Xb: np.ndarray) -> np.ndarray:
 
 class Coverage:
     """Distance (M,) of every candidate X_cand (M, d) to the nearest pose of X_done (N, d) and of the picks since:
-    the part of the design that asks nothing of the model (what no term describes is best found by spreading)."""
+    the part of the design that asks nothing of the model (what no term describes is best found by spreading).
+    With task poses X_task (T, d) (where the robot will work) the picks cover the task instead of every candidate:
+    each the free candidate nearest the task pose farthest from every pose measured or picked (once every task pose
+    is itself measured or picked, the farthest candidate again)."""
 
-    def __init__(self, X_cand: np.ndarray, X_done: np.ndarray) -> None:
+    def __init__(self, X_cand: np.ndarray, X_done: np.ndarray, X_task: np.ndarray | None = None) -> None:
         self.X = np.asarray(X_cand, float)
         D = np.asarray(X_done, float).reshape(-1, self.X.shape[1])
-        self.dist = np.full(len(self.X), np.inf)
-        for chunk in np.array_split(D, max(1, len(D) // 64)) if len(D) else []:
-            self.dist = np.minimum(self.dist, np.min(np.linalg.norm(self.X[:, None] - chunk[None], axis=2), axis=1))
+        self.dist = _nearest(self.X, D)
+        self.task = None if X_task is None else np.asarray(X_task, float).reshape(-1, self.X.shape[1])
+        self.task_dist = None if self.task is None else _nearest(self.task, D)
+
+    def pick(self, free: np.ndarray) -> int:
+        """The next candidate among ``free`` (M,) bool: the farthest from every pose, or the nearest the task pose
+        farthest from every pose."""
+        if self.task is None or not np.max(self.task_dist) > 0:          # no task, or every task pose measured
+            return int(np.argmax(np.where(free, self.dist, -np.inf)))
+        t = self.task[int(np.argmax(self.task_dist))]
+        return int(np.argmin(np.where(free, np.linalg.norm(self.X - t, axis=1), np.inf)))
 
     def add(self, k: int) -> None:
         self.dist = np.minimum(self.dist, np.linalg.norm(self.X - self.X[k], axis=1))
+        if self.task is not None:
+            self.task_dist = np.minimum(self.task_dist, np.linalg.norm(self.task - self.X[k], axis=1))
+
+
+def _nearest(X: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """Distance (M,) of every row of X (M, d) to the nearest row of D (N, d) (inf without D), in chunks of D."""
+    dist = np.full(len(X), np.inf)
+    for chunk in np.array_split(D, max(1, len(D) // 64)) if len(D) else []:
+        dist = np.minimum(dist, np.min(np.linalg.norm(X[:, None] - chunk[None], axis=2), axis=1))
+    return dist
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,7 +171,8 @@ class Batch:
 def choose_batch(terms, n: int, available: np.ndarray, criterion: str = "i", cover: Coverage | None = None) -> Batch:
     """Greedy batch of ``n`` candidates among ``available`` (M,) bool: each pick the candidate with the largest
     sum over ``terms`` of the task variance it removes (``criterion`` "i") or of the information it brings ("d");
-    "f": the candidate farthest from every pose (``cover``); "df": the picks of "d" and "f" in turn, "d" first.
+    "f": ``cover``'s pick (the candidate farthest from every pose, or nearest the least covered task pose); "df":
+    the picks of "d" and "f" in turn, "d" first.
     Every term is updated before the next pick (the variances do not depend on what will be measured)."""
     if criterion not in CRITERIA:
         raise ValueError(f"unknown criterion {criterion!r} (expected one of {CRITERIA})")
@@ -160,10 +182,10 @@ def choose_batch(terms, n: int, available: np.ndarray, criterion: str = "i", cov
     chosen, curve = [], [sum(t.task_variance() for t in terms)]
     for j in range(min(n, int(free.sum()))):
         if criterion == "f" or (criterion == "df" and j % 2):
-            g = cover.dist
+            k = cover.pick(free)
         else:
             g = sum((t.reduction() if criterion == "i" else t.information()) for t in terms)
-        k = int(np.argmax(np.where(free, g, -np.inf)))
+            k = int(np.argmax(np.where(free, g, -np.inf)))
         for t in terms:
             t.add(k)
         if cover is not None:

@@ -102,3 +102,29 @@ def test_coverage_picks_continue_farthest_first_and_df_alternates_with_d():
     assert b.chosen[1] == int(np.argmax(dist)) and dist[b.chosen[1]] > 0
     with pytest.raises(ValueError, match="coverage"):
         choose_batch([], 1, np.ones(60, bool), "df")
+
+
+def test_coverage_with_a_task_covers_the_task_poses_farthest_first():
+    """With task poses among the candidates, "f" picks only task poses, each the one farthest from every pose
+    measured or picked (farthest-first over the task); task poses off the candidates get the nearest candidate."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-1.0, 1.0, size=(200, 3))
+    done = np.zeros(len(X), bool)
+    done[:5] = True
+    in_task = np.flatnonzero(np.all(X[:, :2] > 0.2, axis=1) & ~done)
+    b = choose_batch([], 6, ~done, "f", Coverage(X, X[done], X[in_task]))
+    assert set(b.chosen) <= set(in_task)
+    D = X[done]
+    for k in b.chosen:                                   # each pick: the task pose farthest from all poses so far
+        dist = np.min(np.linalg.norm(X[in_task][:, None] - D[None], axis=2), axis=1)
+        assert k == in_task[int(np.argmax(dist))]
+        D = np.vstack([D, X[k]])
+    untasked = choose_batch([], 6, ~done, "f", Coverage(X, X[done])).chosen
+    assert not set(untasked) <= set(in_task)             # without the task the picks leave the box
+    target = np.array([[2.0, 2.0, 2.0]])                 # off the candidates: the nearest free candidate
+    k = choose_batch([], 1, ~done, "f", Coverage(X, X[done], target)).chosen[0]
+    assert k == int(np.argmin(np.where(~done, np.linalg.norm(X - target, axis=1), np.inf)))
+    b = choose_batch([], len(in_task) + 3, ~done, "f", Coverage(X, X[done], X[in_task]))
+    assert set(b.chosen[:len(in_task)]) == set(in_task)  # the task used up: farthest-first over every candidate
+    D = np.vstack([X[done], X[b.chosen[:len(in_task)]]])
+    assert b.chosen[len(in_task)] == int(np.argmax(np.min(np.linalg.norm(X[:, None] - D[None], axis=2), axis=1)))
