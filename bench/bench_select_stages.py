@@ -11,8 +11,11 @@ joint compliance.
   ``f`` at 50 rows, by stage, with the effects taken.
 * Seeds 7 and 9 of the sparse-far-pose form (where rule ``f`` misses the goal at 50 rows): all rows and ``f``'s 50,
   by stage, with the layer chosen.
+* Seed 10 of the IRB 4600-like form with the task of ``bench_select_task.py`` (where the task-covering picks broke
+  down at 50 rows in the fourth protocol's run): all rows, ``f`` and ``f-task`` at 50 and 60 rows, by stage, with the
+  effects taken (``--only task``: this section alone).
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py [--only task]
 """
 from __future__ import annotations
 
@@ -46,7 +49,22 @@ def stages(r) -> str:
         f"  ({', '.join(r.effects.selection['taken']) or 'no effect'}; layer {r.method.residual})"
 
 
+def task_breakdown(tmp: Path) -> None:
+    """IRB 4600-like seed 10, judged at the task of ``bench_select_task.py``: by stage, with and without covering it."""
+    from bench_select_task import task_data
+    ds, cell, task_q = task_data(*ADAPTIVE_FORMS["IRB 4600-like (compliance + J3 gear + coupling)"](tmp, 10))
+    print(f"IRB 4600-like, seed 10, at the task: held-out RMS by stage, mm (all rows: {stages(report(ds, cell))})")
+    for cover in (False, True):
+        sel = adaptive_rows(ds, cell, 60, task_q_rad=task_q, cover_task=cover)
+        for n in (50, 60):
+            print(f"  {'f-task' if cover else 'f':6s} {n}: {stages(report(ds, cell, sel.order[:n]))}")
+
+
 def main() -> None:
+    if sys.argv[1:] == ["--only", "task"]:
+        with tempfile.TemporaryDirectory() as tmp:
+            task_breakdown(Path(tmp))
+        return
     ds, cell = ur5_dataset()
     print("UR5 public campaign: held-out RMS by stage, mm (nominal / kinematic / + effects / final)")
     print(f"  all {int(ds.mask('calib').sum())} rows: {stages(report(ds, cell))}")
@@ -73,6 +91,7 @@ def main() -> None:
             print(f"strong compliance, sparse far poses, seed {seed}: held-out RMS by stage, mm")
             print(f"  all {int(ds.mask('calib').sum())} rows: {stages(report(ds, cell))}")
             print(f"  rule f, 50 rows: {stages(report(ds, cell, adaptive_rows(ds, cell, 50, rule='f').order[:50]))}")
+        task_breakdown(Path(tmp))
 
 
 if __name__ == "__main__":

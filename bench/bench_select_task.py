@@ -36,6 +36,14 @@ without being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select_task.py [--seeds 10 11 12]
         [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on 811e0f1 in two processes, then --combine; the table is in docs/results.md): score f-task 1.213, f
+1.202, so the task-covering picks are not taken. f-task is lower at 50 poses on six forms of seven, and at 100 on four,
+the UR5 at both (1.384 / 1.122 against 1.557 / 1.228). One data set decided it: on seed 10 of the IRB 4600-like
+form, f-task's 50 rows took a spurious registration drift in measurement order (3.18 x;
+``bench_select_stages.py --only task``). After the run, ``task_data`` was split out of ``evaluate`` for that
+script (one data set re-run gave the same figures), and the switch ``COVER_TASK`` was removed: the campaign never
+sets it, and the candidate stays here as ``adaptive_rows(..., cover_task=True)``.
 """
 from __future__ import annotations
 
@@ -81,18 +89,24 @@ def task_box(p_test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def evaluate(ds, cell) -> dict:
-    """Ratios to all rows at the task per method and size, with the task's sizes."""
+def task_data(ds, cell):
+    """(data set without the held-out poses outside the task, cell, the task's calibration poses (T, n) rad)."""
     q = np.radians(ds.q_deg)
     p = smr_base(cell.kinematics, np.where(np.isfinite(q), q, 0.0))
-    test, cal = ds.mask("test"), ds.mask("calib")
+    test = ds.mask("test")
     lo, hi = task_box(p[test])
     inside = np.all((p >= lo) & (p <= hi), axis=1)
     ds = ds.with_order_context().subset(~test | inside)  # the held-out poses outside the task are not judged
-    q, inside = q[~test | inside], inside[~test | inside]
-    task_q = q[ds.mask("calib") & inside]
+    return ds, cell, q[~test | inside][ds.mask("calib") & inside[~test | inside]]
+
+
+def evaluate(ds, cell) -> dict:
+    """Ratios to all rows at the task per method and size, with the task's sizes."""
+    ds, cell, task_q = task_data(ds, cell)
+    q = np.radians(ds.q_deg)
+    inside = np.any(np.all(np.isclose(q[:, None], task_q[None]), axis=2), axis=1) | ds.mask("test")
     everything = held_out_rms(ds, cell)
-    out = {"all_mm": everything, "task_test": int((ds.mask("test") & inside).sum()), "task_cal": len(task_q)}
+    out = {"all_mm": everything, "task_test": int(ds.mask("test").sum()), "task_cal": len(task_q)}
     for m, cover in METHODS.items():
         sel = adaptive_rows(ds, cell, max(SIZES), task_q_rad=task_q, cover_task=cover)
         for n in SIZES:
@@ -112,7 +126,7 @@ def summary(table: dict[str, list[dict]]) -> None:
                                              for n in SIZES for m in METHODS))
     print("score (mean over forms of the two sizes' mean): " + ", ".join(f"{m} {s:.3f}" for m, s in score.items()))
     take = score["f-task"] < 0.99 * score["f"]
-    print(f"COVER_TASK = {take} (f-task {'more' if take else 'not more'} than 1 % below f)")
+    print(f"f-task taken: {take} (f-task {'more' if take else 'not more'} than 1 % below f)")
 
 
 def main() -> None:

@@ -32,7 +32,7 @@ from campaign.config.cell_model import CellModel
 from campaign.data.log_dataset import dataset_from_log
 from campaign.errors import DataError, one_line
 from campaign.io.quantities import floor_mm
-from campaign.plan.adaptive import COVER_TASK, RULE, task_poses
+from campaign.plan.adaptive import RULE, task_poses
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.optimal import tracker_kinematics
 from campaign.plan.points import Plan, PlanPoint
@@ -103,10 +103,8 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
     meta = lambda m: {"payload_kg": np.full(m, cell.payload_kg)}  # noqa: E731
     terms = design_terms(cur, q, meta(len(q)), cell.covariance(smr_tracker(cur.kinematics, q)), q_task,
                          meta(len(q_task)))
-    kin_t = tracker_kinematics(cell)
-    X = lever_scaled(kin_t, np.vstack([q, np.radians(ds.q_deg[ds.mask("calib")])]), every)
-    X_task = lever_scaled(kin_t, task, every) if COVER_TASK and pl.task is not None else None
-    b = choose_batch(terms, k, np.ones(len(q), bool), RULE, Coverage(X[:len(q)], X[len(q):], X_task))
+    X = lever_scaled(tracker_kinematics(cell), np.vstack([q, np.radians(ds.q_deg[ds.mask("calib")])]), every)
+    b = choose_batch(terms, k, np.ones(len(q), bool), RULE, Coverage(X[:len(q)], X[len(q):]))
     floor = cur.floor_mm
     curve = predicted_curve(cur, b, n)
     now, gain = curve[0][1], curve[0][1] - curve[-1][1]

@@ -26,7 +26,7 @@ from robocal.kinematics.models import smr_base, smr_tracker
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, one_line
-from campaign.plan.adaptive import COVER_TASK, RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
+from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
 from .adaptive_model import design_terms, predicted_curve, refit, task_sample
@@ -73,10 +73,11 @@ def adaptive_selection(ds: Dataset, cell: CellModel, n: int, *, force: bool = Fa
 
 def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
                   task_q_rad: np.ndarray | None = None, *, force: bool = False, seed_design: str = SEED_DESIGN,
-                  seed_points: str = SEED_SIZE, cover_task: bool = COVER_TASK) -> AdaptiveSelection:
+                  seed_points: str = SEED_SIZE, cover_task: bool = False) -> AdaptiveSelection:
     """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring; the seed by
     ``campaign.plan.adaptive.seed_rows`` / ``seed_size``); DataError as for ``select_rows``; ``force`` overrides
-    failed plausibility checks (here and in every refit)."""
+    failed plausibility checks (here and in every refit). ``cover_task``: rule ``f``'s picks cover ``task_q_rad``
+    instead of every row (judged by ``bench/bench_select_task.py`` and not taken: the campaign never sets it)."""
     check_dataset(ds, cell, force=force)
     cal = np.flatnonzero(ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1))
     if len(cal) < n:

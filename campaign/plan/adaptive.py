@@ -40,8 +40,6 @@ SEED_DESIGN, SEED_SIZE = "space_filling", "geometric"   # of plan.kind: adaptive
 RULE = "f"                      # robocal.design.adaptive criterion of the rounds, chosen by bench/bench_select.py --adaptive
 #                                 (first protocol: d 1.168 against i 2.257; third, fresh seeds 7-9: f 1.156, df 1.206,
 #                                 d 1.300, mean over seven forms and both sizes)
-COVER_TASK = False              # with plan.task, rule f's picks cover the task's poses (True) or every candidate (False):
-#                                 judged by bench/bench_select_task.py (issue 32, fourth protocol)
 
 
 def seed_size(identifiable_geometric: int, n_max: int, folds: int, size: str = SEED_SIZE) -> int:

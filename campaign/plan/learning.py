@@ -19,7 +19,7 @@ from robocal.design import (Coverage, choose_batch, criterion, criterion_effects
                             greedy_order, learning_curve, lever_scaled)
 
 from campaign.config.cell_model import CellModel
-from .adaptive import COVER_TASK, RULE, task_poses
+from .adaptive import RULE
 from .optimal import pose_covariance, tracker_kinematics
 from .points import Plan
 
@@ -39,10 +39,7 @@ def plan_order(cell: CellModel, plan: Plan) -> np.ndarray:
         seen = np.any(np.all(np.isclose(q[:, None], q_cal[None]), axis=2), axis=1)         # the seed's poses
         if RULE == "f":
             X = lever_scaled(kin_t, q)
-            task = None if not COVER_TASK or cell.config.plan.task is None else \
-                lever_scaled(kin_t, task_poses(cell, q, np.array([p.p_base_mm for p in plan.candidates])), q)
-            rest = choose_batch([], n - len(q_cal), ~seen, "f",
-                                Coverage(X, lever_scaled(kin_t, q_cal, q), task)).chosen
+            rest = choose_batch([], n - len(q_cal), ~seen, "f", Coverage(X, lever_scaled(kin_t, q_cal, q))).chosen
         else:
             crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cell.payload_kg)
             rest = [i for i in d_optimal(crit.A, n, crit.spread).chosen if not seen[i]]
