@@ -14,7 +14,7 @@ import numpy as np
 
 from robocal.kinematics.gravity import GravityModel, gravity_torques
 from robocal.kinematics.chains import wrist_joints
-from robocal.kinematics.models import Kinematics
+from robocal.kinematics.models import Kinematics, smr_base
 from .model import EffectChoice
 
 ARCMIN = math.pi / 180.0 / 60.0
@@ -41,6 +41,9 @@ class LibraryOptions:
     temp_min_span_c: float = 0.2
     warmup_tau_s: tuple[float, ...] = (1800.0, 3600.0, 7200.0)
     min_order_points: int = 40            # a drift in measurement order needs this many points
+    clock_place_max_r2: float | None = 0.9   # a drift needs a clock the place does not explain: a quadratic in the
+    #                                       SMR position fits at most this share of its variance (a serpentine
+    #                                       grid's order 0.98-0.99, random order < 0.2); None: no such check
     # physical ranges (a fitted value outside is reported as the best available description, never dropped)
     stiffness_range_nm_per_rad: tuple[float, float] = (1e3, 1e8)
     max_deflection_arcmin: float = 30.0   # compliance: joint deflection over the data
@@ -116,7 +119,7 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
                            "reason": f"J{j} covers only {span:.0f} deg: a cyclic error cannot be told from its zero"})
     out += _backlash(meta, N, n, opt, cannot)
     out += _lag(meta, n, opt, cannot)
-    out += _time(meta, N, opt, cannot, tuple(j + kin.n_track for j in (1, 2, 3)))
+    out += _time(meta, N, opt, cannot, tuple(j + kin.n_track for j in (1, 2, 3)), lambda: smr_base(kin, q))
     out += _coupling(kin, q, cannot)
     out += _track(kin, q, cannot)
     return out, cannot
@@ -215,16 +218,27 @@ def _lag(meta, n, opt, cannot) -> list[EffectChoice]:
     return [EffectChoice("readback_lag", (("joints", joints), ("memory_joints", joints)))]
 
 
-def _time(meta, N, opt, cannot, main=(1, 2, 3)) -> list[EffectChoice]:
-    """Warm-up (timestamps or temperatures) and drift of the registration (in time, else in measurement order)."""
+def _time(meta, N, opt, cannot, main=(1, 2, 3), p_base_mm=None) -> list[EffectChoice]:
+    """Warm-up (timestamps or temperatures) and drift of the registration (in time, else in measurement order);
+    neither when its clock follows the place (``_follows_place``; ``p_base_mm()``: the SMR positions (N, 3) mm)."""
     out = []
     t, temp, order = meta.get("t_s"), meta.get("temp_c"), meta.get("order")
     timed = t is not None and np.ptp(np.asarray(t, float)) >= opt.time_min_span_s
     warm = temp is not None and np.ptp(np.asarray(temp, float)) >= opt.temp_min_span_c
-    if timed or warm:
+
+    def placed(effect: str, clock, name: str) -> bool:
+        r2 = None if p_base_mm is None else _follows_place(np.asarray(clock, float), p_base_mm, opt)
+        if r2 is not None:
+            cannot.append({"effect": effect, "joints": [], "reason": f"the {name} follows the place in the workspace "
+                           f"(a quadratic in the SMR position explains {r2:.0%} of it): a drift cannot be told from a "
+                           "shape in space"})
+        return r2 is not None
+
+    if (timed or warm) and not placed("thermal_drift", temp if temp is not None else t,
+                                      "temperature" if temp is not None else "time"):
         taus = opt.warmup_tau_s if (timed and not warm) else opt.warmup_tau_s[:1]
         out += [EffectChoice("thermal_drift", (("tau_s", tau), ("joints", main))) for tau in taus]
-    else:
+    elif not (timed or warm):
         cannot.append({"effect": "thermal_drift", "joints": list(main),
                        "reason": "no timestamps or temperatures in the data" if t is None and temp is None
                        else "the data span too short a time to reveal a warm-up"})
@@ -237,9 +251,25 @@ def _time(meta, N, opt, cannot, main=(1, 2, 3)) -> list[EffectChoice]:
                        "reason": "no timestamps and no measurement order" if order is None else
                        "too few points in measurement order"})
         return out
+    if placed("registration_drift", t if timed else order, "time" if timed else "measurement order"):
+        return out
     out += [EffectChoice("registration_drift", (("clock", clock), ("degree", d), ("span", max(span, 1e-9))))
             for d in (1, 2)]
     return out
+
+
+def _follows_place(clock: np.ndarray, p_base_mm, opt: LibraryOptions) -> float | None:
+    """The share of the clock's variance (N,) a quadratic in the SMR position explains, when it exceeds
+    ``opt.clock_place_max_r2`` (the clock then stands for the place: a drift in it is a shape in space), else None."""
+    if opt.clock_place_max_r2 is None or len(clock) < 20 or not np.ptp(clock) > 0:
+        return None
+    p = np.asarray(p_base_mm(), float)
+    p = (p - p.mean(axis=0)) / np.maximum(p.std(axis=0), 1e-9)
+    i, j = np.triu_indices(3)
+    F = np.column_stack([np.ones(len(p)), p, p[:, i] * p[:, j]])          # 1, x, y, z and their 6 products
+    u = clock - clock.mean()
+    r2 = 1.0 - float(np.sum((u - F @ np.linalg.lstsq(F, u, rcond=None)[0]) ** 2)) / float(np.sum(u**2))
+    return r2 if r2 > opt.clock_place_max_r2 else None
 
 
 def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:

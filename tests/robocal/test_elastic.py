@@ -150,6 +150,34 @@ def test_what_the_data_cannot_tell_is_named_with_the_reason():
     assert {c.name for c in cands} == {"joint_compliance", "gear_cyclic"}
 
 
+@pytest.mark.unit
+def test_no_drift_is_offered_in_a_clock_that_follows_the_place():
+    """Poses measured along a serpentine grid without timestamps: the order is a shape in space, so neither drift
+    is offered and the reason says so; the same poses in random order (or the check off) offer the drift."""
+    kin = irb2600()
+    g = np.linspace(-0.6, 0.6, 8)
+    rows = [(a, b, c) for i, a in enumerate(g) for j, b in enumerate(g[::(-1) ** i])
+            for c in (g if (i * 8 + j) % 2 == 0 else g[::-1])]         # serpentine over J1, J2, J3
+    q = np.zeros((len(rows), 6))
+    q[:, :3] = rows
+    q[:, 1] += 0.3
+    q[:, 4] = 0.8
+    meta = {"payload_kg": np.zeros(len(q)), "approach": None, "move": None, "order": np.arange(len(q), dtype=float),
+            "t_s": None}
+    cands, cannot = candidates(kin, q, meta, GravityModel())
+    why = {u["effect"]: u["reason"] for u in cannot}
+    assert "registration_drift" not in {c.name for c in cands}
+    assert "measurement order follows the place" in why["registration_drift"]
+    shuffled = {**meta, "order": np.random.default_rng(4).permutation(len(q)).astype(float)}
+    assert "registration_drift" in {c.name for c in candidates(kin, q, shuffled, GravityModel())[0]}
+    off = LibraryOptions(clock_place_max_r2=None)
+    assert "registration_drift" in {c.name for c in candidates(kin, q, meta, GravityModel(), off)[0]}
+    timed = {**meta, "t_s": 30.0 * np.arange(len(q))}                 # timestamps along the same path
+    cands, cannot = candidates(kin, q, timed, GravityModel())
+    assert not {"registration_drift", "thermal_drift"} & {c.name for c in cands}
+    assert sum("time follows the place" in u["reason"] for u in cannot) == 2
+
+
 @pytest.mark.system
 def test_compliance_of_the_truth_module_is_taken_and_predicts_the_test_rows():
     camp = simulate(["joint_compliance"], 11, SMALL)
