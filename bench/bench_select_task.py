@@ -44,6 +44,20 @@ form, f-task's 50 rows took a spurious registration drift in measurement order (
 ``bench_select_stages.py --only task``). After the run, ``task_data`` was split out of ``evaluate`` for that
 script (one data set re-run gave the same figures), and the switch ``COVER_TASK`` was removed: the campaign never
 sets it, and the candidate stays here as ``adaptive_rows(..., cover_task=True)``.
+
+Sixth protocol: the same comparison on fresh seeds, after the fifth (written after the fifth protocol's outcome and
+before this run; committed on its own before it). Everything above holds except what is named here.
+  * Why again: the fourth run was decided by one breakdown, a spurious registration drift in measurement order.
+    The fifth protocol (``bench_drift_place.py``) judged a fix for that failure, and the fix is now in the default
+    process. The candidate is unchanged.
+  * Seeds: 16 17 18, fresh for the simulated forms; the UR5 halves of seeds 16-18 are new, the campaign is known.
+  * Choice: the same rule. The task-covering picks are taken only if their score on seeds 16-18 is more than 1 % lower
+    than ``f``'s. Seeds 10-12 are not re-run: they were seen.
+  * If taken, the switch returns in ``campaign.plan.adaptive``, and the rounds, the plan's forecast order and
+    ``campaign select --adaptive`` use it when a config has ``plan.task``.
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select_task.py --seeds 16 17 18
+        [--forms ... --json A.json] [--combine A.json B.json]
 """
 from __future__ import annotations
 
