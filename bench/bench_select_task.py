@@ -58,6 +58,12 @@ before this run; committed on its own before it). Everything above holds except 
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select_task.py --seeds 16 17 18
         [--forms ... --json A.json] [--combine A.json B.json]
+
+Outcome of the sixth protocol (run on 331f79b in two processes, then --combine; the table is in docs/results.md):
+score f-task 1.435, f 1.179, so the task-covering picks are not taken, for the second time. They were lower on the
+mean at 50 poses (1.199 against 1.255). On seed 18 of the sparse-far-pose form at 100 poses they broke down: 13.5 x.
+On those rows the effect selection took no effect. Joint compliance lowered the CV RMS by 36 %, but its paired t was
+1.92, below the rule's 2: the gain was concentrated on a few far poses.
 """
 from __future__ import annotations
 
