@@ -11,9 +11,11 @@ joint compliance.
   ``f`` at 50 rows, by stage, with the effects taken.
 * Seeds 7 and 9 of the sparse-far-pose form (where rule ``f`` misses the goal at 50 rows): all rows and ``f``'s 50,
   by stage, with the layer chosen.
-* Seed 10 of the IRB 4600-like form with the task of ``bench_select_task.py`` (where the task-covering picks broke
-  down at 50 rows in the fourth protocol's run): all rows, ``f`` and ``f-task`` at 50 and 60 rows, by stage, with the
-  effects taken (``--only task``: this section alone).
+* Where the task-covering picks of ``bench_select_task.py`` broke down, at the task (``--only task``: this section
+  alone): seed 10 of the IRB 4600-like form (fourth protocol), ``f`` and ``f-task`` at 50 and 60 rows, by stage, with
+  the effects taken, without the clock-place check of ``bench_drift_place.py`` (the code of that run) and at 50 rows
+  with it; seed 18 of the sparse-far-pose form (sixth protocol), ``f-task`` at 80 and 100 rows with the first trial
+  of joint compliance.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_select_stages.py [--only task]
 """
@@ -50,14 +52,29 @@ def stages(r) -> str:
 
 
 def task_breakdown(tmp: Path) -> None:
-    """IRB 4600-like seed 10, judged at the task of ``bench_select_task.py``: by stage, with and without covering it."""
+    """The two breakdowns of the task-covering picks (``bench_select_task.py``), at the task, by stage: IRB 4600-like
+    seed 10 (fourth protocol) without and with the clock-place check of ``bench_drift_place.py``, and sparse-far
+    seed 18 (sixth protocol) with the trial of joint compliance."""
+    from bench_drift_place import check_off
     from bench_select_task import task_data
     ds, cell, task_q = task_data(*ADAPTIVE_FORMS["IRB 4600-like (compliance + J3 gear + coupling)"](tmp, 10))
-    print(f"IRB 4600-like, seed 10, at the task: held-out RMS by stage, mm (all rows: {stages(report(ds, cell))})")
+    with check_off():
+        print(f"IRB 4600-like, seed 10, at the task: held-out RMS by stage, mm (all rows: {stages(report(ds, cell))})")
+        sel = {cover: adaptive_rows(ds, cell, 60, task_q_rad=task_q, cover_task=cover) for cover in (False, True)}
     for cover in (False, True):
-        sel = adaptive_rows(ds, cell, 60, task_q_rad=task_q, cover_task=cover)
         for n in (50, 60):
-            print(f"  {'f-task' if cover else 'f':6s} {n}: {stages(report(ds, cell, sel.order[:n]))}")
+            with check_off():
+                off = stages(report(ds, cell, sel[cover].order[:n]))
+            print(f"  {'f-task' if cover else 'f':6s} {n}, no clock-place check: {off}")
+        print(f"  {'f-task' if cover else 'f':6s} 50, the check: {stages(report(ds, cell, sel[cover].order[:50]))}")
+    ds, cell, task_q = task_data(*ADAPTIVE_FORMS["strong compliance, sparse far"](tmp, 18))
+    print(f"strong compliance, sparse far, seed 18, at the task (all rows: {stages(report(ds, cell))})")
+    sel = adaptive_rows(ds, cell, 100, task_q_rad=task_q, cover_task=True)
+    for n in (80, 100):
+        r = report(ds, cell, sel.order[:n])
+        trial = next(t for t in r.effects.selection["trials"] if t["effect"].startswith("joint_compliance"))
+        print(f"  f-task {n}: {stages(r)}; round-1 {trial['effect']}: CV {trial['base_cv_rms_mm']:.4f} -> "
+              f"{trial['cv_rms_mm']:.4f} mm (gain {100 * trial['gain']:.0f} %, t {trial['t']:.2f})")
 
 
 def main() -> None:

@@ -44,6 +44,8 @@ form, f-task's 50 rows took a spurious registration drift in measurement order (
 ``bench_select_stages.py --only task``). After the run, ``task_data`` was split out of ``evaluate`` for that
 script (one data set re-run gave the same figures), and the switch ``COVER_TASK`` was removed: the campaign never
 sets it, and the candidate stays here as ``adaptive_rows(..., cover_task=True)``.
+After the sixth run, ``ur5_split`` reuses ``bench_select.ur5_split_datasets`` (the same halves: UR5 seed 10 re-run
+gives the fourth run's figures).
 
 Sixth protocol: the same comparison on fresh seeds, after the fifth (written after the fifth protocol's outcome and
 before this run; committed on its own before it). Everything above holds except what is named here.
@@ -71,7 +73,6 @@ import argparse
 import json
 import sys
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +83,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from robocal.kinematics.models import smr_base  # noqa: E402
-from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
+from bench_select import ur5_split_datasets  # noqa: E402
+from select_forms import ADAPTIVE_FORMS  # noqa: E402
 from select_replay import held_out_rms, subset_rms  # noqa: E402
 
 SIZES = (50, 100)
@@ -92,12 +94,8 @@ UR5_SPLIT = "UR5 real campaign, split halves"
 
 def ur5_split(seed: int):
     """The UR5 campaign with one seeded half of its grid held out (``bench_select.ur5_split_datasets``)."""
-    ds, cell = ur5_dataset()
-    cal = np.flatnonzero(ds.mask("calib"))
-    held = np.random.default_rng(100 + seed).permutation(cal)[len(cal) // 2:]
-    sets = np.array(ds.set, dtype=object)
-    sets[held] = "test"
-    return replace(ds, set=tuple(sets)), cell
+    _, ds, cell, _ = next(ur5_split_datasets([seed]))
+    return ds, cell
 
 
 def task_box(p_test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
