@@ -296,9 +296,9 @@ class SelfCheckResult:
 def run_self_check(seeds: int = 5, controls: int | None = None, combos: int | None = None,
                    options: DiagnosisOptions = DiagnosisOptions(), outside: int | None = None,
                    progress: Callable[[int, int, Trial], None] | None = None,
-                   forms: Sequence[str] = tuple(FORMS)) -> SelfCheckResult:
+                   forms: Sequence[str] = tuple(FORMS), first_seed: int = 1000) -> SelfCheckResult:
     """Run the whole withheld-effect self-check (see ``trial_plan``) on truth campaigns."""
-    plan = trial_plan(seeds, controls, combos, outside=outside, forms=forms)
+    plan = trial_plan(seeds, controls, combos, first_seed=first_seed, outside=outside, forms=forms)
     t0 = time.perf_counter()
     trials = []
     for i, (kind, effects, seed) in enumerate(plan):

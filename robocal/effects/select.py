@@ -2,15 +2,18 @@
 
 Every round tries each remaining candidate on top of the geometry + the effects taken so far (linearised at the
 geometric solution) and takes the one with the lowest held-out error, if its gain is significant: one-sided paired t
-of the per-point squared errors > 3 and held-out RMS lower by > 2 % (``robocal.measure.stats.paired_gain``), or t > 2 and >
-10 % lower, the per-point errors being the mean over the blockings (pose blocks and, when the measurement order is
-known, order blocks), and the gain positive under each blocking on its own. An effect just taken loses the parts the
-data do not need (a joint, a harmonic, a memory term: removing the part must cost t >= 2); refinements of it
+of the per-point squared errors > 3 and held-out RMS lower by > 2 % (``robocal.measure.stats.paired_gain``), or >
+10 % lower with t > 2 or a one-sided signed-rank z > 2 (``signed_rank_z``: a gain over most poses that a few far
+poses' large differences hide from the t), the per-point errors being the mean over the blockings (pose blocks and,
+when the measurement order is known, order blocks), and the gain positive under each blocking on its own. An effect
+just taken loses the parts the data do not need (a joint, a harmonic, a memory term: removing the part must cost
+t >= 2, or pass the rank rule); refinements of it
 (compliance's free mass distribution) join the candidates. A joint's cyclic errors of a higher order (an encoder's
 track, a gear's teeth: two periods over the joint's span up to 40 per revolution) are one candidate per joint, a
 scan: in every fold the order that fits the training rows best predicts the held-out rows, so the pick among many
 orders is cross-validated too (nested); the order taken is the one that fits all rows best. At the end every taken
-effect must still be needed given the others (removing it costs t >= 2 and >= 1 % of RMS), else it is dropped.
+effect must still be needed given the others (removing it costs t >= 2 and >= 1 % of RMS, or passes the rank
+rule), else it is dropped.
 Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a plausible
 one before an implausible best), and never drops an effect; consistency is reported, never used here.
 """
@@ -23,7 +26,7 @@ import numpy as np
 from .bases import effect_regressor, meta_rows
 from robocal.identify.whitened import whitening
 from robocal.kinematics.models import JACOBIAN_ROWS, Kinematics, identification_jacobian
-from robocal.measure.stats import paired_gain
+from robocal.measure.stats import paired_gain, signed_rank_z
 from .cv import BlockedCV, Blocking, order_blocks, pose_blocks
 from .library import parts, refinements
 from .model import EffectChoice
@@ -31,6 +34,9 @@ from .model import EffectChoice
 TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a held-out RMS gain > 2 % ...
 LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain concentrated on few poses has a
 #                                    heavy-tailed per-point difference: its t understates how unlikely it is)
+RANK_Z = 2.0    # ... or, with a gain > 10 %, on a signed-rank z > 2 (the large-gain rule's level, read from the ranks:
+#                 a gain over most poses that a few far poses' large differences hide from the t); None: t alone.
+#                 The same evidence keeps a part or an effect (issue 32, seventh protocol)
 SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) lies >= 90 % inside a taken effect's
 #                         span cannot be told from that effect: one class
 SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
@@ -106,7 +112,8 @@ class EffectSelection:
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
                           f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
                           "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
-                          "held-out RMS drops by more than 2 % (or t > 2 and more than 10 %), under every blocking; "
+                          "held-out RMS drops by more than 2 % (or by more than 10 % with t > 2 or a signed-rank z > 2), under "
+                          "every blocking; "
                           "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
                           "every fold (nested)" + (f"; on a seeded subset of {self.rows[0]} of the {self.rows[1]} "
                                                    "calibration rows (the taken effects are fitted on all)" if sub
@@ -215,7 +222,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
             each = all(_rms(se[b]) < _rms(base[b]) for b in se)
             trials.append(Trial(rnd, c.label, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.rms_base_mm,
                                 g.gain, g.t, False, as_candidate))
-            if _supported(g) and each:
+            if _supported(g, _mean(base), _mean(se)) and each:
                 scored.append((g.rms_cand_mm, len(trials) - 1, c, se, g))
         if not scored:
             break
@@ -280,8 +287,20 @@ def _plausible_pick(scored, cv, design, model, plausible) -> int:
     return 0
 
 
-def _supported(g) -> bool:
-    return (g.t > TAKE_T and g.gain > TAKE_GAIN) or (g.t > LARGE_T and g.gain > LARGE_GAIN)
+def _supported(g, se_base, se_cand) -> bool:
+    """Whether the gain ``g`` of the candidate's per-point errors ``se_cand`` over ``se_base`` takes it."""
+    return (g.t > TAKE_T and g.gain > TAKE_GAIN) or (g.t > LARGE_T and g.gain > LARGE_GAIN) or _by_ranks(
+        g, se_base, se_cand)
+
+
+def _by_ranks(g, se_base, se_cand) -> bool:
+    """A gain above LARGE_GAIN whose signed ranks pass RANK_Z (when the rule is on)."""
+    return RANK_Z is not None and g.gain > LARGE_GAIN and signed_rank_z(se_base, se_cand) > RANK_Z
+
+
+def _needed(g, se_without, se_with, min_gain) -> bool:
+    """Whether removing a part or an effect costs enough: t >= KEEP_T and ``min_gain``, or the rank rule."""
+    return (g.t >= KEEP_T and g.gain >= min_gain) or _by_ranks(g, se_without, se_with)
 
 
 def alternatives(a: EffectChoice, b: EffectChoice) -> bool:
@@ -308,7 +327,7 @@ def _prune(errors, design, model, choice, full, step, n):
         for label, reduced in parts(choice):
             s = errors(model, design.sub(full, reduced, n))
             g = paired_gain(_mean(s), _mean(se))             # what keeping the part gains
-            if (g.t < KEEP_T or g.gain < KEEP_GAIN) and (best is None or g.t < best[0]):
+            if not _needed(g, _mean(s), _mean(se), KEEP_GAIN) and (best is None or g.t < best[0]):
                 best = (g.t, label, reduced, s)
         if best is None:
             return choice, se
@@ -324,8 +343,9 @@ def _final_check(errors, model, steps) -> list[tuple[str, float]]:
         se = errors(model)
         worst = None
         for i in range(len(model)):
-            g = paired_gain(_mean(errors(model[:i] + model[i + 1:])), _mean(se))
-            if (g.t < KEEP_T or g.gain < 2 * KEEP_GAIN) and (worst is None or g.t < worst[0]):
+            without = _mean(errors(model[:i] + model[i + 1:]))
+            g = paired_gain(without, _mean(se))
+            if not _needed(g, without, _mean(se), 2 * KEEP_GAIN) and (worst is None or g.t < worst[0]):
                 worst = (g.t, i)
         if worst is None:
             break
