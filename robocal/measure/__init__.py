@@ -14,7 +14,7 @@ _HOMES = {                      # module -> the public names it holds
               "repeatability_sigma_mm"),
     "readback": ("ENCODER_NOISE_DEG", "prefer_commanded", "readback_statistics"),
     "repeats": ("noise_floor_from_repeats", "repeat_dof", "repeat_groups"),
-    "stats": ("ErrorStats", "SIGNIFICANT_GAIN", "error_stats", "paired_gain"),
+    "stats": ("ErrorStats", "SIGNIFICANT_GAIN", "error_stats", "paired_gain", "signed_rank_z"),
 }
 __all__ = [name for names in _HOMES.values() for name in names]
 __getattr__ = lazy_exports(__name__, _HOMES)

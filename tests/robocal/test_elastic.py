@@ -16,6 +16,8 @@ from robocal.effects.physical import reading
 from robocal.effects.engine import run_engine
 from robocal.effects.engine import select_candidates
 from robocal.effects.library import LibraryOptions, scan_families, scan_orders
+import robocal.effects.select as select
+from robocal.measure.stats import paired_gain, signed_rank_z
 from robocal.identify.identification import CalibrationOptions, calibrate
 from robocal.kinematics.models import ParamLayout, smr_tracker
 from robocal.layers.calibrated_model import CalibratedModel
@@ -176,6 +178,46 @@ def test_no_drift_is_offered_in_a_clock_that_follows_the_place():
     cands, cannot = candidates(kin, q, timed, GravityModel())
     assert not {"registration_drift", "thermal_drift"} & {c.name for c in cands}
     assert sum("time follows the place" in u["reason"] for u in cannot) == 2
+
+
+@pytest.mark.unit
+def test_signed_rank_z_is_wilcoxons_normal_approximation():
+    """Against scipy's one-sided signed-rank test (normal approximation, zeros dropped, ties' variance corrected)."""
+    from scipy.stats import norm, wilcoxon
+    rng = np.random.default_rng(5)
+    base = np.round(rng.exponential(1.0, 150), 2)
+    cand = np.round(base * rng.uniform(0.6, 1.3, 150), 2)
+    cand[:10] = base[:10]                                            # zeros, and ties from the rounding
+    ref = wilcoxon(base - cand, alternative="greater", method="approx", correction=False, zero_method="wilcox")
+    assert signed_rank_z(base, cand) == pytest.approx(norm.isf(ref.pvalue), rel=1e-9)
+    assert signed_rank_z(cand, base) == pytest.approx(-signed_rank_z(base, cand))
+
+
+@pytest.mark.unit
+def test_a_gain_over_most_points_that_a_few_large_differences_hide_from_the_t_is_taken_by_the_ranks():
+    """80 of 100 points gain a little, and 6 far points differ by much, either way: the gain is large (> 10 %), the
+    paired t is below 2 and the signed ranks clear z > 2, so the rank rule takes it, and only it; a small gain
+    with clear ranks is not taken."""
+    rng = np.random.default_rng(3)
+    base = np.full(100, 1.0)
+    base[:6] = 40.0
+    cand = base - np.where(np.arange(100) < 86, 0.8, -0.2)
+    cand[:6] = base[:6] + np.array([-30.0, -25.0, 24.0, 26.0, -20.0, -5.0]) + rng.normal(0, 0.1, 6)
+    g = paired_gain(base, cand)
+    assert g.gain > select.LARGE_GAIN and g.t < select.LARGE_T and signed_rank_z(base, cand) > 2
+    assert select._supported(g, base, cand)
+    assert select._needed(g, base, cand, select.KEEP_GAIN)
+    made = select.RANK_Z
+    try:
+        select.RANK_Z = None
+        assert not select._supported(g, base, cand) and not select._needed(g, base, cand, select.KEEP_GAIN)
+    finally:
+        select.RANK_Z = made
+    small = base - np.where(np.arange(100) < 86, 0.05, -0.02)
+    small[:6] = base[:6]
+    g = paired_gain(base, small)
+    assert g.gain < select.TAKE_GAIN and signed_rank_z(base, small) > 2
+    assert not select._supported(g, base, small)
 
 
 @pytest.mark.system
