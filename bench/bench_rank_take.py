@@ -34,6 +34,16 @@ being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_rank_take.py [--seeds 19 20 21]
         [--parts i ii iii] [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on 57a1e2c as two processes, ``--parts i ii --forms`` UR5 + compliance + gear + drift + sparse far +
+layer only and ``--parts i iii --forms`` lag + UR10-like + IRB 4600-like, then ``--combine``): the rule is kept.
+  * (i) 57 figures (the UR5's 3 and 54 at seeds 19-21), every ratio 1.000: the rule changed no choice there.
+  * (ii) f-task 80: 0.0433 mm both; f-task 100: 0.5195 mm without, 0.0414 with (ratio 0.080; all rows 0.0385 mm at
+    the task).
+  * (iii) On 90 fresh data sets, without and with: named right 65/65, controls clean 10/10, 6 spurious
+    acceptances, targets pass.
+  * The script test before the protocol was fixed: read-back lag, seed 101, all rows / f 50 / f 100: 0.0350 /
+    0.0390 / 0.0357 mm with and without.
 """
 from __future__ import annotations
 
