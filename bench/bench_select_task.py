@@ -81,6 +81,12 @@ and before this run; committed on its own before it). Everything of the sixth ho
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_select_task.py --seeds 22 23 24
         [--forms ... --json A.json] [--combine A.json B.json]
+
+Outcome of the eighth protocol (run on 09f80ba in two processes, then --combine; the table is in docs/results.md):
+score f-task 1.142, f 1.164, so the task-covering picks are taken: ``campaign.plan.adaptive.COVER_TASK`` (True) and
+``covered_task`` steer the rounds, the forecast's order and ``campaign select --adaptive`` when a config has
+``plan.task``. Mean over forms at 50 poses 1.189 against 1.191, at 100 1.095 against 1.136; no breakdown (the largest
+figure, 2.366, was f's on seed 23 of the compliance + gear + drift form at 50 poses; f-task 1.917 there).
 """
 from __future__ import annotations
 

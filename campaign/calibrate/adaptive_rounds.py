@@ -6,7 +6,8 @@ with the check and nest rows; the test set is measured last) are calibrated as `
 ``MAX_CANDIDATES`` per round, a seeded sample of the pool) by rule ``campaign.plan.adaptive.RULE`` of
 ``robocal.design.adaptive``, chosen by held-out prediction: ``f``, each the candidate farthest, in joint space
 scaled by the levers, from every pose measured or picked (the rules that follow the model's own uncertainty, ``d``
-and ``i``, did worse held out). The refitted model judges the batch: predicted held-out RMS now, the larger of its
+and ``i``, did worse held out); with ``plan.task``, each the candidate nearest the task pose farthest from every
+pose measured or picked (``campaign.plan.adaptive.covered_task``). The refitted model judges the batch: predicted held-out RMS now, the larger of its
 k-fold CV figure and the noise floor with its own prediction variance at the task poses; after the batch, that less
 the variance the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less
 than ``plan.stop_gain_pct`` % of the noise floor, when the next batch would exceed ``plan.max_minutes`` of robot
@@ -32,7 +33,7 @@ from campaign.config.cell_model import CellModel
 from campaign.data.log_dataset import dataset_from_log
 from campaign.errors import DataError, one_line
 from campaign.io.quantities import floor_mm
-from campaign.plan.adaptive import RULE, task_poses
+from campaign.plan.adaptive import RULE, covered_task, task_poses
 from campaign.plan.motion_safety import PathGuard, UnsafeMotion
 from campaign.plan.optimal import tracker_kinematics
 from campaign.plan.points import Plan, PlanPoint
@@ -103,8 +104,10 @@ def decide_round(cell: CellModel, plan: Plan, contents: LogContents, elapsed_s: 
     meta = lambda m: {"payload_kg": np.full(m, cell.payload_kg)}  # noqa: E731
     terms = design_terms(cur, q, meta(len(q)), cell.covariance(smr_tracker(cur.kinematics, q)), q_task,
                          meta(len(q_task)))
-    X = lever_scaled(tracker_kinematics(cell), np.vstack([q, np.radians(ds.q_deg[ds.mask("calib")])]), every)
-    b = choose_batch(terms, k, np.ones(len(q), bool), RULE, Coverage(X[:len(q)], X[len(q):]))
+    kin_t, cover = tracker_kinematics(cell), covered_task(cell, task)
+    X = lever_scaled(kin_t, np.vstack([q, np.radians(ds.q_deg[ds.mask("calib")])]), every)
+    X_task = None if cover is None else lever_scaled(kin_t, cover, every)
+    b = choose_batch(terms, k, np.ones(len(q), bool), RULE, Coverage(X[:len(q)], X[len(q):], X_task))
     floor = cur.floor_mm
     curve = predicted_curve(cur, b, n)
     now, gain = curve[0][1], curve[0][1] - curve[-1][1]

@@ -26,7 +26,7 @@ from robocal.kinematics.models import smr_base, smr_tracker
 from campaign.config.cell_model import CellModel
 from campaign.data.dataset import Dataset
 from campaign.errors import DataError, one_line
-from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE, seed_rows, seed_size, task_poses
+from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE, covered_task, seed_rows, seed_size, task_poses
 from campaign.plan.optimal import pose_covariance, tracker_kinematics
 
 from .adaptive_model import design_terms, predicted_curve, refit, task_sample
@@ -63,12 +63,14 @@ class AdaptiveSelection:
 
 
 def adaptive_selection(ds: Dataset, cell: CellModel, n: int, *, force: bool = False) -> AdaptiveSelection:
-    """``campaign select --adaptive``: ``adaptive_rows`` judged at the config's ``plan.task`` when it has one."""
+    """``campaign select --adaptive``: ``adaptive_rows`` judged at the config's ``plan.task`` when it has one, its
+    picks covering the task (``campaign.plan.adaptive.covered_task``)."""
     if cell.config.plan.task is None:
         return adaptive_rows(ds, cell, n, force=force)
     cal = ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1)
     q = np.radians(ds.q_deg[cal])
-    return adaptive_rows(ds, cell, n, task_q_rad=task_poses(cell, q, smr_base(cell.kinematics, q)), force=force)
+    task = task_poses(cell, q, smr_base(cell.kinematics, q))
+    return adaptive_rows(ds, cell, n, task_q_rad=task, force=force, cover_task=covered_task(cell, task) is not None)
 
 
 def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule: str = RULE,
@@ -77,7 +79,7 @@ def adaptive_rows(ds: Dataset, cell: CellModel, n: int, batch: int = BATCH, rule
     """The adaptive replay choosing ``n`` calibration rows of ``ds`` (see the module docstring; the seed by
     ``campaign.plan.adaptive.seed_rows`` / ``seed_size``); DataError as for ``select_rows``; ``force`` overrides
     failed plausibility checks (here and in every refit). ``cover_task``: rule ``f``'s picks cover ``task_q_rad``
-    instead of every row (judged by ``bench/bench_select_task.py`` and not taken: the campaign never sets it)."""
+    instead of every row (``adaptive_selection`` sets it when the config has ``plan.task``)."""
     check_dataset(ds, cell, force=force)
     cal = np.flatnonzero(ds.mask("calib") & np.all(np.isfinite(ds.q_deg), axis=1))
     if len(cal) < n:

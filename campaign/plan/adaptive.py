@@ -11,6 +11,8 @@ them and route every move through the same swept-path guard.
 
 ``task_poses``: the poses the selection lowers the predicted error at: ``plan.task`` (targets solved on
 ``q_ref_deg``'s branch, or the candidates whose SMR lies in the box), else the candidates (the grid box).
+``covered_task``: with ``plan.task``, the rounds' picks cover those poses (each the candidate nearest the task pose
+farthest from every pose measured or picked); without it, they spread over every candidate.
 """
 from __future__ import annotations
 
@@ -40,6 +42,10 @@ SEED_DESIGN, SEED_SIZE = "space_filling", "geometric"   # of plan.kind: adaptive
 RULE = "f"                      # robocal.design.adaptive criterion of the rounds, chosen by bench/bench_select.py --adaptive
 #                                 (first protocol: d 1.168 against i 2.257; third, fresh seeds 7-9: f 1.156, df 1.206,
 #                                 d 1.300, mean over seven forms and both sizes)
+COVER_TASK = True               # with plan.task, rule f's picks cover the task poses (``covered_task``;
+#                                 bench/bench_select_task.py, held-out RMS at the task over all rows', seven forms:
+#                                 not taken at seeds 10-12 and 16-18, each decided by a breakdown fixed since; taken
+#                                 at fresh seeds 22-24, f-task 1.142 against f 1.164)
 
 
 def seed_size(identifiable_geometric: int, n_max: int, folds: int, size: str = SEED_SIZE) -> int:
@@ -120,6 +126,12 @@ def task_poses(cell: CellModel, q_rad: np.ndarray, p_base_mm: np.ndarray) -> np.
         raise ConfigError(cfg.source_path, "plan.task.targets_csv", f"none of the {len(p)} targets of {path} is "
                           "reachable on the configured IK branch (q_ref_deg)")
     return q[ok]
+
+
+def covered_task(cell: CellModel, task_q_rad: np.ndarray) -> np.ndarray | None:
+    """The task poses (T, n) rad rule ``f``'s picks cover: ``task_q_rad`` when the config has ``plan.task``
+    (``COVER_TASK``), else None (the picks spread over every candidate)."""
+    return task_q_rad if COVER_TASK and cell.config.plan.task is not None else None
 
 
 def read_task_targets(path: Path, default_R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ repeatability) and the parameter uncertainty of the geometry and the pose-depend
 auto`` may take, each with its prior (1 mm / 1 mrad, the effects' typical sizes), so that a parameter the first
 poses cannot determine still counts with its prior. The poses in the order the plan measures them: an optimal
 plan's order (its D-optimal greedy order); for an adaptive plan its seed, then the order its rounds take under
-rule ``f`` (farthest-first over the candidates; a round judges a seeded sample of at most 3000 of them, so a large
+rule ``f`` (farthest-first over the candidates, or covering ``plan.task``'s poses when it has one; a round judges a seeded sample of at most 3000 of them, so a large
 pool's run differs in detail), or the D-optimal order of the candidates under a rule whose choice depends on the
 measurements (the measured curve is in the run's report); for a grid plan the D-optimal order of its calibration points (any prefix of a grid's serpentine would be one corner of
 the box). What the model cannot express (the residual layer's work) is not in the forecast.
@@ -19,7 +19,7 @@ from robocal.design import (Coverage, choose_batch, criterion, criterion_effects
                             greedy_order, learning_curve, lever_scaled)
 
 from campaign.config.cell_model import CellModel
-from .adaptive import RULE
+from .adaptive import RULE, covered_task, task_poses
 from .optimal import pose_covariance, tracker_kinematics
 from .points import Plan
 
@@ -39,7 +39,10 @@ def plan_order(cell: CellModel, plan: Plan) -> np.ndarray:
         seen = np.any(np.all(np.isclose(q[:, None], q_cal[None]), axis=2), axis=1)         # the seed's poses
         if RULE == "f":
             X = lever_scaled(kin_t, q)
-            rest = choose_batch([], n - len(q_cal), ~seen, "f", Coverage(X, lever_scaled(kin_t, q_cal, q))).chosen
+            cover = covered_task(cell, task_poses(cell, q, np.array([p.p_base_mm for p in plan.candidates])))
+            X_task = None if cover is None else lever_scaled(kin_t, cover, q)
+            rest = choose_batch([], n - len(q_cal), ~seen, "f", Coverage(X, lever_scaled(kin_t, q_cal, q),
+                                                                        X_task)).chosen
         else:
             crit = criterion(kin_t, q, pose_covariance(cell, kin_t, q), cell.payload_kg)
             rest = [i for i in d_optimal(crit.A, n, crit.spread).chosen if not seen[i]]

@@ -60,3 +60,29 @@ def test_select_adaptive_cli_writes_the_subset_and_its_rounds(campaign, tmp_path
     sub = load_source(tmp_path / "sub.csv").dataset
     assert int(sub.mask("calib").sum()) == N and int(sub.mask("test").sum()) == int(ds.mask("test").sum())
     assert f"selected {N} of {int(ds.mask('calib').sum())} calibration rows (adaptive" in out and "Rounds" in out
+
+
+def test_with_a_task_the_replay_picks_the_task_first(campaign, tmp_path):
+    """With ``plan.task`` in the config, the rounds' picks cover it: after the seed, rows whose SMR is in the box
+    (the box of the middle of the calibration SMRs), until the box is used up; without it, they spread."""
+    import yaml
+
+    from campaign.calibrate.select_adaptive import adaptive_selection
+    from robocal.kinematics.models import smr_base
+
+    _, cfg, ds, cell = campaign
+    cal = np.flatnonzero(ds.mask("calib"))
+    p = smr_base(cell.kinematics, np.radians(ds.q_deg))
+    lo, hi = np.percentile(p[cal], 25, axis=0), np.percentile(p[cal], 75, axis=0)
+    doc = yaml.safe_load(cfg.read_text())
+    doc.setdefault("plan", {})["task"] = {"box_mm": [lo.tolist(), hi.tolist()]}
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump(doc))
+    inside = lambda rows: np.all((p[rows] >= lo) & (p[rows] <= hi), axis=1)       # noqa: E731
+    n_box = int(inside(cal).sum())
+    shares = {}
+    for c in (cell, load_cell(tmp_path / "task.yaml")):
+        sel = adaptive_selection(ds, c, N)
+        after = sel.order[sel.n_seed:]
+        free_in_box = n_box - int(inside(sel.order[:sel.n_seed]).sum())
+        shares[c is cell] = float(np.mean(inside(after[:min(len(after), free_in_box)])))
+    assert shares[False] == 1.0 and shares[True] < 0.5, shares

@@ -85,6 +85,35 @@ def test_the_forecast_takes_the_poses_in_the_order_the_rounds_will(tmp_path):
 
 
 @pytest.mark.system
+def test_with_a_task_the_forecast_and_the_rounds_pick_the_task_first(tmp_path, capsys):
+    """With ``plan.task`` rule ``f``'s picks cover the task (``covered_task``): after the seed, the forecast's order
+    and the first round of a mock run take candidates inside the task box, where without a task they spread."""
+    from campaign.plan.learning import plan_order
+    from campaign.calibrate.adaptive_rounds import round_checks
+    from campaign.run.log_reader import read_log
+
+    box = {"box_mm": [[900, -400, 600], [1300, 400, 1000]]}
+    lo, hi = np.array(box["box_mm"][0]) - 0.01, np.array(box["box_mm"][1]) + 0.01   # grid poses on its faces
+    in_box = lambda q: np.all((smr_base(cell.kinematics, q) >= lo) & (smr_base(cell.kinematics, q) <= hi), axis=1)  # noqa: E731
+    shares = {}
+    for task in (None, box):
+        d = tmp_path / ("task" if task else "none")
+        d.mkdir()
+        path = small_config(d, **{**POOL, "plan.kind": "adaptive", "plan.max_points": 37,
+                                  **({"plan.task": task} if task else {})})
+        cell = load_cell(path)
+        plan = build_plan(cell)
+        n0 = sum(p.set == "calib" for p in plan.points)
+        shares[task is not None] = float(np.mean(in_box(plan_order(cell, plan)[n0:n0 + 10])))
+    assert shares[True] == 1.0 and shares[False] < 0.5, shares
+    code, _, err = cli(capsys, "run", path, "--out", d / "run")               # the last: with the task
+    assert code == 0, err
+    added = [r for r in round_checks(read_log(d / "run")) if r.decision == "continue"][0].added
+    q = {c.point_id: c.q_deg for c in plan.candidates}
+    assert len(added) == 10 and np.all(in_box(np.radians([q[i] for i in added])))
+
+
+@pytest.mark.system
 def test_task_box_and_targets_give_the_task_poses(tmp_path):
     box = {"box_mm": [[900, -400, 600], [1300, 400, 1000]]}
     cell = load_cell(_config(tmp_path, **{"plan.task": box}))
