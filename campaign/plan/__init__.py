@@ -7,7 +7,7 @@ from drivers import lazy_exports
 
 _HOMES = {                      # module -> the public names it holds
     "acceptance": ("acceptance_warnings",),
-    "adaptive": ("RULE", "SEED_DESIGN", "SEED_SIZE", "seed_rows", "seed_size", "task_poses"),
+    "adaptive": ("RULE", "SEED_DESIGN", "SEED_SIZE", "covered_task", "seed_rows", "seed_size", "task_poses"),
     "build": ("build_plan",),
     "iso9283": ("IsoCube", "is_iso_plan", "iso_cube", "iso_plan"),
     "learning": ("SIZES", "forecast_curve"),
