@@ -1,20 +1,21 @@
 """``plan.kind: adaptive``: measure the seed, then round after round a batch, until the refitted model says stop.
 
-After the seed and after every batch the calibration points measured so far (read back from the durable log,
-with the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
+After the seed and after every batch the calibration points measured so far (read back from the durable log, with
+the check and nest rows; the test set is measured last) are calibrated as ``reprocess`` does
 (``adaptive_model.refit``). The next ``plan.block_points`` poses are chosen among the plan's candidates (at most
 ``MAX_CANDIDATES`` per round, a seeded sample of the pool) by rule ``campaign.plan.adaptive.RULE`` of
 ``robocal.design.adaptive``, chosen by held-out prediction: ``f``, each the candidate farthest, in joint space
 scaled by the levers, from every pose measured or picked (the rules that follow the model's own uncertainty, ``d``
 and ``i``, did worse held out); with ``plan.task``, each the candidate nearest the task pose farthest from every
-pose measured or picked (``campaign.plan.adaptive.covered_task``). The refitted model judges the batch: predicted held-out RMS now, the larger of its
-k-fold CV figure and the noise floor with its own prediction variance at the task poses; after the batch, that less
-the variance the batch removes. The rounds stop (``plan.stop: auto``) when the next batch would lower it by less
-than ``plan.stop_gain_pct`` % of the noise floor, when the next batch would exceed ``plan.max_minutes`` of robot
-time, or at ``plan.max_points``; then the test set is measured. Every decision is an ``adaptive_round`` event in the log,
-written before its batch moves the robot (its poses by id, in measurement order), so a resumed run measures the
-rest of the batch it was in, then refits; nothing is measured twice and nothing is lost. Every move is routed by the
-plan's swept-path guard (via poses; a candidate no route reaches is left out of the round and named).
+pose measured or picked (``campaign.plan.adaptive.covered_task``). The refitted model judges the batch: predicted
+held-out RMS now, the larger of its k-fold CV figure and the noise floor with its own prediction variance at the
+task poses; after the batch, that less the variance the batch removes. The rounds stop (``plan.stop: auto``) when
+the next batch would lower it by less than ``plan.stop_gain_pct`` % of the noise floor, when the next batch would
+exceed ``plan.max_minutes`` of robot time, or at ``plan.max_points``; then the test set is measured. Every decision
+is an ``adaptive_round`` event in the log, written before its batch moves the robot (its poses by id, in measurement
+order), so a resumed run measures the rest of the batch it was in, then refits; nothing is measured twice and
+nothing is lost. Every move is routed by the plan's swept-path guard (via poses; a candidate no route reaches is
+left out of the round and named).
 """
 from __future__ import annotations
 

@@ -4,12 +4,13 @@
 plan's count (``robocal.design.adaptive.learning_curve``): the noise floor at the test poses (tracker model + robot
 repeatability) and the parameter uncertainty of the geometry and the pose-dependent effects ``calibration.effects:
 auto`` may take, each with its prior (1 mm / 1 mrad, the effects' typical sizes), so that a parameter the first
-poses cannot determine still counts with its prior. The poses in the order the plan measures them: an optimal
-plan's order (its D-optimal greedy order); for an adaptive plan its seed, then the order its rounds take under
-rule ``f`` (farthest-first over the candidates, or covering ``plan.task``'s poses when it has one; a round judges a seeded sample of at most 3000 of them, so a large
-pool's run differs in detail), or the D-optimal order of the candidates under a rule whose choice depends on the
-measurements (the measured curve is in the run's report); for a grid plan the D-optimal order of its calibration points (any prefix of a grid's serpentine would be one corner of
-the box). What the model cannot express (the residual layer's work) is not in the forecast.
+poses cannot determine still counts with its prior. The poses in the order the plan measures them: an optimal plan's
+order (its D-optimal greedy order); for an adaptive plan its seed, then the order its rounds take under rule ``f``
+(farthest-first over the candidates, or covering ``plan.task``'s poses when it has one; a round judges a seeded
+sample of at most 3000 of them, so a large pool's run differs in detail), or the D-optimal order of the candidates
+under a rule whose choice depends on the measurements (the measured curve is in the run's report); for a grid plan
+the D-optimal order of its calibration points (any prefix of a grid's serpentine would be one corner of the box).
+What the model cannot express (the residual layer's work) is not in the forecast.
 """
 from __future__ import annotations
 

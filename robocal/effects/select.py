@@ -112,8 +112,8 @@ class EffectSelection:
         return {"method": f"forward selection, {self.folds}-fold cross-validation blocked by "
                           f"{' and by '.join(self.blockings)} (linearised at the geometric solution); an effect is "
                           "taken when the paired t of the per-point held-out squared errors exceeds 3 and the "
-                          "held-out RMS drops by more than 2 % (or by more than 10 % with t > 2 or a signed-rank z > 2), under "
-                          "every blocking; "
+                          "held-out RMS drops by more than 2 % (or by more than 10 % with t > 2 or a signed-rank "
+                          "z > 2), under every blocking; "
                           "a joint's cyclic errors of higher orders are one candidate, its order chosen inside "
                           "every fold (nested)" + (f"; on a seeded subset of {self.rows[0]} of the {self.rows[1]} "
                                                    "calibration rows (the taken effects are fitted on all)" if sub

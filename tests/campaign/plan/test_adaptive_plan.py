@@ -94,7 +94,7 @@ def test_with_a_task_the_forecast_and_the_rounds_pick_the_task_first(tmp_path, c
 
     box = {"box_mm": [[900, -400, 600], [1300, 400, 1000]]}
     lo, hi = np.array(box["box_mm"][0]) - 0.01, np.array(box["box_mm"][1]) + 0.01   # grid poses on its faces
-    in_box = lambda q: np.all((smr_base(cell.kinematics, q) >= lo) & (smr_base(cell.kinematics, q) <= hi), axis=1)  # noqa: E731
+    in_box = lambda q: np.all((lo <= smr_base(cell.kinematics, q)) & (smr_base(cell.kinematics, q) <= hi), 1)  # noqa: E731
     shares = {}
     for task in (None, box):
         d = tmp_path / ("task" if task else "none")
