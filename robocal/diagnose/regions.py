@@ -9,6 +9,8 @@ import numpy as np
 from scipy import sparse, stats
 from scipy.spatial import cKDTree
 
+from robocal.effects.cv import spread_scaled
+
 from .records import DiagnosisOptions, Region
 
 
@@ -194,11 +196,9 @@ def structure_test(w: np.ndarray, spaces: Mapping[str, np.ndarray], rng: np.rand
     m = len(w)
     perms = np.stack([rng.permutation(m) for _ in range(permutations)])
     for name, F in spaces.items():
-        F = np.asarray(F, float).reshape(m, -1)
-        sd = F.std(axis=0)
-        if np.all(sd <= 0) or m <= k + 1:
+        F = spread_scaled(np.asarray(F, float).reshape(m, -1))
+        if not F.shape[1] or m <= k + 1:
             continue
-        F = F[:, sd > 0] / sd[sd > 0]
         F = F + 1e-9 * rng.standard_normal(F.shape)          # break ties (repeated values)
         _, nn = cKDTree(F).query(F, k=k + 1)
         nn = nn[:, 1:]

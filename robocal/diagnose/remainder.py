@@ -27,6 +27,8 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import cKDTree
 
+from robocal.effects.cv import spread_scaled
+
 from .jsonable import json_float, plain
 
 KINDS = ("structure", "noise", "none")
@@ -62,8 +64,8 @@ def nugget(r_mm: np.ndarray, q_rad: np.ndarray, k: int = 6, dof_share: float = 0
     neighbour distance (least squares, clipped to [0, sill]); ``dof_share``: share of the residual's degrees of
     freedom used by the fit (in-sample residuals are inflated by 1 / (1 - dof_share)). mm^2."""
     q = np.asarray(q_rad, float)
-    sd = q.std(axis=0)
-    x = q[:, sd > 0] / sd[sd > 0] if np.any(sd > 0) else np.zeros((len(q), 1))
+    x = spread_scaled(q)
+    x = x if x.shape[1] else np.zeros((len(q), 1))
     k = min(k, len(q) - 1)
     inflate = 1.0 / max(1.0 - dof_share, 0.5)
     sill = float(np.mean(np.sum((r_mm - r_mm.mean(axis=0)) ** 2, axis=1))) * inflate

@@ -49,13 +49,23 @@ def pose_clusters(q_rad: np.ndarray, block_points: int = 12, seed: int = 0, max_
                      8)[0]
 
 
+def spread_scaled(X: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
+    """X (N, d) centred and divided by each column's spread, (N, d') with the columns that do not vary left out:
+    a spread at most ``rel_tol`` x the column's largest magnitude is rounding (a joint held at one angle whose
+    values differ in the last bits), and dividing by it would make that rounding the largest coordinate."""
+    X = np.asarray(X, float).reshape(len(X), -1)
+    sd = X.std(axis=0)
+    keep = sd > rel_tol * np.abs(X).max(axis=0, initial=0.0)
+    return (X[:, keep] - X[:, keep].mean(axis=0)) / sd[keep]
+
+
 def _clusters(q_rad: np.ndarray, k: int, rng: np.random.Generator, iterations: int) -> tuple[np.ndarray, int]:
     """(label (N,), number of centres) of k-means in joint space (joints scaled by their spread) from a
     farthest-point start."""
     q = np.asarray(q_rad, float)
     n = len(q)
-    sd = q.std(axis=0)
-    x = q[:, sd > 0] / sd[sd > 0] if np.any(sd > 0) else np.zeros((n, 1))
+    x = spread_scaled(q)
+    x = x if x.shape[1] else np.zeros((n, 1))
     first = int(rng.integers(n))
     idx, dist = [first], ((x - x[first]) ** 2).sum(axis=1)
     for _ in range(min(k, n) - 1):                  # farthest-point start: every separate group gets a centre

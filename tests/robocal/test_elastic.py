@@ -8,7 +8,7 @@ import pytest
 
 from robocal.kinematics.gravity import GravityModel
 from robocal.effects.bases import apply_effects, effect_regressor, gear_cyclic, joint_compliance
-from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks
+from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks, spread_scaled
 from robocal.effects.model import EffectChoice, FittedEffect
 from robocal.effects.fit import calibrate_elastic
 from robocal.effects.library import candidates
@@ -134,6 +134,22 @@ def test_pose_blocks_hold_neighbours_out_together_and_order_blocks_are_contiguou
     assert len(set(fold)) == 4
     ob = order_blocks(np.arange(200.0), 5)
     assert np.all(ob[:10] == ob[0]) and len(np.flatnonzero(np.diff(ob))) == 19
+
+
+@pytest.mark.unit
+def test_a_joint_held_at_one_angle_does_not_collapse_the_pose_blocks():
+    """A grid that holds J6 at one angle, its values differing in the last bits (a spread of ~1e-15 rad): the pose
+    blocks still spread the poses over every fold, as without J6 (dividing by that spread once made J6 the largest
+    coordinate, and k-means put every pose in one cluster: one fold, no cross-validation)."""
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-1.5, 1.5, (400, 6))
+    q[:, 5] = -np.pi / 2 + rng.integers(-2, 3, 400) * np.spacing(np.pi / 2)
+    assert 0 < q[:, 5].std() < 1e-14
+    fold = pose_blocks(q, 5, seed=0)
+    np.testing.assert_array_equal(fold, pose_blocks(q[:, :5], 5, seed=0))
+    assert np.bincount(fold).min() > 40
+    x = spread_scaled(q)
+    assert x.shape == (400, 5) and np.allclose(x.mean(axis=0), 0) and np.allclose(x.std(axis=0), 1)
 
 
 @pytest.mark.unit
