@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from robocal.effects.cv import varies
 from robocal.identify.whitened import DesignFactor
 from .prose import DRIFT_EXPERIMENT, separating_experiment
 
@@ -51,8 +52,9 @@ def visible(d_mm: np.ndarray, J_geo: np.ndarray) -> np.ndarray:
 def joints_following_order(q_rad: np.ndarray, order: np.ndarray, r_min: float) -> list[tuple[int, float]]:
     """[(joint, r)] of the joints whose angle correlates with the measurement order by |r| > ``r_min``."""
     out = []
+    moving = varies(q_rad)
     for j in range(q_rad.shape[1]):
-        if np.std(q_rad[:, j]) > 0:
+        if moving[j]:
             r = float(np.corrcoef(q_rad[:, j], order)[0, 1])
             if abs(r) > r_min:
                 out.append((j + 1, r))

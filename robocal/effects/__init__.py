@@ -18,7 +18,7 @@ _HOMES = {                      # module -> the public names it holds
     "bases": ("EFFECT_NAMES", "FACTORY_KEYS", "MODEL_EFFECTS", "SIMULATED_EFFECTS", "apply_effects", "by_name",
               "effect_regressor", "effect_state", "meta_rows"),
     "cv": ("CV_MAX_ROWS", "BlockedCV", "Blocking", "capped_rows", "design_array", "kfold", "order_blocks",
-           "pose_blocks", "pose_clusters", "spread_scaled"),
+           "pose_blocks", "pose_clusters", "spread_scaled", "varies"),
     "engine": ("EngineOptions", "EngineResult", "run_engine", "select_candidates"),
     "fit": ("ElasticResult", "calibrate_elastic"),
     "library": ("candidates",),

@@ -49,14 +49,19 @@ def pose_clusters(q_rad: np.ndarray, block_points: int = 12, seed: int = 0, max_
                      8)[0]
 
 
-def spread_scaled(X: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
-    """X (N, d) centred and divided by each column's spread, (N, d') with the columns that do not vary left out:
-    a spread at most ``rel_tol`` x the column's largest magnitude is rounding (a joint held at one angle whose
-    values differ in the last bits), and dividing by it would make that rounding the largest coordinate."""
+def varies(X: np.ndarray, rel_tol: float = 1e-9) -> np.ndarray:
+    """(d,) bool: the columns of X (N, d) whose spread exceeds ``rel_tol`` x their largest magnitude; a smaller
+    spread is rounding (a joint held at one angle whose values differ in the last bits)."""
     X = np.asarray(X, float).reshape(len(X), -1)
-    sd = X.std(axis=0)
-    keep = sd > rel_tol * np.abs(X).max(axis=0, initial=0.0)
-    return (X[:, keep] - X[:, keep].mean(axis=0)) / sd[keep]
+    return X.std(axis=0) > rel_tol * np.abs(X).max(axis=0, initial=0.0)
+
+
+def spread_scaled(X: np.ndarray) -> np.ndarray:
+    """X (N, d) centred and divided by each column's spread, (N, d') with the columns that do not vary (``varies``)
+    left out: dividing by a spread of rounding would make that rounding the largest coordinate."""
+    X = np.asarray(X, float).reshape(len(X), -1)
+    X = X[:, varies(X)]
+    return (X - X.mean(axis=0)) / X.std(axis=0)
 
 
 def _clusters(q_rad: np.ndarray, k: int, rng: np.random.Generator, iterations: int) -> tuple[np.ndarray, int]:

@@ -8,7 +8,7 @@ import pytest
 
 from robocal.kinematics.gravity import GravityModel
 from robocal.effects.bases import apply_effects, effect_regressor, gear_cyclic, joint_compliance
-from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks, spread_scaled
+from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks, spread_scaled, varies
 from robocal.effects.model import EffectChoice, FittedEffect
 from robocal.effects.fit import calibrate_elastic
 from robocal.effects.library import candidates
@@ -150,6 +150,7 @@ def test_a_joint_held_at_one_angle_does_not_collapse_the_pose_blocks():
     assert np.bincount(fold).min() > 40
     x = spread_scaled(q)
     assert x.shape == (400, 5) and np.allclose(x.mean(axis=0), 0) and np.allclose(x.std(axis=0), 1)
+    assert varies(q).tolist() == [True] * 5 + [False]
 
 
 @pytest.mark.unit
