@@ -18,6 +18,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.selection import select_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from campaign.errors import PlausibilityError, one_line  # noqa: E402
 from campaign.plan.adaptive import RULE, SEED_DESIGN, SEED_SIZE  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 
@@ -44,6 +45,16 @@ def subset_rms(ds, cell, rows) -> float:
     return held_out_rms(ds.with_order_context().subset(keep), cell)
 
 
+def subset_or_refused(ds, cell, rows) -> float:
+    """``subset_rms``, or inf when the plausibility check refuses the calibration of those rows (a subset that gives
+    no model is worse than any that gives one; the refusal is printed)."""
+    try:
+        return subset_rms(ds, cell, rows)
+    except PlausibilityError as exc:
+        print(f"  refused ({len(rows)} rows): {one_line(exc)[:160]}", flush=True)
+        return float("inf")
+
+
 def adaptive_methods(rules, seeds) -> list[str]:
     """Labels of the adaptive methods: 'adaptive-<rule>' with the first run's seed, '<rule>:<seed>' otherwise."""
     return [f"adaptive-{r}" if s == FIRST else f"{r}:{s}" for s in seeds for r in rules]
@@ -61,13 +72,13 @@ def evaluate(ds, cell, rules=RULES, seeds=(CHOSEN,)) -> dict:
         sel = adaptive_rows(ds, cell, max(SIZES), rule=rule, seed_design=design, seed_points=size)
         out["seconds"][m] = time.perf_counter() - t
         for n in SIZES:
-            out[(m, n)] = subset_rms(ds, cell, sel.order[:n]) / everything
+            out[(m, n)] = subset_or_refused(ds, cell, sel.order[:n]) / everything
         out[f"layers-{m}"] = f"{sel.n_seed}:" + "".join(r.layer[0] for r in sel.rounds)
     for n in SIZES:
-        out[("one-shot", n)] = subset_rms(ds, cell, np.flatnonzero(select_rows(ds, cell, n).keep & ds.mask("calib"))) \
-            / everything
-        out[("random", n)] = float(np.median([subset_rms(ds, cell, np.random.default_rng(s).choice(cal, n, replace=False))
-                                              for s in range(N_RANDOM)])) / everything
+        one_shot = np.flatnonzero(select_rows(ds, cell, n).keep & ds.mask("calib"))
+        out[("one-shot", n)] = subset_or_refused(ds, cell, one_shot) / everything
+        out[("random", n)] = float(np.median([subset_or_refused(ds, cell, np.random.default_rng(s).choice(
+            cal, n, replace=False)) for s in range(N_RANDOM)])) / everything
     return out
 
 
