@@ -45,7 +45,7 @@ import robocal.diagnose.remainder as remainder  # noqa: E402
 import robocal.effects.cv as cv  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
-from select_replay import held_out_rms, subset_rms  # noqa: E402
+from select_replay import rms_off_on  # noqa: E402
 
 FORMS = ("UR10-like (compliance + J2 gear)", "IRB 4600-like (compliance + J3 gear + coupling)",
          "compliance+gear+drift")
@@ -80,10 +80,8 @@ def folds(ds) -> str:
 
 
 def figures(ds, cell, rows) -> tuple[float, float]:
-    rms = (lambda: held_out_rms(ds, cell)) if rows is None else (lambda: subset_rms(ds, cell, rows))
-    with before_fix():
-        old = rms()
-    return old, rms()
+    """Held-out RMS (mm) before and after the fix, on the calibration rows ``rows`` (all when None)."""
+    return rms_off_on(ds, cell, rows, before_fix)
 
 
 def main() -> None:

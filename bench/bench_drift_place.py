@@ -67,7 +67,7 @@ from robocal.effects.library import LibraryOptions, _follows_place  # noqa: E402
 from robocal.kinematics.models import smr_base  # noqa: E402
 from bench_select_task import task_data  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
-from select_replay import held_out_rms, subset_rms  # noqa: E402
+from select_replay import rms_off_on  # noqa: E402
 
 GRID_FORMS = ("UR10-like (compliance + J2 gear)", "IRB 4600-like (compliance + J3 gear + coupling)")
 TRUTH_FORMS = ("compliance+gear+drift", "strong compliance, sparse far", "read-back lag",
@@ -87,10 +87,7 @@ def check_off():
 
 def figures(ds, cell, rows) -> tuple[float, float]:
     """Held-out RMS (mm) without and with the check, on the calibration rows ``rows`` (all when None)."""
-    rms = (lambda: held_out_rms(ds, cell)) if rows is None else (lambda: subset_rms(ds, cell, rows))
-    with check_off():
-        off = rms()
-    return off, rms()
+    return rms_off_on(ds, cell, rows, check_off)
 
 
 def explained(ds, cell, rows) -> float:

@@ -64,7 +64,7 @@ import robocal.effects.select as select  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from robocal.diagnose.selfcheck import run_self_check  # noqa: E402
 from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
-from select_replay import held_out_rms, subset_rms  # noqa: E402
+from select_replay import rms_off_on  # noqa: E402
 
 UR5 = "UR5 campaign"
 SELF_CHECK_SEED = 5000
@@ -83,10 +83,7 @@ def rank_off():
 
 def figures(ds, cell, rows) -> tuple[float, float]:
     """Held-out RMS (mm) without and with the rule, on the calibration rows ``rows`` (all when None)."""
-    rms = (lambda: held_out_rms(ds, cell)) if rows is None else (lambda: subset_rms(ds, cell, rows))
-    with rank_off():
-        off = rms()
-    return off, rms()
+    return rms_off_on(ds, cell, rows, rank_off)
 
 
 def line(label, off, on) -> None:

@@ -45,6 +45,15 @@ def subset_rms(ds, cell, rows) -> float:
     return held_out_rms(ds.with_order_context().subset(keep), cell)
 
 
+def rms_off_on(ds, cell, rows, off) -> tuple[float, float]:
+    """Held-out RMS (mm) on the calibration rows ``rows`` (all when None) with the default process inside the
+    context ``off()`` (a feature switched off), then as it is."""
+    rms = (lambda: held_out_rms(ds, cell)) if rows is None else (lambda: subset_rms(ds, cell, rows))
+    with off():
+        before = rms()
+    return before, rms()
+
+
 def subset_or_refused(ds, cell, rows) -> float:
     """``subset_rms``, or inf when the plausibility check refuses the calibration of those rows (a subset that gives
     no model is worse than any that gives one; the refusal is printed)."""
