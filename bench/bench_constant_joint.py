@@ -30,7 +30,8 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
+from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -60,16 +61,12 @@ def _old_scaled(X):
 
 @contextmanager
 def before_fix():
-    made, moving = cv.spread_scaled, evidence.varies
-    for m in (cv, regions, remainder):
-        m.spread_scaled = _old_scaled
-    evidence.varies = lambda X: np.asarray(X, float).std(axis=0) > 0
-    try:
-        yield
-    finally:
+    """The scaling and the test of a varying joint as they were before the fix."""
+    with ExitStack() as stack:
         for m in (cv, regions, remainder):
-            m.spread_scaled = made
-        evidence.varies = moving
+            stack.enter_context(mock.patch.object(m, "spread_scaled", _old_scaled))
+        stack.enter_context(mock.patch.object(evidence, "varies", lambda X: np.asarray(X, float).std(axis=0) > 0))
+        yield
 
 
 def folds(ds) -> str:

@@ -51,7 +51,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from contextlib import contextmanager
+from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -74,15 +74,10 @@ TRUTH_FORMS = ("compliance+gear+drift", "strong compliance, sparse far", "read-b
                "layer only (sag outside the library)")
 
 
-@contextmanager
 def check_off():
-    """The default process without the check (today's library)."""
-    made = effects_stage.EngineOptions
-    effects_stage.EngineOptions = lambda **kw: EngineOptions(library=LibraryOptions(clock_place_max_r2=None), **kw)
-    try:
-        yield
-    finally:
-        effects_stage.EngineOptions = made
+    """The default process without the check (today's library), as a context."""
+    return mock.patch.object(effects_stage, "EngineOptions",
+                             lambda **kw: EngineOptions(library=LibraryOptions(clock_place_max_r2=None), **kw))
 
 
 def figures(ds, cell, rows) -> tuple[float, float]:

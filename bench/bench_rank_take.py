@@ -51,7 +51,8 @@ import argparse
 import json
 import sys
 import tempfile
-from contextlib import contextmanager, nullcontext
+from unittest import mock
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -70,15 +71,9 @@ UR5 = "UR5 campaign"
 SELF_CHECK_SEED = 5000
 
 
-@contextmanager
 def rank_off():
-    """The default process without the rank rule (today's selection)."""
-    made = select.RANK_Z
-    select.RANK_Z = None
-    try:
-        yield
-    finally:
-        select.RANK_Z = made
+    """The default process without the rank rule (today's selection), as a context."""
+    return mock.patch.object(select, "RANK_Z", None)
 
 
 def figures(ds, cell, rows) -> tuple[float, float]:
