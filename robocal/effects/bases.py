@@ -104,9 +104,13 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=None,
         for k, j in enumerate(joints):
             dq[:, j - 1, k] = tau[:, j - 1]
         return Basis(dq=dq)
-    typical = {1: 2e-7, 2: 3.3e-7, 3: 6.7e-7}
     return Effect("joint_compliance", tuple(joints), tuple(f"c{j}" for j in joints), "rad/(N*m)", basis,
-                  typical=tuple(typical.get(j, 3e-6) for j in joints))
+                  typical=tuple(compliance_typical(j) for j in joints))
+
+
+def compliance_typical(joint: int) -> float:
+    """Typical compliance (rad/(N·m)) of a 1-based joint of an industrial arm under gravity."""
+    return {1: 2e-7, 2: 3.3e-7, 3: 6.7e-7}.get(joint, 3e-6)
 
 
 def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
@@ -123,7 +127,19 @@ def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
             dq[:, j - 1, at:at + c.shape[1]] = c
             at += c.shape[1]
         return Basis(dq=dq)
-    return Effect("joint_compliance", joints, names, "rad*kg/(N*m)", basis, typical=tuple(3e-8 for _ in names))
+    return Effect("joint_compliance", joints, names, "rad*kg/(N*m)", basis, typical=_lever_typical(joints, n))
+
+
+def _lever_typical(joints, n: int) -> tuple[float, ...]:
+    """Typical values of the lever form's parameters: per joint, its typical compliance times the default moving
+    mass downstream of it shared over its arm points (rad·kg/(N·m)), and the compliance itself for the payload
+    column (its regressor is the payload's torque, N·m): the gravity form's deflection at its typical values."""
+    masses = default_link_masses(n)
+    out = []
+    for j in joints:
+        c, points = compliance_typical(j), n - j + 2          # downstream origins, the flange, beside
+        out += [c * sum(masses[j - 1:]) / points] * points + [c]
+    return tuple(out)
 
 
 def payload_deflection(joints=(2, 3), payload_cog_flange_mm=None, gravity_base=(0.0, 0.0, -1.0)) -> Effect:
