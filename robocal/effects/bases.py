@@ -133,7 +133,8 @@ def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
 def _lever_typical(joints, n: int) -> tuple[float, ...]:
     """Typical values of the lever form's parameters: per joint, its typical compliance times the default moving
     mass downstream of it shared over its arm points (rad·kg/(N·m)), and the compliance itself for the payload
-    column (its regressor is the payload's torque, N·m): the gravity form's deflection at its typical values."""
+    column (its regressor is the payload's torque, N·m). At these values the form deflects the joints by the order of
+    the gravity form at its typical values."""
     masses = default_link_masses(n)
     out = []
     for j in joints:
