@@ -47,15 +47,9 @@ layer only and ``--parts i iii --forms`` lag + UR10-like + IRB 4600-like, then `
 """
 from __future__ import annotations
 
-import argparse
-import json
 import sys
-import tempfile
-from unittest import mock
-from contextlib import nullcontext
 from pathlib import Path
-
-import numpy as np
+from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -63,11 +57,10 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.effects.select as select  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
-from robocal.diagnose.selfcheck import run_self_check  # noqa: E402
-from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
+from select_forms import ADAPTIVE_FORMS  # noqa: E402
 from select_replay import rms_off_on  # noqa: E402
+from switch_protocol import arguments, line, run  # noqa: E402
 
-UR5 = "UR5 campaign"
 SELF_CHECK_SEED = 5000
 
 
@@ -76,112 +69,20 @@ def rank_off():
     return mock.patch.object(select, "RANK_Z", None)
 
 
-def figures(ds, cell, rows) -> tuple[float, float]:
-    """Held-out RMS (mm) without and with the rule, on the calibration rows ``rows`` (all when None)."""
-    return rms_off_on(ds, cell, rows, rank_off)
-
-
-def line(label, off, on) -> None:
-    print(f"  {label:46s} off {off:.4f}  on {on:.4f} mm  ratio {on / off:.3f}", flush=True)
-
-
-def part_i(tmp: Path, forms, seeds) -> dict:
-    """{form: [{size: (off, on)} per seed]} with sizes "all", "50", "100"."""
-    out = {}
-    for form in forms:
-        builds = [(UR5, ur5_dataset())] if form == UR5 else [(f"{form}, seed {s}", ADAPTIVE_FORMS[form](tmp, s))
-                                                              for s in seeds]
-        out[form] = []
-        for label, (ds, cell) in builds:
-            with rank_off():
-                order = adaptive_rows(ds, cell, 100, rule="f").order
-            figs = {}
-            for n in (None, 50, 100):
-                figs["all" if n is None else str(n)] = figures(ds, cell, None if n is None else order[:n])
-                line(f"{label}, {'all rows' if n is None else f'f {n}'}", *figs["all" if n is None else str(n)])
-            out[form].append(figs)
-    return out
-
-
-def part_ii(tmp: Path) -> None:
+def part_ii(tmp: Path, parts) -> None:
+    if "ii" not in parts:
+        return
     from bench_select_task import task_data
     ds, cell, task_q = task_data(*ADAPTIVE_FORMS["strong compliance, sparse far"](tmp, 18))
     with rank_off():
         order = adaptive_rows(ds, cell, 100, task_q_rad=task_q, cover_task=True).order
     for n in (80, 100):
-        line(f"(ii) sparse far seed 18, f-task {n} (at the task)", *figures(ds, cell, order[:n]))
-
-
-def self_check(seeds: int, first_seed: int) -> dict:
-    """The self-check's summary figures without and with the rule, on the same fresh trials."""
-    out = {}
-    for name in ("off", "on"):
-        with rank_off() if name == "off" else nullcontext():
-            r = run_self_check(seeds, first_seed=first_seed)
-        s = r.summary()
-        groups = list(s["per_effect"].values()) + list(s["forms"].values())
-        out[name] = {"named_right": sum(g["named_right"] for g in groups), "of": sum(g["n"] for g in groups),
-                     "controls_clean": s["controls_clean"], "controls": s["controls"],
-                     "spurious": s["spurious_acceptances"], "passed": r.passed()}
-        print(f"(iii) self-check, rule {name}: named right {out[name]['named_right']}/{out[name]['of']}, controls "
-              f"clean {s['controls_clean']}/{s['controls']}, spurious acceptances {s['spurious_acceptances']}, "
-              f"targets {'pass' if r.passed() else 'MISSED'}", flush=True)
-    return out
-
-
-def judge(figs: dict, checks: dict | None) -> None:
-    ratios = {f: [on / off for per in v for off, on in per.values()] for f, v in figs.items()}
-    every = np.concatenate([np.asarray(r) for r in ratios.values()])
-    print(f"(i) {len(every)} figures: mean ratio {every.mean():.4f}, largest {every.max():.3f}, smallest "
-          f"{every.min():.3f}")
-    print("issue 32's ratios against all rows, mean over the seeds (worst), off -> on:")
-    for form, per in figs.items():
-        cells = []
-        for n in ("50", "100"):
-            r = {k: [p[n][i] / p["all"][i] for p in per] for i, k in enumerate(("off", "on"))}
-            cells.append(f"{n}: {np.mean(r['off']):.3f} ({max(r['off']):.3f}) -> {np.mean(r['on']):.3f} "
-                         f"({max(r['on']):.3f})")
-        print(f"  {form:48s} " + "; ".join(cells))
-    if checks is None or len(figs) < 7:
-        return
-    ur5 = max(ratios[UR5]) if UR5 in ratios else np.inf
-    off, on = checks["off"], checks["on"]
-    sc = (on["named_right"] >= off["named_right"] and on["controls_clean"] >= off["controls_clean"]
-          and on["spurious"] <= off["spurious"])
-    keep = every.mean() <= 1.0 and every.max() <= 1.05 and ur5 <= 1.01 and sc
-    print(f"rank rule kept: {keep} (i: mean {every.mean():.4f} <= 1, largest {every.max():.3f} <= 1.05, UR5 largest "
-          f"{ur5:.3f} <= 1.01; iii: named right {on['named_right']} >= {off['named_right']}, controls clean "
-          f"{on['controls_clean']} >= {off['controls_clean']}, spurious {on['spurious']} <= {off['spurious']})")
+        line(f"(ii) sparse far seed 18, f-task {n} (at the task)", *rms_off_on(ds, cell, order[:n], rank_off))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[19, 20, 21])
-    ap.add_argument("--parts", nargs="+", default=["i", "ii", "iii"], choices=["i", "ii", "iii"])
-    ap.add_argument("--forms", nargs="+", default=[UR5, *ADAPTIVE_FORMS])
-    ap.add_argument("--self-check-seeds", type=int, default=5)
-    ap.add_argument("--self-check-first-seed", type=int, default=SELF_CHECK_SEED)
-    ap.add_argument("--json", type=Path, help="write this process's figures, for --combine")
-    ap.add_argument("--combine", type=Path, nargs="+", help="judge the figures of several processes' --json")
-    args = ap.parse_args()
-    if args.combine:
-        parts = [json.loads(p.read_text()) for p in args.combine]
-        figs = {f: [{k: tuple(v) for k, v in per.items()} for per in v] for p in parts for f, v in p["i"].items()}
-        checks = next((p["iii"] for p in parts if p.get("iii")), None)
-        judge(figs, checks)
-        return
-    figs, checks = {}, None
-    with tempfile.TemporaryDirectory() as tmp:
-        if "i" in args.parts:
-            figs = part_i(Path(tmp), args.forms, args.seeds)
-        if "ii" in args.parts:
-            part_ii(Path(tmp))
-    if "iii" in args.parts:
-        checks = self_check(args.self_check_seeds, args.self_check_first_seed)
-    if figs:
-        judge(figs, checks)
-    if args.json:
-        args.json.write_text(json.dumps({"i": figs, "iii": checks}))
+    args = arguments(__doc__, (19, 20, 21), SELF_CHECK_SEED, ("i", "ii", "iii")).parse_args()
+    run(args, rank_off, "rank rule", "iii", part_ii)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ from typing import Callable, Mapping
 import numpy as np
 
 from robocal.kinematics.frames import skew, transform_points
-from robocal.kinematics.gravity import default_link_masses, gravity_torques, lever_torques, link_masses
+from robocal.kinematics.gravity import (default_link_masses, gravity_torques, lever_torques, link_mass_torques,
+                                       link_masses)
 from robocal.kinematics.models import Kinematics, ParamLayout, chain, identification_jacobian, joint_motion_columns
 EFFECT_NAMES = ("joint_compliance", "payload_deflection", "gear_cyclic", "backlash", "readback_lag", "thermal_drift",
                 "axis_coupling", "registration_drift")     # every effect of the library, in report order
@@ -80,6 +81,8 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=None,
     lumped link masses + payload (its centre of gravity ``payload_cog_flange_mm`` in the flange frame).
     ``levers``: the mass distribution left free: dq_j = sum_p c_jp * tau_jp(q) over the ``lever_torques`` points
     of joint j (torque per kg) + the payload torque, c_jp in rad·kg/(N·m) (compliance x mass).
+    ``links``: the same with the complete gravity regressor of the links (``link_mass_torques``: per link a kg at
+    its frame's origin and displaced along its three axes), which also holds a centre of mass off a roll axis.
     ``trig`` (seed 001 eq. 21-22, controller angles): dq2 = k1 s2 + k2 s23 + k3 c23; dq3 = k4 s23 + k5 c23 (rad).
     """
     if form == "trig":
@@ -91,10 +94,10 @@ def joint_compliance(joints=(2, 3), form: str = "gravity", link_masses_kg=None,
             return Basis(dq=dq)
         return Effect("joint_compliance", (2, 3), ("k1", "k2", "k3", "k4", "k5"), "rad", basis,
                       typical=(2e-4, 1e-4, 1e-4, 1e-4, 1e-4))
-    if form == "levers":
-        return _lever_compliance(tuple(joints), payload_cog_flange_mm, gravity_base, n_joints)
+    if form in ("levers", "links"):
+        return _mass_compliance(tuple(joints), payload_cog_flange_mm, gravity_base, n_joints, form)
     if form != "gravity":
-        raise ValueError(f"unknown compliance form {form!r} (expected gravity, levers or trig)")
+        raise ValueError(f"unknown compliance form {form!r} (expected gravity, levers, links or trig)")
 
     def basis(kin, q, meta):
         masses = default_link_masses(kin.n) if link_masses_kg is None else link_masses_kg
@@ -113,33 +116,48 @@ def compliance_typical(joint: int) -> float:
     return {1: 2e-7, 2: 3.3e-7, 3: 6.7e-7}.get(joint, 3e-6)
 
 
-def _lever_compliance(joints, payload_cog_flange_mm, gravity_base, n) -> Effect:
-    names = tuple(f"c{j}_{p}" for j in joints for p in [f"o{i + 1}" for i in range(j, n)] + ["flange", "beside", "payload"])
+def _mass_compliance(joints, payload_cog_flange_mm, gravity_base, n, form: str) -> Effect:
+    """The free mass distribution: per joint, its columns of torque per kg (``lever_torques`` for ``levers``,
+    ``link_mass_torques`` for ``links``) and the payload's torque (N·m)."""
+    torques = lever_torques if form == "levers" else link_mass_torques
 
     def basis(kin, q, meta):
         pay = _meta(meta, "payload_kg", len(q))
         tau_pay = gravity_torques(kin, q, np.zeros(kin.n), pay, payload_cog_flange_mm, gravity_base)
-        levers = lever_torques(kin, q, joints, gravity_base)
-        cols = [(j, np.concatenate([levers[j][0], tau_pay[:, j - 1:j]], axis=1)) for j in joints]
+        per_kg = torques(kin, q, joints, gravity_base)
+        cols = [(j, np.concatenate([per_kg[j][0], tau_pay[:, j - 1:j]], axis=1)) for j in joints]
         dq = _zeros_dq(q, sum(c.shape[1] for _, c in cols))
         at = 0
         for j, c in cols:
             dq[:, j - 1, at:at + c.shape[1]] = c
             at += c.shape[1]
         return Basis(dq=dq)
-    return Effect("joint_compliance", joints, names, "rad*kg/(N*m)", basis, typical=_lever_typical(joints, n))
+    points = _mass_points(joints, n, form)
+    names = tuple(f"c{j}_{p}" for j in joints for p in points[j] + ("payload",))
+    return Effect("joint_compliance", joints, names, "rad*kg/(N*m)", basis, typical=_mass_typical(joints, n, points))
 
 
-def _lever_typical(joints, n: int) -> tuple[float, ...]:
-    """Typical values of the lever form's parameters: per joint, its typical compliance times the default moving
-    mass downstream of it shared over its arm points (rad·kg/(N·m)), and the compliance itself for the payload
-    column (its regressor is the payload's torque, N·m). At these values the form deflects the joints by the order of
-    the gravity form at its typical values."""
+def _mass_points(joints, n: int, form: str) -> dict[int, tuple[str, ...]]:
+    """{joint: the names of its mass columns} of the lever or the link form (the torque functions' names)."""
+    if form == "levers":
+        return {j: tuple(f"o{i + 1}" for i in range(j, n)) + ("flange", "beside") for j in joints}
+    return {j: tuple(f"L{i + 1}{s}" for i in range(j - 1, n) for s in "oxyz")[2:] for j in joints}
+
+
+def _mass_typical(joints, n: int, points) -> tuple[float, ...]:
+    """Typical values of a free mass distribution's parameters (rad·kg/(N·m)): per joint, its typical compliance
+    times, for the lever form, the default moving mass downstream of it shared over its points; for the link form,
+    each link's default mass on its origin and each offset column (a link's mass 100 mm off its frame's origin). The
+    payload column takes the compliance itself (its regressor is the payload's torque, N·m). At these values the
+    form deflects the joints by the order of the gravity form at its typical values."""
     masses = default_link_masses(n)
     out = []
     for j in joints:
-        c, points = compliance_typical(j), n - j + 2          # downstream origins, the flange, beside
-        out += [c * sum(masses[j - 1:]) / points] * points + [c]
+        c, names = compliance_typical(j), points[j]
+        if names[-1] == "beside":
+            out += [c * sum(masses[j - 1:]) / len(names)] * len(names) + [c]
+        else:
+            out += [c * masses[int(p[1:-1]) - 1] for p in names] + [c]
     return tuple(out)
 
 
@@ -380,7 +398,8 @@ def effect_regressor(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, effect: 
 
 def every_effect(n_joints: int = 6) -> tuple[Effect, ...]:
     """One instance of every library effect with its default joints (tests of the bases)."""
-    effs = [joint_compliance(), joint_compliance(form="levers", n_joints=n_joints), payload_deflection()]
+    effs = [joint_compliance(), joint_compliance(form="levers", n_joints=n_joints),
+            joint_compliance(form="links", n_joints=n_joints), payload_deflection()]
     effs += [gear_cyclic(j) for j in range(1, min(n_joints, 6) + 1)]
     effs += [backlash(tuple(range(1, min(n_joints, 6) + 1))), readback_lag((1, 2, 3), (2,)), thermal_drift()]
     if n_joints >= 6:

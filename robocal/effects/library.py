@@ -272,13 +272,18 @@ def _follows_place(clock: np.ndarray, p_base_mm, opt: LibraryOptions) -> float |
     return r2 if r2 > opt.clock_place_max_r2 else None
 
 
+REFINED_FORMS = ("levers", "links")   # gravity compliance's free mass distributions offered once it is taken
+
+
 def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
-    """Candidates that refine an accepted effect: the free mass distribution of gravity compliance."""
+    """Candidates that refine an accepted effect: the free mass distributions of gravity compliance
+    (``REFINED_FORMS``: the lever points, the links' complete gravity regressor)."""
     opts = dict(choice.options)
     if choice.name == "joint_compliance" and opts.get("form", "gravity") == "gravity":
-        return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", "levers"),
+        return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", form),
                                                   ("payload_cog_flange_mm", opts.get("payload_cog_flange_mm")),
-                                                  ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))]
+                                                  ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))
+                for form in REFINED_FORMS]
     return []
 
 

@@ -68,6 +68,70 @@ def lever_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0,
     return out
 
 
+def link_frames(kin: Kinematics, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A frame fixed to each moving link: (origins (N, n, 3) mm, axes (N, n, 3, 3) with columns e1 e2 e3), base
+    frame. Link i (0-based, turned by joint i) has its origin on joint i's axis, e1 along that axis and e2 the part
+    of the next link's axis or of the link vector (the longer one) across e1; the last link takes the flange's x or y.
+    Every one is fixed to its link (a point on a link's own axis and the next joint's axis and origin move with it)."""
+    q = np.atleast_2d(q_rad)
+    c = chain(kin, q, full=False)
+    pick = _e2_pick(kin)
+    axes = np.empty(q.shape + (3, 3))
+    for i, (e1, across) in enumerate(zip(*_across(c))):
+        e2 = across[pick[i]] / np.maximum(np.linalg.norm(across[pick[i]], axis=1, keepdims=True), 1e-12)
+        axes[:, i] = np.stack([e1, e2, np.cross(e1, e2)], axis=2)
+    return c.origin, axes
+
+
+def _across(c) -> tuple[list, list]:
+    """Per link: its unit axis e1 (N, 3) and the two candidates for e2 (``link_frames``) across it (N, 3) each."""
+    n = c.axis.shape[1]
+    flange = c.T_base_flange[:, :3, :3]
+    o_next = np.concatenate([c.origin[:, 1:], c.T_base_flange[:, None, :3, 3]], axis=1)
+    e1s, acr = [], []
+    for i in range(n):
+        e1 = c.axis[:, i] / np.linalg.norm(c.axis[:, i], axis=1, keepdims=True)
+        cands = [c.axis[:, i + 1], o_next[:, i] - c.origin[:, i]] if i + 1 < n else [flange[:, :, 0], flange[:, :, 1]]
+        e1s.append(e1)
+        acr.append([v - np.sum(v * e1, axis=1, keepdims=True) * e1 for v in cands])
+    return e1s, acr
+
+
+def _e2_pick(kin: Kinematics) -> list[int]:
+    """Per link, which e2 candidate ``link_frames`` takes: the longer across e1 in the zero pose, the first on a tie.
+    Both are fixed to the link, so their lengths are those of every pose: one pick for every call."""
+    _, across = _across(chain(kin, np.zeros((1, kin.n)), full=False))
+    return [int(np.linalg.norm(a[1][0]) > np.linalg.norm(a[0][0]) * (1.0 + 1e-6)) for a in across]
+
+
+LINK_OFFSET_MM = 100.0    # the offset columns of ``link_mass_torques``: per kg displaced by 100 mm
+
+
+def link_mass_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(0.0, 0.0, -1.0)
+                      ) -> dict[int, tuple[np.ndarray, tuple[str, ...]]]:
+    """{joint: (torque per kg (N, m) N·m/kg, column names)} about each of ``joints`` (1-based) of the complete
+    gravity regressor of the links it carries: per link i from the joint's own, a kg at the link frame's origin
+    (``o``) and a kg displaced by ``LINK_OFFSET_MM`` along each of its axes (``x y z``; ``link_frames``). Any mass
+    rigidly fixed on those links, wherever its centre, loads the joint by a combination of them (the mass
+    distribution of ``joint_compliance(form="links")``); the joint's own link contributes its two across-axis
+    columns only (its origin and axis give no torque about itself)."""
+    q = np.atleast_2d(q_rad)
+    origin, axes = link_frames(kin, q)
+    c_axis = chain(kin, q, full=False).axis
+    g = np.asarray(gravity_base, float)
+    force = G_MM_S2 * g / np.linalg.norm(g)
+    out = {}
+    for joint in joints:
+        j = joint - 1
+        lever = np.cross(force, c_axis[:, j])                   # tau = (p - o_j) . (F x a_j) / 1000 for a kg at p
+        to = np.einsum("nik,nk->ni", origin[:, j:] - origin[:, j:j + 1], lever) / 1000.0
+        ta = np.einsum("nikm,nk->nim", axes[:, j:], lever) * (LINK_OFFSET_MM / 1000.0)
+        cols = np.concatenate([to[:, :, None], ta], axis=2).reshape(len(q), -1)[:, 2:]    # own link: y, z only
+        names = tuple(f"L{i + 1}{s}" for i in range(j, kin.n) for s in "oxyz")[2:]
+        out[joint] = (cols, names)
+    return out
+
+
 DEFAULT_LINK_MASSES_KG = (0.0, 35.0, 40.0, 12.0, 4.0, 1.0)
 MOVING_SHARE = 0.7      # the moving links carry ~70 % of a 6-axis arm's datasheet mass (base and J1 column the rest)
 

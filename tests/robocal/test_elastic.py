@@ -323,19 +323,20 @@ def test_gravity_direction_of_a_wall_mount_is_used():
 
 @pytest.mark.unit
 def test_lever_form_typical_values_deflect_as_much_as_the_gravity_form():
-    """The lever form's typical values (its prior in the adaptive design and the predicted curve) describe the
+    """The lever and the link forms' typical values (its prior in the adaptive design and the predicted curve) describe the
     same physical effect as the gravity form's: at typical values both deflect J2 and J3 by the same order (the
     old 3e-8 rad kg/(N m) per point gave 1/70 of it)."""
     kin = irb2600().with_(T_tracker_base=T_SEED000)
     q = np.random.default_rng(3).uniform(-1.2, 1.2, (400, 6))
     meta = {"payload_kg": np.full(400, 3.0)}
     dq = {}
-    for form in ("gravity", "levers"):
+    for form in ("gravity", "levers", "links"):
         eff = joint_compliance(form=form)
-        assert len(eff.typical) == len(eff.param_names)
+        assert len(eff.typical) == len(eff.param_names) == eff.basis(kin, q, meta).dq.shape[2]
         dq[form] = np.sqrt(np.mean((eff.basis(kin, q, meta).dq @ np.asarray(eff.typical))[:, 1:3] ** 2, axis=0))
-    ratio = dq["levers"] / dq["gravity"]
-    assert np.all((ratio > 0.5) & (ratio < 5.0)), ratio
+    for form in ("levers", "links"):
+        ratio = dq[form] / dq["gravity"]
+        assert np.all((ratio > 0.5) & (ratio < 5.0)), (form, ratio)
 
 
 @pytest.mark.unit

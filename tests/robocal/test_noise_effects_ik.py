@@ -73,22 +73,30 @@ def test_gravity_torques_signs():
     assert abs(tau[1, 1]) > abs(tau[0, 1])                 # leaning forward loads J2 more
 
 
+def _frames_reference(kin, qk):
+    """4x4 frames of one pose, multiplied one by one: frames[i] turns with joint i - 1 (frames[0] the base), its z
+    joint i's axis; the last one the flange."""
+    T, frames = np.eye(4), []
+    for i in range(kin.n):
+        frames.append(T.copy())
+        th, d, a, al = qk[i] + kin.theta_rad[i], kin.d_mm[i], kin.a_mm[i], kin.alpha_rad[i]
+        Rz = np.array([[np.cos(th), -np.sin(th), 0, 0], [np.sin(th), np.cos(th), 0, 0], [0, 0, 1, d], [0, 0, 0, 1]])
+        Tx = np.array([[1, 0, 0, a], [0, np.cos(al), -np.sin(al), 0], [0, np.sin(al), np.cos(al), 0], [0, 0, 0, 1]])
+        b = kin.beta_rad[i]
+        Ry = np.array([[np.cos(b), 0, np.sin(b), 0], [0, 1, 0, 0], [-np.sin(b), 0, np.cos(b), 0], [0, 0, 0, 1]])
+        T = T @ Rz @ Tx @ Ry
+    return frames + [T]
+
+
 def _gravity_torques_reference(kin, q, link_masses_kg, payload_kg, cog_flange_mm, g_base):
     """Independent reference: per pose, joint and hanging body, the lever (body - joint origin) x weight about the
     joint axis, from 4x4 frames multiplied one by one (Python loops: small N only)."""
     out = np.zeros(q.shape)
     g = np.asarray(g_base, float) / np.linalg.norm(g_base) * 9.80665
     for k, qk in enumerate(q):
-        T, frames = np.eye(4), []
-        for i in range(kin.n):
-            frames.append(T.copy())
-            th, d, a, al = qk[i] + kin.theta_rad[i], kin.d_mm[i], kin.a_mm[i], kin.alpha_rad[i]
-            Rz = np.array([[np.cos(th), -np.sin(th), 0, 0], [np.sin(th), np.cos(th), 0, 0], [0, 0, 1, d], [0, 0, 0, 1]])
-            Tx = np.array([[1, 0, 0, a], [0, np.cos(al), -np.sin(al), 0], [0, np.sin(al), np.cos(al), 0], [0, 0, 0, 1]])
-            b = kin.beta_rad[i]
-            Ry = np.array([[np.cos(b), 0, np.sin(b), 0], [0, 1, 0, 0], [-np.sin(b), 0, np.cos(b), 0], [0, 0, 0, 1]])
-            T = T @ Rz @ Tx @ Ry
-        origins = [f[:3, 3] for f in frames] + [T[:3, 3]]
+        frames = _frames_reference(kin, qk)
+        origins = [f[:3, 3] for f in frames]
+        T = frames[-1]
         p_pay = T[:3, :3] @ np.asarray(cog_flange_mm, float) + T[:3, 3]
         for j in range(kin.n):
             o_j, z_j = frames[j][:3, 3], frames[j][:3, 2]
@@ -96,6 +104,34 @@ def _gravity_torques_reference(kin, q, link_masses_kg, payload_kg, cog_flange_mm
             bodies.append((payload_kg[k], p_pay))
             out[k, j] = sum(m * np.dot(np.cross(c - o_j, g), z_j) for m, c in bodies) / 1000.0
     return out
+
+
+def test_link_mass_torques_span_any_mass_fixed_on_the_links_and_the_lever_points_do_not():
+    """Point masses anywhere on links 2-6 (their centres off the roll axes, fixed in each link's 4x4 frame of the
+    reference): their gravity torques about J2 and J3 are a combination of ``link_mass_torques``' columns (to
+    rounding); the lever form's points (``lever_torques``) leave a visible part of them."""
+    kin = irb2600()
+    rng = np.random.default_rng(12)
+    q = np.radians(rng.uniform(-90, 90, (60, 6)))
+    g = np.array([0.0, 0.0, -9.80665])
+    bodies = [(m, rng.uniform(0.5, 20.0), rng.uniform(-150.0, 150.0, 3)) for m in range(1, 6) for _ in range(2)]
+    tau = np.zeros((len(q), 2))
+    for k, qk in enumerate(q):
+        frames = _frames_reference(kin, qk)
+        for col, j in enumerate((1, 2)):
+            o_j, z_j = frames[j][:3, 3], frames[j][:3, 2]
+            for link, mass, p_link in bodies:
+                if link >= j:
+                    p = frames[link + 1][:3, :3] @ p_link + frames[link + 1][:3, 3]
+                    tau[k, col] += mass * np.dot(np.cross(p - o_j, g), z_j) / 1000.0
+    links = gravity.link_mass_torques(kin, q, (2, 3))
+    levers = gravity.lever_torques(kin, q, (2, 3))
+
+    def left(cols, t):
+        return np.linalg.norm(t - cols @ np.linalg.lstsq(cols, t, rcond=None)[0]) / np.linalg.norm(t)
+    for col, j in enumerate((2, 3)):
+        assert left(links[j][0], tau[:, col]) < 1e-9
+        assert left(levers[j][0], tau[:, col]) > 1e-3
 
 
 @pytest.mark.parametrize("g_base", [(0.0, 0.0, -1.0), (0.3, -1.0, 0.2)])
