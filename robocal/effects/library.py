@@ -272,12 +272,13 @@ def _follows_place(clock: np.ndarray, p_base_mm, opt: LibraryOptions) -> float |
     return r2 if r2 > opt.clock_place_max_r2 else None
 
 
-REFINED_FORMS = ("levers", "links")   # gravity compliance's free mass distributions offered once it is taken
+REFINED_FORMS = ("levers",)   # gravity compliance's free mass distributions offered once it is taken
 
 
 def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
-    """Candidates that refine an accepted effect: the free mass distributions of gravity compliance
-    (``REFINED_FORMS``: the lever points, the links' complete gravity regressor)."""
+    """Candidates that refine an accepted effect: the free mass distribution of gravity compliance
+    (``REFINED_FORMS``: the lever points; the links' complete gravity regressor is not offered by default, since the
+    ninth protocol of ``bench/bench_links_form.py`` did not keep it, and is taken by config)."""
     opts = dict(choice.options)
     if choice.name == "joint_compliance" and opts.get("form", "gravity") == "gravity":
         return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", form),

@@ -34,6 +34,8 @@ from .model import EffectChoice
 TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a held-out RMS gain > 2 % ...
 LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain concentrated on few poses has a
 #                                    heavy-tailed per-point difference: its t understates how unlikely it is)
+REPRUNE_FROM_OFFERED = True   # before the final check, every taken effect's parts are judged again from the effect
+#                               as offered, given all the others (issue 32, tenth protocol)
 RANK_Z = 2.0    # ... or, with a gain > 10 %, on a signed-rank z > 2 (the large-gain rule's level, read from the ranks:
 #                 a gain over most poses that a few far poses' large differences hide from the t); None: t alone.
 #                 The same evidence keeps a part or an effect (issue 32, seventh protocol)
@@ -242,12 +244,10 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         step.choice = reduced
         steps.append(step)
         pool += [r for r in refinements(c, n) if r in design.cols and r not in pool]
+    if REPRUNE_FROM_OFFERED:
+        _reprune(errors, design, model, steps, n, from_offered=True)
     dropped = _final_check(errors, model, steps)
-    for i, (c, _, full) in enumerate(model):            # parts the later effects made unnecessary
-        step = next(s for s in steps if s.choice is c)
-        reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], c, full, step, n)
-        model[i] = (reduced, design.sub(full, reduced, n), full)
-        step.choice = reduced
+    _reprune(errors, design, model, steps, n, from_offered=False)
     absorbed = {c.label: cv.absorbed(design.cols[c], design.geo) for c in candidates}
     shadowed = {}
     for c in candidates:
@@ -333,6 +333,19 @@ def _prune(errors, design, model, choice, full, step, n):
             return choice, se
         t, label, choice, se = best
         step.pruned.append((label, t))
+
+
+def _reprune(errors, design, model, steps, n, from_offered: bool) -> None:
+    """Every taken effect's parts judged again given all the others (in place): from the effect as offered (a part
+    pruned while a larger effect was still unmodelled comes back when it is needed), or from its pruned state (the
+    parts the later effects made unnecessary)."""
+    for i, (c, _, full) in enumerate(model):
+        step = next(s for s in steps if s.choice is c)
+        if from_offered:
+            step.pruned.clear()
+        reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], full if from_offered else c, full, step, n)
+        model[i] = (reduced, design.sub(full, reduced, n), full)
+        step.choice = reduced
 
 
 def _final_check(errors, model, steps) -> list[tuple[str, float]]:
