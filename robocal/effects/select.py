@@ -12,8 +12,9 @@ t >= 2, or pass the rank rule); refinements of it
 track, a gear's teeth: two periods over the joint's span up to 40 per revolution) are one candidate per joint, a
 scan: in every fold the order that fits the training rows best predicts the held-out rows, so the pick among many
 orders is cross-validated too (nested); the order taken is the one that fits all rows best. At the end every taken
-effect must still be needed given the others (removing it costs t >= 2 and >= 1 % of RMS, or passes the rank
-rule), else it is dropped.
+effect's parts are judged again from the effect as offered, given all the others (a part pruned while a larger
+effect was unmodelled comes back); then every taken effect must still be needed given the others (removing it costs
+t >= 2 and >= 1 % of RMS, or passes the rank rule), else it is dropped, and the parts are pruned once more.
 Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a plausible
 one before an implausible best), and never drops an effect; consistency is reported, never used here.
 """
@@ -35,7 +36,7 @@ TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a 
 LARGE_T, LARGE_GAIN = 2.0, 0.10    # ... or on t > 2 with a gain > 10 % (a gain concentrated on few poses has a
 #                                    heavy-tailed per-point difference: its t understates how unlikely it is)
 REPRUNE_FROM_OFFERED = True   # before the final check, every taken effect's parts are judged again from the effect
-#                               as offered, given all the others (issue 32, tenth protocol)
+#                               as offered, given all the others (issue 32, tenth protocol: kept)
 RANK_Z = 2.0    # ... or, with a gain > 10 %, on a signed-rank z > 2 (the large-gain rule's level, read from the ranks:
 #                 a gain over most poses that a few far poses' large differences hide from the t); None: t alone.
 #                 The same evidence keeps a part or an effect (issue 32, seventh protocol)

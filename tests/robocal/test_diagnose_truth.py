@@ -105,6 +105,17 @@ def test_compliance_is_not_vetoed_next_to_misalignment_and_a_gear_term():
 
 
 @pytest.mark.system
+def test_a_part_pruned_before_a_larger_effect_was_taken_comes_back():
+    """Lag + compliance, seed 6087 (the tenth protocol's breakdown): the lag is taken first and its J2 part looked
+    unneeded while the larger compliance was unmodelled. Judged again from the lag as offered once compliance is in,
+    J2 comes back, and no backlash takes its share; the test error reaches the noise floor."""
+    t = run_trial("lag_compliance", FORMS["lag_compliance"][0], 6087)
+    lag = t.diagnosed_joints[t.diagnosed.index("readback_lag")]
+    assert tuple(lag) == (1, 2, 3) and not t.lag_as_backlash, (t.diagnosed, t.diagnosed_joints)
+    assert t.final_test_rms_mm < 1.2 * t.noise_floor_mm
+
+
+@pytest.mark.system
 def test_reduced_self_check():
     """One seed per effect and per form, 3 controls, 2 two-effect cases, 1 out-of-library case."""
     result = run_self_check(seeds=1, controls=3, combos=2, outside=1)
