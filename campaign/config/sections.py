@@ -167,7 +167,7 @@ def _model_effects(r: Reader) -> str | tuple[EffectSpec, ...]:
         return r.choice("effects", ("auto", "none"), "auto")
     specs = _effects(r, MODEL_EFFECTS)
     where = r.child_list("effects")
-    from robocal.effects.bases import FACTORY_KEYS
+    from robocal.effects.bases import FACTORY_KEYS, by_name
 
     for i, spec in enumerate(specs):
         for key in spec.params:
@@ -176,6 +176,10 @@ def _model_effects(r: Reader) -> str | tuple[EffectSpec, ...]:
                                   f"{spec.name} (expected one of: {', '.join(sorted(FACTORY_KEYS[spec.name])) or 'none'})")
         if spec.scale != 1.0:
             raise ConfigError(r.file, where.key_path(i) + ".scale", "scale applies to simulated effects only")
+        try:                                   # a value the factory refuses (a form, a joint list) fails here, not
+            by_name(spec.name, **dict(spec.params))         # after the measurements
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(r.file, f"{where.key_path(i)}.params", str(exc).splitlines()[0]) from None
     return specs
 
 

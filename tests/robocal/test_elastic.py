@@ -446,3 +446,19 @@ def test_beyond_max_rows_the_choices_are_those_of_a_seeded_subset_and_say_so():
     few = capped_rows(len(cal), 100)
     same = choose_layer(model, q[few], p[few], meta_rows(meta, few))
     assert lay.rows == (100, len(cal)) and lay.cv == same.cv and lay.to_dict()["of_rows"] == len(cal)
+
+
+@pytest.mark.unit
+def test_a_model_with_the_link_form_round_trips_through_json():
+    """A model whose compliance has the link form (taken by config) predicts the same after model.json."""
+    kin = irb2600().with_(T_tracker_base=T_SEED000)
+    choice = EffectChoice("joint_compliance", (("joints", (2, 3)), ("form", "links")))
+    eff = choice.build(kin.n)
+    values = np.asarray(eff.typical) * np.random.default_rng(8).uniform(-2.0, 2.0, eff.k)
+    model = CalibratedModel(kin, None, None, (FittedEffect(choice, values, np.full(eff.k, np.nan), eff.param_names,
+                                                           eff.unit),))
+    back = CalibratedModel.from_dict(json.loads(json.dumps(model.to_dict())))
+    q = np.random.default_rng(9).uniform(-1.0, 1.0, (50, 6))
+    meta = {"payload_kg": np.full(50, 5.0)}
+    assert np.max(np.abs(model.smr_tracker(q, meta) - smr_tracker(kin, q))) > 0.01
+    np.testing.assert_allclose(back.smr_tracker(q, meta), model.smr_tracker(q, meta), atol=1e-9)

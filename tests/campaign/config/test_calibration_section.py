@@ -35,6 +35,8 @@ def test_effect_list_is_parsed(tmp_path):
     ("effects", [{"name": "axis_coupling", "params": {"tau_s": 4}}], "calibration.effects[0].params.tau_s",
      "expected one of: joints"),
     ("effects", [{"name": "backlash", "scale": 2}], "calibration.effects[0].scale", "simulated effects only"),
+    ("effects", [{"name": "joint_compliance", "params": {"form": "linkz"}}], "calibration.effects[0].params",
+     "unknown compliance form 'linkz'"),
     ("outliers", "igg3", "calibration.outliers", "local, none"),
     ("residual", "krige", "calibration.residual", "auto"),
     ("cv_folds", 1, "calibration.cv_folds", "[2, 20]"),
