@@ -117,13 +117,12 @@ def link_mass_torques(kin: Kinematics, q_rad: np.ndarray, joints, gravity_base=(
     columns only (its origin and axis give no torque about itself)."""
     q = np.atleast_2d(q_rad)
     origin, axes = link_frames(kin, q)
-    c_axis = chain(kin, q, full=False).axis
     g = np.asarray(gravity_base, float)
     force = G_MM_S2 * g / np.linalg.norm(g)
     out = {}
     for joint in joints:
         j = joint - 1
-        lever = np.cross(force, c_axis[:, j])                   # tau = (p - o_j) . (F x a_j) / 1000 for a kg at p
+        lever = np.cross(force, axes[:, j, :, 0])               # tau = (p - o_j) . (F x a_j) / 1000 for a kg at p
         to = np.einsum("nik,nk->ni", origin[:, j:] - origin[:, j:j + 1], lever) / 1000.0
         ta = np.einsum("nikm,nk->nim", axes[:, j:], lever) * (LINK_OFFSET_MM / 1000.0)
         cols = np.concatenate([to[:, :, None], ta], axis=2).reshape(len(q), -1)[:, 2:]    # own link: y, z only
