@@ -61,32 +61,25 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.effects.library as library  # noqa: E402
-from switch_protocol import arguments, run  # noqa: E402
+from switch_protocol import arguments, run, switch  # noqa: E402
 
 SELF_CHECK_SEED = 6000
 
 
-def links_off():
-    """The default process without the link form (the lever form the only refinement), as a context."""
-    return mock.patch.object(library, "REFINED_FORMS", ("levers",))
-
-
-def links_on():
-    """The change judged: both forms offered (main offers the lever form alone since this protocol's outcome)."""
-    return mock.patch.object(library, "REFINED_FORMS", ("levers", "links"))
+# without: the lever form the only refinement; with (the change judged): both forms offered (main offers the lever
+# form alone since this protocol's outcome)
+links_off, links_on = switch(library, "REFINED_FORMS", ("levers",), ("levers", "links"))
 
 
 def main() -> None:
     args = arguments(__doc__, (28, 29, 30), SELF_CHECK_SEED, ("i", "ii")).parse_args()
-    with links_on():
-        run(args, links_off, "link form", "ii")
+    run(args, links_off, "link form", "ii", on=links_on)
 
 
 if __name__ == "__main__":

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -59,14 +58,12 @@ import robocal.effects.select as select  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from select_forms import ADAPTIVE_FORMS  # noqa: E402
 from select_replay import rms_off_on  # noqa: E402
-from switch_protocol import arguments, line, run  # noqa: E402
+from switch_protocol import arguments, line, run, switch  # noqa: E402
 
 SELF_CHECK_SEED = 5000
 
 
-def rank_off():
-    """The default process without the rank rule (today's selection), as a context."""
-    return mock.patch.object(select, "RANK_Z", None)
+rank_off, _ = switch(select, "RANK_Z", None, select.RANK_Z)   # the default process without the rank rule
 
 
 def part_ii(tmp: Path, parts) -> None:

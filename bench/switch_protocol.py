@@ -12,6 +12,7 @@ import sys
 import tempfile
 from contextlib import nullcontext
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -25,6 +26,11 @@ from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
 from select_replay import rms_off_on  # noqa: E402
 
 UR5 = "UR5 campaign"
+
+
+def switch(module, attr: str, off_value, on_value):
+    """(off, on): context factories that set ``module.attr`` to the value without and with the change judged."""
+    return (lambda: mock.patch.object(module, attr, off_value)), (lambda: mock.patch.object(module, attr, on_value))
 
 
 def line(label, off, on) -> None:
@@ -105,9 +111,14 @@ def arguments(doc: str, seeds, first_seed: int, parts) -> argparse.ArgumentParse
     return ap
 
 
-def run(args, off, what: str, checks_part: str, extra=None) -> None:
-    """The protocol's parts as the arguments ask: "i" the forms, ``checks_part`` the self-check, ``extra(tmp)`` any
-    other part; or judge the --combine'd figures."""
+def run(args, off, what: str, checks_part: str, extra=None, on=nullcontext) -> None:
+    """The protocol's parts as the arguments ask, inside ``on()`` (the change judged): "i" the forms,
+    ``checks_part`` the self-check, ``extra(tmp, parts)`` any other part; or judge the --combine'd figures."""
+    with on():
+        _run(args, off, what, checks_part, extra)
+
+
+def _run(args, off, what, checks_part, extra) -> None:
     if args.combine:
         parts = [json.loads(p.read_text()) for p in args.combine]
         figs = {f: [{k: tuple(v) for k, v in per.items()} for per in v] for p in parts for f, v in p["i"].items()}
