@@ -230,7 +230,7 @@ def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer
     cal, test, check = ds.mask("calib"), ds.mask("test"), ds.mask("check")
     q, p, kept = np.radians(ds.q_deg), ds.p_tracker_mm, stage.kept_rows
     qk, pk = q[kept], p[kept]
-    payload = _varying_payload(ds, cal) if c.residual in ("gpr", "auto") else None
+    payload = _varying_payload(ds, cal) if c.residual in ("gpr", "trend_gpr", "auto") else None
     pay_k = None if payload is None else payload[kept]
     repeats = noise_floor_from_repeats(ds.q_deg[check], p[check]) if check.any() else None
     specs = cell.noise_floor_mm(p[test if test.any() else cal])

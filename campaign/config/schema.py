@@ -181,7 +181,7 @@ class CalibrationConfig:
     ``effects``: ``auto`` (forward selection of physical effects by k-fold CV on the calibration points),
     ``none``, or a list of effect specs (``name`` in ``robocal.effects.bases.MODEL_EFFECTS``, optional ``params`` with the
     factory's keys: joints, joint, harmonics, tau_s, link_masses_kg) that become parameters of the model.
-    ``residual`` ``auto`` chooses none / idw / gpr / joint_gp by k-fold CV and keeps a layer only when it beats
+    ``residual`` ``auto`` chooses none / idw / gpr / joint_gp / trend_gpr by k-fold CV and keeps a layer only when it beats
     none by more than one standard error of the CV difference.
 
     ``residual`` (one of ``values.RESIDUAL_MODELS``) is the layer fitted on top of
@@ -191,7 +191,10 @@ class CalibrationConfig:
     when it varies across the calibration points; the report gives the
     predictive standard deviation of every test point), ``joint_gp`` one
     angle-error curve per joint (a GP over that joint's angle) moved to the
-    SMR through the Jacobian (``robocal.layers.joint_gp``), ``none`` no layer.
+    SMR through the Jacobian (``robocal.layers.joint_gp``), ``trend_gpr`` a
+    quadratic trend over the workspace (base frame) and the GPR on what it
+    leaves (``robocal.layers.trend``; ``auto`` offers it up to 3000
+    calibration rows), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
 
     ``joints`` (one of ``values.JOINT_SETS``, default auto) which joint values drive

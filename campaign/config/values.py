@@ -10,7 +10,7 @@ from typing import Any
 CONVENTIONS = ("dh", "mdh")
 CALIBRATION_METHODS = ("robust_ridge", "lm")
 WEIGHT_FUNCTIONS = ("igg3", "huber", "none")
-RESIDUAL_MODELS = ("idw", "gpr", "joint_gp", "none", "auto")
+RESIDUAL_MODELS = ("idw", "gpr", "joint_gp", "trend_gpr", "none", "auto")
 OUTLIER_SCREENS = ("local", "none")
 JOINT_SETS = ("auto", "commanded", "readback")
 PLAN_ORDERS = ("serpentine", "random")

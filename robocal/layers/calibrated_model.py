@@ -22,9 +22,11 @@ from .gp_layer import GPRResidual
 from .joint_gp import JointGPResidual
 from robocal.identify.parameters import ParameterTable
 from .idw import IDWResidual
+from .trend import TrendGPRResidual
 
 FORMAT = "robocal-model/1"
-RESIDUAL_KINDS = {"idw": IDWResidual, "gpr": GPRResidual, "joint_gp": JointGPResidual}
+RESIDUAL_KINDS = {"idw": IDWResidual, "gpr": GPRResidual, "joint_gp": JointGPResidual,
+                  "trend_gpr": TrendGPRResidual}
 
 
 @dataclass(frozen=True, eq=False)

@@ -28,9 +28,10 @@ from .joint_gp import JointGPResidual, fit_joint_gp
 from .calibrated_model import CalibratedModel
 from .idw import IDWResidual
 from .sparse_gp import EXACT_MAX_POINTS, SparseGP
+from .trend import TREND_MAX_ROWS, fit_trend_gpr
 from robocal.measure.stats import paired_gain
 
-LAYER_KINDS = ("idw", "gpr", "joint_gp")
+LAYER_KINDS = ("idw", "gpr", "joint_gp", "trend_gpr")
 
 
 def layer_targets(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None
@@ -71,6 +72,9 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
         return GPRResidual(gp, payload_kg is not None, None)
     if kind == "joint_gp":
         return fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm)[0]
+    if kind == "trend_gpr":
+        return fit_trend_gpr(q_rad, layer_targets(model, q_rad, p_tracker_mm, meta)[0], e, payload_kg, seed,
+                             noise_floor_mm)[0]
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
 
@@ -113,6 +117,9 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
     if kind == "joint_gp":
         layer, err = fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm, fold)
         return (np.sum(e**2, axis=1), None) if layer is None else (np.sum(err**2, axis=1), layer)
+    if kind == "trend_gpr":
+        layer, err = fit_trend_gpr(q_rad, p_kin, e, payload_kg, seed, noise_floor_mm, fold)
+        return np.sum(err**2, axis=1), layer
     raise ValueError(f"unknown residual layer {kind!r}")
 
 
@@ -142,6 +149,8 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
     cv = {"none": {"cv_rms_mm": float(np.sqrt(np.mean(se0)))}}
     best = ("none", None, float(np.sqrt(np.mean(se0))))
     for kind in candidates:
+        if kind == "trend_gpr" and len(q) > TREND_MAX_ROWS:
+            continue                                    # offered with few rows only (robocal.layers.trend)
         se, layer = cv_squared_errors(kind, model, q, p_tracker_mm, fold, **kw)
         g = paired_gain(se0, se)
         cv[kind] = {"cv_rms_mm": g.rms_cand_mm, "gain": g.gain, "t": g.t, "significant": g.significant,
