@@ -71,6 +71,8 @@ def layer_line(lay: LayerSummary) -> str:
                else f"inducing-point GP, {lay.n_inducing} inputs")
         if lay.joint_curve_rms_arcsec:
             how += " (" + ", ".join(f"{j} {v:.0f}\"" for j, v in lay.joint_curve_rms_arcsec.items()) + " RMS)"
+        if lay.trend_rms_mm is not None:
+            how = f"quadratic trend {_mm(lay.trend_rms_mm)} mm RMS, then {how}"
         gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {floor_mm(lay.noise_floor_mm)} mm)"
     return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "
             f"points, not an accuracy; CV-predicted held-out RMS {_mm(lay.cv_predicted_rms_mm)} mm "

@@ -28,7 +28,7 @@ from .joint_gp import JointGPResidual, fit_joint_gp
 from .calibrated_model import CalibratedModel
 from .idw import IDWResidual
 from .sparse_gp import EXACT_MAX_POINTS, SparseGP
-from .trend import TREND_MAX_ROWS, fit_trend_gpr
+from .trend import TREND_MAX_ROWS, TrendGPRResidual, fit_trend_gpr
 from robocal.measure.stats import paired_gain
 
 LAYER_KINDS = ("idw", "gpr", "joint_gp", "trend_gpr")
@@ -177,6 +177,8 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
         out.update(approximation=lay.approximation, n_train=int(lay.n_train), n_inducing=None,
                    noise_mm=float(np.sqrt(3) * lay.noise_mm), noise_floor_mm=lay.noise_floor_mm,
                    joint_curve_rms_arcsec=arcsec)
+    if isinstance(choice.layer, TrendGPRResidual):
+        out.update(trend_rms_mm=choice.layer.trend.fit_rms_mm)
     if gp is not None:
         out.update(approximation=gp.kind, n_train=int(gp.n_train),
                    n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,

@@ -5,7 +5,9 @@ A GP over six joint angles learns little from a few dozen poses; a smooth error 
 with the reach, a slow scale or tilt of the cell) is carried by ten coefficients per base-frame axis, which 50 poses
 determine. The trend is a least-squares fit of ``1, x, y, z, x^2, y^2, z^2, xy, xz, yz`` (metres about the training
 centroid) to the residuals at the model's SMR positions, minimum-norm where the poses leave a direction undetermined
-(a planar grid); the GP then models what is left. Offered to the CV choice like every layer (``choice.choose_layer``)
+(a planar grid); the GP then models what is left. A quadratic grows without bound away from its data, so the trend
+is evaluated at the nearest point of the box of its fitted positions widened by ``TREND_MARGIN`` of its size on
+each side: beyond it, the trend is held at its value on that box's face. Offered to the CV choice like every layer (``choice.choose_layer``)
 up to ``TREND_MAX_ROWS`` calibration rows: beyond, the GP layers alone have the poses to learn the same structure.
 """
 from __future__ import annotations
@@ -19,6 +21,7 @@ from .gp_layer import GPRResidual, gp_inputs
 
 TREND_TERMS = ("1", "x", "y", "z", "x^2", "y^2", "z^2", "xy", "xz", "yz")
 TREND_MAX_ROWS = 3000           # offered up to this many calibration rows (robocal.layers.sparse_gp.EXACT_MAX_POINTS)
+TREND_MARGIN = 0.1              # the trend is held constant beyond its data's box widened by this fraction per side
 
 
 def trend_features(p_base_mm: np.ndarray, centre_mm: np.ndarray) -> np.ndarray:
@@ -30,23 +33,33 @@ def trend_features(p_base_mm: np.ndarray, centre_mm: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class QuadraticTrend:
     """A quadratic field over the base frame: residual (N, 3) mm = ``trend_features(p) @ coef_mm`` (coef_mm (10, 3),
-    mm per m^k of each term)."""
+    mm per m^k of each term), evaluated inside the box lo_mm..hi_mm (3,) (positions beyond are moved to its face);
+    ``fit_rms_mm`` its 3-D RMS over the rows it was fitted on (its size, for the report)."""
     centre_mm: np.ndarray
     coef_mm: np.ndarray
+    lo_mm: np.ndarray
+    hi_mm: np.ndarray
+    fit_rms_mm: float | None = None
 
     @classmethod
     def fit(cls, p_base_mm: np.ndarray, e_base_mm: np.ndarray) -> "QuadraticTrend":
         """Least squares (minimum norm where undetermined) of residuals e_base_mm (N, 3) at p_base_mm (N, 3)."""
         p = np.atleast_2d(np.asarray(p_base_mm, float))
         centre = p.mean(axis=0)
-        coef = np.linalg.lstsq(trend_features(p, centre), np.asarray(e_base_mm, float), rcond=1e-8)[0]
-        return cls(centre, coef)
+        F = trend_features(p, centre)
+        coef = np.linalg.lstsq(F, np.asarray(e_base_mm, float), rcond=1e-8)[0]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        margin = TREND_MARGIN * (hi - lo)
+        return cls(centre, coef, lo - margin, hi + margin, float(np.sqrt(np.mean(np.sum((F @ coef) ** 2, axis=1)))))
 
     def predict(self, p_base_mm: np.ndarray) -> np.ndarray:
-        return trend_features(p_base_mm, self.centre_mm) @ self.coef_mm
+        """The trend (N, 3) mm at base-frame positions p_base_mm (N, 3), held at the box's face beyond it."""
+        p = np.clip(np.atleast_2d(np.asarray(p_base_mm, float)), self.lo_mm, self.hi_mm)
+        return trend_features(p, self.centre_mm) @ self.coef_mm
 
     def to_dict(self) -> dict:
-        return {"terms": list(TREND_TERMS), "centre_mm": self.centre_mm.tolist(), "coef_mm": self.coef_mm.tolist()}
+        return {"terms": list(TREND_TERMS), "centre_mm": self.centre_mm.tolist(), "coef_mm": self.coef_mm.tolist(),
+                "lo_mm": self.lo_mm.tolist(), "hi_mm": self.hi_mm.tolist(), "fit_rms_mm": self.fit_rms_mm}
 
     @classmethod
     def from_dict(cls, d: dict) -> "QuadraticTrend":
@@ -55,7 +68,9 @@ class QuadraticTrend:
         coef = np.asarray(d["coef_mm"], float)
         if coef.shape != (len(TREND_TERMS), 3):
             raise ValueError(f"trend coef_mm has shape {coef.shape}, expected ({len(TREND_TERMS)}, 3)")
-        return cls(np.asarray(d["centre_mm"], float).reshape(3), coef)
+        rms = d.get("fit_rms_mm")
+        box = [np.asarray(d[k], float).reshape(3) for k in ("centre_mm", "lo_mm", "hi_mm")]
+        return cls(box[0], coef, box[1], box[2], None if rms is None else float(rms))
 
 
 @dataclass(frozen=True, eq=False)
