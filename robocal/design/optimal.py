@@ -26,9 +26,9 @@ from robocal.effects.bases import effect_regressor
 from robocal.effects.model import EffectChoice
 from robocal.effects.library import candidates
 from robocal.identify.identification import analyse_identifiability, priority_order
+from robocal.identify.parameters import geometric_prior_sigma
 from robocal.kinematics.models import Kinematics, ParamLayout, identification_jacobian, joint_motion_columns
 
-GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3, "mm/mm": 1.0e-3}   # prior std by unit (1 mm, 1 mrad, a track 1 mm/m)
 
 
 def whiten_rows(J: np.ndarray, cov_mm2: np.ndarray | None) -> np.ndarray:
@@ -43,11 +43,6 @@ def information_rows(J: np.ndarray, cov_mm2: np.ndarray | None, prior_sigma: np.
     """Whitened rows (N, 3, L) of the columns J (N, 3, L), each scaled by its prior std (L,) (unit information
     prior in these units)."""
     return whiten_rows(J, cov_mm2) * np.asarray(prior_sigma, float)
-
-
-def geometric_prior_sigma(units) -> np.ndarray:
-    """Prior std per geometric parameter from its unit ("mm" or "rad")."""
-    return np.array([GEOMETRIC_PRIOR[u] for u in units], float)
 
 
 # ---------------------------------------------------------------- D-optimal selection

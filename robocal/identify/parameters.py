@@ -17,8 +17,14 @@ import numpy as np
 from robocal.kinematics.models import Kinematics, ParamLayout, parameter_difference
 
 GEOMETRY = "geometry"
+GEOMETRIC_PRIOR = {"mm": 1.0, "rad": 1.0e-3, "mm/mm": 1.0e-3}   # prior std by unit (1 mm, 1 mrad, a track 1 mm/m)
 GEOMETRY_AND_EFFECTS = "geometry + physical effects"
 """The fits a table comes from: the geometric identification, or the joint fit of the geometry and the effects."""
+
+
+def geometric_prior_sigma(units) -> np.ndarray:
+    """Prior std per geometric parameter from its unit ("mm", "rad" or "mm/mm")."""
+    return np.array([GEOMETRIC_PRIOR[u] for u in units], float)
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,14 @@ def layer_targets(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nd
     return p_kin, p_meas, p_meas - p_kin
 
 
+def identified_geometry(model: CalibratedModel) -> dict:
+    """``fit_trend_gpr``'s geometry keywords: the model's kinematics and the names of its identified geometric
+    parameters (none when the model carries no parameter table)."""
+    table = model.parameters
+    names = () if table is None else tuple(r.name for r in table.rows if r.identified)
+    return {"kinematics": model.kinematics, "names": names}
+
+
 def fit_gp(X: np.ndarray, Y: np.ndarray, seed: int = 0, noise_floor_mm: float | None = None):
     """The layer's GP of inputs X (N, d) and residuals Y (N, 3) mm: exact (``MultiOutputGP.fit_subset``) up to
     ``EXACT_MAX_POINTS`` points, the inducing-point ``SparseGP`` above; noise bounded below by the floor."""
@@ -74,7 +82,7 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
         return fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm)[0]
     if kind == "trend_gpr":
         return fit_trend_gpr(q_rad, layer_targets(model, q_rad, p_tracker_mm, meta)[0], e, payload_kg, seed,
-                             noise_floor_mm)[0]
+                             noise_floor_mm, **identified_geometry(model))[0]
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
 
@@ -118,7 +126,8 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
         layer, err = fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm, fold)
         return (np.sum(e**2, axis=1), None) if layer is None else (np.sum(err**2, axis=1), layer)
     if kind == "trend_gpr":
-        layer, err = fit_trend_gpr(q_rad, p_kin, e, payload_kg, seed, noise_floor_mm, fold)
+        layer, err = fit_trend_gpr(q_rad, p_kin, e, payload_kg, seed, noise_floor_mm, fold,
+                                   **identified_geometry(model))
         return np.sum(err**2, axis=1), layer
     raise ValueError(f"unknown residual layer {kind!r}")
 
