@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.design.adaptive import Batch, KernelTerm, LinearTerm
-from robocal.design.optimal import geometric_prior_sigma, whiten_rows
+from robocal.design.optimal import whiten_rows
+from robocal.identify import geometric_prior_sigma
 from robocal.effects.bases import effect_regressor
 from robocal.layers.gp import MultiOutputGP
 from robocal.layers.gp_layer import GPRResidual, gp_inputs

@@ -8,7 +8,7 @@ from robocal import lazy_exports
 _HOMES = {                      # module -> the public names it holds
     "adaptive": ("Batch", "Coverage", "KernelTerm", "LinearTerm", "choose_batch", "learning_curve"),
     "optimal": ("Criterion", "Forecast", "criterion", "criterion_effects", "d_optimal", "design_columns", "forecast",
-                "geometric_prior_sigma", "greedy_order", "lever_scaled", "prediction", "short_tour", "space_filling",
+                "greedy_order", "lever_scaled", "prediction", "short_tour", "space_filling",
                 "whiten_rows"),
     "pool": ("candidate_poses", "incidence_rad", "smr_base_and_axis", "tilted_rotations"),
 }

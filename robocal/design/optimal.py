@@ -26,7 +26,7 @@ from robocal.effects.bases import effect_regressor
 from robocal.effects.model import EffectChoice
 from robocal.effects.library import candidates
 from robocal.identify.identification import analyse_identifiability, priority_order
-from robocal.identify.parameters import geometric_prior_sigma
+from robocal.identify import geometric_prior_sigma
 from robocal.kinematics.models import Kinematics, ParamLayout, identification_jacobian, joint_motion_columns
 
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.identify.parameters import geometric_prior_sigma
+from robocal.identify import geometric_prior_sigma
 from robocal.kinematics.models import Kinematics, ParamLayout, identification_jacobian
 from .gp import MultiOutputGP
 from .gp_layer import GPRResidual, gp_inputs
