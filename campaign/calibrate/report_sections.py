@@ -66,7 +66,7 @@ class PredictiveStd:
 
 _GP_KEYS = ("approximation", "n_train", "n_inducing", "noise_mm", "noise_floor_mm")
 _CURVES = "joint_curve_rms_arcsec"
-_TREND = "trend_rms_mm"
+_TREND = ("trend_rms_mm", "geometry_shift_rms_mm")
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,7 @@ class LayerSummary:
     noise_floor_mm: float | None = None
     joint_curve_rms_arcsec: Mapping[str, float] | None = None     # joint GP: each joint's curve, RMS over its range
     trend_rms_mm: float | None = None          # trend + GPR: the quadratic trend's 3-D RMS over the calibration rows
+    geometry_shift_rms_mm: float | None = None  # trend + GPR: the geometry change's displacement, the same RMS
 
     def to_dict(self) -> dict:
         out = record_dict(self)
@@ -95,8 +96,9 @@ class LayerSummary:
                 del out[key]
         if self.joint_curve_rms_arcsec is None:
             del out[_CURVES]
-        if self.trend_rms_mm is None:
-            del out[_TREND]
+        for key in _TREND:
+            if out[key] is None:
+                del out[key]
         return out
 
     @classmethod
@@ -104,8 +106,7 @@ class LayerSummary:
         gp = {k: get_field(d, k, True) for k in _GP_KEYS} if "approximation" in d else {}
         if _CURVES in d:
             gp[_CURVES] = object_field(d, _CURVES)
-        if _TREND in d:
-            gp[_TREND] = figure_field(d, _TREND)
+        gp.update({k: figure_field(d, k) for k in _TREND if k in d})
         return cls(text_field(d, "kind"), figure_field(d, "calib_rms_mm"), figure_field(d, "cv_predicted_rms_mm"),
                    count_field(d, "folds"), figure_field(d, "test_rms_mm"), text_field(d, "note", True) or "", **gp)
 

@@ -187,7 +187,9 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
                    noise_mm=float(np.sqrt(3) * lay.noise_mm), noise_floor_mm=lay.noise_floor_mm,
                    joint_curve_rms_arcsec=arcsec)
     if isinstance(choice.layer, TrendGPRResidual):
-        out.update(trend_rms_mm=choice.layer.trend.fit_rms_mm)
+        shift = choice.layer.shift
+        out.update(trend_rms_mm=choice.layer.trend.fit_rms_mm,
+                   **({} if shift is None else {"geometry_shift_rms_mm": shift.fit_rms_mm}))
     if gp is not None:
         out.update(approximation=gp.kind, n_train=int(gp.n_train),
                    n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,

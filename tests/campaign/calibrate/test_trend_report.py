@@ -1,6 +1,6 @@
 """The trend + GPR layer in the calibration: its summary (the trend's size, then the GP) survives report.json and the
 terminal line names it; on a truth campaign whose sag is outside the effect library, the default process chooses it
-and predicts the held-out poses better than without it, and model.json reloads it."""
+(with the geometry change it fits), predicts the held-out poses better than without it, and model.json reloads it."""
 from __future__ import annotations
 
 from unittest import mock
@@ -53,4 +53,7 @@ def test_chosen_on_a_sag_outside_the_library_and_better_held_out(tmp_path):
     again = CalibratedModel.from_dict(res.model.to_dict())
     q = np.radians(ds.q_deg[ds.mask("test")])
     np.testing.assert_allclose(again.smr_tracker(q), res.model.smr_tracker(q), atol=1e-9)
-    assert res.report.final.layer.trend_rms_mm > 0.01
+    lay = res.report.final.layer
+    assert lay.trend_rms_mm > 0.01 and lay.geometry_shift_rms_mm > 0.0
+    assert LayerSummary.from_dict(lay.to_dict()) == lay
+    assert "with a geometry change of 0." in layer_line(lay)
