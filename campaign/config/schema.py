@@ -192,9 +192,10 @@ class CalibrationConfig:
     predictive standard deviation of every test point), ``joint_gp`` one
     angle-error curve per joint (a GP over that joint's angle) moved to the
     SMR through the Jacobian (``robocal.layers.joint_gp``), ``trend_gpr`` a
-    quadratic trend over the workspace (base frame) and the GPR on what it
-    leaves (``robocal.layers.trend``; ``auto`` offers it up to 3000
-    calibration rows), ``none`` no layer.
+    quadratic trend over the workspace (base frame) fitted with a linearised
+    change of the identified geometry, and the GPR on what they leave
+    (``robocal.layers.trend``; ``auto`` offers it up to 3000 calibration
+    rows), ``none`` no layer.
     ``idw_*`` apply to ``idw`` only.
 
     ``joints`` (one of ``values.JOINT_SETS``, default auto) which joint values drive

@@ -2,8 +2,9 @@
 
 ``layer_targets`` gives, for calibration points, the measured SMR positions and the residuals measured - model in
 the robot base frame (kinematic layer with its physical effects). ``fit_layer`` fits an IDW (seed 000), GPR
-(seed 003) or joint-error GP (``robocal.layers.joint_gp``: one angle-error curve per joint) layer on them.
-``choose_layer`` compares none / IDW / GPR / joint GP by k-fold CV on the calibration points (the
+(seed 003), joint-error GP (``robocal.layers.joint_gp``: one angle-error curve per joint) or trend + GPR
+(``robocal.layers.trend``: a quadratic trend with a linearised change of the geometry) layer on them.
+``choose_layer`` compares none / IDW / GPR / joint GP / trend + GPR by k-fold CV on the calibration points (the
 kinematic layer fixed) and keeps a layer when its CV gain over none passes the one-standard-error rule (one-sided
 paired t of the per-point squared errors > 1 and CV RMS lower by > 2 %, ``robocal.measure.stats.paired_gain``): the layer
 is chosen for prediction and claims no cause, so the stricter test of a claim (t > 3) is only reported. With a
@@ -70,7 +71,7 @@ def gp_cv_errors(gp, X: np.ndarray, Y: np.ndarray, fold: np.ndarray, seed: int =
 def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
               meta: Mapping | None = None, payload_kg: np.ndarray | None = None, idw_power: float = 2.0,
               idw_k_nearest: int = 8, seed: int = 0, noise_floor_mm: float | None = None):
-    """An IDW or GPR layer on the calibration residuals of ``model`` (payload_kg (N,) as a GPR input when given;
+    """A layer of ``kind`` on the calibration residuals of ``model`` (payload_kg (N,) as a GPR input when given;
     ``noise_floor_mm`` bounds the GPR's noise below)."""
     _, p_meas, e = layer_targets(model, q_rad, p_tracker_mm, meta)
     if kind == "idw":
@@ -136,7 +137,7 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
                  payload_kg: np.ndarray | None = None, candidates=None, folds: int = 5, seed: int = 0,
                  idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None,
                  max_rows: int = CV_MAX_ROWS) -> LayerChoice:
-    """none / IDW / GPR / joint GP (``candidates``, default ``LAYER_KINDS``) by k-fold CV on the calibration points:
+    """none / IDW / GPR / joint GP / trend + GPR (``candidates``, default ``LAYER_KINDS``) by k-fold CV on the calibration points:
     the candidate with the lowest CV RMS among those
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
     bound). Each candidate's figures record also whether its gain is significant (t > 3). Beyond ``max_rows``
