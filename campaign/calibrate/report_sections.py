@@ -66,7 +66,7 @@ class PredictiveStd:
 
 _GP_KEYS = ("approximation", "n_train", "n_inducing", "noise_mm", "noise_floor_mm")
 _CURVES = "joint_curve_rms_arcsec"
-_TREND = ("trend_rms_mm", "geometry_shift_rms_mm")
+_TREND = ("trend_rms_mm", "geometry_shift_rms_mm", "trend_and_shift_rms_mm")
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,7 @@ class LayerSummary:
     joint_curve_rms_arcsec: Mapping[str, float] | None = None     # joint GP: each joint's curve, RMS over its range
     trend_rms_mm: float | None = None          # trend + GPR: the quadratic trend's 3-D RMS over the calibration rows
     geometry_shift_rms_mm: float | None = None  # trend + GPR: the geometry change's displacement, the same RMS
+    trend_and_shift_rms_mm: float | None = None  # trend + GPR: the two together (they share directions)
 
     def to_dict(self) -> dict:
         out = record_dict(self)

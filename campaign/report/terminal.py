@@ -73,7 +73,8 @@ def layer_line(lay: LayerSummary) -> str:
             how += " (" + ", ".join(f"{j} {v:.0f}\"" for j, v in lay.joint_curve_rms_arcsec.items()) + " RMS)"
         if lay.trend_rms_mm is not None:
             geo = ("" if lay.geometry_shift_rms_mm is None
-                   else f" with a geometry change of {_mm(lay.geometry_shift_rms_mm)} mm RMS")
+                   else f" with a geometry change of {_mm(lay.geometry_shift_rms_mm)} mm RMS, together "
+                        f"{_mm(lay.trend_and_shift_rms_mm)} mm RMS")
             how = f"quadratic trend {_mm(lay.trend_rms_mm)} mm RMS{geo}, then {how}"
         gp = f" ({how} on {lay.n_train} points, noise {_mm(lay.noise_mm)} mm, floor {floor_mm(lay.noise_floor_mm)} mm)"
     return (f"residual layer {lay.kind}{gp}: calibration RMS {_mm(lay.calib_rms_mm)} mm is a fit to its own "

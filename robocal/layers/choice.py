@@ -190,7 +190,8 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
     if isinstance(choice.layer, TrendGPRResidual):
         shift = choice.layer.shift
         out.update(trend_rms_mm=choice.layer.trend.fit_rms_mm,
-                   **({} if shift is None else {"geometry_shift_rms_mm": shift.fit_rms_mm}))
+                   **({} if shift is None else {"geometry_shift_rms_mm": shift.fit_rms_mm,
+                                                "trend_and_shift_rms_mm": choice.layer.together_rms_mm}))
     if gp is not None:
         out.update(approximation=gp.kind, n_train=int(gp.n_train),
                    n_inducing=int(len(gp.Z)) if isinstance(gp, SparseGP) else None,

@@ -131,10 +131,12 @@ def geometry_columns(kin: Kinematics, names, q_rad: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class TrendGPRResidual(GPRResidual):
     """The GPR layer on what a quadratic trend and a geometry shift leave: residual = shift(q) + trend(p_base) +
-    GP(q [, payload]). The predictive standard deviation is the GP's (the trend's and the shift's own uncertainty is
-    not in it)."""
+    GP(q [, payload]); ``together_rms_mm`` the trend and the shift together over the fitted rows (each alone can be
+    larger: they share directions). The predictive standard deviation is the GP's (the trend's and the shift's own
+    uncertainty is not in it)."""
     trend: QuadraticTrend | None = None
     shift: GeometryShift | None = None
+    together_rms_mm: float | None = None     # trend + shift, 3-D RMS over the fitted rows (they share directions)
 
     kind = "trend_gpr"
 
@@ -147,18 +149,19 @@ class TrendGPRResidual(GPRResidual):
         return out if self.shift is None else out + self.shift.predict(q_rad)
 
     def with_payload(self, payload_kg: float | None) -> "TrendGPRResidual":
-        return TrendGPRResidual(self.gp, self.uses_payload, payload_kg, self.trend, self.shift)
+        return TrendGPRResidual(self.gp, self.uses_payload, payload_kg, self.trend, self.shift, self.together_rms_mm)
 
     def to_dict(self) -> dict:
         return {**super().to_dict(), "kind": self.kind, "trend": self.trend.to_dict(),
-                "geometry_shift": None if self.shift is None else self.shift.to_dict()}
+                "geometry_shift": None if self.shift is None else self.shift.to_dict(),
+                "together_rms_mm": self.together_rms_mm}
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrendGPRResidual":
         g = GPRResidual.from_dict(d)
-        shift = d.get("geometry_shift")
+        shift, together = d.get("geometry_shift"), d.get("together_rms_mm")
         return cls(g.gp, g.uses_payload, g.payload_kg, QuadraticTrend.from_dict(d["trend"]),
-                   None if shift is None else GeometryShift.from_dict(shift))
+                   None if shift is None else GeometryShift.from_dict(shift), None if together is None else float(together))
 
 
 def _joint_solve(A: np.ndarray, F: np.ndarray, e: np.ndarray, prior: np.ndarray, noise_mm: float
@@ -205,9 +208,9 @@ def fit_trend_gpr(q_rad: np.ndarray, p_base_mm: np.ndarray, e_base_mm: np.ndarra
     delta, coef = _joint_solve(A, F, e, prior, noise)
     trend = QuadraticTrend.of(p, centre, coef)
     shift = GeometryShift(kinematics, names, delta, _rms(A @ delta)) if names else None
-    left = e - trend.predict(p) - A @ delta
-    gp = MultiOutputGP.fit_subset(X, left, seed=seed, noise_floor_mm=noise_floor_mm)
-    layer = TrendGPRResidual(gp, payload_kg is not None, None, trend, shift)
+    parametric = trend.predict(p) + A @ delta
+    gp = MultiOutputGP.fit_subset(X, e - parametric, seed=seed, noise_floor_mm=noise_floor_mm)
+    layer = TrendGPRResidual(gp, payload_kg is not None, None, trend, shift, _rms(parametric))
     if fold is None:
         return layer, None
     err = np.empty_like(e)

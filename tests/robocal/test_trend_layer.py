@@ -98,6 +98,8 @@ def test_the_share_a_geometric_fit_absorbed_goes_back_to_the_trend():
     print(f"residual {rms:.4f} mm; left by trend + geometry {left(joint):.4f}, by the trend alone {left(alone):.4f}")
     assert left(joint) < 0.15 * rms and left(joint) < 0.5 * left(alone)
     assert joint.shift.names == GEOMETRY and joint.shift.fit_rms_mm > 0
+    together = joint.trend.predict(p) + joint.shift.predict(q)
+    assert joint.together_rms_mm == pytest.approx(np.sqrt(np.mean(np.sum(together**2, 1))), rel=1e-9)
 
 
 @pytest.mark.unit
@@ -128,7 +130,7 @@ def test_round_trip_through_the_model_file_and_payload():
     qt = _poses(10, 4)
     pt = model.kinematic_smr_base(qt)
     assert type(again.residual) is TrendGPRResidual and again.residual.payload_kg == 12.0
-    assert again.residual.shift.names == GEOMETRY
+    assert again.residual.shift.names == GEOMETRY and again.residual.together_rms_mm == layer.together_rms_mm
     np.testing.assert_allclose(again.residual.predict(qt, pt), layer.predict(qt, pt), atol=1e-12)
     np.testing.assert_allclose(again.smr_base(qt), model.kinematic_smr_base(qt) + layer.predict(qt, pt), atol=1e-9)
     with pytest.raises(ValueError, match="SMR positions"):

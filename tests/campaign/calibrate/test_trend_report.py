@@ -54,6 +54,6 @@ def test_chosen_on_a_sag_outside_the_library_and_better_held_out(tmp_path):
     q = np.radians(ds.q_deg[ds.mask("test")])
     np.testing.assert_allclose(again.smr_tracker(q), res.model.smr_tracker(q), atol=1e-9)
     lay = res.report.final.layer
-    assert lay.trend_rms_mm > 0.01 and lay.geometry_shift_rms_mm > 0.0
+    assert lay.trend_rms_mm > 0.01 and lay.geometry_shift_rms_mm > 0.0 and lay.trend_and_shift_rms_mm > 0.01
     assert LayerSummary.from_dict(lay.to_dict()) == lay
-    assert "with a geometry change of 0." in layer_line(lay)
+    assert "with a geometry change of 0." in layer_line(lay) and ", together 0." in layer_line(lay)
