@@ -73,7 +73,7 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
               idw_k_nearest: int = 8, seed: int = 0, noise_floor_mm: float | None = None):
     """A layer of ``kind`` on the calibration residuals of ``model`` (payload_kg (N,) as a GPR input when given;
     ``noise_floor_mm`` bounds the GPR's noise below)."""
-    _, p_meas, e = layer_targets(model, q_rad, p_tracker_mm, meta)
+    p_kin, p_meas, e = layer_targets(model, q_rad, p_tracker_mm, meta)
     if kind == "idw":
         return IDWResidual.fit(p_meas, e, idw_power, idw_k_nearest)
     if kind == "gpr":
@@ -82,8 +82,7 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
     if kind == "joint_gp":
         return fit_joint_gp(model.kinematics, q_rad, e, noise_floor_mm)[0]
     if kind == "trend_gpr":
-        return fit_trend_gpr(q_rad, layer_targets(model, q_rad, p_tracker_mm, meta)[0], e, payload_kg, seed,
-                             noise_floor_mm, **identified_geometry(model))[0]
+        return fit_trend_gpr(q_rad, p_kin, e, payload_kg, seed, noise_floor_mm, **identified_geometry(model))[0]
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
 
