@@ -72,7 +72,7 @@ def refit(ds: Dataset, cell: CellModel, *, force: bool = False) -> CurrentModel:
     q, p = np.radians(data.q_deg[kept]), data.p_tracker_mm[kept]
     meta = subset(stage.meta, kept)
     cov = cell.weights(data)[0][kept]
-    model = stage.model
+    model = fl.base                                        # the elastic model, or the geometry when it won
     kin = model.kinematics
     layout = ParamLayout.of(kin)
     cols = np.array([layout.index(n) for n in fitted.geo.result.identified], int)
@@ -81,8 +81,8 @@ def refit(ds: Dataset, cell: CellModel, *, force: bool = False) -> CurrentModel:
     J = parametric_columns(kin, cols, effects, q, meta)
     r_w = whiten_rows((p - model.smr_tracker(q, meta))[:, :, None], cov)[:, :, 0]
     s0 = float(np.sqrt(np.sum(r_w**2) / max(r_w.size - J.shape[2], 1)))
-    cv = fl.choice.cv
-    cv_rms = cv.get(fl.choice.kind, cv.get("none", {})).get("cv_rms_mm")
+    cv_rms = fl.choice.cv_rms_mm
+    cv_rms = fl.choice.cv.get("none", {}).get("cv_rms_mm") if cv_rms is None else cv_rms
     if cv_rms is None:                                     # no CV (too few rows): the fit's RMS, inflated by its dof
         cv_rms = float(np.sqrt(np.sum(e_base**2) / max(len(q) - J.shape[2] / 3.0, 1.0)))
     return CurrentModel(kin, cols, effects, q, meta, cov, e_base, s0, fl.choice, float(fl.floor_mm), float(cv_rms))

@@ -87,7 +87,8 @@ class ElasticStage:
     ``elastic`` their joint fit (None without effects), ``model`` the geometric or elasto-geometric model (with the
     record of its parameters: ``CalibratedModel.parameters``),
     ``kept_rows`` the rows fitted (after the second fault screen), ``screen`` that screen (or the geometric one),
-    ``meta`` the per-row metadata of every dataset row."""
+    ``meta`` the per-row metadata of every dataset row, ``geometric`` the geometric model (``model`` without
+    effects)."""
     choices: tuple[EffectChoice, ...]
     engine: EngineResult | None
     elastic: object
@@ -95,6 +96,7 @@ class ElasticStage:
     kept_rows: np.ndarray
     screen: ScreenResult | None
     meta: dict
+    geometric: CalibratedModel
 
 
 def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> ElasticStage:
@@ -108,9 +110,9 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
     payload = cell.payload_kg
     cols = np.array([ParamLayout.of(result.kinematics).index(n) for n in result.identified], int)
     choices, engine = effect_choices(cell, result.kinematics, cols, q, p, cov_all, meta_all, kept)
-    model = CalibratedModel(result.kinematics, None, None, (), payload, result.table())
+    geometric = model = CalibratedModel(result.kinematics, None, None, (), payload, result.table())
     if not choices:
-        return ElasticStage((), engine, None, model, kept, geo.screen, meta_all)
+        return ElasticStage((), engine, None, model, kept, geo.screen, meta_all, geometric)
 
     def fit(rows):
         try:
@@ -139,4 +141,4 @@ def elastic_stage(ds: Dataset, cell: CellModel, geo, order: dict, rescreen) -> E
             kept = rc[new_keep]
             elastic = fit(kept)
             model = elastic_model(elastic)
-    return ElasticStage(tuple(choices), engine, elastic, model, kept, final_screen, meta_all)
+    return ElasticStage(tuple(choices), engine, elastic, model, kept, final_screen, meta_all, geometric)

@@ -305,24 +305,32 @@ class EffectsReport:
 @dataclass(frozen=True)
 class ResidualChoice:
     """The residual layer chosen by k-fold CV on the calibration points: per candidate its CV RMS (mm) and its
-    test against none (``robocal.layers``)."""
+    test against none, and the geometric model's trend + GPR layer against the model with its effects when that
+    was compared (``robocal.layers.choice.WithoutEffects``)."""
     chosen: str
     folds: int
     test: str
     candidates: dict
+    without_effects: dict | None = None
 
     @classmethod
     def of(cls, choice: LayerChoice) -> "ResidualChoice":
         d = choice.to_dict()
-        return cls(d["chosen"], d["folds"], d["test"], d["candidates"])
+        return cls(d["chosen"], d["folds"], d["test"], d["candidates"], d.get("without_effects"))
+
+    @property
+    def effects_left_out(self) -> tuple[str, ...]:
+        """The fitted effects the final model leaves out (its layer sits on the geometric model), else ()."""
+        w = self.without_effects
+        return tuple(w.get("effects") or ()) if w and w.get("chosen") else ()
 
     def to_dict(self) -> dict:
-        return record_dict(self)
+        return record_dict(self, omit_none=("without_effects",))
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "ResidualChoice":
         return cls(text_field(d, "chosen"), count_field(d, "folds"), text_field(d, "test", True) or "",
-                   object_field(d, "candidates"))
+                   object_field(d, "candidates"), object_field(d, "without_effects", True))
 
 
 @dataclass(frozen=True)

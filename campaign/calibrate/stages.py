@@ -216,12 +216,14 @@ def fit_stages(ds: Dataset, cell: CellModel, plaus) -> Fitted:
 class FinalLayer:
     """The residual layer chosen on the fitted rows of a dataset (``calibration.residual``), with what it was
     chosen with: per-row payloads when they vary (a GPR input; else None) and the noise floor (the check rows'
-    repeats, else the specs at the test rows, or at the calibration rows without test rows)."""
+    repeats, else the specs at the test rows, or at the calibration rows without test rows); ``base`` the model
+    the layer sits on: the elastic stage's, or its geometric model when the choice left the effects out."""
     choice: LayerChoice
     payload: np.ndarray | None
     floor_mm: float
     repeats_mm: float | None
     specs_mm: float
+    base: CalibratedModel
 
 
 def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer:
@@ -239,7 +241,8 @@ def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer
                   idw_k_nearest=c.idw_k_nearest, noise_floor_mm=floor)
     model_el = stage.model
     if c.residual == "auto":
-        choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, **lay_kw)
+        rival = stage.geometric if c.effects == "auto" else None       # configured effects are never left out
+        choice = choose_layer(model_el, qk, pk, folds=c.cv_folds, geometric=rival, **lay_kw)
     elif c.residual == "none":
         choice = LayerChoice("none", None, {}, c.cv_folds)
     else:
@@ -250,7 +253,7 @@ def final_layer(ds: Dataset, cell: CellModel, stage: ElasticStage) -> FinalLayer
                           f"{np.degrees(MIN_SPAN_RAD):.0f} deg over the "
                           "calibration rows; no residual layer", DataWarning, stacklevel=2)
         choice = LayerChoice(c.residual if forced is not None else "none", forced, choice.cv, c.cv_folds)
-    return FinalLayer(choice, payload, floor, repeats, specs)
+    return FinalLayer(choice, payload, floor, repeats, specs, stage.geometric if choice.on_geometry else model_el)
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,20 +306,20 @@ def evaluate_stages(ds: Dataset, cell: CellModel, *, force: bool = False) -> Eva
     ds, geo, stage = fitted.dataset, fitted.geo, fitted.stage
     q, p = np.radians(ds.q_deg), ds.p_tracker_mm
     cal, test = ds.mask("calib"), ds.mask("test")
-    meta_all, kept_rows, model_el = stage.meta, stage.kept_rows, stage.model
+    meta_all, kept_rows = stage.meta, stage.kept_rows
     fl = final_layer(ds, cell, stage)
-    payload, choice = fl.payload, fl.choice
+    payload, choice, base = fl.payload, fl.choice, fl.base
     layer = choice.layer
     if isinstance(layer, GPRResidual) and layer.uses_payload:
         layer = layer.with_payload(cfg.tool.payload_kg)
-    model = CalibratedModel(model_el.kinematics, layer, {"config": cfg.name, "source": ds.source},
-                            model_el.effects, float(cfg.tool.payload_kg or 0.0), model_el.parameters)
+    model = CalibratedModel(base.kinematics, layer, {"config": cfg.name, "source": ds.source},
+                            base.effects, float(cfg.tool.payload_kg or 0.0), base.parameters)
     rows = lambda m: None if payload is None else payload[m]  # noqa: E731
     predict = lambda m, r: _predict(m, q[r], rows(r), subset(meta_all, r))  # noqa: E731
     stage_models = [(NOMINAL, register(registered_kinematics(cell, plaus), q[cal], p[cal])),
                     (KINEMATIC, geo.result.kinematics)]
     if stage.elastic is not None:
-        stage_models.append((ELASTIC, model_el))
+        stage_models.append((ELASTIC, stage.model))
     stage_models.append((COMPENSATED, model))
     stages = {name: StageResult(_stage(m, q[test], p[test], rows(test), subset(meta_all, test)),
                                 _stage(m, q[cal], p[cal], rows(cal), subset(meta_all, cal)))
@@ -337,7 +340,10 @@ def evaluate_stages(ds: Dataset, cell: CellModel, *, force: bool = False) -> Eva
                         {name: (lambda r, m=m: predict(m, r)) for name, m in stage_models}, used, ds.t_s, pred_std)
     points = report_points_value(table)
     stages[COMPENSATED] = _final_stage(stages[COMPENSATED], choice, spread, points)
-    budget = calibration_budget(predict, stage_models, geo, stage.elastic, choice.kind, q, p, cell.weights(ds)[0],
+    # the budget of the final model: without the elastic stage when the layer sits on the geometry alone
+    budget_models = [sm for sm in stage_models if sm[0] != ELASTIC or not choice.on_geometry]
+    budget = calibration_budget(predict, budget_models, geo, None if choice.on_geometry else stage.elastic,
+                                choice.kind, q, p, cell.weights(ds)[0],
                                 cell.covariance(p), meta_all, kept_rows, test, fl.floor_mm, subset, c.cv_folds)
     if test.any():
         outliers = held_out_outliers(np.array(ds.point_id)[test], table.err_base_mm[COMPENSATED][test],
@@ -385,11 +391,11 @@ def calibration_report(ev: Evaluation, cell: CellModel) -> CalibrationReport:
         method=MethodChoice(c.method, c.weights if c.method == "robust_ridge" else None, c.outliers,
                             c.effects if isinstance(c.effects, str) else "list", choice.kind, c.residual,
                             cell.weights(ds)[1]),
-        effects=_effects_report(selection, stage.elastic), residual_choice=ResidualChoice.of(choice),
+        effects=_effects_report(selection, stage.elastic, choice), residual_choice=ResidualChoice.of(choice),
         plausibility=ev.plaus, residual_cv=_residual_cv_summary(choice), preparation=ev.fitted.prep.report,
         multi_smr=ev.multi, cell=cell_summary(cfg), points=ev.points, parameters_fit=model.parameters.fit,
         parameters_sigma0=model.parameters.sigma0,
-        parameters_geometry_only=None if stage.elastic is None else parameter_rows(result.table()), budget=ev.budget)
+        parameters_geometry_only=None if not model.effects else parameter_rows(result.table()), budget=ev.budget)
 
 
 ABSURD_OVER_FLOOR = 100.0     # a held-out error this many noise floors ...
@@ -420,19 +426,34 @@ def _final_stage(stage: StageResult, choice: LayerChoice, spread: PredictiveStd 
     return replace(stage, test_pred_std_mm=spread, layer=layer)
 
 
-def _effects_report(selection, elastic) -> EffectsReport:
+def _effects_report(selection, elastic, choice: LayerChoice) -> EffectsReport:
     if elastic is None:
         return EffectsReport(None if selection is None else selection.to_dict())
     notes = tuple(f"{fe.choice.label}.{n}: negative compliance {v:.3g} rad/(N*m) ({-v / s:.1f} std below zero): "
                   "not physical; check the link masses, payload and joint directions"
                   for fe in elastic.effects if fe.unit == "rad/(N*m)"
                   for n, v, s in zip(fe.param_names, fe.values, fe.std) if np.isfinite(s) and v < -3 * s)
+    if choice.on_geometry:
+        notes = (left_out_note(choice.without_effects),) + notes
     return EffectsReport(None if selection is None else selection.to_dict(), tuple(fe.to_dict() for fe in elastic.effects),
                          tuple(elastic.unidentifiable), elastic.sigma0, notes, elastic.condition_number)
 
 
+def left_out_note(rival) -> str:
+    """The one wording of effects left out of the final model (``robocal.layers.choice.WithoutEffects``)."""
+    return (f"not in the final model: {', '.join(rival.effects)}; the geometry with a trend + GPR layer predicted "
+            f"the calibration points better in cross-validation ({rival.cv_rms_mm:.4f} mm against "
+            f"{rival.cv_rms_with_effects_mm:.4f} mm with the effects, paired t {rival.t:.1f})")
+
+
 def _residual_cv_summary(choice: LayerChoice) -> ResidualCV | None:
-    """The CV figure of the chosen (else the best) candidate layer against none (earlier report key)."""
+    """The CV figure of the chosen (else the best) candidate layer against none (earlier report key); on the
+    geometric model, the rival's figure against the model with its effects."""
+    rival = choice.without_effects
+    if choice.on_geometry:                                  # the layer against none, both on the geometric model
+        return ResidualCV(choice.folds, rival.layer, rival.geometry_cv_rms_mm, rival.cv_rms_mm,
+                          1.0 - rival.cv_rms_mm / rival.geometry_cv_rms_mm, rival.geometry_t,
+                          rival.geometry_significant)
     cands = {k: v for k, v in choice.cv.items() if k != "none"}
     if not cands:
         return None

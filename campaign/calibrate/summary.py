@@ -209,8 +209,9 @@ def _drift(drift: Mapping) -> str:
 
 
 def _effects(report) -> tuple[ChosenEffect, ...]:
+    """The physical effects of the final model (none when its layer sits on the geometry alone)."""
     fx = report.effects
-    if fx is None or not fx.fitted:
+    if fx is None or not fx.fitted or (report.residual_choice and report.residual_choice.effects_left_out):
         return ()
     taken = list((fx.selection or {}).get("taken") or [])
     labels = taken if len(taken) == len(fx.fitted) else [fe["name"] for fe in fx.fitted]
@@ -235,6 +236,10 @@ def _effects_reason(report) -> str:
     counts = None if report.effects is None else report.effects.counts
     if counts is not None:
         how = "forward selection by cross-validation on the calibration points"
+        left_out = () if report.residual_choice is None else report.residual_choice.effects_left_out
+        if left_out:
+            return (f"{how}: {taken_of_tried(counts)} ({', '.join(left_out)}), then left out: the geometry with a "
+                    "trend + GPR layer predicted better in cross-validation (see the residual layer)")
         return f"{how}: {taken_of_tried(counts)}"
     if setting == "list":
         return "configured (calibration.effects)"

@@ -140,6 +140,13 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
         console.print(f"residual layer by {ch.folds}-fold CV on the calibration points (RMS mm): {figs} -> "
                       f"{ch.chosen}" + (" (kept for prediction by the one-standard-error rule; t <= 3 is no evidence "
                                         "of structure)" if weak else ""), markup=False)
+    w = None if ch is None else ch.without_effects
+    if w:
+        verdict = ("chosen: the final model leaves the effects out" if w["chosen"]
+                   else "not chosen: the final model keeps the effects")
+        console.print(f"without the effects ({', '.join(w['effects'])}): geometry + {w['layer']} CV RMS "
+                      f"{w['cv_rms_mm']:.4f} mm against {w['cv_rms_with_effects_mm']:.4f} mm with them and "
+                      f"{w['against']} (t {w['t']:+.1f}): {verdict}", markup=False)
     for e in report.excluded_points:
         console.print(f"excluded {e.point_id}: {e.reason}")
     if report.structure_note:

@@ -33,6 +33,7 @@ from .trend import TREND_MAX_ROWS, TrendGPRResidual, fit_trend_gpr
 from robocal.measure.stats import paired_gain
 
 LAYER_KINDS = ("idw", "gpr", "joint_gp", "trend_gpr")
+GEOMETRIC_RIVAL = True      # offer the geometric model with a trend + GPR layer against the effects (issue 32's 13th)
 
 
 def layer_targets(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None
@@ -86,22 +87,64 @@ def fit_layer(kind: str, model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm
     raise ValueError(f"unknown residual layer {kind!r} (expected one of: {', '.join(LAYER_KINDS)})")
 
 
+@dataclass(frozen=True)
+class WithoutEffects:
+    """The geometric model with a trend + GPR layer against the model with its physical effects ``effects``
+    (labels) and its best candidate ``against`` (a layer kind or "none"): both CV RMS (mm), the gain, the paired t
+    and whether the final model leaves the effects out (``chosen``: the one-standard-error rule passed); and the
+    layer against the geometric model without it (``geometry_cv_rms_mm``, its paired t ``geometry_t``, whether that
+    gain is significant)."""
+    effects: tuple[str, ...]
+    against: str
+    cv_rms_with_effects_mm: float
+    cv_rms_mm: float
+    gain: float
+    t: float
+    chosen: bool
+    geometry_cv_rms_mm: float
+    geometry_t: float
+    geometry_significant: bool
+    layer: str = "trend_gpr"
+
+    def to_dict(self) -> dict:
+        return {"effects": list(self.effects), "layer": self.layer, "against": self.against,
+                "cv_rms_with_effects_mm": self.cv_rms_with_effects_mm, "cv_rms_mm": self.cv_rms_mm,
+                "gain": self.gain, "t": self.t, "chosen": self.chosen, "geometry_cv_rms_mm": self.geometry_cv_rms_mm,
+                "geometry_t": self.geometry_t, "geometry_significant": self.geometry_significant}
+
+
 @dataclass(frozen=True, eq=False)
 class LayerChoice:
     """The outcome of the CV comparison: chosen kind (or "none"), the fitted layer (or None) and, per candidate,
-    its CV RMS (mm) and test against none."""
+    its CV RMS (mm) and test against none; ``without_effects`` the comparison with the geometric model when it
+    was offered (its ``chosen``: the layer sits on the geometric model, the effects left out)."""
     kind: str
     layer: object
     cv: dict
     folds: int
     rows: tuple[int, int] = (0, 0)      # (rows cross-validated and fitted, calibration rows): a seeded subset if fewer
+    without_effects: WithoutEffects | None = None
+
+    @property
+    def on_geometry(self) -> bool:
+        """The layer sits on the geometric model: the physical effects are left out of the final model."""
+        return self.without_effects is not None and self.without_effects.chosen
+
+    @property
+    def cv_rms_mm(self) -> float | None:
+        """The chosen candidate's CV RMS (mm; "none": the model without a layer), None when it was not
+        cross-validated."""
+        if self.on_geometry:
+            return self.without_effects.cv_rms_mm
+        return self.cv.get(self.kind, {}).get("cv_rms_mm")
 
     def to_dict(self) -> dict:
         sub = self.rows[0] < self.rows[1]
+        rival = {} if self.without_effects is None else {"without_effects": self.without_effects.to_dict()}
         return {"chosen": self.kind, "folds": self.folds,
                 "test": "one-standard-error rule: one-sided paired t of per-point held-out squared errors vs none > 1 "
                         "and CV RMS gain > 2 % ('significant': the same with t > 3)",
-                "candidates": self.cv, **({"rows": self.rows[0], "of_rows": self.rows[1]} if sub else {})}
+                "candidates": self.cv, **({"rows": self.rows[0], "of_rows": self.rows[1]} if sub else {}), **rival}
 
 
 def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fold, meta=None, payload_kg=None,
@@ -135,12 +178,13 @@ def cv_squared_errors(kind: str, model: CalibratedModel, q_rad, p_tracker_mm, fo
 def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.ndarray, meta: Mapping | None = None,
                  payload_kg: np.ndarray | None = None, candidates=None, folds: int = 5, seed: int = 0,
                  idw_power: float = 2.0, idw_k_nearest: int = 8, noise_floor_mm: float | None = None,
-                 max_rows: int = CV_MAX_ROWS) -> LayerChoice:
+                 max_rows: int = CV_MAX_ROWS, geometric: CalibratedModel | None = None) -> LayerChoice:
     """none / IDW / GPR / joint GP / trend + GPR (``candidates``, default ``LAYER_KINDS``) by k-fold CV on the calibration points:
     the candidate with the lowest CV RMS among those
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
     bound). Each candidate's figures record also whether its gain is significant (t > 3). Beyond ``max_rows``
-    points, a seeded subset of that many is cross-validated and the chosen layer fitted on it."""
+    points, a seeded subset of that many is cross-validated and the chosen layer fitted on it. ``geometric``: the
+    model without its physical effects, whose trend + GPR layer then rivals the choice (module docstring)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     of_rows = len(q)
     sub = capped_rows(len(q), max_rows, seed)
@@ -156,7 +200,7 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
               noise_floor_mm=noise_floor_mm)
     se0, _ = cv_squared_errors("none", model, q, p_tracker_mm, fold, **kw)
     cv = {"none": {"cv_rms_mm": float(np.sqrt(np.mean(se0)))}}
-    best = ("none", None, float(np.sqrt(np.mean(se0))))
+    best = ("none", None, float(np.sqrt(np.mean(se0))), se0)
     for kind in candidates:
         if kind == "trend_gpr" and len(q) > TREND_MAX_ROWS:
             continue                                    # offered with few rows only (robocal.layers.trend)
@@ -165,8 +209,17 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
         cv[kind] = {"cv_rms_mm": g.rms_cand_mm, "gain": g.gain, "t": g.t, "significant": g.significant,
                     "kept": g.beats_one_se}
         if g.beats_one_se and g.rms_cand_mm < best[2]:
-            best = (kind, layer, g.rms_cand_mm)
-    return LayerChoice(best[0], best[1], cv, folds, (len(q), of_rows))
+            best = (kind, layer, g.rms_cand_mm, se)
+    if not (GEOMETRIC_RIVAL and geometric is not None and model.effects and len(q) <= TREND_MAX_ROWS):
+        return LayerChoice(best[0], best[1], cv, folds, (len(q), of_rows))
+    se, layer = cv_squared_errors("trend_gpr", geometric, q, p_tracker_mm, fold, **kw)
+    g = paired_gain(best[3], se)
+    g0 = paired_gain(cv_squared_errors("none", geometric, q, p_tracker_mm, fold, **kw)[0], se)
+    rival = WithoutEffects(tuple(fe.choice.label for fe in model.effects), best[0], g.rms_base_mm, g.rms_cand_mm,
+                           g.gain, g.t, bool(g.beats_one_se), g0.rms_base_mm, g0.t, bool(g0.significant))
+    if rival.chosen:
+        best = ("trend_gpr", layer)
+    return LayerChoice(best[0], best[1], cv, folds, (len(q), of_rows), rival)
 
 
 def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
@@ -175,7 +228,7 @@ def layer_summary(choice: LayerChoice, stage: Mapping) -> dict:
     the kinematic layer fixed) and the test-set RMS; for a GPR its approximation, training size and noise (3-D
     RMS, mm) against the floor it was bounded by. ``stage``: the report's compensated stage (calib/test stats)."""
     out = {"kind": choice.kind, "calib_rms_mm": stage["calib"]["rms_mm"],
-           "cv_predicted_rms_mm": choice.cv.get(choice.kind, {}).get("cv_rms_mm"), "folds": choice.folds,
+           "cv_predicted_rms_mm": choice.cv_rms_mm, "folds": choice.folds,
            "test_rms_mm": stage["test"]["rms_mm"],
            "note": "calib_rms_mm is a fit to the points the layer interpolates, not an accuracy; "
                    "cv_predicted_rms_mm predicts the held-out RMS"}
