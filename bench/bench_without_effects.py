@@ -34,6 +34,16 @@ after it without being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_without_effects.py [--seeds 40 41 42]
         [--parts i ii] [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on deef83c as two processes, ``--parts i --forms`` UR5 + compliance + gear + drift + sparse far + layer
+only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--combine``): **kept**.
+  * (i) 57 figures: mean ratio 0.9691, largest 1.000, smallest 0.493 (layer only, seed 42, f 50, 0.0812 -> 0.0400
+    mm). Only the layer-only form moved, 8 of its 9 figures (seed 40 at f 50: 1.000); the 48 others, the UR5's
+    three among them, are 1.000.
+  * (ii) On 90 fresh data sets, without and with: named right 65/65, controls clean 10/10, 10 spurious
+    acceptances, targets pass.
+  * Issue 32's ratios on the layer-only form, off -> on: 1.586 -> 1.166 at 50 poses, 1.111 -> 1.076 at 100. At these
+    seeds the compliance + gear + drift form misses the 50-pose goal with and without (1.597; seed 42 2.090).
 """
 from __future__ import annotations
 
