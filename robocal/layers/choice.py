@@ -184,7 +184,8 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
     whose gain over none passes the one-standard-error rule, else none (``noise_floor_mm``: the GPR's noise
     bound). Each candidate's figures record also whether its gain is significant (t > 3). Beyond ``max_rows``
     points, a seeded subset of that many is cross-validated and the chosen layer fitted on it. ``geometric``: the
-    model without its physical effects, whose trend + GPR layer then rivals the choice (module docstring)."""
+    model without its physical effects, whose trend + GPR layer (when among the candidates) then rivals the choice
+    (module docstring)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     of_rows = len(q)
     sub = capped_rows(len(q), max_rows, seed)
@@ -210,7 +211,8 @@ def choose_layer(model: CalibratedModel, q_rad: np.ndarray, p_tracker_mm: np.nda
                     "kept": g.beats_one_se}
         if g.beats_one_se and g.rms_cand_mm < best[2]:
             best = (kind, layer, g.rms_cand_mm, se)
-    if not (GEOMETRIC_RIVAL and geometric is not None and model.effects and len(q) <= TREND_MAX_ROWS):
+    if not (GEOMETRIC_RIVAL and geometric is not None and model.effects and "trend_gpr" in candidates
+            and len(q) <= TREND_MAX_ROWS):
         return LayerChoice(best[0], best[1], cv, folds, (len(q), of_rows))
     se, layer = cv_squared_errors("trend_gpr", geometric, q, p_tracker_mm, fold, **kw)
     g = paired_gain(best[3], se)

@@ -75,11 +75,13 @@ def test_effects_the_robot_has_are_kept():
 
 @pytest.mark.unit
 def test_rival_needs_effects_and_the_switch(monkeypatch):
-    """No rival without effects in the model, or with ``GEOMETRIC_RIVAL`` off: the choice is the plain one."""
+    """No rival without effects in the model, without the trend among the candidates, or with ``GEOMETRIC_RIVAL``
+    off: the choice is the plain one."""
     geometric, elastic = _models()
     q = np.random.default_rng(4).uniform(LO, HI, (80, 6))
     p = _measured(geometric, q, True, 5)
     assert _choose(geometric, geometric, q, p, candidates=("trend_gpr",)).without_effects is None
+    assert _choose(elastic, geometric, q, p, candidates=("gpr",)).without_effects is None    # no trend offered
     monkeypatch.setattr(choice, "GEOMETRIC_RIVAL", False)
     ch = _choose(elastic, geometric, q, p, candidates=("trend_gpr",))
     assert ch.without_effects is None and not ch.on_geometry
