@@ -273,19 +273,36 @@ def _follows_place(clock: np.ndarray, p_base_mm, opt: LibraryOptions) -> float |
 
 
 REFINED_FORMS = ("levers",)   # gravity compliance's free mass distributions offered once it is taken
+LINKS_AFTER_LEVERS = True     # the links' complete gravity regressor offered once the lever form is taken (it must
+#                               then gain over the lever form in the model; issue 32, fourteenth protocol:
+#                               bench/bench_links_after_levers.py)
 
 
 def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
     """Candidates that refine an accepted effect: the free mass distribution of gravity compliance
-    (``REFINED_FORMS``: the lever points; the links' complete gravity regressor is not offered by default, since the
-    ninth protocol of ``bench/bench_links_form.py`` did not keep it, and is taken by config)."""
+    (``REFINED_FORMS``: the lever points), then, once the lever form is taken (``LINKS_AFTER_LEVERS``), the links'
+    complete gravity regressor, which also holds a centre of mass off a roll axis (offered beside the lever form
+    instead, the ninth protocol of ``bench/bench_links_form.py`` did not keep it)."""
     opts = dict(choice.options)
-    if choice.name == "joint_compliance" and opts.get("form", "gravity") == "gravity":
-        return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", form),
-                                                  ("payload_cog_flange_mm", opts.get("payload_cog_flange_mm")),
-                                                  ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))
-                for form in REFINED_FORMS]
-    return []
+    if choice.name != "joint_compliance":
+        return []
+    form = opts.get("form", "gravity")
+    forms = REFINED_FORMS if form == "gravity" else ("links",) if form == "levers" and LINKS_AFTER_LEVERS else ()
+    return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", f),
+                                              ("payload_cog_flange_mm", opts.get("payload_cog_flange_mm")),
+                                              ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))
+            for f in forms]
+
+
+def refinement_closure(candidates, n_joints: int) -> list[EffectChoice]:
+    """Every refinement reachable from ``candidates`` (refinements of refinements too), not among them, level by
+    level in the candidates' order."""
+    out, level = [], list(candidates)
+    while level:
+        level = [r for c in level for r in refinements(c, n_joints) if r not in out and r not in candidates]
+        level = list(dict.fromkeys(level))
+        out += level
+    return out
 
 
 def parts(choice: EffectChoice) -> list[tuple[str, EffectChoice]]:

@@ -29,7 +29,7 @@ from robocal.identify.whitened import whitening
 from robocal.kinematics.models import JACOBIAN_ROWS, Kinematics, identification_jacobian
 from robocal.measure.stats import paired_gain, signed_rank_z
 from .cv import BlockedCV, Blocking, order_blocks, pose_blocks
-from .library import parts, refinements
+from .library import parts, refinement_closure, refinements
 from .model import EffectChoice
 
 TAKE_T, TAKE_GAIN = 3.0, 0.02      # an effect is taken on a paired t > 3 and a held-out RMS gain > 2 % ...
@@ -191,7 +191,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     pool = list(dict.fromkeys(candidates))
-    extra = [r for c in pool for r in refinements(c, n) if r not in pool]
+    extra = refinement_closure(pool, n)
     families = [tuple(f) for f in scans if len(f)]
     design = _Design(kin, geo_cols, q, np.asarray(p_tracker_mm, float), meta,
                      pool + extra + [c for f in families for c in f if c not in pool + extra])
