@@ -40,6 +40,18 @@ after it without being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_links_after_levers.py [--seeds 49 50 51]
         [--parts i ii] [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on 3b499c7 as two processes, ``--parts i --forms`` UR5 + compliance + gear + drift + sparse far + layer
+only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--combine``): **kept**.
+  * (i) 57 figures: mean ratio 0.9798, largest 1.000, smallest 0.613 (sparse far, seed 49, f 50: 0.0738 -> 0.0452
+    mm). Only the sparse-far form moved: seed 49 at every size (all rows 0.0525 -> 0.0341, f 50 0.0738 -> 0.0452,
+    f 100 0.0574 -> 0.0375), seeds 50 and 51 at all rows (0.970, 0.961). The 50 other figures, the UR5's three among
+    them, are 1.000.
+  * (ii) On 90 fresh data sets, without and with: named right 65/65, controls clean 10/10, 9 spurious acceptances,
+    targets pass.
+  * Issue 32's ratios at these seeds, off -> on (mean over seeds, worst): sparse far 1.198 (1.405) -> 1.198 (1.326)
+    at 50 poses, 1.042 (1.092) -> 1.069 (1.099) at 100 (all rows improved more than 100 rows on seeds 50 and 51);
+    the other forms unchanged. Compliance + gear + drift misses the 50-pose goal with and without: 1.491 (1.620).
 """
 from __future__ import annotations
 
