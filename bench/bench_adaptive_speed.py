@@ -7,8 +7,10 @@ The demo IRB 2600 cell of ``configs/irb2600.yaml`` (its simulated effects: gravi
 random candidates), 3000 other candidates (a seeded sample of the pool). One round = ``adaptive_model.refit`` (the
 default process: screen, geometry, effect engine, residual layer by CV) + ``design_terms`` and the candidates'
 coverage + ``choose_batch`` (the campaign's rule, ``campaign.plan.adaptive.RULE``); median of ``--repeats`` runs, wall and CPU time, with the split.
+``--without-links``: also the same rounds with the link form never offered (``robocal.effects.library.
+LINKS_AFTER_LEVERS`` off), interleaved with the others, and the ratio of the medians.
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_adaptive_speed.py [--repeats 5]
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD python3 bench/bench_adaptive_speed.py [--repeats 5] [--without-links]
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import yaml
@@ -24,6 +27,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import robocal.effects.library as library  # noqa: E402
 from campaign.calibrate.adaptive_model import design_terms, refit, task_sample  # noqa: E402
 from campaign.plan.adaptive import RULE  # noqa: E402
 from campaign.config.load import load_cell  # noqa: E402
@@ -78,19 +82,26 @@ def one_round(cell, ds, q_cand):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--without-links", action="store_true", help="also time the rounds without the link form")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         cell, ds, q_cand, pool = setup(Path(d))
-    runs = []
+    runs, off = [], []
     for _ in range(args.repeats):
         times, cur, b = one_round(cell, ds, q_cand)
         runs.append(times)
+        if args.without_links:
+            with mock.patch.object(library, "LINKS_AFTER_LEVERS", False):
+                off.append(one_round(cell, ds, q_cand)[0])
     r = np.median(np.array(runs), axis=0)
     print(f"{len(ds)} measured points, {len(q_cand)} candidates (of a pool of {pool}), batch of {BATCH}; layer "
           f"{cur.layer_kind}, effects {[e.name for e in cur.effects]}")
     print(f"one round: median wall {r[0]:.2f} s (CPU {r[1]:.2f} s; min wall {min(x[0] for x in runs):.2f}, max "
           f"{max(x[0] for x in runs):.2f}) over {args.repeats} runs; target <= 2 s on one core")
     print(f"  refit {r[2]:.2f} s, design terms {r[3]:.2f} s, greedy batch {r[4]:.2f} s")
+    if off:
+        o = np.median(np.array(off), axis=0)
+        print(f"without the link form: median wall {o[0]:.2f} s (refit {o[2]:.2f} s); with / without {r[0] / o[0]:.2f}")
 
 
 if __name__ == "__main__":
