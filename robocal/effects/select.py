@@ -8,7 +8,7 @@ poses' large differences hide from the t), the per-point errors being the mean o
 when the measurement order is known, order blocks), and the gain positive under each blocking on its own. An effect
 just taken loses the parts the data do not need (a joint, a harmonic, a memory term: removing the part must cost
 t >= 2, or pass the rank rule); refinements of it
-(compliance's free mass distribution) join the candidates. A joint's cyclic errors of a higher order (an encoder's
+(compliance's free mass distribution; once that is taken, the links' complete gravity regressor) join the candidates. A joint's cyclic errors of a higher order (an encoder's
 track, a gear's teeth: two periods over the joint's span up to 40 per revolution) are one candidate per joint, a
 scan: in every fold the order that fits the training rows best predicts the held-out rows, so the pick among many
 orders is cross-validated too (nested); the order taken is the one that fits all rows best. At the end every taken
