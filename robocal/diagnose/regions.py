@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
-from scipy import sparse, stats
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from robocal.effects.cv import spread_scaled
@@ -16,6 +16,7 @@ from .records import DiagnosisOptions, Region
 
 def _region_stats(r_b, w, floor_pt, idx):
     """(rms, floor, p) of residuals r_b (m, 3) mm / whitened w (m, 3) over indices idx."""
+    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     k = len(idx)
     rms = float(np.sqrt(np.mean(np.sum(r_b[idx] ** 2, axis=1))))
     floor = float(np.sqrt(np.mean(floor_pt[idx] ** 2)))
@@ -44,6 +45,7 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     workspace, joint ranges, base axes, time, approach direction and payload. Returns (flagged regions sorted by
     RMS/floor, full maps for plots; ``every``: every region, flagged or not); a region's ``share`` is the part
     of the squared error over the floor it holds."""
+    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     m = len(r_mm)
     R = np.asarray(R_tracker_base)[:3, :3]
     r_b = r_mm @ R                                    # base frame (R^T r)
@@ -145,6 +147,7 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
 
 def _approach_region(j, s, r_mm, cov, jq, stage, min_points: int = 5) -> Region | None:
     """Difference of the residual along joint j's motion between + and - approaches (Welch t)."""
+    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     plus, minus = s > 0, s < 0
     if plus.sum() < min_points or minus.sum() < min_points:
         return None

@@ -23,7 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve, solve_triangular
+from scipy.linalg import solve_triangular
+from scipy.linalg.lapack import dpotrf, dpotrs, dtrtri
 from scipy.optimize import minimize
 
 from robocal.kinematics.models import Kinematics, identification_jacobian, joint_motion_columns
@@ -121,9 +122,12 @@ def _prior(theta: np.ndarray, omega: np.ndarray, owner: np.ndarray, J: int) -> t
 
 def _posterior(g: Gram, lam: np.ndarray, var: float):
     """Cholesky factor C of B = PtP / var + diag(1 / lam) and the posterior mean alpha = B^-1 PtY / var."""
-    B = g.PtP / var + np.diag(1.0 / lam)
-    C = np.linalg.cholesky(B)
-    return C, cho_solve((C, True), g.Pty / var)
+    B = g.PtP / var
+    B[np.diag_indices_from(B)] += 1.0 / lam
+    C, info = dpotrf(B.T, lower=1, clean=1, overwrite_a=1)    # B.T: B's own memory in Fortran order (B symmetric)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"posterior precision not positive definite (LAPACK dpotrf info {info})")
+    return C, dpotrs(C, g.Pty / var, lower=1)[0]
 
 
 def _nll(theta: np.ndarray, g: Gram, omega, owner, J: int, floor_var: float):
@@ -136,7 +140,7 @@ def _nll(theta: np.ndarray, g: Gram, omega, owner, J: int, floor_var: float):
     except np.linalg.LinAlgError:
         return 1e30, np.zeros_like(theta)
     b = g.Pty / var
-    Binv_diag = np.sum(solve_triangular(C, np.eye(len(lam)), lower=True) ** 2, axis=0)
+    Binv_diag = np.sum(dtrtri(C, lower=1)[0] ** 2, axis=0)       # diag(B^-1): column norms of C^-1
     f = 0.5 * (g.yy / var - b @ alpha + g.n * np.log(var) + 2 * np.sum(np.log(np.diag(C))) + np.sum(np.log(lam)))
     d_lam = 0.5 * (-(alpha**2) / lam**2 - Binv_diag / lam**2 + 1.0 / lam)
     grad_s = np.bincount(owner, d_lam * dlam_ds, J)

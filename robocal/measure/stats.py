@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, asdict
 
 import numpy as np
-from scipy.stats import rankdata
 
 
 @dataclass(frozen=True)
@@ -83,6 +82,8 @@ def signed_rank_z(se_base_mm2: np.ndarray, se_cand_mm2: np.ndarray) -> float:
     n = len(d)
     if n == 0:
         return 0.0
+    from scipy.stats import rankdata            # here, not at the top: scipy.stats takes ~1 s to import
+
     r = rankdata(np.abs(d))
     _, ties = np.unique(np.abs(d), return_counts=True)
     var = n * (n + 1) * (2 * n + 1) / 24 - np.sum(ties**3 - ties) / 48

@@ -33,3 +33,16 @@ def test_the_ur5_config_comment_gives_commands_that_run(tmp_path, monkeypatch, c
     from campaign.cli.entry import build_parser
     args = build_parser().parse_args(commands[1][1:])         # the next command parses; tests/campaign/
     assert args.config == "configs/ur5.yaml"                  # test_ur5_public.py runs it
+
+
+@pytest.mark.system
+def test_starting_a_command_does_not_import_scipy_stats():
+    """scipy.stats takes about 1 s to import, more than the rest of a command's start; the few functions that use
+    it import it where they run, so ``report``, ``--help`` and every killed or refused command start without it."""
+    import subprocess
+    import sys
+
+    probe = ("import sys, campaign.cli.entry, campaign.workflows\n"
+             "print(sorted(m for m in sys.modules if m.startswith('scipy.stats')))")
+    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", out
