@@ -17,21 +17,11 @@ def _unwrapped_output(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("COLUMNS", "1000")
 
 
-LONG_FIRST = ("tests/campaign/test_hostile_signals.py", "tests/campaign/run/test_kill_resume.py",
-              "tests/campaign/test_kill_study.py", "tests/robocal/test_diagnose_truth.py::test_reduced_self_check",
-              "tests/campaign/calibrate/test_adaptive_figures.py", "tests/campaign/calibrate/test_robust_default.py",
-              "tests/campaign/calibrate/test_select_adaptive.py", "tests/campaign/test_select_ur5.py")
-"""The longest studies (30-180 s each), longest first: started before the rest (which keeps its order), so that in
-parallel runs no worker is left with one of them while the others have finished."""
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     bad = [item.nodeid for item in items if len({m.name for m in item.iter_markers()} & KINDS) != 1]
     if bad:
         raise pytest.UsageError("tests need exactly one of the marks unit/system: " + ", ".join(bad[:10])
                                 + (f" (+{len(bad) - 10} more)" if len(bad) > 10 else ""))
-    rank = {prefix: i for i, prefix in enumerate(LONG_FIRST)}
-    items.sort(key=lambda item: next((i for p, i in rank.items() if item.nodeid.startswith(p)), len(rank)))
 
 
 @pytest.fixture(autouse=True)
