@@ -7,9 +7,9 @@ from drivers import lazy_exports
 _HOMES = {                      # module -> the public names it holds
     "accuracy": ("held_out_of", "summary_lines"),
     "targets": ("Targets", "check_model_fits", "correct_targets", "read_targets_csv", "recorded_identity"),
-    "verify": ("POOLED", "UNCORRECTED", "verify_run"),
+    "verify": ("verify_run",),
     "verify_drift": ("VerifyDrift",),
-    "verify_report": ("VerifyReport",),
+    "verify_report": ("POOLED", "UNCORRECTED", "VerifyReport"),
     "write_back": ("read_rejected", "write_corrected"),
 }
 __all__ = [name for names in _HOMES.values() for name in names]

@@ -23,12 +23,10 @@ from robocal.measure.stats import error_stats
 from .configuration import configuration_reasons
 from .targets import limits_deg, model_pose_fn, run_correction
 from .verify_drift import VerifyDrift
-from .verify_report import VERIFY_FORMAT, VerifyReport
+from .verify_report import POOLED, UNCORRECTED, VERIFY_FORMAT, VerifyReport
 
 
 # ---------------------------------------------------------------- closed-loop verification
-UNCORRECTED = "uncorrected (planned joints)"
-POOLED = "after correction (all passes pooled)"
 
 
 def held_reasons(q: np.ndarray, q0: np.ndarray, limit_rad: float, lo: np.ndarray, hi: np.ndarray,

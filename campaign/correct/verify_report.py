@@ -10,6 +10,8 @@ from campaign.io.json_fields import (RecordError, count_field, number_field, obj
 
 VERIFY_FORMAT = "campaign-verify/2"
 VERIFY_FORMAT_1 = "campaign-verify/1"          # earlier verify.json: no passes, no definitions
+UNCORRECTED = "uncorrected (planned joints)"   # stages of every verify.json: the test points at their planned joints ...
+POOLED = "after correction (all passes pooled)"     # ... and every corrected pass pooled
 
 
 @dataclass(frozen=True, eq=False)

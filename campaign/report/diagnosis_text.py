@@ -1,6 +1,8 @@
 """Terminal rendering of a diagnosis and of the withheld-effect self-check (nothing here computes a figure)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
@@ -8,10 +10,12 @@ from rich.text import Text
 from campaign.io.terminal_text import clean, keep_words, print_notes
 from campaign.report.budget_text import render_budget
 from campaign.report.terminal import render_preparation
-from robocal.diagnose.selfcheck import LABELS, SHORT, SelfCheckResult
 from robocal.effects.model import EffectChoice
 
 from campaign.io.quantities import floor_mm
+
+if TYPE_CHECKING:
+    from robocal.diagnose.selfcheck import SelfCheckResult
 
 
 # ============================================================================ terminal
@@ -126,6 +130,8 @@ def render_gap(console: Console, report: dict) -> None:
 
 
 def render_self_check(console: Console, result: SelfCheckResult) -> None:
+    from robocal.diagnose.selfcheck import LABELS, SHORT      # the self-check, not a report, needs its engine
+
     m = result.confusion()
     t = Table(title="Self-check: true effect (rows) vs diagnosed effect (columns, first accepted)")
     t.add_column("truth", no_wrap=True)

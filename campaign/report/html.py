@@ -11,7 +11,9 @@ Sources, all optional but at least one, found in the run (or output) directory:
 Nothing is computed here: every number printed comes from these documents through :func:`_num`, which also
 tags it with ``data-doc``/``data-key``/``data-value`` so a browser test can compare the page with the JSON.
 Figures are drawn from the same documents (``html_figures``) and also written as PNG files in a directory named
-after the HTML file (``report.html`` -> ``report_figures/``). Output paths are owned (:mod:`campaign.run.output_dirs`).
+after the HTML file (``report.html`` -> ``report_figures/``), indexed by what they were drawn from
+(``figure_index``): a report written again draws only what changed. Output paths are owned
+(:mod:`campaign.run.output_dirs`).
 """
 from __future__ import annotations
 
@@ -148,23 +150,50 @@ def _num_factory(docs: dict):
     return num
 
 
-def build_figures(src: ReportSources) -> dict[str, list]:
-    """Figures per section (lists of html_figures.Figure), drawn from the documents only."""
+def figure_sections(src: ReportSources, reuse_from=()) -> dict:
+    """{section: figure_index.Section} of the report, in page order: each section's figures taken from the first
+    figures directory of ``reuse_from`` that indexes them under the same key (:mod:`.figure_index`), else drawn
+    from the documents."""
     from . import html_figures as hf
+    from .figure_index import Section, reused, section_key
 
-    figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": [], "budget": []}
+    docs, out = src.docs(), {}
+
+    def section(name: str, draw, *inputs) -> None:
+        key = section_key(name, *inputs)
+        figs = reused(reuse_from, name, key)
+        out[name] = Section(key, figs if figs is not None else tuple(f for f in draw() if f is not None))
+
     if src.calibration:
-        figs["calibration"] = hf.calibration_figures(src.calibration, src.points)
+        p = src.points
+        rows = None if p is None else (p.point_id, p.set, p.q_deg, p.p_base_mm, p.err_base_mm, p.used, p.t_s,
+                                        p.pred_std_mm)
+        section("calibration", lambda: hf.calibration_figures(src.calibration, p), docs["calibration"], rows)
         if src.calibration.budget is not None:
-            figs["budget"] = [hf.budget_figure(src.calibration.budget.to_dict())]
+            budget = src.calibration.budget.to_dict()
+            section("budget", lambda: [hf.budget_figure(budget)], budget)
     for i, v in enumerate(src.verify):
         if v.stages:
-            figs["verify"].append(hf.verify_figure(v, i))
+            section(f"verify{i}", lambda v=v, i=i: [hf.verify_figure(v, i)], docs[f"verify{i}"], i)
     if src.diagnosis and src.diagnosis.get("maps"):
-        figs["diagnosis"] = diagnosis_figures(src.diagnosis)
+        section("diagnosis", lambda: diagnosis_figures(src.diagnosis), src.diagnosis)
     if src.iso9283:
-        figs["iso9283"] = hf.iso_figures(src.iso9283)
+        section("iso9283", lambda: hf.iso_figures(src.iso9283), src.iso9283)
+    return out
+
+
+def _by_part(sections: dict) -> dict[str, list]:
+    """Figures per part of the page (lists of html_figures.Figure): ``calibration``, ``budget``, ``verify`` (every
+    verification's), ``diagnosis``, ``iso9283``."""
+    figs: dict[str, list] = {"calibration": [], "verify": [], "diagnosis": [], "iso9283": [], "budget": []}
+    for name, s in sections.items():
+        figs["verify" if name.startswith("verify") else name] += s.figures
     return figs
+
+
+def build_figures(src: ReportSources, reuse_from=()) -> dict[str, list]:
+    """The report's figures per part of the page (:func:`_by_part`; :func:`figure_sections`)."""
+    return _by_part(figure_sections(src, reuse_from))
 
 
 def diagnosis_figures(report: dict) -> list:
@@ -291,14 +320,19 @@ def report_targets(directory: str | os.PathLike, out: str | os.PathLike | None =
 def write_report(directory: str | os.PathLike, out: str | os.PathLike | None = None, overwrite: bool = False,
                  sources: ReportSources | None = None) -> Path:
     """Write DIRECTORY/report.html (or ``out``) from the documents in DIRECTORY (or ``sources``), and its figures as
-    PNG in the directory named after it (:func:`figures_dir`); every file atomically, after
-    :func:`report_targets` accepted the paths."""
+    PNG in the directory named after it (:func:`figures_dir`) with their index; every file atomically, after
+    :func:`report_targets` accepted the paths. Figures whose documents are unchanged are taken from the figures
+    directory written to or from DIRECTORY's own report (:mod:`.figure_index`), not drawn again."""
+    from .figure_index import INDEX, index_document, same_file
+
     html, figures_claim = report_targets(directory, out, overwrite)
     src = sources if sources is not None else collect(directory)
-    figures = build_figures(src)
+    sections = figure_sections(src, (figures_claim.path, figures_dir(Path(directory) / "report.html")))
     png_dir = figures_claim.take()
-    for fs in figures.values():
-        for f in fs:
-            atomic_write(png_dir / f"{f.name}.png", f.png)
-    atomic_write(html, redact(render_html(src, figures, png_dir.name)).encode())
+    for s in sections.values():
+        for f in s.figures:
+            if not same_file(png_dir / f"{f.name}.png", f.png):
+                atomic_write(png_dir / f"{f.name}.png", f.png)
+    atomic_write(png_dir / INDEX, index_document(sections))
+    atomic_write(html, redact(render_html(src, _by_part(sections), png_dir.name)).encode())
     return html

@@ -23,6 +23,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,7 +35,9 @@ from campaign.plan.iso9283 import IsoCube, iso_cube
 from campaign.run.log_records import PointRecord
 from robocal.kinematics.frames import fit_rigid, inv_T, transform_points
 from robocal.iso9283 import COVERAGE_K, POSE_NAMES, RepeatabilitySplit, characteristics, split_rp
-from robocal.layers.calibrated_model import CalibratedModel
+
+if TYPE_CHECKING:                   # a report of a run needs no model's numerics (nor scipy.optimize) loaded
+    from robocal.layers.calibrated_model import CalibratedModel
 
 
 REPORT_FORMAT = "campaign-iso9283/1"

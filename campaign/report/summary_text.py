@@ -7,8 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from campaign.calibrate.summary import FAIL, PASS, Summary
-from campaign.correct.verify import POOLED, UNCORRECTED
-from campaign.correct.verify_report import VerifyReport
+from campaign.correct.verify_report import POOLED, UNCORRECTED, VerifyReport
 
 from campaign.io.quantities import FLOOR_FMT
 

@@ -15,7 +15,7 @@ import numpy as np
 from robocal.kinematics.models import JACOBIAN_ROWS, jacobian_blocks, joint_motion_columns
 from robocal.layers.joint_gp import joint_directions
 from robocal.layers.choice import fit_layer
-from robocal.measure.stats import paired_gain
+from robocal.measure.stats import f_isf, paired_gain
 from .records import DiagnosisInput
 from .regions import structure_test, where_analysis
 from .remainder import RemainderEvidence, classify, noise_shape, nugget, readback_jitter
@@ -135,8 +135,7 @@ def leftover(inp, opt, fit, test, model, resid, cv_final, stage, fold, meta):
     removes = math.sqrt(max(R**2 - R_lay**2, 0.0))
     ratio = opt.unexplained_ratio
     if inp.noise_floor_dof:              # a floor measured from repeats is an estimate: F test of the two variances
-        from scipy import stats
-        ratio = max(ratio, math.sqrt(float(stats.f.isf(opt.floor_f_alpha, 3 * len(held), 3 * inp.noise_floor_dof))))
+        ratio = max(ratio, math.sqrt(float(f_isf(opt.floor_f_alpha, 3 * len(held), 3 * inp.noise_floor_dof))))
     flagged = bool(R > ratio * F * inflate)
     # along which inputs the leftover lies (in-sample residuals of the fit rows, whitened to the floor; at most
     # ``structure_max_points`` of them, a seeded subset: the permutation test holds N x 3 x permutations numbers)

@@ -10,18 +10,18 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from robocal.effects.cv import spread_scaled
+from robocal.measure.stats import chi2_sf, f_sf, welch_t
 
 from .records import DiagnosisOptions, Region
 
 
 def _region_stats(r_b, w, floor_pt, idx):
     """(rms, floor, p) of residuals r_b (m, 3) mm / whitened w (m, 3) over indices idx."""
-    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     k = len(idx)
     rms = float(np.sqrt(np.mean(np.sum(r_b[idx] ** 2, axis=1))))
     floor = float(np.sqrt(np.mean(floor_pt[idx] ** 2)))
     chi = float(np.sum(w[idx] ** 2))
-    return rms, floor, float(stats.chi2.sf(chi, 3 * k))
+    return rms, floor, float(chi2_sf(chi, 3 * k))
 
 
 def _edges(x, k):
@@ -45,7 +45,6 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
     workspace, joint ranges, base axes, time, approach direction and payload. Returns (flagged regions sorted by
     RMS/floor, full maps for plots; ``every``: every region, flagged or not); a region's ``share`` is the part
     of the squared error over the floor it holds."""
-    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     m = len(r_mm)
     R = np.asarray(R_tracker_base)[:3, :3]
     r_b = r_mm @ R                                    # base frame (R^T r)
@@ -115,7 +114,7 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
             F = (chi / (3 * len(idx))) / max((chi_all - chi) / (3 * rest), 1e-300)
             out = np.setdiff1d(np.arange(m), idx)
             extra = dict(extra, vs_rest_ratio=rms / max(float(np.sqrt(np.mean(np.sum(r_b[out] ** 2, axis=1)))), 1e-12),
-                         stands_out=bool(stats.f.sf(F, 3 * len(idx), 3 * rest) < alpha))
+                         stands_out=bool(f_sf(F, 3 * len(idx), 3 * rest) < alpha))
         regions.append(Region(f"{desc}: RMS {rms:.3f} mm vs floor {floor:.3f} mm", rms, floor, len(idx), kind, stage,
                               p, dict(extra, region=desc)))
     # per base axis: RMS of one component vs its own floor
@@ -125,7 +124,7 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
         rms = float(np.sqrt(np.mean(r_b[:, a] ** 2)))
         fl = float(np.sqrt(np.mean(cov_b[:, a, a])))
         chi = float(np.sum(r_b[:, a] ** 2 / cov_b[:, a, a]))
-        p = float(stats.chi2.sf(chi, m))
+        p = float(chi2_sf(chi, m))
         label = f"base {name} axis" + (" (vertical)" if name == "z" else "")
         regions.append(Region(f"{label}: RMS {rms:.3f} mm vs floor {fl:.3f} mm", rms, fl, m, "axis", stage, p,
                               {"region": label}))
@@ -147,22 +146,20 @@ def where_analysis(stage: str, r_mm: np.ndarray, cov_eff: np.ndarray, p_base: np
 
 def _approach_region(j, s, r_mm, cov, jq, stage, min_points: int = 5) -> Region | None:
     """Difference of the residual along joint j's motion between + and - approaches (Welch t)."""
-    from scipy import stats                     # here, not at the top: scipy.stats takes ~1 s to import
     plus, minus = s > 0, s < 0
     if plus.sum() < min_points or minus.sum() < min_points:
         return None
     u = jq / np.maximum(np.linalg.norm(jq, axis=1, keepdims=True), 1e-12)
     x = np.einsum("ni,ni->n", r_mm, u)
     var = np.einsum("ni,nij,nj->n", u, cov, u)
-    res = stats.ttest_ind(x[plus], x[minus], equal_var=False)
+    t, p = welch_t(x[plus], x[minus])
     shift = float(np.mean(x[plus]) - np.mean(x[minus]))
     floor = float(np.sqrt(np.mean(var)))
     rms = float(np.sqrt(np.mean(x**2)))
     return Region(f"J{j + 1} approach direction: the residual along the J{j + 1} motion differs by {abs(shift):.3f} mm "
                   f"between + and - approaches (RMS {rms:.3f} mm vs floor {floor:.3f} mm)", rms, floor, len(s),
-                  "approach", stage, float(res.pvalue), {"joint": j + 1, "shift_mm": shift, "t": float(res.statistic),
-                                                         "region": f"J{j + 1} approach direction (+ vs -), shift "
-                                                                   f"{shift:+.3f} mm"})
+                  "approach", stage, p, {"joint": j + 1, "shift_mm": shift, "t": t,
+                                         "region": f"J{j + 1} approach direction (+ vs -), shift {shift:+.3f} mm"})
 
 
 def _line_map(x, r_b, floor_pt, k, label):

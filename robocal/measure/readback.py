@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .stats import t_sf
+
 ENCODER_NOISE_DEG = 0.001   # read-back resolution/noise of industrial joint encoders (typ. 1e-4 .. 1e-3 deg)
 SIGNIFICANCE = 1e-3         # family-wise level of the correlation test (Bonferroni over joints)
 
@@ -53,8 +55,7 @@ def readback_statistics(q_read_deg: np.ndarray, q_cmd_deg: np.ndarray) -> Readba
         corr = np.where(ok, smd / np.sqrt(np.where(ok, smm * sdd, 1.0)), 0.0)
         dof = len(move) - 2
         t = corr * np.sqrt(dof / np.maximum(1.0 - corr**2, 1e-300))
-        from scipy import stats     # deferred: scipy.stats costs ~0.4 s of every `campaign` start-up
-        p = np.where(ok, 2.0 * stats.t.sf(np.abs(t), dof), 1.0)
+        p = np.where(ok, 2.0 * t_sf(np.abs(t), dof), 1.0)
         expl = np.abs(lag) * np.sqrt(smm / len(move))
     return ReadbackStats(rms, mean, std, lag, corr, p, expl, int(n_rows))
 

@@ -164,7 +164,7 @@ def test_signoff_comes_last_and_the_summary_states_verify_and_diagnosis(mock_run
     """The sign-off is the page's last section, after everything it signs (verification, diagnosis); the summary
     gives the verified accuracy from verify.json (the corrected passes pooled, against verify's noise floor) and the
     diagnosis's headline from diagnosis.json, every number tagged with its key there."""
-    from campaign.correct.verify import POOLED
+    from campaign.correct.verify_report import POOLED
 
     run_dir, _ = mock_run
     html = (run_dir / "report.html").read_text()
