@@ -89,3 +89,17 @@ def test_an_edited_or_missing_figure_or_index_is_drawn_again(run_dir, tmp_path, 
     assert main(["report", str(work), "--out", str(tmp_path / "out.html")]) == 0
     assert "calibration_figures" in calls and ("budget_figure" in calls) == (damage == "index")
     assert _pngs(tmp_path / "out_figures") == _pngs(run_dir / "report_figures")
+
+
+def test_report_of_a_run_loads_no_scipy(run_dir, tmp_path):
+    """``campaign report`` reads documents and PNG files: no scipy module (nor the calibration's numerics) loads."""
+    import subprocess
+    import sys
+
+    from tests.campaign.helpers import ROOT
+
+    probe = ("import sys\nfrom campaign.cli import main\n"
+             f"assert main(['report', {str(run_dir)!r}, '--out', {str(tmp_path / 'r.html')!r}]) == 0\n"
+             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy' or m.startswith('robocal.layers')))")
+    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]", out
