@@ -168,7 +168,8 @@ def figure_sections(src: ReportSources, reuse_from=()) -> dict:
         p = src.points
         rows = None if p is None else (p.point_id, p.set, p.q_deg, p.p_base_mm, p.err_base_mm, p.used, p.t_s,
                                         p.pred_std_mm)
-        section("calibration", lambda: hf.calibration_figures(src.calibration, p), docs["calibration"], rows)
+        doc = {k: v for k, v in docs["calibration"].items() if k != "points"}   # the rows, hashed as arrays
+        section("calibration", lambda: hf.calibration_figures(src.calibration, p), doc, rows)
         if src.calibration.budget is not None:
             budget = src.calibration.budget.to_dict()
             section("budget", lambda: [hf.budget_figure(budget)], budget)
