@@ -11,7 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-RIDGE = 1e-9          # on unit-norm columns: directions the data cannot tell apart get no weight
+RIDGE = 1e-6          # on unit-norm columns: (rank_tol = 1e-3)^2 of the fit that follows (robocal.identify
+#                       CalibrationOptions.rank_tol): a direction whose relative residual is below 1e-3 is fixed at
+#                       zero there, so it gets no weight here (bench/bench_cv_ridge.py; it was 1e-9)
 CHUNK_ROWS = 8192     # rows per block of the in-place whitening
 CV_MAX_ROWS = 200_000  # the cross-validated choices (effects, residual layer) and the diagnosis's analyses work on at
 #                        most this many rows: a seeded subset beyond (their memory and time stay bounded at any size)
