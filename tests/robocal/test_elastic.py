@@ -8,7 +8,7 @@ import pytest
 
 from robocal.kinematics.gravity import GravityModel
 from robocal.effects.bases import apply_effects, effect_regressor, gear_cyclic, joint_compliance
-from robocal.effects.cv import BlockedCV, Blocking, order_blocks, pose_blocks, spread_scaled, varies
+from robocal.effects.cv import RIDGE, BlockedCV, Blocking, order_blocks, pose_blocks, spread_scaled, varies
 from robocal.effects.model import EffectChoice, FittedEffect
 from robocal.effects.fit import calibrate_elastic
 from robocal.effects.library import candidates
@@ -43,6 +43,14 @@ def rms(e):
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
 
 
+def ridge_fit(A_rows: np.ndarray, y_rows: np.ndarray, norms: np.ndarray) -> np.ndarray:
+    """Parameters x of A_rows (n, P) ~ y_rows (n,) with the cross-validation's ridge on the columns scaled to the
+    norms (P,) they have over all rows (in the units of A)."""
+    As = A_rows / norms
+    x = np.linalg.solve(As.T @ As + RIDGE * np.eye(len(norms)), As.T @ y_rows)
+    return x / norms
+
+
 @pytest.mark.unit
 def test_blocked_cv_equals_a_brute_force_refit_per_fold():
     rng = np.random.default_rng(0)
@@ -55,12 +63,39 @@ def test_blocked_cv_equals_a_brute_force_refit_per_fold():
     cols = np.array([0, 2, 4])
     se = cv.squared_errors(cols)["pose"]
     ref = np.empty(N)
+    norms = np.linalg.norm(np.einsum("nij,njk->nik", W, A[:, :, cols]).reshape(-1, 3), axis=0)
     for f in np.unique(fold):
         tr, te = fold != f, fold == f
         Aw = np.einsum("nij,njk->nik", W[tr], A[tr][:, :, cols]).reshape(-1, 3)
-        x = np.linalg.lstsq(Aw, np.einsum("nij,nj->ni", W[tr], y[tr]).reshape(-1), rcond=None)[0]
+        x = ridge_fit(Aw, np.einsum("nij,nj->ni", W[tr], y[tr]).reshape(-1), norms)
         ref[te] = np.sum((y[te] - A[te][:, :, cols] @ x) ** 2, axis=1)
     np.testing.assert_allclose(se, ref, rtol=1e-6)
+
+
+@pytest.mark.unit
+def test_cv_gives_no_weight_to_a_column_the_fit_would_fix_at_zero(monkeypatch):
+    """A column whose relative residual against the others is below the fit's rank_tol over all rows (so
+    ``calibrate_elastic`` fixes it at zero), and far smaller on every fold's training rows than on the rows that fold
+    holds out, leaves the held-out errors as they are. With the ridge at 1e-9 it took a large weight in the training
+    folds and inflated them (the few-rows case: 40 rows, five folds)."""
+    assert RIDGE == pytest.approx(CalibrationOptions().rank_tol ** 2)
+    rng = np.random.default_rng(10)
+    N = 40
+    fold = np.arange(N) % 5
+    A = rng.normal(size=(N, 3, 5))
+    A[:, :, 4] = A[:, :, 0] + np.where(fold == 0, 1.5e-3, 1e-4)[:, None] * rng.normal(size=(N, 3))
+    y = A[:, :, :4] @ rng.normal(size=4) + rng.normal(0, 0.1, (N, 3))
+    flat = A.reshape(-1, 5)
+    Q = np.linalg.qr(flat[:, :4])[0]
+    rest = flat[:, 4] - Q @ (Q.T @ flat[:, 4])
+    assert np.linalg.norm(rest) / np.linalg.norm(flat[:, 4]) < CalibrationOptions().rank_tol
+
+    def ratio() -> float:
+        cv = BlockedCV(A, y, np.broadcast_to(np.eye(3), (N, 3, 3)).copy(), [Blocking("pose", fold)])
+        return rms(cv.errors(np.arange(5))) / rms(cv.errors(np.arange(4)))
+    assert ratio() == pytest.approx(1.0, abs=0.01)
+    monkeypatch.setattr("robocal.effects.cv.RIDGE", 1e-9)
+    assert ratio() > 1.2
 
 
 def _scan_problem(seed: int, signal: float = 0.0, N: int = 90, K: int = 12):
@@ -83,7 +118,8 @@ def test_a_scan_is_cross_validated_with_its_pick_inside_every_fold():
     ref = np.empty(len(y))
 
     def fit(rows, cols):
-        x = np.linalg.lstsq(A[rows][:, :, cols].reshape(-1, len(cols)), y[rows].reshape(-1), rcond=None)[0]
+        x = ridge_fit(A[rows][:, :, cols].reshape(-1, len(cols)), y[rows].reshape(-1),
+                      np.linalg.norm(A[:, :, cols].reshape(-1, len(cols)), axis=0))
         return x, float(np.sum((y[rows] - A[rows][:, :, cols] @ x) ** 2))
     for f in range(5):
         tr, te = fold != f, fold == f
