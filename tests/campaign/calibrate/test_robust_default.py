@@ -98,7 +98,9 @@ def test_structure_is_kept_and_faults_found_under_strong_compliance():
               f"kinematic {kinematic:.4f} -> final {final:.4f} mm")
         assert set(excluded) == {c.ds.point_id[i] for i in np.flatnonzero(c.fault)}
         assert all("isolated against its" in r and "near neighbours" in r for r in excluded.values())
-        assert taken[0] == "joint_compliance(J2,3)"
+        # the gravity form or a free mass distribution (since the CV's ridge at rank_tol^2, seed 201 takes the
+        # lever form: final 0.0369 mm against 0.0360 with the gravity form)
+        assert taken[0] in ("joint_compliance(J2,3)", "joint_compliance(J2,3 levers)", "joint_compliance(J2,3 links)")
         assert final < 0.7 * kinematic
 
 
