@@ -44,7 +44,8 @@ only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--comb
     seed 53 f 50 0.0602 -> 0.0411 mm and f 100 0.0526 -> 0.0388, seed 54 all rows 0.0365 -> 0.0344. The 54 other
     figures, the UR5's three among them, are 1.000.
   * (ii) On 90 fresh data sets, without and with: named right 64/65, controls clean 10/10, 9 spurious acceptances;
-    the self-check's targets are missed both ways (the one effect or form not named right, not analysed).
+    the self-check's targets are missed both ways (one trial of five of a single cyclic error, seed 12013: a J2
+    error whose geometric model was already 1.15 x the floor, nothing accepted).
   * Issue 32's ratios at these seeds, off -> on (mean over seeds, worst): compliance + gear + drift 1.457 (1.723) ->
     1.297 (1.557) at 50 poses, 1.189 (1.506) -> 1.077 (1.110) at 100; the other forms unchanged.
 """
