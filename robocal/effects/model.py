@@ -59,6 +59,14 @@ class EffectChoice:
         opts = (d.get("options") or {}).items()
         return cls(d["name"], tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in opts))
 
+    def to_spec(self) -> dict:
+        """The effect as a ``calibration.effects`` item of a cell's config: ``{"name", "params"}`` with plain
+        values (tuples as lists), so that the config reads back this choice."""
+        def plain(v):
+            return [plain(x) for x in v] if isinstance(v, (tuple, list, np.ndarray)) else (
+                v.item() if isinstance(v, np.generic) else v)
+        return {"name": self.name, "params": {k: plain(v) for k, v in self.options}}
+
     def with_options(self, **changes) -> "EffectChoice":
         """The same effect with some options replaced (keys in the order of the original)."""
         opts = dict(self.options)

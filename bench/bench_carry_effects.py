@@ -1,0 +1,116 @@
+"""Few poses with the effects of a full campaign: held-out RMS of a 50- or 100-pose campaign whose config carries the
+physical effects (``effects.yaml``, written by ``reprocess``) that the full campaign's ``calibration.effects: auto``
+took, against the same rows choosing their effects themselves (the default), both over all rows' held-out RMS.
+
+What it stands for: a robot calibrated once from a full campaign, then recalibrated from a short one (after a
+crash, a motor change, a move of the cell). The effects that the robot has do not change; their values may. Here
+both campaigns are one data set: the full campaign is all its calibration rows, the short one the adaptive
+replay's rows under rule ``f`` (50 and 100), and the effects are refitted on those rows, values and geometry anew.
+So it is the best case of carrying (the same robot, the same day), not a second campaign of the robot.
+
+Written before it ran, with the figures it prints: per form and seed, all rows (mm), then at 50 and 100 rows the
+ratio to all rows with the effects chosen from those rows (``auto``) and with the full campaign's effects
+(``carried``); per form the mean over the seeds (worst seed). Nothing is chosen from it: ``auto`` stays the
+default, and the figures say when the recommendation to carry the effects holds.
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_carry_effects.py --seeds 55 56 57
+        [--forms ...] [--json OUT.json] [--combine A.json B.json]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from campaign.calibrate.outputs import effects_yaml  # noqa: E402
+from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
+from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
+from campaign.config.schema import EffectSpec  # noqa: E402
+from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
+from select_replay import subset_rms  # noqa: E402
+from switch_protocol import UR5  # noqa: E402
+
+SIZES = (50, 100)
+
+
+def carried(cell, model):
+    """``cell`` with ``calibration.effects`` read from the effects.yaml text of ``model`` (its effects, no values)."""
+    items = yaml.safe_load(effects_yaml(model))["calibration"]["effects"]
+    specs = tuple(EffectSpec(it["name"], 1.0, it["params"]) for it in items)
+    cfg = cell.config
+    return dataclasses.replace(cell, config=dataclasses.replace(
+        cfg, calibration=dataclasses.replace(cfg.calibration, effects=specs)))
+
+
+def figures(ds, cell) -> dict:
+    """{"all": mm, "effects": [labels], "auto 50": ratio, "carried 50": ratio, ...} of one data set."""
+    full = calibrate_dataset(ds, cell)
+    all_mm = float(full.report.final.test.rms_mm)
+    out = {"all": all_mm, "effects": [fe.choice.label for fe in full.model.effects]}
+    order = adaptive_rows(ds, cell, max(SIZES), rule="f").order
+    cell_c = carried(cell, full.model) if full.model.effects else cell
+    for n in SIZES:
+        out[f"auto {n}"] = subset_rms(ds, cell, order[:n]) / all_mm
+        out[f"carried {n}"] = subset_rms(ds, cell_c, order[:n]) / all_mm
+    return out
+
+
+def measure(forms, seeds) -> dict:
+    """{form: {seed: figures}} (the UR5 campaign under seed 0: one data set)."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for form in forms:
+            builds = [(0, ur5_dataset())] if form == UR5 else [(s, ADAPTIVE_FORMS[form](Path(tmp), s)) for s in seeds]
+            out[form] = {}
+            for seed, (ds, cell) in builds:
+                r = out[form][str(seed)] = figures(ds, cell)
+                print(f"  {form}, seed {seed}: all rows {r['all']:.4f} mm ({', '.join(r['effects']) or 'no effects'}); "
+                      + "; ".join(f"{n}: auto {r[f'auto {n}']:.3f}, carried {r[f'carried {n}']:.3f}" for n in SIZES),
+                      flush=True)
+    return out
+
+
+def table(figs: dict) -> None:
+    """Per form: the mean ratio over the seeds (worst seed), auto and carried, at each size."""
+    print("held-out RMS over all rows' (rule f's rows; mean over seeds, worst seed): effects chosen from the rows "
+          "(auto) / the full campaign's effects (carried)")
+    for form, per in figs.items():
+        cells = []
+        for n in SIZES:
+            a = np.array([v[f"auto {n}"] for v in per.values()])
+            c = np.array([v[f"carried {n}"] for v in per.values()])
+            cells.append(f"{n}: auto {a.mean():.3f} ({a.max():.3f}), carried {c.mean():.3f} ({c.max():.3f})")
+        print(f"  {form:48s} {len(per):2d} seeds; " + "; ".join(cells))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[55, 56, 57])
+    ap.add_argument("--forms", nargs="+", default=[UR5, *ADAPTIVE_FORMS])
+    ap.add_argument("--json", type=Path, help="write the figures, for --combine")
+    ap.add_argument("--combine", type=Path, nargs="+", help="pool the figures of several runs' --json")
+    args = ap.parse_args()
+    if args.combine:
+        figs: dict = {}
+        for part in args.combine:
+            for form, per in json.loads(part.read_text()).items():
+                figs.setdefault(form, {}).update(per)
+    else:
+        figs = measure(args.forms, args.seeds)
+        if args.json:
+            args.json.write_text(json.dumps(figs))
+    table(figs)
+
+
+if __name__ == "__main__":
+    main()
