@@ -1,5 +1,5 @@
-"""The files of a calibration: ``report.json`` and ``model.json`` written, the model read back (correct, verify,
-iso9283, export)."""
+"""The files of a calibration: ``report.json``, ``model.json`` and ``effects.yaml`` written, the model read back
+(correct, verify, iso9283, export)."""
 from __future__ import annotations
 
 import json
