@@ -15,6 +15,15 @@ default, and the figures say when the recommendation to carry the effects holds.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_carry_effects.py --seeds 55 56 57
         [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on 14ba85f: every form at seeds 55-57, and the compliance + gear + drift form at 58-62 and 63-66, four
+processes, then ``--combine``). Mean over the seeds (worst), auto -> carried:
+  * compliance + gear + drift, 12 seeds: 50 rows 1.299 (1.690) -> 1.197 (1.392); 100 rows 1.099 (1.239) -> 1.054
+    (1.084). Carried is better by more than 5 % on 5 seeds at 50 rows and worse by more than 5 % on one (seed 55,
+    1.235 -> 1.339: the full campaign's quadratic drift, 12 parameters, from 50 rows).
+  * UR5 campaign: 50 rows 1.218 -> 1.253 (six cyclic errors from 50 rows), 100 rows 1.073 -> 1.056.
+  * UR10-like 1.087 -> 1.049 / 1.017 -> 1.013; IRB 4600-like 1.064 -> 1.045 / 1.062 -> 1.027; sparse far 1.121 ->
+    1.106 / 1.066 -> 1.038; read-back lag and layer only the same both ways (the subsets take the same effects).
 """
 from __future__ import annotations
 

@@ -51,17 +51,17 @@ RUN_FILES = ("log.jsonl", "data.csv (interchange)")
 """What a run writes before the calibration's outputs (the config copy, plan.csv and campaign.log aside)."""
 
 
-def output_files(report) -> list[str]:
+def output_files(processed: Calibrated) -> list[str]:
     """The files a calibration writes into its directory (report.html and its figures by ``write_report``)."""
-    ref = report.points
+    ref = processed.report.points
     side = [ref["file"]] if isinstance(ref, dict) and "file" in ref else []
-    side += [EFFECTS_FILE] if report.effects is not None and report.effects.fitted else []
+    side += [EFFECTS_FILE] if processed.model.effects else []          # the model's, not the report's effects
     return ["report.json", "model.json", *side, "report.html", "report_figures/ (PNG)"]
 
 
-def run_files(report) -> list[str]:
+def run_files(processed: Calibrated) -> list[str]:
     """The files of a finished calibration run, the log first."""
-    return [*RUN_FILES, *output_files(report)]
+    return [*RUN_FILES, *output_files(processed)]
 
 
 def load_model(path: str | Path) -> CalibratedModel:

@@ -78,7 +78,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                   markup=False)
         return EXIT_OK
     _print_calibration(out, result.processed.report)
-    out.print(f"run directory {result.run_dir}: " + ", ".join(run_files(result.processed.report)), markup=False)
+    out.print(f"run directory {result.run_dir}: " + ", ".join(run_files(result.processed)), markup=False)
     return _verdict_exit(result.processed.report, result.run_dir)
 
 
@@ -152,7 +152,7 @@ def cmd_reprocess(args: argparse.Namespace) -> int:
     processed = reprocess(args.source, cell, args.out, args.overwrite, force=args.force)
     out = stdout_console()
     _print_calibration(out, processed.report)
-    out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed.report)), markup=False)
+    out.print(f"wrote into {args.out}: " + ", ".join(output_files(processed)), markup=False)
     return _verdict_exit(processed.report, args.out)
 
 

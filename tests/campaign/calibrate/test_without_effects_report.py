@@ -36,6 +36,7 @@ def test_left_out_effects_are_said_once_and_the_same_everywhere(tmp_path, capsys
     assert w["chosen"] and left_out and tuple(w["effects"]) == left_out
     assert report.method.residual == "trend_gpr" and model["residual"]["kind"] == "trend_gpr"
     assert not model.get("effects") and report.parameters_geometry_only is None
+    assert not (out / "effects.yaml").exists() and "effects.yaml" not in text      # nothing to carry
     assert report.summary.model.effects == ()                     # the summary lists the final model's effects
     assert "then left out" in report.summary.reasons.effects
     assert any(n.startswith("not in the final model: " + ", ".join(left_out)) for n in report.effects.notes)
