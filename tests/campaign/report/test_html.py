@@ -303,7 +303,7 @@ def test_diagnosis_with_an_effect_in_headless_chromium(tmp_path, capsys):
                                                                                                "acceptance criterion")
     assert tail.index("verdict: none") < tail.index("Position error on the test set")   # then the stage table
     assert tail.endswith(f"run directory {run_dir}: log.jsonl, data.csv (interchange), report.json, model.json, "
-                         "report.html, report_figures/ (PNG)")
+                         "effects.yaml, report.html, report_figures/ (PNG)") and (run_dir / "effects.yaml").is_file()
     fitted = read_report(run_dir).effects.fitted[0]["params"]
     assert "effects backlash(J" in tail and f"b1 {fitted['b1']['value']:.3g} rad" in tail
     assert main(["diagnose", str(run_dir), "--config", str(cfg)]) == 0
