@@ -27,11 +27,8 @@ processes, then ``--combine``). Mean over the seeds (worst), auto -> carried:
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -45,9 +42,8 @@ from campaign.calibrate.outputs import effects_yaml  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.schema import EffectSpec  # noqa: E402
-from select_forms import ADAPTIVE_FORMS, ur5_dataset  # noqa: E402
+from bench_goals import command_line, measure  # noqa: E402
 from select_replay import subset_rms  # noqa: E402
-from switch_protocol import UR5  # noqa: E402
 
 SIZES = (50, 100)
 
@@ -74,19 +70,10 @@ def figures(ds, cell) -> dict:
     return out
 
 
-def measure(forms, seeds) -> dict:
-    """{form: {seed: figures}} (the UR5 campaign under seed 0: one data set)."""
-    out = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for form in forms:
-            builds = [(0, ur5_dataset())] if form == UR5 else [(s, ADAPTIVE_FORMS[form](Path(tmp), s)) for s in seeds]
-            out[form] = {}
-            for seed, (ds, cell) in builds:
-                r = out[form][str(seed)] = figures(ds, cell)
-                print(f"  {form}, seed {seed}: all rows {r['all']:.4f} mm ({', '.join(r['effects']) or 'no effects'}); "
-                      + "; ".join(f"{n}: auto {r[f'auto {n}']:.3f}, carried {r[f'carried {n}']:.3f}" for n in SIZES),
-                      flush=True)
-    return out
+def line(r: dict) -> str:
+    """One data set's figures, as printed."""
+    return (f"all rows {r['all']:.4f} mm ({', '.join(r['effects']) or 'no effects'}); "
+            + "; ".join(f"{n}: auto {r[f'auto {n}']:.3f}, carried {r[f'carried {n}']:.3f}" for n in SIZES))
 
 
 def table(figs: dict) -> None:
@@ -103,22 +90,7 @@ def table(figs: dict) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[55, 56, 57])
-    ap.add_argument("--forms", nargs="+", default=[UR5, *ADAPTIVE_FORMS])
-    ap.add_argument("--json", type=Path, help="write the figures, for --combine")
-    ap.add_argument("--combine", type=Path, nargs="+", help="pool the figures of several runs' --json")
-    args = ap.parse_args()
-    if args.combine:
-        figs: dict = {}
-        for part in args.combine:
-            for form, per in json.loads(part.read_text()).items():
-                figs.setdefault(form, {}).update(per)
-    else:
-        figs = measure(args.forms, args.seeds)
-        if args.json:
-            args.json.write_text(json.dumps(figs))
-    table(figs)
+    command_line(__doc__, (55, 56, 57), lambda forms, seeds: measure(forms, seeds, figures, line), table)
 
 
 if __name__ == "__main__":

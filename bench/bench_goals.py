@@ -37,17 +37,18 @@ def ratios(ds, cell) -> dict:
     return {"all": all_mm, **{str(n): subset_rms(ds, cell, order[:n]) / all_mm for n in (50, 100)}}
 
 
-def measure(forms, seeds) -> dict:
-    """{form: {seed: ratios}} (the UR5 campaign under seed 0: one data set)."""
+def measure(forms, seeds, figures=ratios, line=None) -> dict:
+    """{form: {seed: figures(ds, cell)}} (the UR5 campaign under seed 0: one data set), each printed as
+    ``line(figures)`` follows the form and seed."""
+    line = line or (lambda r: f"all rows {r['all']:.4f} mm, f 50 {r['50']:.3f}, f 100 {r['100']:.3f}")
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for form in forms:
             builds = [(0, ur5_dataset())] if form == UR5 else [(s, ADAPTIVE_FORMS[form](Path(tmp), s)) for s in seeds]
             out[form] = {}
             for seed, (ds, cell) in builds:
-                r = out[form][str(seed)] = ratios(ds, cell)
-                print(f"  {form}, seed {seed}: all rows {r['all']:.4f} mm, f 50 {r['50']:.3f}, f 100 {r['100']:.3f}",
-                      flush=True)
+                r = out[form][str(seed)] = figures(ds, cell)
+                print(f"  {form}, seed {seed}: {line(r)}", flush=True)
     return out
 
 
@@ -62,9 +63,12 @@ def table(figs: dict) -> None:
         print(f"  {form:48s} {len(per):2d} seeds; " + "; ".join(cells))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[40, 41, 42])
+def command_line(doc: str, seeds, measure_fn, table_fn) -> None:
+    """The command line of a per-form, per-seed measurement: ``--seeds`` (default ``seeds``), ``--forms``, ``--json``
+    (write the figures) or ``--combine`` (pool several runs' figures); ``measure_fn(forms, seeds)``, then
+    ``table_fn(figures)``."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=list(seeds))
     ap.add_argument("--forms", nargs="+", default=[UR5, *ADAPTIVE_FORMS])
     ap.add_argument("--json", type=Path, help="write the figures, for --combine")
     ap.add_argument("--combine", type=Path, nargs="+", help="pool the figures of several runs' --json")
@@ -75,10 +79,14 @@ def main() -> None:
             for form, per in json.loads(part.read_text()).items():
                 figs.setdefault(form, {}).update(per)
     else:
-        figs = measure(args.forms, args.seeds)
+        figs = measure_fn(args.forms, args.seeds)
         if args.json:
             args.json.write_text(json.dumps(figs))
-    table(figs)
+    table_fn(figs)
+
+
+def main() -> None:
+    command_line(__doc__, (40, 41, 42), measure, table)
 
 
 if __name__ == "__main__":
