@@ -31,7 +31,6 @@ import dataclasses
 import sys
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +41,7 @@ from campaign.calibrate.outputs import effects_yaml  # noqa: E402
 from campaign.calibrate.select_adaptive import adaptive_rows  # noqa: E402
 from campaign.calibrate.stages import calibrate_dataset  # noqa: E402
 from campaign.config.schema import EffectSpec  # noqa: E402
-from bench_goals import command_line, measure  # noqa: E402
+from bench_goals import command_line, measure, spread  # noqa: E402
 from select_replay import subset_rms  # noqa: E402
 
 SIZES = (50, 100)
@@ -78,14 +77,14 @@ def line(r: dict) -> str:
 
 def table(figs: dict) -> None:
     """Per form: the mean ratio over the seeds (worst seed), auto and carried, at each size."""
-    print("held-out RMS over all rows' (rule f's rows; mean over seeds, worst seed): effects chosen from the rows "
+    print("held-out RMS over all rows' (rule f's rows; mean over seeds, standard error, worst seed): effects chosen "
+          "from the rows "
           "(auto) / the full campaign's effects (carried)")
     for form, per in figs.items():
         cells = []
         for n in SIZES:
-            a = np.array([v[f"auto {n}"] for v in per.values()])
-            c = np.array([v[f"carried {n}"] for v in per.values()])
-            cells.append(f"{n}: auto {a.mean():.3f} ({a.max():.3f}), carried {c.mean():.3f} ({c.max():.3f})")
+            cells.append(f"{n}: auto {spread([v[f'auto {n}'] for v in per.values()])}, "
+                         f"carried {spread([v[f'carried {n}'] for v in per.values()])}")
         print(f"  {form:48s} {len(per):2d} seeds; " + "; ".join(cells))
 
 
