@@ -18,6 +18,10 @@ from robocal.kinematics.models import Kinematics, smr_base
 from .model import EffectChoice
 
 ARCMIN = math.pi / 180.0 / 60.0
+SINGLE_HARMONICS = True   # a joint's low harmonics are also offered one at a time beside the set: from few poses an
+#                           error of one or two harmonics can gain where the set's 2 x 4 parameters cannot (a taken
+#                           one makes the set and the singles of its order alternatives; issue 32, sixteenth protocol,
+#                           bench/bench_single_harmonics.py)
 
 
 @dataclass(frozen=True)
@@ -114,6 +118,8 @@ def candidates(kin: Kinematics, q_rad: np.ndarray, meta: Mapping, gravity: Gravi
         if span >= opt.gear_min_span_deg:
             k = int(np.clip(span // opt.degrees_per_harmonic, 1, len(opt.harmonics)))
             out.append(EffectChoice("gear_cyclic", (("joint", j), ("harmonics", opt.harmonics[:k]))))
+            if SINGLE_HARMONICS and k > 1:
+                out += [EffectChoice("gear_cyclic", (("joint", j), ("harmonics", (h,)))) for h in opt.harmonics[:k]]
         else:
             cannot.append({"effect": "gear_cyclic", "joints": [j],
                            "reason": f"J{j} covers only {span:.0f} deg: a cyclic error cannot be told from its zero"})
