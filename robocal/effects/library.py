@@ -18,10 +18,10 @@ from robocal.kinematics.models import Kinematics, smr_base
 from .model import EffectChoice
 
 ARCMIN = math.pi / 180.0 / 60.0
-SINGLE_HARMONICS = True   # a joint's low harmonics are also offered one at a time beside the set: from few poses an
-#                           error of one or two harmonics can gain where the set's 2 x 4 parameters cannot (a taken
-#                           one makes the set and the singles of its order alternatives; issue 32, sixteenth protocol,
-#                           bench/bench_single_harmonics.py)
+SINGLE_HARMONICS = False  # True: a joint's low harmonics are also offered one at a time beside the set (a taken one
+#                           makes the set and the singles of its order alternatives). Not kept: issue 32, sixteenth
+#                           protocol, bench/bench_single_harmonics.py (111 figures mean 1.0002, self-check 9 spurious
+#                           acceptances against 8)
 
 
 @dataclass(frozen=True)
