@@ -63,8 +63,7 @@ def effect_choices(cell: CellModel, kin, cols, q, p, cov, meta, rows=None) -> tu
     if spec == "none":
         return [], None
     if spec != "auto":
-        return [EffectChoice(s.name, tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                           for k, v in s.params.items())) for s in spec], None
+        return [EffectChoice.of_dict({"name": s.name, "options": s.params}) for s in spec], None
     opts = EngineOptions(folds=cell.config.calibration.cv_folds)
     of_rows = None
     if rows is not None:

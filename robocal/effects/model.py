@@ -55,9 +55,10 @@ class EffectChoice:
 
     @classmethod
     def of_dict(cls, d: dict) -> "EffectChoice":
-        """The choice of a fitted effect's dict (``FittedEffect.to_dict``: its name and options, lists as tuples)."""
+        """The choice of a fitted effect's dict (``FittedEffect.to_dict``: its name and options, lists as tuples), or
+        of a config's ``calibration.effects`` item as ``{"name", "options": its params}``."""
         opts = (d.get("options") or {}).items()
-        return cls(d["name"], tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in opts))
+        return cls(d["name"], tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in opts))
 
     def to_spec(self) -> dict:
         """The effect as a ``calibration.effects`` item of a cell's config: ``{"name", "params"}`` with plain

@@ -21,9 +21,8 @@ CHOICES = [
 
 
 def _read_back(item: dict) -> EffectChoice:
-    """The choice a config item gives (``campaign.calibrate.effects_stage.effect_choices``: lists as tuples)."""
-    return EffectChoice(item["name"], tuple((k, tuple(v) if isinstance(v, list) else v)
-                                            for k, v in item["params"].items()))
+    """The choice a config item gives, as ``campaign.calibrate.effects_stage.effect_choices`` reads it."""
+    return EffectChoice.of_dict({"name": item["name"], "options": item["params"]})
 
 
 @pytest.mark.unit
