@@ -47,6 +47,10 @@ only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--comb
     50 poses, 1.118 (1.203) at 100; strong compliance, sparse far 1.128 (1.260) / 1.045 (1.087); read-back lag 1.069
     (1.114) / 1.034 (1.050); UR10-like 1.060 (1.124) / 1.010 (1.029); IRB 4600-like 1.077 (1.139) / 1.045 (1.110);
     layer only 1.288 (1.879) / 1.064 (1.095); UR5 1.218 / 1.073.
+  * After the verdict, the development look's figure from this bench (``--parts i --forms compliance+gear+drift``,
+    seeds 43-54 and 55-66, on afbd062): 72 figures, ratios off -> on at 50 poses 1.341 -> 1.303 (the scratch look
+    gave 1.304); seeds 49 (0.685), 52 (0.850), 63 (0.989) and 66 (0.871) better at 50 rows, seed 58 worse (1.047);
+    at 100 rows 1.106 -> 1.105.
 """
 from __future__ import annotations
 
