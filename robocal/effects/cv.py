@@ -283,6 +283,26 @@ class BlockedCV:
         inside = np.einsum("ij,ij->j", Gbc, np.linalg.solve(Gbb, Gbc))
         return float(np.clip(inside.sum() / max(float(np.trace(G[np.ix_(cols, cols)])), 1e-300), 0.0, 1.0))
 
+    def nested_p(self, base_cols, extra_cols, rank_tol: float = 1e-6) -> float:
+        """p-value of a nested F-test on all points: that the columns ``extra_cols`` fit nothing beyond
+        ``base_cols`` (whitened rows; the residual variance estimated from them, not taken from the noise model).
+        ``extra_cols`` add the rank of their unit-norm part beyond the base whose eigenvalues exceed ``rank_tol``;
+        1.0 when they add none."""
+        from scipy.stats import f as f_dist
+        G, c, _ = self._gram[0]
+        base, extra = np.asarray(base_cols, int), np.asarray(extra_cols, int)
+        Gbe = G[np.ix_(base, extra)]
+        Z = np.linalg.solve(G[np.ix_(base, base)] + RIDGE * np.eye(len(base)), np.column_stack([c[base], Gbe]))
+        r = c[extra] - Gbe.T @ Z[:, 0]                          # what the extra columns explain beyond the base
+        w, V = np.linalg.eigh(G[np.ix_(extra, extra)] - Gbe.T @ Z[:, 1:])
+        keep = w > rank_tol
+        k, dof = int(keep.sum()), self.yw.size - len(base) - int(keep.sum())
+        if k == 0 or dof <= 0:
+            return 1.0
+        gained = float(np.sum((V[:, keep].T @ r) ** 2 / w[keep]))
+        rss = float(np.sum(self.yw ** 2)) - float(c[base] @ Z[:, 0]) - gained
+        return 0.0 if rss <= 0 else float(f_dist.sf((gained / k) / (rss / dof), k, dof))
+
     def fit(self, cols) -> np.ndarray:
         """Weighted least-squares parameters of the columns ``cols`` on all points (in the units of A)."""
         cols = np.asarray(cols, int)

@@ -45,6 +45,10 @@ SHADOW_SHARE = 0.9      # a candidate whose visible part (beyond the geometry) l
 SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is visible beyond the geometry)
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
+F_LEVEL = None     # with a level (e.g. 0.01): an effect or a part is also taken / kept on in-sample evidence, a
+#                    nested F-test of the whitened rows (p below F_LEVEL / the number of candidates) with a held-out
+#                    gain > TAKE_GAIN under every blocking (``f_p``); None: held-out evidence alone
+F_RANK_TOL = 1e-6  # eigenvalue of a candidate's unit-norm columns beyond the others', below which it adds no rank
 BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
 
@@ -201,6 +205,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     W = whitening(cov_mm2, len(q))
     W = np.broadcast_to(np.eye(3), (len(q), 3, 3)) if W is None else W
     cv = BlockedCV.of_blocks(design.blocks(), len(q), design.P, W, blockings)
+    ftest = _FTest(cv, F_LEVEL, len(pool) + len(extra))
     model: list[tuple[EffectChoice, np.ndarray, EffectChoice]] = []   # taken (choice, its columns, as offered)
 
     def errors(entries, extra_cols=()):
@@ -225,7 +230,8 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
             each = all(_rms(se[b]) < _rms(base[b]) for b in se)
             trials.append(Trial(rnd, c.label, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.rms_base_mm,
                                 g.gain, g.t, False, as_candidate))
-            if _supported(g, _mean(base), _mean(se)) and each:
+            in_sample = as_candidate == c.label and ftest.passes(g, in_model, design.cols[c])   # not a scan's pick
+            if (_supported(g, _mean(base), _mean(se)) or in_sample) and each:
                 scored.append((g.rms_cand_mm, len(trials) - 1, c, se, g))
         if not scored:
             break
@@ -240,15 +246,15 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         step = Step(c, rnd, g.rms_base_mm, g.rms_cand_mm, {b: _rms(v) for b, v in se.items()}, g.t, g.gain,
                     [rv for rv in rivals if rv[3] < KEEP_T], note=note)
         pool = [o for o in pool if not alternatives(o, c)]
-        reduced, base = _prune(errors, design, model, c, c, step, n)
+        reduced, base = _prune(errors, design, model, c, c, step, n, ftest)
         model.append((reduced, design.sub(c, reduced, n), c))
         step.choice = reduced
         steps.append(step)
         pool += [r for r in refinements(c, n) if r in design.cols and r not in pool]
     if REPRUNE_FROM_OFFERED:
-        _reprune(errors, design, model, steps, n, from_offered=True)
-    dropped = _final_check(errors, model, steps)
-    _reprune(errors, design, model, steps, n, from_offered=False)
+        _reprune(errors, design, model, steps, n, True, ftest)
+    dropped = _final_check(errors, model, steps, design, ftest)
+    _reprune(errors, design, model, steps, n, False, ftest)
     absorbed = {c.label: cv.absorbed(design.cols[c], design.geo) for c in candidates}
     shadowed = {}
     for c in candidates:
@@ -265,6 +271,18 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
                            tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
                            tuple(e[2].label for e in model), shadowed, (len(q), of_rows or len(q)))
+
+
+class _FTest:
+    """The in-sample rule (``F_LEVEL``): a column set is supported when a nested F-test on all rows
+    (``BlockedCV.nested_p``) gives p below the level over the number of candidates, with a held-out gain."""
+
+    def __init__(self, cv: BlockedCV, level: float | None, tests: int):
+        self.cv, self.alpha = cv, None if level is None else level / max(tests, 1)
+
+    def passes(self, g, base, extra) -> bool:
+        """p < the level per test for ``extra`` beyond ``base``, with a held-out gain ``g`` > TAKE_GAIN."""
+        return self.alpha is not None and g.gain > TAKE_GAIN and self.cv.nested_p(base, extra, F_RANK_TOL) < self.alpha
 
 
 def _family_label(family) -> str:
@@ -299,9 +317,10 @@ def _by_ranks(g, se_base, se_cand) -> bool:
     return RANK_Z is not None and g.gain > LARGE_GAIN and signed_rank_z(se_base, se_cand) > RANK_Z
 
 
-def _needed(g, se_without, se_with, min_gain) -> bool:
-    """Whether removing a part or an effect costs enough: t >= KEEP_T and ``min_gain``, or the rank rule."""
-    return (g.t >= KEEP_T and g.gain >= min_gain) or _by_ranks(g, se_without, se_with)
+def _needed(g, se_without, se_with, min_gain, in_sample=False) -> bool:
+    """Whether removing a part or an effect costs enough: t >= KEEP_T and ``min_gain``, or the rank rule, or the
+    in-sample evidence that would take it (``in_sample``: ``_FTest.passes``)."""
+    return (g.t >= KEEP_T and g.gain >= min_gain) or _by_ranks(g, se_without, se_with) or in_sample
 
 
 def alternatives(a: EffectChoice, b: EffectChoice) -> bool:
@@ -318,7 +337,12 @@ def alternatives(a: EffectChoice, b: EffectChoice) -> bool:
     return oa.get("joint") == ob.get("joint")
 
 
-def _prune(errors, design, model, choice, full, step, n):
+def _cols(design, model, extra=()) -> np.ndarray:
+    """Columns of the geometry, the taken effects ``model`` and ``extra``."""
+    return np.concatenate([design.geo] + [e[1] for e in model] + [np.asarray(extra, int)])
+
+
+def _prune(errors, design, model, choice, full, step, n, ftest):
     """``choice`` (a part of the offered ``full``) without the parts whose removal costs less than KEEP_T /
     KEEP_GAIN given the other effects ``model`` (the cheapest first, until every part left is needed). Returns
     (the pruned choice, the per-point errors of the model with it)."""
@@ -326,9 +350,12 @@ def _prune(errors, design, model, choice, full, step, n):
     while True:
         best = None
         for label, reduced in parts(choice):
-            s = errors(model, design.sub(full, reduced, n))
+            kept = design.sub(full, reduced, n)
+            s = errors(model, kept)
             g = paired_gain(_mean(s), _mean(se))             # what keeping the part gains
-            if not _needed(g, _mean(s), _mean(se), KEEP_GAIN) and (best is None or g.t < best[0]):
+            part = np.setdiff1d(design.sub(full, choice, n), kept)
+            if not _needed(g, _mean(s), _mean(se), KEEP_GAIN, ftest.passes(g, _cols(design, model, kept), part)) \
+                    and (best is None or g.t < best[0]):
                 best = (g.t, label, reduced, s)
         if best is None:
             return choice, se
@@ -336,7 +363,7 @@ def _prune(errors, design, model, choice, full, step, n):
         step.pruned.append((label, t))
 
 
-def _reprune(errors, design, model, steps, n, from_offered: bool) -> None:
+def _reprune(errors, design, model, steps, n, from_offered: bool, ftest) -> None:
     """Every taken effect's parts judged again given all the others (in place): from the effect as offered (a part
     pruned while a larger effect was still unmodelled comes back when it is needed), or from its pruned state (the
     parts the later effects made unnecessary)."""
@@ -344,12 +371,13 @@ def _reprune(errors, design, model, steps, n, from_offered: bool) -> None:
         step = next(s for s in steps if s.choice is c)
         if from_offered:
             step.pruned.clear()
-        reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], full if from_offered else c, full, step, n)
+        reduced, _ = _prune(errors, design, model[:i] + model[i + 1:], full if from_offered else c, full, step, n,
+                            ftest)
         model[i] = (reduced, design.sub(full, reduced, n), full)
         step.choice = reduced
 
 
-def _final_check(errors, model, steps) -> list[tuple[str, float]]:
+def _final_check(errors, model, steps, design, ftest) -> list[tuple[str, float]]:
     """Drop taken effects that the others made unnecessary (removing one costs t < KEEP_T or < 2 KEEP_GAIN),
     the cheapest first, until every one left is needed."""
     dropped = []
@@ -357,9 +385,11 @@ def _final_check(errors, model, steps) -> list[tuple[str, float]]:
         se = errors(model)
         worst = None
         for i in range(len(model)):
-            without = _mean(errors(model[:i] + model[i + 1:]))
+            others = model[:i] + model[i + 1:]
+            without = _mean(errors(others))
             g = paired_gain(without, _mean(se))
-            if not _needed(g, without, _mean(se), 2 * KEEP_GAIN) and (worst is None or g.t < worst[0]):
+            in_sample = ftest.passes(g, _cols(design, others), model[i][1])
+            if not _needed(g, without, _mean(se), 2 * KEEP_GAIN, in_sample) and (worst is None or g.t < worst[0]):
                 worst = (g.t, i)
         if worst is None:
             break
