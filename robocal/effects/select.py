@@ -48,6 +48,8 @@ KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects
 F_LEVEL = None     # with a level (e.g. 0.01): an effect or a part is also taken / kept on in-sample evidence, a
 #                    nested F-test of the whitened rows (p below F_LEVEL / the number of candidates) with a held-out
 #                    gain > TAKE_GAIN under every blocking (``f_p``); None: held-out evidence alone
+F_PARTS = True     # the in-sample evidence keeps a part of a taken effect too (False: parts are pruned on held-out
+#                    evidence alone; the rule takes and keeps whole effects)
 F_RANK_TOL = 1e-6  # eigenvalue of a candidate's unit-norm columns beyond the others', below which it adds no rank
 BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
@@ -354,7 +356,8 @@ def _prune(errors, design, model, choice, full, step, n, ftest):
             s = errors(model, kept)
             g = paired_gain(_mean(s), _mean(se))             # what keeping the part gains
             part = np.setdiff1d(design.sub(full, choice, n), kept)
-            if not _needed(g, _mean(s), _mean(se), KEEP_GAIN, ftest.passes(g, _cols(design, model, kept), part)) \
+            if not _needed(g, _mean(s), _mean(se), KEEP_GAIN, F_PARTS and ftest.passes(
+                    g, _cols(design, model, kept), part)) \
                     and (best is None or g.t < best[0]):
                 best = (g.t, label, reduced, s)
         if best is None:
