@@ -36,29 +36,42 @@ after it without being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_f_effects.py [--seeds 79 ... 84]
         [--parts i ii] [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on b4b594f as two processes, ``--parts i --forms`` UR5 + compliance + gear + drift + sparse far + layer
+only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--combine``): **not kept**; ``F_LEVEL``
+stays None.
+  * (i) 111 figures: mean ratio 0.9893, largest **1.063** (the rule asks that none exceed 1.05), smallest 0.734.
+    15 moved, 13 of them better: compliance + gear + drift seeds 80, 81 and 82 at 50 rows 0.0541 -> 0.0438,
+    0.0454 -> 0.0390 and 0.0707 -> 0.0527 mm, seed 81 at 100 0.0456 -> 0.0335; layer only seed 80 at 50 0.0509 ->
+    0.0421; and eight smaller. Two worse: IRB 4600-like seed 81 at 50 rows 0.0485 -> 0.0516, UR10-like seed 83 at
+    100 0.0509 -> 0.0510. The UR5's three figures did not move.
+  * (ii) On 90 fresh data sets, without and with: named right 65/65 both, controls clean 10/10 both, spurious
+    acceptances 10 both; the self-check's targets pass both ways.
+  * Issue 32's ratios at these seeds, off (the code as it stays) -> on, 50 poses; 100 poses: compliance + gear +
+    drift 1.476 (worst 1.953) -> 1.312 (1.505); 1.131 (1.433) -> 1.054 (1.079); strong compliance, sparse far 1.145
+    (1.270); 1.032 (1.070), unchanged; layer only 1.224 (1.464) -> 1.182 (1.307); 1.066 (1.096); read-back lag
+    1.073 (1.113); 1.022 (1.053), unchanged; UR10-like 1.029 (1.045) -> 1.025 (1.037); 1.017 (1.021) -> 1.014
+    (1.021); IRB 4600-like 1.104 (1.158) -> 1.110 (1.158); 1.045 (1.061) -> 1.031 (1.050); UR5 1.218; 1.073.
+  * Why seed 81 of the IRB 4600-like form lost (a look after the verdict, a scratch script): on the in-sample
+    evidence the selection took the axis coupling the truth has (held-out gain 6.7 %, t 1.26, p 8.7e-5 against a
+    level of 8.3e-4); given it, the held-out rule then took a J1 cyclic error of order 18 from the scan (gain 8.9 %,
+    t 3.09) that the truth does not have. Without the change it took neither.
 """
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import robocal.effects.select as select  # noqa: E402
-from switch_protocol import arguments, run  # noqa: E402
+from switch_protocol import arguments, run, switch_many  # noqa: E402
 
 SELF_CHECK_SEED = 15000
 
-
-def f_off():
-    return mock.patch.multiple(select, F_LEVEL=None, F_PARTS=False)
-
-
-def f_on():
-    return mock.patch.multiple(select, F_LEVEL=0.01, F_PARTS=False)
+f_off, f_on = switch_many(select, {"F_LEVEL": None, "F_PARTS": False}, {"F_LEVEL": 0.01, "F_PARTS": False})
 
 
 def main() -> None:

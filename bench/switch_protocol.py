@@ -33,6 +33,11 @@ def switch(module, attr: str, off_value, on_value):
     return (lambda: mock.patch.object(module, attr, off_value)), (lambda: mock.patch.object(module, attr, on_value))
 
 
+def switch_many(module, off_values: dict, on_values: dict):
+    """(off, on): context factories that set several attributes of ``module`` at once (``switch`` for one)."""
+    return (lambda: mock.patch.multiple(module, **off_values)), (lambda: mock.patch.multiple(module, **on_values))
+
+
 def line(label, off, on) -> None:
     print(f"  {label:46s} off {off:.4f}  on {on:.4f} mm  ratio {on / off:.3f}", flush=True)
 

@@ -46,8 +46,9 @@ SHADOW_MIN_VISIBLE = 0.01   # (judged only when at least 1 % of the candidate is
 KEEP_T = 2.0            # a part or an effect stays when removing it costs at least this paired t ...
 KEEP_GAIN = 0.005       # ... and this share of the held-out RMS (parts; effects: 2 x)
 F_LEVEL = None     # with a level (e.g. 0.01): an effect or a part is also taken / kept on in-sample evidence, a
-#                    nested F-test of the whitened rows (p below F_LEVEL / the number of candidates) with a held-out
-#                    gain > TAKE_GAIN under every blocking (``f_p``); None: held-out evidence alone
+#                    nested F-test of the whitened rows (``BlockedCV.nested_p``: p below F_LEVEL / the number of
+#                    candidates) with a held-out gain > TAKE_GAIN under every blocking; None: held-out evidence alone
+#                    (issue 32's seventeenth and eighteenth protocols did not keep it)
 F_PARTS = True     # the in-sample evidence keeps a part of a taken effect too (False: parts are pruned on held-out
 #                    evidence alone; the rule takes and keeps whole effects)
 F_RANK_TOL = 1e-6  # eigenvalue of a candidate's unit-norm columns beyond the others', below which it adds no rank
