@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robocal.measure.stats import f_sf
+
 RIDGE = 1e-6          # on unit-norm columns: (rank_tol = 1e-3)^2 of the fit that follows (robocal.identify
 #                       CalibrationOptions.rank_tol): a direction whose relative residual is below 1e-3 is fixed at
 #                       zero there, so it gets no weight here (bench/bench_cv_ridge.py; it was 1e-9)
@@ -288,7 +290,6 @@ class BlockedCV:
         ``base_cols`` (whitened rows; the residual variance estimated from them, not taken from the noise model).
         ``extra_cols`` add the rank of their unit-norm part beyond the base whose eigenvalues exceed ``rank_tol``;
         1.0 when they add none."""
-        from scipy.stats import f as f_dist
         G, c, _ = self._gram[0]
         base, extra = np.asarray(base_cols, int), np.asarray(extra_cols, int)
         Gbe = G[np.ix_(base, extra)]
@@ -301,7 +302,7 @@ class BlockedCV:
             return 1.0
         gained = float(np.sum((V[:, keep].T @ r) ** 2 / w[keep]))
         rss = float(np.sum(self.yw ** 2)) - float(c[base] @ Z[:, 0]) - gained
-        return 0.0 if rss <= 0 else float(f_dist.sf((gained / k) / (rss / dof), k, dof))
+        return 0.0 if rss <= 0 else float(f_sf((gained / k) / (rss / dof), k, dof))
 
     def fit(self, cols) -> np.ndarray:
         """Weighted least-squares parameters of the columns ``cols`` on all points (in the units of A)."""
