@@ -51,6 +51,8 @@ F_LEVEL = None     # with a level (e.g. 0.01): an effect or a part is also taken
 #                    (issue 32's seventeenth and eighteenth protocols did not keep it)
 F_PARTS = True     # the in-sample evidence keeps a part of a taken effect too (False: parts are pruned on held-out
 #                    evidence alone; the rule takes and keeps whole effects)
+SHORT_ROWS = None  # with a row count (e.g. 100): a selection over fewer rows cross-validates with at least
+SHORT_FOLDS = 10   # this many folds (each fit sees 90 % of the rows, not 80 %); None: the folds asked for
 F_RANK_TOL = 1e-6  # eigenvalue of a candidate's unit-norm columns beyond the others', below which it adds no rank
 BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
@@ -197,6 +199,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     are a subset of (reported)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
+    folds = short_folds(folds, len(q))
     pool = list(dict.fromkeys(candidates))
     extra = refinement_closure(pool, n)
     families = [tuple(f) for f in scans if len(f)]
@@ -274,6 +277,11 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
                            _rms(_mean(errors(model))), folds, tuple(b.name for b in blockings),
                            tuple(c.label for c in candidates) + tuple(_family_label(f) for f in families), absorbed,
                            tuple(e[2].label for e in model), shadowed, (len(q), of_rows or len(q)))
+
+
+def short_folds(folds: int, rows: int) -> int:
+    """The folds of a selection over ``rows`` rows: at least ``SHORT_FOLDS`` below ``SHORT_ROWS`` rows."""
+    return max(folds, SHORT_FOLDS) if SHORT_ROWS is not None and rows < SHORT_ROWS else folds
 
 
 class _FTest:
