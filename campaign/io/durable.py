@@ -7,6 +7,7 @@ import os
 import re
 import secrets
 import stat
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -129,19 +130,37 @@ def create_new(path: Path, data: bytes, mode: int = 0o644) -> None:
     """Make the new file ``path`` appear already holding ``data``, fsynced, never replacing anything: a temporary
     file (:func:`create_temp`) hard-linked into place, or where hard links are unsupported (FAT, some network
     mounts) an ``O_EXCL`` create, write and fsync. FileExistsError when ``path`` exists (another writer won); the
-    temporary file is removed on every exit path; the directory is fsynced."""
-    fd, tmp = create_temp(path, mode)
-    try:
-        _fill(fd, data)
+    temporary file is removed on every exit path (:func:`_removing_own_temps`); the directory is fsynced."""
+    with _removing_own_temps(path):
+        fd, tmp = create_temp(path, mode)
         try:
-            os.link(tmp, path)
-        except FileExistsError:
-            raise
-        except OSError:
-            _create_exclusive(path, data, mode)
-    finally:
-        remove_quietly(tmp)
+            _fill(fd, data)
+            try:
+                os.link(tmp, path)
+            except FileExistsError:
+                raise
+            except OSError:
+                _create_exclusive(path, data, mode)
+        finally:
+            remove_quietly(tmp)
     fsync_dir(path.parent)
+
+
+@contextmanager
+def _removing_own_temps(path: Path):
+    """On any exception (a signal's too) remove every temporary of ``path`` this process made
+    (``.NAME.PID.*.tmp``): also the one whose name a signal kept from reaching the caller, landing between the
+    ``os.open`` that made it and the ``try`` that removes it."""
+    try:
+        yield
+    except BaseException:
+        try:
+            own = list(path.parent.glob(f".{glob.escape(path.name)}.{os.getpid()}.*{TEMP_SUFFIX}"))
+        except OSError:
+            own = []
+        for entry in own:
+            remove_quietly(entry)
+        raise
 
 
 def _create_exclusive(path: Path, data: bytes, mode: int) -> None:
@@ -156,14 +175,11 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     refused (:func:`refuse_special`); stale temporaries of ``path`` left by killed writers are removed."""
     path = Path(path)
     refuse_special(path)
-    fd, tmp = create_temp(path)
-    try:
+    with _removing_own_temps(path):
+        fd, tmp = create_temp(path)
         _fill(fd, data)
         refuse_special(path)                    # again: nothing may have been planted there meanwhile
         os.replace(tmp, path)
-    except BaseException:
-        remove_quietly(tmp)
-        raise
     fsync_dir(path.parent)
     remove_stale_temps(path)
     return path

@@ -10,7 +10,7 @@ import sys
 import pytest
 
 import campaign.io.durable as durable
-from campaign.errors import DataError
+from campaign.errors import DataError, Terminated
 from campaign.io.durable import atomic_write, create_temp, stale_temp
 
 pytestmark = pytest.mark.unit
@@ -109,3 +109,22 @@ def test_a_run_log_and_a_directory_marker_are_created_where_hard_links_are_unsup
         release_locks()
     assert read_marker(tmp_path / "out") == {"kind": "reprocess", "source": "data.csv"}
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [".campaign-owner.json"]
+
+
+@pytest.mark.parametrize("write", ["atomic_write", "create_new"])
+def test_a_signal_between_the_temporary_files_creation_and_its_try_leaves_nothing(tmp_path, monkeypatch, write):
+    """The signal's exception raised as ``os.open`` returns the temporary file (before its name reaches the caller,
+    where SIGTERM once left ``.model.json.PID.X.tmp`` behind): no temporary is left, the output is absent, and the
+    exception goes on."""
+    real_open = os.open
+
+    def open_then_signal(path, flags, mode=0o777):
+        fd = real_open(path, flags, mode)
+        os.close(fd)
+        raise Terminated("SIGTERM")
+
+    monkeypatch.setattr(durable.os, "open", open_then_signal)
+    out = tmp_path / "model.json"
+    with pytest.raises(Terminated):
+        getattr(durable, write)(out, b"{}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
