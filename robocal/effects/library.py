@@ -284,16 +284,18 @@ LINKS_AFTER_LEVERS = True     # the links' complete gravity regressor offered on
 #                               bench/bench_links_after_levers.py: kept, mean ratio 0.980, none worse)
 
 
-def refinements(choice: EffectChoice, n_joints: int) -> list[EffectChoice]:
+def refinements(choice: EffectChoice, n_joints: int, refined_forms=None) -> list[EffectChoice]:
     """Candidates that refine an accepted effect: the free mass distribution of gravity compliance
-    (``REFINED_FORMS``: the lever points), then, once the lever form is taken (``LINKS_AFTER_LEVERS``), the links'
-    complete gravity regressor, which also holds a centre of mass off a roll axis (offered beside the lever form
-    instead, the ninth protocol of ``bench/bench_links_form.py`` did not keep it)."""
+    (``refined_forms``, by default ``REFINED_FORMS``: the lever points), then, once the lever form is taken
+    (``LINKS_AFTER_LEVERS``), the links' complete gravity regressor, which also holds a centre of mass off a roll
+    axis (offered beside the lever form instead, the ninth protocol of ``bench/bench_links_form.py`` did not keep
+    it)."""
     opts = dict(choice.options)
     if choice.name != "joint_compliance":
         return []
     form = opts.get("form", "gravity")
-    forms = REFINED_FORMS if form == "gravity" else ("links",) if form == "levers" and LINKS_AFTER_LEVERS else ()
+    after_levers = ("links",) if form == "levers" and LINKS_AFTER_LEVERS else ()
+    forms = (refined_forms or REFINED_FORMS) if form == "gravity" else after_levers
     return [EffectChoice("joint_compliance", (("joints", tuple(opts["joints"])), ("form", f),
                                               ("payload_cog_flange_mm", opts.get("payload_cog_flange_mm")),
                                               ("gravity_base", opts.get("gravity_base", (0.0, 0.0, -1.0)))))

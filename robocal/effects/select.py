@@ -20,7 +20,7 @@ one before an implausible best), and never drops an effect; consistency is repor
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -54,6 +54,12 @@ F_PARTS = True     # the in-sample evidence keeps a part of a taken effect too (
 SHORT_ROWS = None  # with a row count (e.g. 100): a selection over fewer rows cross-validates with at least
 SHORT_FOLDS = 10   # this many folds (each fit sees 90 % of the rows, not 80 %); None: the folds asked for (issue
 #                    32's nineteenth protocol did not keep 100: bench/bench_short_folds.py)
+LINKS_PATH_GAIN = None  # with a share (e.g. 0.02): when the selection takes gravity compliance's lever form and
+#                         not the links' form, it is run again with the links' form offered in place of the lever
+#                         form, and that path is kept when its final held-out RMS is lower by more than this share.
+#                         The links' form after the lever form must gain over it in the model; at few rows the
+#                         effects taken after it (a gear, a drift) may only show beside the links' form. None: one
+#                         path (issue 32, twentieth protocol: bench/bench_links_path.py)
 F_RANK_TOL = 1e-6  # eigenvalue of a candidate's unit-norm columns beyond the others', below which it adds no rank
 BLOCK_VALUES = 1 << 19  # rows x columns of the design per block (the scan's hundreds of columns: fewer rows)
 
@@ -119,6 +125,7 @@ class EffectSelection:
     #                                                  inside the taken effect's span): one class with it
     rows: tuple[int, int] = (0, 0)                   # (rows cross-validated, calibration rows): a seeded subset when
     #                                                  fewer
+    path: str = ""                                   # the two paths compared (``LINKS_PATH_GAIN``), when they were
 
     def to_dict(self) -> dict:
         sub = self.rows[0] < self.rows[1]
@@ -137,7 +144,7 @@ class EffectSelection:
                 "candidates": list(self.candidates), "steps": [s.to_dict() for s in self.steps],
                 "dropped": [{"effect": lb, "t": t} for lb, t in self.dropped], "absorbed_by_geometry": self.absorbed,
                 "shadowed": {k: {"by": v[0], "share": v[1]} for k, v in self.shadowed.items()},
-                "trials": [t.to_dict() for t in self.trials]}
+                "trials": [t.to_dict() for t in self.trials], **({"path": self.path} if self.path else {})}
 
 
 class _Design:
@@ -190,6 +197,31 @@ def _rms(se) -> float:
 def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
                    cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
                    max_effects: int = 6, plausible=None, scans=(), of_rows: int | None = None) -> EffectSelection:
+    """The forward selection (``_forward``, see the module docstring); with ``LINKS_PATH_GAIN``, also the path with
+    the links' form offered in place of the lever form, when the first one takes the lever form alone."""
+    args = (kin, geo_cols, q_rad, p_tracker_mm, cov_mm2, meta, candidates, folds, seed, max_effects, plausible,
+            scans, of_rows)
+    sel = _forward(*args)
+    forms = _forms(sel.taken)
+    if LINKS_PATH_GAIN is None or "levers" not in forms or "links" in forms:
+        return sel
+    alt = _forward(*args, refined_forms=("links",))
+    keep = alt.final_cv_rms_mm < (1.0 - LINKS_PATH_GAIN) * sel.final_cv_rms_mm
+    path = (f"the links' form offered in place of the lever form: final held-out RMS {alt.final_cv_rms_mm:.4f} mm, "
+            f"the lever form's path {sel.final_cv_rms_mm:.4f} mm; kept the "
+            + ("links' path" if keep else "lever form's path") + f" (it must be lower by > {LINKS_PATH_GAIN:.0%})")
+    return replace(alt if keep else sel, path=path)
+
+
+def _forms(taken) -> set:
+    """The forms of gravity compliance among the taken effects."""
+    return {dict(c.options).get("form", "gravity") for c in taken if c.name == "joint_compliance"}
+
+
+def _forward(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_tracker_mm: np.ndarray,
+             cov_mm2: np.ndarray | None, meta, candidates, folds: int = 5, seed: int = 0,
+             max_effects: int = 6, plausible=None, scans=(), of_rows: int | None = None,
+             refined_forms=None) -> EffectSelection:
     """Forward selection (see the module docstring) around the geometric solution ``kin`` with identified
     columns ``geo_cols``; ``meta["order"]`` (the measurement order) adds the order blocking. ``plausible(choice,
     values) -> bool`` (the physical range): among candidates that predict equally well (the best one's paired t
@@ -197,7 +229,8 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
     (``library.scan_families``: one joint's cyclic errors of every higher order); each family is one candidate
     per round, its member chosen inside every fold of the cross-validation (nested: the scan's pick among many
     orders does not make its held-out errors optimistic) and, to be taken, on all rows. ``of_rows``: the rows these
-    are a subset of (reported)."""
+    are a subset of (reported). ``refined_forms``: the forms offered once gravity compliance is taken (None: the
+    library's)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
     n = kin.n
     folds = short_folds(folds, len(q))
@@ -257,7 +290,7 @@ def select_effects(kin: Kinematics, geo_cols: np.ndarray, q_rad: np.ndarray, p_t
         model.append((reduced, design.sub(c, reduced, n), c))
         step.choice = reduced
         steps.append(step)
-        pool += [r for r in refinements(c, n) if r in design.cols and r not in pool]
+        pool += [r for r in refinements(c, n, refined_forms) if r in design.cols and r not in pool]
     if REPRUNE_FROM_OFFERED:
         _reprune(errors, design, model, steps, n, True, ftest)
     dropped = _final_check(errors, model, steps, design, ftest)
