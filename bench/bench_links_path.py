@@ -46,6 +46,23 @@ after it without being disclosed beside the figures):
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD nice -n 10 python3 bench/bench_links_path.py [--seeds 91 ... 96]
         [--parts i ii] [--forms ...] [--json OUT.json] [--combine A.json B.json]
+
+Outcome (run on 0a59bfc as two processes, ``--parts i --forms`` UR5 + compliance + gear + drift + sparse far + layer
+only and ``--parts i ii --forms`` lag + UR10-like + IRB 4600-like, then ``--combine``): **kept**;
+``LINKS_PATH_GAIN = 0.02``.
+  * (i) 111 figures: mean ratio **0.9958**, largest **1.000**, smallest 0.842. 5 moved, all on the compliance + gear
+    + drift form, all better: seed 91 at 50 rows 0.0631 -> 0.0535 mm (0.848), seed 94 at 50 rows 0.0542 -> 0.0486
+    (0.897), seed 96 at 50 rows 0.0543 -> 0.0519 (0.957) and at 100 rows 0.0422 -> 0.0355 (0.842), seed 93 all rows
+    0.0326 -> 0.0321 (0.985). The UR5 campaign and the five other forms did not move.
+  * (ii) On 90 fresh data sets, without and with: named right 65/65 both, controls clean 10/10 both, spurious
+    acceptances 8 both; the self-check's targets pass both ways.
+  * Issue 32's ratios at these seeds, off -> on, compliance + gear + drift: 50 poses 1.465 (worst 1.745) -> 1.385
+    (1.535); 100 poses 1.112 (1.246) -> 1.082 (1.124). Unchanged: UR5 1.218 / 1.073; sparse far 1.169 (1.291) /
+    1.049 (1.085); layer only 1.191 (1.258) / 1.069 (1.086); read-back lag 1.061 (1.120) / 1.018 (1.038); UR10-like
+    1.052 (1.097) / 1.024 (1.052); IRB 4600-like 1.077 (1.172) / 1.045 (1.125).
+  * What it says: the two paths' comparison by the cross-validation's own final RMS picked the better path on every
+    moved figure, as on the development seeds. The second path runs only where the first ends with the lever form;
+    the other forms rarely do, so it costs nothing there.
 """
 from __future__ import annotations
 

@@ -125,6 +125,8 @@ def render_choices(console: Console, report: CalibrationReport) -> None:
                          for v in tried.values())
         console.print(f"physical effects ({taken_of_tried(effects.counts)}; CV RMS on the calibration points, mm; "
                       f"geometry alone {sel['geometric_cv_rms_mm']:.4f}): {figs}")
+        if sel.get("path"):
+            console.print(f"  two paths: {sel['path']}", markup=False)
     for fe in () if effects is None else effects.fitted:
         vals = ", ".join(f"{n} {p['value']:.3g} {p['unit']}" + (f" (stiffness {p['stiffness_Nm_per_rad']:.3g} N*m/rad)"
                                                                  if "stiffness_Nm_per_rad" in p else "")

@@ -64,7 +64,7 @@ def test_one_path_unless_the_lever_form_is_taken_without_the_links_form(taken):
     assert calls == [None] and sel.path == "" and sel.taken == taken
 
 
-def test_off_by_default_one_path():
-    assert select.LINKS_PATH_GAIN is None
+def test_on_by_default_and_off_with_none():
+    assert select.LINKS_PATH_GAIN == 0.02
     sel, calls = _select(_Path((_compliance("levers"),), 0.05), _Path((), 0.01), None)
     assert calls == [None] and sel.taken == (_compliance("levers"),)

@@ -327,3 +327,22 @@ def test_report_command_errors_are_one_line(tmp_path, capsys):
     assert "no report.json" in capsys.readouterr().err
     (tmp_path / "report.json").write_text("{not json")
     assert main(["report", str(tmp_path)]) == 2
+
+
+@pytest.mark.system
+def test_the_selections_two_paths_are_stated(mock_run, tmp_path):
+    """When the effect selection compared two paths (``robocal.effects.select.LINKS_PATH_GAIN``), the effects
+    section states them from report.json; without, no such line."""
+    run_dir, _ = mock_run
+    doc = json.loads((run_dir / "report.json").read_text())
+    assert "path" not in doc["effects"]["selection"]
+    for name, path in (("one", None), ("two", "the links' form offered in place of the lever form: final held-out "
+                                              "RMS 0.0479 mm, the lever form's path 0.0995 mm; kept the links' path")):
+        d = tmp_path / name
+        d.mkdir()
+        if path:
+            doc["effects"]["selection"]["path"] = path
+        (d / "report.json").write_text(json.dumps(doc))
+        assert main(["report", str(d), "--out", str(tmp_path / f"{name}.html")]) == 0
+        text = read_page((tmp_path / f"{name}.html").read_text()).text
+        assert (f"Two paths: {path}." in " ".join(text.split())) if path else "Two paths" not in text
