@@ -16,8 +16,9 @@ effect's parts are judged again from the effect as offered, given all the others
 effect was unmodelled comes back); then every taken effect must still be needed given the others (removing it costs
 t >= 2 and >= 1 % of RMS, or passes the rank rule), else it is dropped, and the parts are pruned once more. When
 that path ends with compliance's lever form and not the links' form, a second path offers the links' form in place
-of the lever form, and is kept when its final held-out RMS is lower by more than 2 % (the forward steps' order decides what
-else shows: at few rows a gear or a drift may pass beside the links' form and not beside the lever form).
+of the lever form, and is kept when its final held-out RMS is lower by more than 2 % (the forward steps' order
+decides what else shows: at few rows a gear or a drift may pass beside the links' form and not beside the lever
+form).
 Held-out prediction is the arbiter: plausibility only picks among candidates that predict equally well (a plausible
 one before an implausible best), and never drops an effect; consistency is reported, never used here.
 """

@@ -3,10 +3,12 @@ non-physical best description (gap.py): exact Shapley values, closure, bootstrap
 the shape of a noise excess, and two truth campaigns (joint jitter above the floor; a reach-dependent J2 sag
 outside the library)."""
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
 
+import robocal.effects.select as select
 from robocal.diagnose.core import diagnose
 from robocal.diagnose.budget import BudgetTerms, ErrorBudget, error_budget, per_point, shapley
 from robocal.diagnose.remainder import Remainder, noise_shape, nugget
@@ -101,7 +103,8 @@ def test_noise_shape_tells_joint_jitter_from_the_declared_noise():
 def test_joint_jitter_above_the_floor_is_noise_and_a_non_physical_fit_is_unexplained():
     """Jitter of 0.004 deg on J1-J3, no effect: nothing accepted, the remainder is noise of the joint readings
     (not structure), the budget says so. A reach-dependent J2 sag outside the library: the best description has
-    a negative stiffness, so the verdict is unexplained and names it."""
+    a negative stiffness on the lever form's path (the selection's first), so the verdict is unexplained and names
+    it; on the links' path, which the selection keeps here, the verdict names the missing reach term."""
     d = diagnose(truth_input(simulate(["joint_jitter"], 5001, SMALL, 1.0)))
     assert not d.accepted_effects and not d.unexplained and d.remainder.kind == "noise"
     assert d.remainder.source.startswith("noisy joint readings")
@@ -111,8 +114,13 @@ def test_joint_jitter_above_the_floor_is_noise_and_a_non_physical_fit_is_unexpla
     assert {"name", "rms_mm", "low_mm", "high_mm"} <= set(report["budget"]["components"][0])
     assert report["remainder"]["kind"] == "noise" and report["budget"]["closure"] < 0.05
     assert report["next_steps"][0]["experiment"].startswith("log the commanded joints")
-    d = diagnose(truth_input(simulate(["reach_sag_j2"], 5001, TruthProtocol(timestamps=False))))
+    sag = truth_input(simulate(["reach_sag_j2"], 5001, TruthProtocol(timestamps=False)))
+    with mock.patch.object(select, "LINKS_PATH_GAIN", None):        # the lever form's path alone
+        d = diagnose(sag)
     bad = d.unexplained_structure.get("nonphysical")
     assert d.unexplained and d.to_dict()["unexplained"] and bad
     assert any("negative" in w for b in bad for w in b["why"]) and d.unexplained_structure["best_description"]
     assert any(f.evidence.get("unexplained") for f in d.findings if f.accepted)
+    d = diagnose(sag)          # the links' path, kept: physical values, and the term the model lacks is named
+    assert d.unexplained and not d.unexplained_structure.get("nonphysical")
+    assert "vertical sag growing with the reach" in d.unexplained_structure["text"]
