@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -291,6 +292,8 @@ CHILD = textwrap.dedent(
         log = RunLog.open_for_resume(run)
     else:
         log = RunLog.create(run, start)
+    sys.stderr.write("open\\n")  # the log is open: the parent's clock for the kill may start
+    sys.stderr.flush()
     i = 0
     while True:
         seq = log.append_point({"point_id": f"{tag}-{i}", "q_cmd_deg": [i * 0.1] * 6,
@@ -315,10 +318,13 @@ def test_sigkill_at_random_moments(tmp_path):
         ack_path = tmp_path / f"ack{trial}.txt"
         with open(ack_path, "w") as ack:
             cmd = [sys.executable, str(script), str(run), f"T{trial}"]
-            child = subprocess.Popen(cmd, stdout=ack, env=env)
+            child = subprocess.Popen(cmd, stdout=ack, stderr=subprocess.PIPE, env=env)
+            if trial % 3:        # from the open log (start-up under load can outlast 0.4 s); else from the spawn
+                assert select.select([child.stderr], [], [], 60)[0] and child.stderr.readline() == b"open\n"
             time.sleep(float(rng.uniform(0.0, 0.4)))
             child.send_signal(signal.SIGKILL)
             child.wait(timeout=10)
+            child.stderr.close()
         if not (run / LOG_NAME).exists():
             assert good_prefix == b"" and ack_path.read_text() == ""
             continue  # killed before the log was created
